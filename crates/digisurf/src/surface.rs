@@ -1,0 +1,669 @@
+//! Construction and queries of the digital surface.
+
+use std::collections::HashMap;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+use crate::csr::Lists;
+use crate::{
+    EdgeId, InterfaceId, LabelVolume, RegionId, RegionMap, Regions, SurfaceError, SurfelId, VertexId, Voxel,
+};
+
+const NONE: u32 = u32::MAX;
+
+/// A surfel: the square face between two face-adjacent voxels of different regions.
+///
+/// The face lies in the lattice plane perpendicular to `axis` through lattice
+/// corner `cell`; it separates voxel `cell - e_axis` (the *negative side*) from
+/// voxel `cell` (the *positive side*).
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub struct Surfel {
+    /// Lattice coordinates of the face's minimal corner.
+    pub cell: [u32; 3],
+    /// The axis (0 = x, 1 = y, 2 = z) the face is perpendicular to.
+    pub axis: u8,
+    /// Whether the oriented normal is `-e_axis` rather than `+e_axis`.
+    pub flipped: bool,
+    /// `[inner, outer]` regions, `inner < outer`: the oriented normal points from
+    /// the inner voxel into the outer one.
+    pub regions: [RegionId; 2],
+    /// Labels of the `[inner, outer]` voxels (the background label for the outside
+    /// of the domain).
+    pub labels: [u32; 2],
+    /// The four corners, counter-clockwise seen from the tip of the oriented normal.
+    pub vertices: [VertexId; 4],
+    /// The interface (region pair) the surfel belongs to.
+    pub interface: InterfaceId,
+}
+
+impl Surfel {
+    /// The oriented unit normal (the trivial normal): `±e_axis`, from inner to outer.
+    pub fn normal(&self) -> DVec3 {
+        let mut n = DVec3::ZERO;
+        n[self.axis as usize] = if self.flipped { -1.0 } else { 1.0 };
+        n
+    }
+
+    /// The `[inner, outer]` voxels. Either may lie outside the domain.
+    pub fn voxels(&self) -> [Voxel; 2] {
+        let pos = [self.cell[0] as i64, self.cell[1] as i64, self.cell[2] as i64];
+        let mut neg = pos;
+        neg[self.axis as usize] -= 1;
+        if self.flipped {
+            [pos, neg]
+        } else {
+            [neg, pos]
+        }
+    }
+}
+
+/// How an edge sits in the complex, by its incident surfels.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
+pub enum EdgeKind {
+    /// On the rim of an open surface (the domain border of a volume without background).
+    Boundary,
+    /// Two incident surfels: a manifold edge.
+    Regular,
+    /// Three or four incident surfels around three or more regions: where interfaces meet.
+    Junction,
+    /// Four incident surfels around only two regions: two diagonal voxels of a region
+    /// touching along this edge (an edge pinch).
+    Pinch,
+}
+
+/// An edge of the complex: a lattice edge incident to at least one surfel.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+pub struct Edge {
+    /// End points, the lower id first.
+    pub vertices: [VertexId; 2],
+    /// The axis the edge is parallel to.
+    pub axis: u8,
+    /// How the edge sits in the complex.
+    pub kind: EdgeKind,
+}
+
+/// The surfels between one unordered pair of regions.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct Interface {
+    /// The two regions, lower first (surfel normals point from the first to the second).
+    pub regions: [RegionId; 2],
+    /// The interface's surfels, in increasing id order.
+    pub surfels: Vec<SurfelId>,
+}
+
+/// Counts describing a digital surface, as reported by `voxreg info`.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct SurfaceCounts {
+    /// Number of surfels (quads).
+    pub surfels: usize,
+    /// Number of vertices.
+    pub vertices: usize,
+    /// Number of edges.
+    pub edges: usize,
+    /// Number of interfaces (region pairs with at least one surfel).
+    pub interfaces: usize,
+    /// Number of edge-connected components of surfels.
+    pub components: usize,
+    /// Number of vertices on the rim of open surfaces.
+    pub boundary_vertices: usize,
+    /// Number of rim edges.
+    pub boundary_edges: usize,
+    /// Number of junction edges (three or more regions meet).
+    pub junction_edges: usize,
+    /// Number of pinched edges (two diagonal voxels of one region).
+    pub pinched_edges: usize,
+    /// Number of pinched vertices (the surfels around the vertex form several fans).
+    pub pinched_vertices: usize,
+}
+
+/// The digital surface of a labeled volume: surfels, edges, vertices and interfaces,
+/// with their incidences.
+///
+/// It holds structure only (ids and incidences) plus the embedding of the lattice;
+/// per-element quantities (normals, positions, weights) live in plain arrays indexed
+/// by the ids. Build it with [`DigitalSurface::new`].
+#[derive(Clone, Debug)]
+pub struct DigitalSurface {
+    dims: [usize; 3],
+    spacing: DVec3,
+    origin: DVec3,
+    open_border: bool,
+    regions: Regions,
+    surfels: Vec<Surfel>,
+    surfel_edges: Vec<[EdgeId; 4]>,
+    vertex_corners: Vec<[u32; 3]>,
+    vertex_surfels: Lists<SurfelId>,
+    vertex_neighbours: Lists<VertexId>,
+    boundary_vertex: Vec<bool>,
+    pinched_vertex: Vec<bool>,
+    edges: Vec<Edge>,
+    edge_surfels: Lists<SurfelId>,
+    interfaces: Vec<Interface>,
+    surfel_component: Vec<u32>,
+    component_closed: Vec<bool>,
+}
+
+/// Rolling per-slab state of the scan.
+struct Scan<'a> {
+    volume: &'a LabelVolume,
+    regions: &'a Regions,
+    outside_region: u32,
+    outside_label: u32,
+    nx: usize,
+    ny: usize,
+    surfels: Vec<Surfel>,
+    vertex_corners: Vec<[u32; 3]>,
+    /// Vertex ids of corner layers `k` and `k + 1`.
+    corners_lo: Vec<u32>,
+    corners_hi: Vec<u32>,
+    interface_of_pair: HashMap<(u32, u32), u32>,
+    last_pair: ((u32, u32), u32),
+}
+
+impl Scan<'_> {
+    fn fill_slab(&self, z: usize, regions: &mut [u32], labels: &mut [u32]) -> Result<(), SurfaceError> {
+        for y in 0..self.ny {
+            for x in 0..self.nx {
+                let l = self.volume.labels()[[x, y, z]];
+                let r = self
+                    .regions
+                    .region_of(l)
+                    .ok_or_else(|| SurfaceError::InvalidRegions(format!("label {l} has no region")))?;
+                regions[x + self.nx * y] = r.0;
+                labels[x + self.nx * y] = l;
+            }
+        }
+        Ok(())
+    }
+
+    fn vertex(&mut self, c: [u32; 3], k: usize) -> Result<VertexId, SurfaceError> {
+        let idx = c[0] as usize + (self.nx + 1) * c[1] as usize;
+        let layer = if c[2] as usize == k { &mut self.corners_lo } else { &mut self.corners_hi };
+        if layer[idx] == NONE {
+            let id = u32::try_from(self.vertex_corners.len())
+                .ok()
+                .filter(|&i| i != NONE)
+                .ok_or_else(|| SurfaceError::TooLarge("more than 2^32 - 1 vertices".into()))?;
+            layer[idx] = id;
+            self.vertex_corners.push(c);
+        }
+        Ok(VertexId(layer[idx]))
+    }
+
+    /// Adds the surfel between region `a` (negative side) and `b` (positive side), if any.
+    #[allow(clippy::too_many_arguments)]
+    fn face(
+        &mut self,
+        cell: [u32; 3],
+        axis: usize,
+        a: u32,
+        b: u32,
+        la: u32,
+        lb: u32,
+        k: usize,
+    ) -> Result<(), SurfaceError> {
+        if a == b || a == NONE || b == NONE {
+            return Ok(());
+        }
+        if self.surfels.len() >= NONE as usize {
+            return Err(SurfaceError::TooLarge("more than 2^32 - 1 surfels".into()));
+        }
+        let flipped = a > b;
+        let (inner, outer, li, lo) = if flipped { (b, a, lb, la) } else { (a, b, la, lb) };
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let mut cu = cell;
+        cu[u] += 1;
+        let mut cuv = cu;
+        cuv[v] += 1;
+        let mut cv = cell;
+        cv[v] += 1;
+        let corners = if flipped { [cell, cv, cuv, cu] } else { [cell, cu, cuv, cv] };
+        let mut vertices = [VertexId(0); 4];
+        for (slot, c) in vertices.iter_mut().zip(corners) {
+            *slot = self.vertex(c, k)?;
+        }
+        let pair = (inner, outer);
+        let interface = if self.last_pair.0 == pair {
+            self.last_pair.1
+        } else {
+            let n = self.interface_of_pair.len() as u32;
+            let id = *self.interface_of_pair.entry(pair).or_insert(n);
+            self.last_pair = (pair, id);
+            id
+        };
+        self.surfels.push(Surfel {
+            cell,
+            axis: axis as u8,
+            flipped,
+            regions: [RegionId(inner), RegionId(outer)],
+            labels: [li, lo],
+            vertices,
+            interface: InterfaceId(interface),
+        });
+        Ok(())
+    }
+}
+
+impl DigitalSurface {
+    /// The digital surface of `volume` with every label its own region.
+    pub fn from_volume(volume: &LabelVolume) -> Result<Self, SurfaceError> {
+        Self::new(volume, &RegionMap::per_label())
+    }
+
+    /// The digital surface of `volume`, with labels grouped into regions by `map`.
+    ///
+    /// Cost: one pass over the voxels (linear), memory for the slab being scanned plus
+    /// the complex itself (proportional to the number of surfels). Fails with
+    /// [`SurfaceError::Empty`] when no surfel separates two regions.
+    pub fn new(volume: &LabelVolume, map: &RegionMap) -> Result<Self, SurfaceError> {
+        let regions = map.resolve(volume)?;
+        let [nx, ny, nz] = volume.dims();
+        if nx.max(ny).max(nz) >= (u32::MAX as usize) - 1 {
+            return Err(SurfaceError::TooLarge(format!("dimensions {nx}x{ny}x{nz}")));
+        }
+        let (outside_region, outside_label) = match (volume.background(), regions.background()) {
+            (Some(l), Some(r)) => (r.0, l),
+            _ => (NONE, NONE),
+        };
+        let layer = (nx + 1) * (ny + 1);
+        let mut scan = Scan {
+            volume,
+            regions: &regions,
+            outside_region,
+            outside_label,
+            nx,
+            ny,
+            surfels: Vec::new(),
+            vertex_corners: Vec::new(),
+            corners_lo: vec![NONE; layer],
+            corners_hi: vec![NONE; layer],
+            interface_of_pair: HashMap::new(),
+            last_pair: ((NONE, NONE), NONE),
+        };
+        let slab = nx * ny;
+        let mut prev_r = vec![outside_region; slab];
+        let mut prev_l = vec![outside_label; slab];
+        let mut cur_r = vec![0u32; slab];
+        let mut cur_l = vec![0u32; slab];
+        for k in 0..=nz {
+            if k < nz {
+                scan.fill_slab(k, &mut cur_r, &mut cur_l)?;
+            } else {
+                cur_r.fill(outside_region);
+                cur_l.fill(outside_label);
+            }
+            let kk = k as u32;
+            // Faces perpendicular to z between voxel layers k - 1 and k.
+            for y in 0..ny {
+                for x in 0..nx {
+                    let i = x + nx * y;
+                    scan.face([x as u32, y as u32, kk], 2, prev_r[i], cur_r[i], prev_l[i], cur_l[i], k)?;
+                }
+            }
+            if k < nz {
+                let (or, ol) = (scan.outside_region, scan.outside_label);
+                // Faces perpendicular to x and y within voxel layer k.
+                for y in 0..ny {
+                    for x in 0..=nx {
+                        let (a, la) =
+                            if x > 0 { (cur_r[x - 1 + nx * y], cur_l[x - 1 + nx * y]) } else { (or, ol) };
+                        let (b, lb) = if x < nx { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { (or, ol) };
+                        scan.face([x as u32, y as u32, kk], 0, a, b, la, lb, k)?;
+                    }
+                }
+                for y in 0..=ny {
+                    for x in 0..nx {
+                        let (a, la) =
+                            if y > 0 { (cur_r[x + nx * (y - 1)], cur_l[x + nx * (y - 1)]) } else { (or, ol) };
+                        let (b, lb) = if y < ny { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { (or, ol) };
+                        scan.face([x as u32, y as u32, kk], 1, a, b, la, lb, k)?;
+                    }
+                }
+            }
+            std::mem::swap(&mut prev_r, &mut cur_r);
+            std::mem::swap(&mut prev_l, &mut cur_l);
+            std::mem::swap(&mut scan.corners_lo, &mut scan.corners_hi);
+            scan.corners_hi.fill(NONE);
+        }
+        let Scan { mut surfels, vertex_corners, interface_of_pair, .. } = scan;
+        if surfels.is_empty() {
+            return Err(SurfaceError::Empty);
+        }
+
+        // Interfaces, numbered by region pair.
+        let mut pairs: Vec<((u32, u32), u32)> = interface_of_pair.into_iter().collect();
+        pairs.sort_unstable();
+        let mut renumber = vec![0u32; pairs.len()];
+        for (new, &(_, old)) in pairs.iter().enumerate() {
+            renumber[old as usize] = new as u32;
+        }
+        let mut interfaces: Vec<Interface> = pairs
+            .iter()
+            .map(|&((a, b), _)| Interface { regions: [RegionId(a), RegionId(b)], surfels: Vec::new() })
+            .collect();
+        for (i, s) in surfels.iter_mut().enumerate() {
+            s.interface = InterfaceId(renumber[s.interface.index()]);
+            interfaces[s.interface.index()].surfels.push(SurfelId(i as u32));
+        }
+
+        let open_border = volume.background().is_none();
+        let mut surface = DigitalSurface {
+            dims: [nx, ny, nz],
+            spacing: volume.spacing(),
+            origin: volume.origin(),
+            open_border,
+            regions,
+            surfel_edges: Vec::new(),
+            vertex_surfels: Lists::default(),
+            vertex_neighbours: Lists::default(),
+            boundary_vertex: Vec::new(),
+            pinched_vertex: Vec::new(),
+            edges: Vec::new(),
+            edge_surfels: Lists::default(),
+            interfaces,
+            surfel_component: Vec::new(),
+            component_closed: Vec::new(),
+            vertex_corners,
+            surfels,
+        };
+        surface.build_edges();
+        surface.build_vertex_lists();
+        surface.build_components();
+        Ok(surface)
+    }
+
+    /// Edges by sorting the surfels' `4F` vertex pairs (radix-like cost in practice,
+    /// `O(F log F)` at worst), then their incident surfels and kinds.
+    fn build_edges(&mut self) {
+        let mut keys: Vec<(u64, u32)> = Vec::with_capacity(4 * self.surfels.len());
+        for (s, surfel) in self.surfels.iter().enumerate() {
+            for i in 0..4 {
+                let a = surfel.vertices[i].0;
+                let b = surfel.vertices[(i + 1) % 4].0;
+                let key = ((a.min(b) as u64) << 32) | a.max(b) as u64;
+                keys.push((key, (s as u32) * 4 + i as u32));
+            }
+        }
+        keys.par_sort_unstable();
+        let mut edges = Vec::with_capacity(keys.len() / 2 + 1);
+        let mut offsets = Vec::with_capacity(keys.len() / 2 + 2);
+        let mut items = Vec::with_capacity(keys.len());
+        let mut surfel_edges = vec![[EdgeId(0); 4]; self.surfels.len()];
+        offsets.push(0);
+        for group in keys.chunk_by(|x, y| x.0 == y.0) {
+            let e = EdgeId(edges.len() as u32);
+            let a = VertexId((group[0].0 >> 32) as u32);
+            let b = VertexId(group[0].0 as u32);
+            let (ca, cb) = (self.vertex_corners[a.index()], self.vertex_corners[b.index()]);
+            let axis = (0..3).find(|&k| ca[k] != cb[k]).unwrap_or(0);
+            for &(_, slot) in group {
+                surfel_edges[(slot / 4) as usize][(slot % 4) as usize] = e;
+                items.push(SurfelId(slot / 4));
+            }
+            offsets.push(items.len());
+            let kind = self.edge_kind(ca.min(cb), axis, &items[offsets[offsets.len() - 2]..]);
+            edges.push(Edge { vertices: [a, b], axis: axis as u8, kind });
+        }
+        self.edges = edges;
+        self.edge_surfels = Lists::from_parts(offsets, items);
+        self.surfel_edges = surfel_edges;
+    }
+
+    fn edge_kind(&self, corner: [u32; 3], axis: usize, incident: &[SurfelId]) -> EdgeKind {
+        if self.open_border {
+            let on_border =
+                (0..3).any(|u| u != axis && (corner[u] == 0 || corner[u] as usize == self.dims[u]));
+            if on_border {
+                return EdgeKind::Boundary;
+            }
+        }
+        match incident.len() {
+            0..=2 => EdgeKind::Regular,
+            3 => EdgeKind::Junction,
+            _ => {
+                let mut rs: Vec<RegionId> =
+                    incident.iter().flat_map(|s| self.surfels[s.index()].regions).collect();
+                rs.sort_unstable();
+                rs.dedup();
+                if rs.len() == 2 {
+                    EdgeKind::Pinch
+                } else {
+                    EdgeKind::Junction
+                }
+            }
+        }
+    }
+
+    fn build_vertex_lists(&mut self) {
+        let nv = self.vertex_corners.len();
+        let surfels = &self.surfels;
+        self.vertex_surfels = Lists::from_pairs(nv, |f| {
+            for (s, surfel) in surfels.iter().enumerate() {
+                for v in surfel.vertices {
+                    f(v.index(), SurfelId(s as u32));
+                }
+            }
+        });
+        let edges = &self.edges;
+        let mut neighbours = Lists::from_pairs(nv, |f| {
+            for e in edges {
+                f(e.vertices[0].index(), e.vertices[1]);
+                f(e.vertices[1].index(), e.vertices[0]);
+            }
+        });
+        for v in 0..nv {
+            neighbours.get_mut(v).sort_unstable();
+        }
+        self.vertex_neighbours = neighbours;
+        let mut boundary = vec![false; nv];
+        for e in &self.edges {
+            if e.kind == EdgeKind::Boundary {
+                boundary[e.vertices[0].index()] = true;
+                boundary[e.vertices[1].index()] = true;
+            }
+        }
+        self.boundary_vertex = boundary;
+        self.pinched_vertex =
+            (0..nv).into_par_iter().map(|v| self.fan_count(VertexId(v as u32)) > 1).collect();
+    }
+
+    /// Number of fans around `v`: groups of incident surfels connected through
+    /// edges incident to `v`.
+    fn fan_count(&self, v: VertexId) -> usize {
+        let around = self.vertex_surfels.get(v.index());
+        // (edge, local surfel index) for the two edges of each surfel that touch v.
+        let mut links: Vec<(EdgeId, usize)> = Vec::with_capacity(2 * around.len());
+        for (li, s) in around.iter().enumerate() {
+            let sf = &self.surfels[s.index()];
+            let i = sf.vertices.iter().position(|&w| w == v).unwrap_or(0);
+            let es = self.surfel_edges[s.index()];
+            links.push((es[i], li));
+            links.push((es[(i + 3) % 4], li));
+        }
+        links.sort_unstable();
+        let mut parent: Vec<usize> = (0..around.len()).collect();
+        fn find(p: &mut [usize], mut x: usize) -> usize {
+            while p[x] != x {
+                p[x] = p[p[x]];
+                x = p[x];
+            }
+            x
+        }
+        for group in links.chunk_by(|a, b| a.0 == b.0) {
+            for w in group.windows(2) {
+                let (a, b) = (find(&mut parent, w[0].1), find(&mut parent, w[1].1));
+                parent[a] = b;
+            }
+        }
+        (0..around.len()).filter(|&i| find(&mut parent, i) == i).count()
+    }
+
+    fn build_components(&mut self) {
+        let n = self.surfels.len();
+        let mut comp = vec![NONE; n];
+        let mut closed = Vec::new();
+        let mut stack = Vec::new();
+        for start in 0..n {
+            if comp[start] != NONE {
+                continue;
+            }
+            let c = closed.len() as u32;
+            let mut is_closed = true;
+            comp[start] = c;
+            stack.push(start);
+            while let Some(s) = stack.pop() {
+                for e in self.surfel_edges[s] {
+                    if self.edges[e.index()].kind == EdgeKind::Boundary {
+                        is_closed = false;
+                    }
+                    for t in self.edge_surfels.get(e.index()) {
+                        if comp[t.index()] == NONE {
+                            comp[t.index()] = c;
+                            stack.push(t.index());
+                        }
+                    }
+                }
+            }
+            closed.push(is_closed);
+        }
+        self.surfel_component = comp;
+        self.component_closed = closed;
+    }
+
+    // ---- queries ------------------------------------------------------------------
+
+    /// Number of voxels along x, y and z of the source volume.
+    pub fn dims(&self) -> [usize; 3] {
+        self.dims
+    }
+
+    /// Physical voxel size of the source volume.
+    pub fn spacing(&self) -> DVec3 {
+        self.spacing
+    }
+
+    /// The regions of the source volume.
+    pub fn regions(&self) -> &Regions {
+        &self.regions
+    }
+
+    /// Whether the domain border is open (the volume has no background), so surfaces
+    /// may end there.
+    pub fn has_open_border(&self) -> bool {
+        self.open_border
+    }
+
+    /// All surfels, indexed by [`SurfelId`].
+    pub fn surfels(&self) -> &[Surfel] {
+        &self.surfels
+    }
+
+    /// Surfel `s`.
+    pub fn surfel(&self, s: SurfelId) -> &Surfel {
+        &self.surfels[s.index()]
+    }
+
+    /// The four edges of surfel `s`; edge `i` joins its vertices `i` and `i + 1 (mod 4)`.
+    pub fn surfel_edges(&self, s: SurfelId) -> [EdgeId; 4] {
+        self.surfel_edges[s.index()]
+    }
+
+    /// Number of surfels.
+    pub fn num_surfels(&self) -> usize {
+        self.surfels.len()
+    }
+
+    /// Number of vertices.
+    pub fn num_vertices(&self) -> usize {
+        self.vertex_corners.len()
+    }
+
+    /// Number of edges.
+    pub fn num_edges(&self) -> usize {
+        self.edges.len()
+    }
+
+    /// All edges, indexed by [`EdgeId`].
+    pub fn edges(&self) -> &[Edge] {
+        &self.edges
+    }
+
+    /// The surfels incident to edge `e` (1 on a rim, 2 on a manifold edge, up to 4).
+    pub fn edge_surfels(&self, e: EdgeId) -> &[SurfelId] {
+        self.edge_surfels.get(e.index())
+    }
+
+    /// Lattice coordinates of vertex `v` (integers in `0..=dims`).
+    pub fn vertex_corner(&self, v: VertexId) -> [u32; 3] {
+        self.vertex_corners[v.index()]
+    }
+
+    /// Physical position of vertex `v`: `origin + (corner - 0.5) * spacing`.
+    pub fn vertex_position(&self, v: VertexId) -> DVec3 {
+        let c = self.vertex_corners[v.index()];
+        self.origin + (DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64) - 0.5) * self.spacing
+    }
+
+    /// Physical positions of all vertices, indexed by [`VertexId`].
+    pub fn positions(&self) -> Vec<DVec3> {
+        (0..self.num_vertices()).map(|v| self.vertex_position(VertexId(v as u32))).collect()
+    }
+
+    /// The edge-neighbours of vertex `v`, sorted by id. Across interfaces too.
+    pub fn vertex_neighbours(&self, v: VertexId) -> &[VertexId] {
+        self.vertex_neighbours.get(v.index())
+    }
+
+    /// The surfels incident to vertex `v`.
+    pub fn vertex_surfels(&self, v: VertexId) -> &[SurfelId] {
+        self.vertex_surfels.get(v.index())
+    }
+
+    /// Whether `v` lies on the rim of an open surface.
+    pub fn is_boundary_vertex(&self, v: VertexId) -> bool {
+        self.boundary_vertex[v.index()]
+    }
+
+    /// Whether the surfels around `v` form several fans (a vertex pinch).
+    pub fn is_pinched_vertex(&self, v: VertexId) -> bool {
+        self.pinched_vertex[v.index()]
+    }
+
+    /// All interfaces, ordered by region pair.
+    pub fn interfaces(&self) -> &[Interface] {
+        &self.interfaces
+    }
+
+    /// The edge-connected component of surfel `s` (components are numbered from 0).
+    pub fn surfel_component(&self, s: SurfelId) -> u32 {
+        self.surfel_component[s.index()]
+    }
+
+    /// For each component, whether it is closed (has no rim edge).
+    pub fn components_closed(&self) -> &[bool] {
+        &self.component_closed
+    }
+
+    /// `V - E + F` of the whole complex (pinched cells counted once).
+    pub fn euler_characteristic(&self) -> i64 {
+        self.num_vertices() as i64 - self.num_edges() as i64 + self.num_surfels() as i64
+    }
+
+    /// Summary counts.
+    pub fn counts(&self) -> SurfaceCounts {
+        let count_kind = |k| self.edges.iter().filter(|e| e.kind == k).count();
+        SurfaceCounts {
+            surfels: self.num_surfels(),
+            vertices: self.num_vertices(),
+            edges: self.num_edges(),
+            interfaces: self.interfaces.len(),
+            components: self.component_closed.len(),
+            boundary_vertices: self.boundary_vertex.iter().filter(|&&b| b).count(),
+            boundary_edges: count_kind(EdgeKind::Boundary),
+            junction_edges: count_kind(EdgeKind::Junction),
+            pinched_edges: count_kind(EdgeKind::Pinch),
+            pinched_vertices: self.pinched_vertex.iter().filter(|&&b| b).count(),
+        }
+    }
+}

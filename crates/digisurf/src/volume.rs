@@ -1,0 +1,229 @@
+//! Labeled voxel volumes.
+
+use glam::DVec3;
+use ndarray::{Array3, ShapeBuilder};
+
+use crate::SurfaceError;
+
+/// A voxel's integer coordinates `[x, y, z]`. Coordinates may lie outside the
+/// volume (e.g. `-1`) when they name the outside of the domain.
+pub type Voxel = [i64; 3];
+
+/// A 3D array of labels with a physical embedding.
+///
+/// Labels are `u32`. Voxel `[x, y, z]` is stored at index `[x, y, z]` of the
+/// array (any memory layout is accepted; volumes read from files use `x`
+/// fastest).
+///
+/// **Embedding.** The centre of voxel `[x, y, z]` lies at
+/// `origin + [x * sx, y * sy, z * sz]` (the convention of NIfTI, DGtal and VTK
+/// point data), so the lattice corner `c` (integer, `0..=dims`) of the
+/// digital surface lies at `origin + (c - 0.5) * spacing`.
+///
+/// **Background.** By default label `0` is the background: empty space, which
+/// also fills everything outside the domain, so objects touching the border
+/// still get closed surfaces. A volume with no background ([`LabelVolume::with_background`]
+/// with `None`) treats every label as a material; then the domain border carries no
+/// surfels and interfaces end there as open surfaces.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LabelVolume {
+    labels: Array3<u32>,
+    spacing: DVec3,
+    origin: DVec3,
+    background: Option<u32>,
+}
+
+impl LabelVolume {
+    /// A volume over `labels` with unit spacing, origin `0` and background label `0`.
+    pub fn new(labels: Array3<u32>) -> Self {
+        LabelVolume { labels, spacing: DVec3::ONE, origin: DVec3::ZERO, background: Some(0) }
+    }
+
+    /// A volume of dimensions `dims` whose label at `[x, y, z]` is `f([x, y, z])`.
+    /// Stored with `x` fastest.
+    pub fn from_fn(dims: [usize; 3], mut f: impl FnMut([usize; 3]) -> u32) -> Self {
+        let labels = Array3::from_shape_fn((dims[0], dims[1], dims[2]).f(), |(x, y, z)| f([x, y, z]));
+        Self::new(labels)
+    }
+
+    /// A volume from labels listed with `x` fastest, then `y`, then `z` (the order of
+    /// most file formats).
+    pub fn from_x_fastest(dims: [usize; 3], labels: Vec<u32>) -> Result<Self, SurfaceError> {
+        let expected = dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));
+        if expected != Some(labels.len()) {
+            return Err(SurfaceError::InvalidVolume(format!(
+                "{} labels given for dimensions {}x{}x{}",
+                labels.len(),
+                dims[0],
+                dims[1],
+                dims[2]
+            )));
+        }
+        let labels = Array3::from_shape_vec((dims[0], dims[1], dims[2]).f(), labels)
+            .map_err(|e| SurfaceError::InvalidVolume(e.to_string()))?;
+        Ok(Self::new(labels))
+    }
+
+    /// Sets the physical size of a voxel along x, y and z (default `1, 1, 1`).
+    /// Each component must be finite and positive.
+    pub fn with_spacing(mut self, spacing: DVec3) -> Result<Self, SurfaceError> {
+        if !(spacing.is_finite() && spacing.min_element() > 0.0) {
+            return Err(SurfaceError::InvalidVolume(format!(
+                "voxel spacing must be finite and positive, got {spacing}"
+            )));
+        }
+        self.spacing = spacing;
+        Ok(self)
+    }
+
+    /// Sets the physical position of the centre of voxel `[0, 0, 0]` (default `0`).
+    pub fn with_origin(mut self, origin: DVec3) -> Result<Self, SurfaceError> {
+        if !origin.is_finite() {
+            return Err(SurfaceError::InvalidVolume(format!("origin must be finite, got {origin}")));
+        }
+        self.origin = origin;
+        Ok(self)
+    }
+
+    /// Sets the background label (default `Some(0)`); `None` makes every label a material.
+    pub fn with_background(mut self, background: Option<u32>) -> Self {
+        self.background = background;
+        self
+    }
+
+    /// Number of voxels along x, y and z.
+    pub fn dims(&self) -> [usize; 3] {
+        let d = self.labels.dim();
+        [d.0, d.1, d.2]
+    }
+
+    /// Total number of voxels.
+    pub fn len(&self) -> usize {
+        self.labels.len()
+    }
+
+    /// Whether the volume has no voxel at all.
+    pub fn is_empty(&self) -> bool {
+        self.labels.is_empty()
+    }
+
+    /// Physical size of a voxel along x, y and z.
+    pub fn spacing(&self) -> DVec3 {
+        self.spacing
+    }
+
+    /// Physical position of the centre of voxel `[0, 0, 0]`.
+    pub fn origin(&self) -> DVec3 {
+        self.origin
+    }
+
+    /// The background label, if the volume has one.
+    pub fn background(&self) -> Option<u32> {
+        self.background
+    }
+
+    /// The label array, indexed `[x, y, z]`.
+    pub fn labels(&self) -> &Array3<u32> {
+        &self.labels
+    }
+
+    /// Mutable access to the label array, indexed `[x, y, z]`.
+    pub fn labels_mut(&mut self) -> &mut Array3<u32> {
+        &mut self.labels
+    }
+
+    /// The label of voxel `v`: the background label outside the domain, or `None`
+    /// outside the domain of a volume without background.
+    pub fn label(&self, v: Voxel) -> Option<u32> {
+        let d = self.dims();
+        if (0..3).all(|k| v[k] >= 0 && (v[k] as u64) < d[k] as u64) {
+            Some(self.labels[[v[0] as usize, v[1] as usize, v[2] as usize]])
+        } else {
+            self.background
+        }
+    }
+
+    /// Physical position of lattice corner `c` (integer coordinates `0..=dims`).
+    pub fn corner_position(&self, c: [u32; 3]) -> DVec3 {
+        let c = DVec3::new(c[0] as f64, c[1] as f64, c[2] as f64);
+        self.origin + (c - 0.5) * self.spacing
+    }
+
+    /// Physical position of the centre of voxel `v`.
+    pub fn voxel_centre(&self, v: Voxel) -> DVec3 {
+        let v = DVec3::new(v[0] as f64, v[1] as f64, v[2] as f64);
+        self.origin + v * self.spacing
+    }
+
+    /// The distinct labels of the volume with their voxel counts, sorted by label.
+    pub fn label_counts(&self) -> Vec<(u32, u64)> {
+        let mut counts: Vec<(u32, u64)> = Vec::new();
+        let max = self.labels.iter().copied().max().unwrap_or(0);
+        if (max as usize) < (1 << 20) {
+            let mut dense = vec![0u64; max as usize + 1];
+            for &l in self.labels.iter() {
+                dense[l as usize] += 1;
+            }
+            for (l, &c) in dense.iter().enumerate() {
+                if c > 0 {
+                    counts.push((l as u32, c));
+                }
+            }
+        } else {
+            let mut all: Vec<u32> = self.labels.iter().copied().collect();
+            all.sort_unstable();
+            for chunk in all.chunk_by(|a, b| a == b) {
+                counts.push((chunk[0], chunk.len() as u64));
+            }
+        }
+        counts
+    }
+
+    /// A binary volume: label `1` where `inside(label)` holds, `0` (background) elsewhere.
+    /// Spacing and origin are kept.
+    pub fn binarize(&self, mut inside: impl FnMut(u32) -> bool) -> LabelVolume {
+        LabelVolume {
+            labels: self.labels.mapv(|l| u32::from(inside(l))),
+            spacing: self.spacing,
+            origin: self.origin,
+            background: Some(0),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn x_fastest_layout() {
+        let v = LabelVolume::from_x_fastest([2, 3, 4], (0..24).collect()).unwrap();
+        assert_eq!(v.label([1, 0, 0]), Some(1));
+        assert_eq!(v.label([0, 1, 0]), Some(2));
+        assert_eq!(v.label([0, 0, 1]), Some(6));
+        assert_eq!(v.label([-1, 0, 0]), Some(0));
+        assert_eq!(v.clone().with_background(None).label([0, 3, 0]), None);
+        assert!(LabelVolume::from_x_fastest([2, 3, 4], vec![0; 23]).is_err());
+    }
+
+    #[test]
+    fn embedding_and_validation() {
+        let v = LabelVolume::from_fn([1, 1, 1], |_| 1)
+            .with_spacing(DVec3::new(1.0, 2.0, 3.0))
+            .unwrap()
+            .with_origin(DVec3::splat(10.0))
+            .unwrap();
+        assert_eq!(v.corner_position([0, 0, 0]), DVec3::new(9.5, 9.0, 8.5));
+        assert_eq!(v.corner_position([1, 1, 1]), DVec3::new(10.5, 11.0, 11.5));
+        assert!(v.clone().with_spacing(DVec3::new(0.0, 1.0, 1.0)).is_err());
+        assert!(v.with_origin(DVec3::NAN).is_err());
+    }
+
+    #[test]
+    fn counts() {
+        let v = LabelVolume::from_fn([3, 1, 1], |p| [5, 0, 5][p[0]]);
+        assert_eq!(v.label_counts(), vec![(0, 1), (5, 2)]);
+        let big = LabelVolume::from_fn([2, 1, 1], |p| [u32::MAX, 7][p[0]]);
+        assert_eq!(big.label_counts(), vec![(7, 1), (u32::MAX, 1)]);
+    }
+}
