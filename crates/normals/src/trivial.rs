@@ -1,0 +1,20 @@
+//! The trivial estimator.
+
+use voxreg_digisurf::DigitalSurface;
+
+use crate::{NormalError, NormalEstimator, NormalField};
+
+/// The trivial normal: each surfel's axis, oriented from its lower region to its
+/// higher one (outward for a solid surrounded by background).
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+pub struct Trivial;
+
+impl NormalEstimator for Trivial {
+    fn name(&self) -> &'static str {
+        "trivial"
+    }
+
+    fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
+        Ok(NormalField::new(surface.surfels().iter().map(|s| s.normal()).collect()))
+    }
+}
