@@ -24,8 +24,8 @@ pub struct DirectSolver {
     pattern: OperatorPattern,
     symbolic: SymbolicCholesky<usize>,
     factor: Vec<f64>,
-    /// Seconds spent on the pattern and the symbolic analysis.
-    analysis_seconds: f64,
+    pattern_seconds: f64,
+    symbolic_seconds: f64,
 }
 
 impl DirectSolver {
@@ -33,6 +33,8 @@ impl DirectSolver {
     pub fn new(surface: &voxreg_digisurf::DigitalSurface) -> Result<Self, RegularizeError> {
         let t = Instant::now();
         let pattern = OperatorPattern::new(surface)?;
+        let pattern_seconds = t.elapsed().as_secs_f64();
+        let t = Instant::now();
         let symbolic = factorize_symbolic_cholesky(
             pattern.symbolic().as_ref(),
             Side::Lower,
@@ -44,7 +46,8 @@ impl DirectSolver {
             pattern,
             symbolic,
             factor: Vec::new(),
-            analysis_seconds: t.elapsed().as_secs_f64(),
+            pattern_seconds,
+            symbolic_seconds: t.elapsed().as_secs_f64(),
         })
     }
 
@@ -135,7 +138,8 @@ impl DirectSolver {
                 iterations: refinements + 1,
                 relative_gradient: relative,
                 factor_nnz: Some(self.factor_nnz()),
-                analysis_seconds: self.analysis_seconds,
+                pattern_seconds: self.pattern_seconds,
+                symbolic_seconds: self.symbolic_seconds,
                 assemble_seconds,
                 factor_seconds,
                 solve_seconds,

@@ -79,8 +79,11 @@ pub struct SolveInfo {
     pub relative_gradient: f64,
     /// Entries of the Cholesky factor, for the direct solver.
     pub factor_nnz: Option<usize>,
-    /// Seconds of pattern and symbolic analysis.
-    pub analysis_seconds: f64,
+    /// Seconds spent building the operator's sparsity pattern (once per surface).
+    pub pattern_seconds: f64,
+    /// Seconds of symbolic analysis: fill-reducing ordering and symbolic factorization
+    /// (once per surface).
+    pub symbolic_seconds: f64,
     /// Seconds of numeric assembly.
     pub assemble_seconds: f64,
     /// Seconds of numeric factorization.

@@ -1,0 +1,240 @@
+//! Quad meshes, and writing them to a file of any supported format.
+
+use std::io::{self, BufWriter, Write};
+use std::path::Path;
+
+use glam::DVec3;
+use voxreg_digisurf::DigitalSurface;
+
+use crate::volume::lowercase_extension;
+use crate::{write_obj, write_ply, IoError};
+
+/// A mesh of quads with two labels per face and named groups of faces: what the
+/// writers take.
+///
+/// Built from a digital surface by [`QuadMesh::from_surface`], or by hand. The writers
+/// check its consistency ([`IoError::InvalidMesh`]) before creating any file.
+#[derive(Clone, Debug, Default, PartialEq)]
+pub struct QuadMesh {
+    /// Vertex positions.
+    pub positions: Vec<DVec3>,
+    /// Faces: four indices into `positions`, counter-clockwise seen from the side the
+    /// face's normal points to.
+    pub quads: Vec<[u32; 4]>,
+    /// Per face, the `[inner, outer]` labels: the labels on the back and front side of
+    /// the face (the normal points from inner to outer). Same length as `quads`.
+    pub face_labels: Vec<[u32; 2]>,
+    /// Named groups of faces (indices into `quads`); a face belongs to at most one group.
+    pub groups: Vec<FaceGroup>,
+}
+
+/// A named set of faces of a [`QuadMesh`], written as an OBJ group.
+#[derive(Clone, Debug, Default, PartialEq, Eq)]
+pub struct FaceGroup {
+    /// The group's name: non-empty, no whitespace.
+    pub name: String,
+    /// Indices into [`QuadMesh::quads`], in the order they are written.
+    pub faces: Vec<u32>,
+}
+
+impl QuadMesh {
+    /// The mesh of `surface` with vertex `v` at `positions[v]`: one quad per surfel, in
+    /// surfel order (face `i` is surfel `i`), with the surfel's vertices and
+    /// `[inner, outer]` labels, and one group per interface, in interface order, named
+    /// `interface_{a}_{b}` where `a` and `b` are the smallest labels of the interface's
+    /// inner and outer regions.
+    ///
+    /// `positions` are typically [`DigitalSurface::positions`] or regularized ones.
+    ///
+    /// # Panics
+    ///
+    /// If `positions.len()` differs from `surface.num_vertices()`.
+    pub fn from_surface(surface: &DigitalSurface, positions: &[DVec3]) -> QuadMesh {
+        assert_eq!(
+            positions.len(),
+            surface.num_vertices(),
+            "QuadMesh::from_surface: one position per vertex of the surface"
+        );
+        let surfels = surface.surfels();
+        let quads = surfels.iter().map(|s| s.vertices.map(|v| v.0)).collect();
+        let face_labels = surfels.iter().map(|s| s.labels).collect();
+        let regions = surface.regions();
+        let groups = surface
+            .interfaces()
+            .iter()
+            .map(|interface| {
+                let [a, b] = interface.regions.map(|r| regions.labels(r).first().copied().unwrap_or(0));
+                FaceGroup {
+                    name: format!("interface_{a}_{b}"),
+                    faces: interface.surfels.iter().map(|s| s.0).collect(),
+                }
+            })
+            .collect();
+        QuadMesh { positions: positions.to_vec(), quads, face_labels, groups }
+    }
+
+    /// Number of faces.
+    pub fn num_faces(&self) -> usize {
+        self.quads.len()
+    }
+
+    /// Why the mesh cannot be written, if it cannot: a vertex index or group face out
+    /// of range, a non-finite position, `face_labels` of the wrong length, a face in
+    /// two groups, or a group name that is empty or holds whitespace.
+    pub(crate) fn check(&self) -> Result<(), String> {
+        let n = self.positions.len();
+        if let Some(i) = self.positions.iter().position(|p| !p.is_finite()) {
+            return Err(format!("vertex {i} has a non-finite position {}", self.positions[i]));
+        }
+        if let Some((f, q)) = self.quads.iter().enumerate().find(|(_, q)| q.iter().any(|&v| v as usize >= n))
+        {
+            return Err(format!("face {f} {q:?} names a vertex beyond the {n} vertices"));
+        }
+        if self.face_labels.len() != self.quads.len() {
+            return Err(format!(
+                "{} face label pairs for {} faces",
+                self.face_labels.len(),
+                self.quads.len()
+            ));
+        }
+        let mut grouped = vec![false; self.quads.len()];
+        for g in &self.groups {
+            if g.name.is_empty() || g.name.chars().any(|c| c.is_whitespace() || c.is_control()) {
+                return Err(format!("group name '{}' is empty or holds whitespace", g.name.escape_debug()));
+            }
+            for &f in &g.faces {
+                match grouped.get_mut(f as usize) {
+                    None => {
+                        return Err(format!(
+                            "group {} names face {f}, beyond the {} faces",
+                            g.name,
+                            self.quads.len()
+                        ))
+                    }
+                    Some(true) => return Err(format!("face {f} is in two groups (the second: {})", g.name)),
+                    Some(seen) => *seen = true,
+                }
+            }
+        }
+        Ok(())
+    }
+}
+
+/// Writes `mesh` to `path`, choosing the format by the extension (case insensitive):
+///
+/// - `.obj`: Wavefront OBJ, ASCII, with groups, see [`write_obj`];
+/// - `.ply`: binary little-endian PLY with per-face labels, see [`write_ply`].
+///
+/// Fails with [`IoError::UnsupportedExtension`] for any other name, before creating
+/// anything. Like every writer of this crate, it writes a temporary file next to
+/// `path` and renames it onto `path` only once complete, so a failure leaves no
+/// partial file (and an existing file at `path` untouched).
+pub fn write_mesh(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
+    match lowercase_extension(path).as_deref() {
+        Some("obj") => write_obj(path, mesh),
+        Some("ply") => write_ply(path, mesh),
+        _ => Err(IoError::UnsupportedExtension { path: path.to_path_buf(), expected: ".obj or .ply" }),
+    }
+}
+
+/// Checks `mesh`, then writes it through `encode` to a temporary file in the directory
+/// of `path`, and renames that onto `path`. On any failure the temporary file is
+/// removed and `path` is left as it was.
+pub(crate) fn write_atomically(
+    path: &Path,
+    mesh: &QuadMesh,
+    check: impl FnOnce(&QuadMesh) -> Result<(), String>,
+    encode: impl FnOnce(&QuadMesh, &mut dyn Write) -> io::Result<()>,
+) -> Result<(), IoError> {
+    mesh.check()
+        .and_then(|()| check(mesh))
+        .map_err(|message| IoError::InvalidMesh { path: path.to_path_buf(), message })?;
+    let dir = match path.parent() {
+        Some(dir) if !dir.as_os_str().is_empty() => dir,
+        _ => Path::new("."),
+    };
+    let mut builder = tempfile::Builder::new();
+    builder.prefix(".voxreg-").suffix(".tmp");
+    #[cfg(unix)]
+    {
+        // The mode a plain `File::create` would give (0o666 less the umask), rather
+        // than the temporary file's private 0o600.
+        use std::os::unix::fs::PermissionsExt;
+        builder.permissions(std::fs::Permissions::from_mode(0o666));
+    }
+    let mut tmp = builder.tempfile_in(dir).map_err(|e| IoError::io(path, e))?;
+    {
+        let mut writer = BufWriter::new(tmp.as_file_mut());
+        encode(mesh, &mut writer).and_then(|()| writer.flush()).map_err(|e| IoError::io(path, e))?;
+    }
+    tmp.persist(path).map_err(|e| IoError::io(path, e.error))?;
+    Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use voxreg_digisurf::LabelVolume;
+
+    use super::*;
+
+    #[test]
+    fn from_surface_of_two_labels() {
+        // Labels 3 and 5 side by side in background 0.
+        let volume = LabelVolume::from_fn([4, 3, 3], |[x, y, z]| match (x, y, z) {
+            (1, 1, 1) => 3,
+            (2, 1, 1) => 5,
+            _ => 0,
+        });
+        let surface = DigitalSurface::from_volume(&volume).unwrap();
+        let mesh = QuadMesh::from_surface(&surface, &surface.positions());
+        assert_eq!(mesh.num_faces(), 11);
+        assert_eq!(mesh.positions.len(), surface.num_vertices());
+        let names: Vec<&str> = mesh.groups.iter().map(|g| g.name.as_str()).collect();
+        assert_eq!(names, ["interface_3_5", "interface_3_0", "interface_5_0"]);
+        let sizes: Vec<usize> = mesh.groups.iter().map(|g| g.faces.len()).collect();
+        assert_eq!(sizes, [1, 5, 5]);
+        assert_eq!(mesh.face_labels[mesh.groups[0].faces[0] as usize], [3, 5]);
+        for g in &mesh.groups[1..] {
+            assert!(g.faces.iter().all(|&f| mesh.face_labels[f as usize][1] == 0));
+        }
+        assert_eq!(mesh.check(), Ok(()));
+    }
+
+    #[test]
+    fn check_finds_inconsistencies() {
+        let good = QuadMesh {
+            positions: vec![DVec3::ZERO; 4],
+            quads: vec![[0, 1, 2, 3]],
+            face_labels: vec![[1, 0]],
+            groups: vec![FaceGroup { name: "a".into(), faces: vec![0] }],
+        };
+        assert_eq!(good.check(), Ok(()));
+        let cases: Vec<(QuadMesh, &str)> = vec![
+            (QuadMesh { quads: vec![[0, 1, 2, 4]], ..good.clone() }, "beyond the 4 vertices"),
+            (QuadMesh { positions: vec![DVec3::NAN; 4], ..good.clone() }, "non-finite"),
+            (QuadMesh { face_labels: vec![], ..good.clone() }, "0 face label pairs for 1 faces"),
+            (
+                QuadMesh { groups: vec![FaceGroup { name: "a b".into(), faces: vec![] }], ..good.clone() },
+                "holds whitespace",
+            ),
+            (
+                QuadMesh { groups: vec![FaceGroup { name: "a".into(), faces: vec![1] }], ..good.clone() },
+                "face 1",
+            ),
+            (
+                QuadMesh {
+                    groups: vec![
+                        FaceGroup { name: "a".into(), faces: vec![0] },
+                        FaceGroup { name: "b".into(), faces: vec![0] },
+                    ],
+                    ..good.clone()
+                },
+                "face 0 is in two groups",
+            ),
+        ];
+        for (mesh, expected) in cases {
+            let message = mesh.check().unwrap_err();
+            assert!(message.contains(expected), "expected '{expected}' in '{message}'");
+        }
+    }
+}
