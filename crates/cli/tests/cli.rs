@@ -1,0 +1,188 @@
+//! End-to-end tests of the `voxreg` binary.
+
+use std::collections::HashMap;
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data").join(name)
+}
+
+fn voxreg(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_voxreg")).args(args).output().expect("voxreg runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// Parses the quads of an OBJ file.
+fn obj_quads(path: &Path) -> (usize, Vec<[usize; 4]>, Vec<String>) {
+    let text = std::fs::read_to_string(path).unwrap();
+    let mut vertices = 0;
+    let mut quads = Vec::new();
+    let mut groups = Vec::new();
+    for line in text.lines() {
+        let mut it = line.split_whitespace();
+        match it.next() {
+            Some("v") => vertices += 1,
+            Some("g") => groups.push(it.next().unwrap().to_string()),
+            Some("f") => {
+                let idx: Vec<usize> = it.map(|t| t.parse().unwrap()).collect();
+                quads.push([idx[0], idx[1], idx[2], idx[3]]);
+            }
+            _ => {}
+        }
+    }
+    (vertices, quads, groups)
+}
+
+#[test]
+fn info_snapshot() {
+    let out = voxreg(&["info", data("cat10.vol").to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8(out.stdout).unwrap();
+    // The path depends on the checkout: keep only the file name.
+    let text = text.replace(data("cat10.vol").to_str().unwrap(), "cat10.vol");
+    insta::assert_snapshot!(text);
+}
+
+#[test]
+fn info_of_a_vox_model_groups_colours_into_one_solid() {
+    let out = voxreg(&["info", data("chr_army1.vox").to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(text.contains("dimensions: 8 x 7 x 12"), "{text}");
+    assert!(text.contains("interfaces: 1"), "{text}");
+    // Per-label regions on request: one interface per colour pair.
+    let out = voxreg(&["info", data("chr_army1.vox").to_str().unwrap(), "--regions", "label"]);
+    let text = String::from_utf8(out.stdout).unwrap();
+    assert!(!text.contains("interfaces: 1\n"), "{text}");
+}
+
+#[test]
+fn regularize_writes_a_closed_quad_mesh_and_a_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("cat.obj");
+    let report = dir.path().join("report.json");
+    let out = voxreg(&[
+        "regularize",
+        data("cat10.vol").to_str().unwrap(),
+        "-o",
+        obj.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(stderr(&out).is_empty(), "--quiet printed: {}", stderr(&out));
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let (vertices, quads, groups) = obj_quads(&obj);
+    assert_eq!(quads.len() as u64, r["counts"]["surfels"].as_u64().unwrap());
+    assert_eq!(vertices as u64, r["counts"]["vertices"].as_u64().unwrap());
+    assert_eq!(groups, vec!["interface_96_0"]);
+    // Closed: every undirected edge is used by an even number of quads, and each
+    // directed edge is matched by its reverse (consistent orientation).
+    let mut directed: HashMap<(usize, usize), i32> = HashMap::new();
+    for q in &quads {
+        for i in 0..4 {
+            let (a, b) = (q[i], q[(i + 1) % 4]);
+            *directed.entry((a.min(b), a.max(b))).or_default() += if a < b { 1 } else { -1 };
+        }
+    }
+    assert!(directed.values().all(|&c| c == 0));
+    for key in ["read", "surface", "normals", "assemble", "solve", "write"] {
+        assert!(r["stages"][key].as_f64().unwrap() >= 0.0, "stage {key}");
+    }
+    for term in ["attachment", "alignment", "fairness", "total"] {
+        assert!(r["energy"]["before"][term].is_number() && r["energy"]["after"][term].is_number());
+    }
+    assert!(r["energy"]["after"]["total"].as_f64() < r["energy"]["before"]["total"].as_f64());
+    assert_eq!(r["solver"]["kind"], "direct");
+    assert!(r["solver"]["relative_gradient"].as_f64().unwrap() <= 1e-9);
+    assert!(r["counts"]["edges"].as_u64().unwrap() > 0 && r["counts"]["interfaces"] == 1);
+    assert_eq!(r["counts"]["boundary_vertices"], 0);
+}
+
+#[test]
+fn regularize_a_vox_model_to_ply() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("army.ply");
+    let out = voxreg(&["regularize", data("chr_army1.vox").to_str().unwrap(), "-o", ply.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let bytes = std::fs::read(&ply).unwrap();
+    assert!(bytes.starts_with(b"ply\nformat binary_little_endian 1.0\n"));
+    assert!(stderr(&out).contains("400 quads"), "{}", stderr(&out));
+}
+
+#[test]
+fn threshold_makes_a_binary_volume() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("b.obj");
+    let input = data("bunny-32.vol");
+    let out = voxreg(&[
+        "regularize",
+        input.to_str().unwrap(),
+        "--threshold",
+        "0",
+        "-o",
+        obj.to_str().unwrap(),
+        "-q",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let (_, _, groups) = obj_quads(&obj);
+    assert_eq!(groups, vec!["interface_1_0"]);
+}
+
+#[test]
+fn bad_input_is_a_clear_error_and_writes_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out_path = dir.path().join("out.obj");
+    let out_str = out_path.to_str().unwrap();
+    let cases: Vec<(Vec<String>, &str)> = vec![
+        (
+            vec!["regularize".into(), data("not_a.vox").display().to_string(), "-o".into(), out_str.into()],
+            "not_a.vox",
+        ),
+        (vec!["regularize".into(), "missing.vol".into(), "-o".into(), out_str.into()], "missing.vol"),
+        (
+            vec!["regularize".into(), data("cat10.vol").display().to_string(), "-o".into(), "out.stl".into()],
+            "out.stl",
+        ),
+        (
+            vec![
+                "regularize".into(),
+                data("cat10.vol").display().to_string(),
+                "-o".into(),
+                out_str.into(),
+                "--alpha".into(),
+                "0".into(),
+            ],
+            "alpha",
+        ),
+        (
+            vec![
+                "regularize".into(),
+                data("cat10.vol").display().to_string(),
+                "-o".into(),
+                out_str.into(),
+                "--threshold".into(),
+                "255".into(),
+            ],
+            "empty",
+        ),
+        (vec!["info".into(), data("not_a.vox").display().to_string()], "not_a.vox"),
+    ];
+    for (args, needle) in cases {
+        let args: Vec<&str> = args.iter().map(String::as_str).collect();
+        let out = voxreg(&args);
+        assert!(!out.status.success(), "{args:?} succeeded");
+        let err = stderr(&out);
+        let last = err.lines().last().unwrap_or("");
+        assert!(last.starts_with("error: ") && last.contains(needle), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{err}");
+        assert!(!out_path.exists(), "{args:?} left an output file");
+    }
+    // Nothing at all was left in the output directory (no temporary files either).
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
