@@ -144,14 +144,127 @@ pub struct DigitalSurface {
     component_closed: Vec<bool>,
 }
 
-/// Rolling per-slab state of the scan.
-struct Scan<'a> {
-    volume: &'a LabelVolume,
-    regions: &'a Regions,
-    outside_region: u32,
-    outside_label: u32,
+/// A face between two voxels of different regions, found by the parallel slab pass.
+struct RawFace {
+    cell: [u32; 3],
+    axis: u8,
+    /// Regions and labels of the negative-side and positive-side voxels.
+    regions: [u32; 2],
+    labels: [u32; 2],
+}
+
+/// Fills `rs`/`ls` with the regions and labels of voxel layer `z`, `x` fastest; the
+/// outside beyond the domain.
+fn fill_layer(
+    volume: &LabelVolume,
+    regions: &Regions,
+    outside: (u32, u32),
+    z: isize,
+    rs: &mut [u32],
+    ls: &mut [u32],
+) -> Result<(), SurfaceError> {
+    let nz = volume.dims()[2];
+    if z < 0 || z as usize >= nz {
+        rs.fill(outside.0);
+        ls.fill(outside.1);
+        return Ok(());
+    }
+    // Transposed, the slab is [y, x]: logical order is x fastest, matching `x + nx * y`
+    // (and memory order for volumes stored x fastest).
+    let slab = volume.labels().index_axis(ndarray::Axis(2), z as usize);
+    for ((r, l), &label) in rs.iter_mut().zip(ls.iter_mut()).zip(slab.t().iter()) {
+        *l = label;
+        *r = regions.region_of(label).map_or(NONE, |id| id.0);
+    }
+    if let Some(i) = rs.iter().position(|&r| r == NONE) {
+        return Err(SurfaceError::InvalidRegions(format!("label {} has no region", ls[i])));
+    }
+    Ok(())
+}
+
+/// The faces of slabs `range`, one list per slab (see [`slab_faces`]), with rolling layers.
+fn range_faces(
+    volume: &LabelVolume,
+    regions: &Regions,
+    outside: (u32, u32),
+    range: std::ops::Range<usize>,
+) -> Result<Vec<Vec<RawFace>>, SurfaceError> {
+    let [nx, ny, _] = volume.dims();
+    let mut prev = (vec![0u32; nx * ny], vec![0u32; nx * ny]);
+    let mut cur = (vec![0u32; nx * ny], vec![0u32; nx * ny]);
+    fill_layer(volume, regions, outside, range.start as isize - 1, &mut prev.0, &mut prev.1)?;
+    let mut out = Vec::with_capacity(range.len());
+    for k in range {
+        fill_layer(volume, regions, outside, k as isize, &mut cur.0, &mut cur.1)?;
+        out.push(slab_faces(volume.dims(), outside, k, &prev, &cur));
+        std::mem::swap(&mut prev, &mut cur);
+    }
+    Ok(out)
+}
+
+/// The faces of slab `k`, in scan order: faces perpendicular to z between voxel layers
+/// `k - 1` and `k`, then (for `k < nz`) faces perpendicular to x, then y, within layer `k`.
+fn slab_faces(
+    dims: [usize; 3],
+    outside: (u32, u32),
+    k: usize,
+    (prev_r, prev_l): &(Vec<u32>, Vec<u32>),
+    (cur_r, cur_l): &(Vec<u32>, Vec<u32>),
+) -> Vec<RawFace> {
+    let [nx, ny, nz] = dims;
+    let (or, ol) = outside;
+    let kk = k as u32;
+    let mut out = Vec::new();
+    for y in 0..ny {
+        for x in 0..nx {
+            let i = x + nx * y;
+            if prev_r[i] != cur_r[i] {
+                out.push(RawFace {
+                    cell: [x as u32, y as u32, kk],
+                    axis: 2,
+                    regions: [prev_r[i], cur_r[i]],
+                    labels: [prev_l[i], cur_l[i]],
+                });
+            }
+        }
+    }
+    if k == nz {
+        return out;
+    }
+    for y in 0..ny {
+        for x in 0..=nx {
+            let (a, la) = if x > 0 { (cur_r[x - 1 + nx * y], cur_l[x - 1 + nx * y]) } else { (or, ol) };
+            let (b, lb) = if x < nx { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { (or, ol) };
+            if a != b {
+                out.push(RawFace {
+                    cell: [x as u32, y as u32, kk],
+                    axis: 0,
+                    regions: [a, b],
+                    labels: [la, lb],
+                });
+            }
+        }
+    }
+    for y in 0..=ny {
+        for x in 0..nx {
+            let (a, la) = if y > 0 { (cur_r[x + nx * (y - 1)], cur_l[x + nx * (y - 1)]) } else { (or, ol) };
+            let (b, lb) = if y < ny { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { (or, ol) };
+            if a != b {
+                out.push(RawFace {
+                    cell: [x as u32, y as u32, kk],
+                    axis: 1,
+                    regions: [a, b],
+                    labels: [la, lb],
+                });
+            }
+        }
+    }
+    out
+}
+
+/// Sequential state of the scan: vertex numbering over two rolling corner layers.
+struct Scan {
     nx: usize,
-    ny: usize,
     surfels: Vec<Surfel>,
     vertex_corners: Vec<[u32; 3]>,
     /// Vertex ids of corner layers `k` and `k + 1`.
@@ -161,22 +274,7 @@ struct Scan<'a> {
     last_pair: ((u32, u32), u32),
 }
 
-impl Scan<'_> {
-    fn fill_slab(&self, z: usize, regions: &mut [u32], labels: &mut [u32]) -> Result<(), SurfaceError> {
-        for y in 0..self.ny {
-            for x in 0..self.nx {
-                let l = self.volume.labels()[[x, y, z]];
-                let r = self
-                    .regions
-                    .region_of(l)
-                    .ok_or_else(|| SurfaceError::InvalidRegions(format!("label {l} has no region")))?;
-                regions[x + self.nx * y] = r.0;
-                labels[x + self.nx * y] = l;
-            }
-        }
-        Ok(())
-    }
-
+impl Scan {
     fn vertex(&mut self, c: [u32; 3], k: usize) -> Result<VertexId, SurfaceError> {
         let idx = c[0] as usize + (self.nx + 1) * c[1] as usize;
         let layer = if c[2] as usize == k { &mut self.corners_lo } else { &mut self.corners_hi };
@@ -268,12 +366,7 @@ impl DigitalSurface {
         };
         let layer = (nx + 1) * (ny + 1);
         let mut scan = Scan {
-            volume,
-            regions: &regions,
-            outside_region,
-            outside_label,
             nx,
-            ny,
             surfels: Vec::new(),
             vertex_corners: Vec::new(),
             corners_lo: vec![NONE; layer],
@@ -281,48 +374,26 @@ impl DigitalSurface {
             interface_of_pair: HashMap::new(),
             last_pair: ((NONE, NONE), NONE),
         };
-        let slab = nx * ny;
-        let mut prev_r = vec![outside_region; slab];
-        let mut prev_l = vec![outside_label; slab];
-        let mut cur_r = vec![0u32; slab];
-        let mut cur_l = vec![0u32; slab];
-        for k in 0..=nz {
-            if k < nz {
-                scan.fill_slab(k, &mut cur_r, &mut cur_l)?;
-            } else {
-                cur_r.fill(outside_region);
-                cur_l.fill(outside_label);
+        // Faces are found in parallel over ranges of slabs (voxel-proportional work), then
+        // numbered sequentially in slab order (surfel-proportional work).
+        let outside = (outside_region, outside_label);
+        let tasks = rayon::current_num_threads().max(1);
+        let per_task = (nz + 1).div_ceil(tasks);
+        let found: Vec<Vec<Vec<RawFace>>> = (0..tasks)
+            .into_par_iter()
+            .map(|t| {
+                range_faces(
+                    volume,
+                    &regions,
+                    outside,
+                    (t * per_task).min(nz + 1)..((t + 1) * per_task).min(nz + 1),
+                )
+            })
+            .collect::<Result<_, _>>()?;
+        for (k, faces) in found.into_iter().flatten().enumerate() {
+            for f in faces {
+                scan.face(f.cell, f.axis as usize, f.regions[0], f.regions[1], f.labels[0], f.labels[1], k)?;
             }
-            let kk = k as u32;
-            // Faces perpendicular to z between voxel layers k - 1 and k.
-            for y in 0..ny {
-                for x in 0..nx {
-                    let i = x + nx * y;
-                    scan.face([x as u32, y as u32, kk], 2, prev_r[i], cur_r[i], prev_l[i], cur_l[i], k)?;
-                }
-            }
-            if k < nz {
-                let (or, ol) = (scan.outside_region, scan.outside_label);
-                // Faces perpendicular to x and y within voxel layer k.
-                for y in 0..ny {
-                    for x in 0..=nx {
-                        let (a, la) =
-                            if x > 0 { (cur_r[x - 1 + nx * y], cur_l[x - 1 + nx * y]) } else { (or, ol) };
-                        let (b, lb) = if x < nx { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { (or, ol) };
-                        scan.face([x as u32, y as u32, kk], 0, a, b, la, lb, k)?;
-                    }
-                }
-                for y in 0..=ny {
-                    for x in 0..nx {
-                        let (a, la) =
-                            if y > 0 { (cur_r[x + nx * (y - 1)], cur_l[x + nx * (y - 1)]) } else { (or, ol) };
-                        let (b, lb) = if y < ny { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { (or, ol) };
-                        scan.face([x as u32, y as u32, kk], 1, a, b, la, lb, k)?;
-                    }
-                }
-            }
-            std::mem::swap(&mut prev_r, &mut cur_r);
-            std::mem::swap(&mut prev_l, &mut cur_l);
             std::mem::swap(&mut scan.corners_lo, &mut scan.corners_hi);
             scan.corners_hi.fill(NONE);
         }

@@ -155,26 +155,34 @@ impl LabelVolume {
         self.origin + v * self.spacing
     }
 
+    /// Calls `f` on every label, in memory order (fast whatever the layout).
+    pub fn for_each_label(&self, mut f: impl FnMut(u32)) {
+        match self.labels.as_slice_memory_order() {
+            Some(slice) => slice.iter().for_each(|&l| f(l)),
+            None => self.labels.iter().for_each(|&l| f(l)),
+        }
+    }
+
     /// The distinct labels of the volume with their voxel counts, sorted by label.
     pub fn label_counts(&self) -> Vec<(u32, u64)> {
-        let mut counts: Vec<(u32, u64)> = Vec::new();
-        let max = self.labels.iter().copied().max().unwrap_or(0);
-        if (max as usize) < (1 << 20) {
-            let mut dense = vec![0u64; max as usize + 1];
-            for &l in self.labels.iter() {
-                dense[l as usize] += 1;
-            }
-            for (l, &c) in dense.iter().enumerate() {
-                if c > 0 {
-                    counts.push((l as u32, c));
+        // Dense counting while labels stay small; a sorted tally beyond.
+        let mut dense: Vec<u64> = Vec::new();
+        let mut large: Vec<u32> = Vec::new();
+        self.for_each_label(|l| {
+            if (l as usize) < (1 << 20) {
+                if l as usize >= dense.len() {
+                    dense.resize(l as usize + 1, 0);
                 }
+                dense[l as usize] += 1;
+            } else {
+                large.push(l);
             }
-        } else {
-            let mut all: Vec<u32> = self.labels.iter().copied().collect();
-            all.sort_unstable();
-            for chunk in all.chunk_by(|a, b| a == b) {
-                counts.push((chunk[0], chunk.len() as u64));
-            }
+        });
+        let mut counts: Vec<(u32, u64)> =
+            dense.iter().enumerate().filter(|(_, &c)| c > 0).map(|(l, &c)| (l as u32, c)).collect();
+        large.sort_unstable();
+        for chunk in large.chunk_by(|a, b| a == b) {
+            counts.push((chunk[0], chunk.len() as u64));
         }
         counts
     }
