@@ -4,6 +4,7 @@ use std::time::Instant;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
 use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::perm::PermRef;
 use faer::sparse::linalg::cholesky::{
     factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
 };
@@ -35,10 +36,12 @@ impl DirectSolver {
         let pattern = OperatorPattern::new(surface)?;
         let pattern_seconds = t.elapsed().as_secs_f64();
         let t = Instant::now();
+        let (fwd, inv) = pattern.block_amd_ordering()?;
+        let perm = PermRef::new_checked(&fwd, &inv, pattern.dim());
         let symbolic = factorize_symbolic_cholesky(
             pattern.symbolic().as_ref(),
             Side::Lower,
-            SymmetricOrdering::Amd,
+            SymmetricOrdering::Custom(perm),
             CholeskySymbolicParams::default(),
         )
         .map_err(|e| RegularizeError::Factorization(format!("symbolic analysis failed: {e:?}")))?;
