@@ -1,1 +1,121 @@
-fn main() {}
+//! Project automation, run as `cargo xtask <command>`.
+//!
+//! - `timings [--runs N] [FILE...]`: times each pipeline stage (read, surface, normals,
+//!   assemble, solve, write) on the given volumes (default: the bundled bunny-128 and
+//!   cat10) and prints a Markdown table of medians, as used in the README.
+
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+use anyhow::{bail, Context, Result};
+use voxreg_digisurf::{DigitalSurface, RegionMap};
+use voxreg_io::{read_volume, write_mesh, QuadMesh};
+use voxreg_normals::{NormalEstimator, Trivial};
+use voxreg_regularize::{DirectSolver, Energy, EnergyParams};
+
+fn main() -> Result<()> {
+    let args: Vec<String> = std::env::args().skip(1).collect();
+    match args.first().map(String::as_str) {
+        Some("timings") => timings(&args[1..]),
+        _ => {
+            eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
+            bail!("unknown or missing command")
+        }
+    }
+}
+
+fn root() -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask sits in the workspace").to_path_buf()
+}
+
+fn median(mut v: Vec<f64>) -> f64 {
+    v.sort_by(f64::total_cmp);
+    v[v.len() / 2]
+}
+
+/// Stage timings of one run, in seconds, plus counts.
+struct Run {
+    stages: [f64; 6],
+    surfels: usize,
+    factor_mib: f64,
+    relative_gradient: f64,
+}
+
+fn run_once(path: &Path, out: &Path) -> Result<Run> {
+    let t = Instant::now();
+    let loaded = read_volume(path)?;
+    let read = t.elapsed().as_secs_f64();
+    let map = if path.extension().is_some_and(|e| e == "vox") { RegionMap::single_solid() } else { RegionMap::per_label() };
+    let t = Instant::now();
+    let surface = DigitalSurface::new(&loaded.volume, &map)?;
+    let surf = t.elapsed().as_secs_f64();
+    let t = Instant::now();
+    let normals = Trivial.estimate(&surface)?;
+    let norm = t.elapsed().as_secs_f64();
+    let input = surface.positions();
+    let energy = Energy::new(&surface, &normals, &input, EnergyParams::default())?;
+    let mut solver = DirectSolver::new(&surface)?;
+    let (x, info) = solver.solve(&energy)?;
+    let t = Instant::now();
+    write_mesh(out, &QuadMesh::from_surface(&surface, &x))?;
+    let write = t.elapsed().as_secs_f64();
+    Ok(Run {
+        stages: [
+            read,
+            surf,
+            norm,
+            info.pattern_seconds + info.assemble_seconds,
+            info.symbolic_seconds + info.factor_seconds + info.solve_seconds,
+            write,
+        ],
+        surfels: surface.num_surfels(),
+        factor_mib: info.factor_nnz.unwrap_or(0) as f64 * 8.0 / (1024.0 * 1024.0),
+        relative_gradient: info.relative_gradient,
+    })
+}
+
+fn timings(args: &[String]) -> Result<()> {
+    let mut runs = 5;
+    let mut files = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        if a == "--runs" {
+            runs = it.next().context("--runs needs a number")?.parse().context("--runs needs a number")?;
+        } else {
+            files.push(PathBuf::from(a));
+        }
+    }
+    if files.is_empty() {
+        files = vec![root().join("data/bunny-128.vol"), root().join("data/cat10.vol")];
+    }
+    let dir = std::env::temp_dir().join(format!("voxreg-xtask-{}", std::process::id()));
+    std::fs::create_dir_all(&dir)?;
+    println!(
+        "| input | surfels | read | surface | normals (trivial) | assemble | solve (direct) | write (OBJ) | total | factor | rel. gradient |"
+    );
+    println!("|---|---|---|---|---|---|---|---|---|---|---|");
+    for file in &files {
+        let out = dir.join("out.obj");
+        let all: Vec<Run> = (0..runs).map(|_| run_once(file, &out)).collect::<Result<_>>()?;
+        let med: Vec<f64> = (0..6).map(|k| median(all.iter().map(|r| r.stages[k]).collect())).collect();
+        let total = median(all.iter().map(|r| r.stages.iter().sum()).collect());
+        let name = file.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+        let fmt = |s: f64| if s < 0.1 { format!("{:.1} ms", s * 1e3) } else { format!("{s:.2} s") };
+        println!(
+            "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {:.0} MiB | {:.0e} |",
+            all[0].surfels,
+            fmt(med[0]),
+            fmt(med[1]),
+            fmt(med[2]),
+            fmt(med[3]),
+            fmt(med[4]),
+            fmt(med[5]),
+            fmt(total),
+            all[0].factor_mib,
+            all.iter().map(|r| r.relative_gradient).fold(0.0, f64::max)
+        );
+    }
+    std::fs::remove_dir_all(&dir).ok();
+    println!("\nmedians of {runs} runs; `cargo xtask timings` on {} cores", std::thread::available_parallelism()?);
+    Ok(())
+}
