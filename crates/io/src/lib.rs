@@ -1,17 +1,34 @@
 //! File formats for voxreg: labeled volumes in, quad meshes out.
 //!
-//! **Reading volumes.** [`read_volume`] picks the reader by extension and returns a
-//! [`LoadedVolume`]: a [`LabelVolume`](voxreg_digisurf::LabelVolume) plus, for
-//! MagicaVoxel files, the palette.
+//! **Reading volumes.** [`read_voxels`] picks the reader by extension and returns
+//! [`LoadedVoxels`]: [`Voxels`], either labels (a
+//! [`LabelVolume`](voxreg_digisurf::LabelVolume): values that are all integers in
+//! `0..=u32::MAX`) or grey levels (a [`GreyVolume`] of `f64`, to
+//! [threshold](Voxels::threshold)), with spacing and origin from the header, plus, for
+//! MagicaVoxel files, the palette. [`read_volume`] does the same for label data and
+//! returns a [`LoadedVolume`].
 //!
 //! - DGtal `.vol` (versions 2 and 3): [`read_vol`], [`read_vol_bytes`]; one byte per
 //!   voxel, label = byte value, background `0`.
+//! - DGtal `.longvol` (versions 2 and 3, 64-bit voxels): [`read_longvol`],
+//!   [`read_longvol_bytes`].
+//! - DGtal `.pgm3d` (`P3D` binary, `P2-3D` ASCII): [`read_pgm3d`], [`read_pgm3d_bytes`].
 //! - MagicaVoxel `.vox`: [`read_vox`], [`read_vox_bytes`]; label = colour index
 //!   (`1..=255`), background `0`, lattice corners at integer MagicaVoxel coordinates.
+//! - NIfTI-1 `.nii`, `.nii.gz`: [`read_nifti`], [`read_nifti_bytes`]; integer and float
+//!   types, `scl_slope`/`scl_inter`, spacing and origin from the sform or qform (axis
+//!   flips and permutations applied, oblique rotations dropped).
+//! - VTK XML image data `.vti`: [`read_vti`], [`read_vti_bytes`]; cell or point data,
+//!   ASCII, base64 or appended, raw or zlib-compressed.
+//! - NumPy `.npy` (versions 1 to 3): [`read_npy`], [`read_npy_bytes`]; a 3-D array
+//!   `a[x, y, z]`, C or Fortran order.
+//! - Raw data, whose layout ([`RawSpec`]: dimensions, [`DataType`], [`Endian`],
+//!   spacing) the caller gives: [`read_raw`], [`read_raw_bytes`].
 //!
-//! Readers never panic on malformed input: truncated data, bad headers and dimensions
-//! that do not match the data are [`IoError`]s naming the file, and volumes of more
-//! than [`MAX_VOXELS`] voxels are refused before anything is allocated for them.
+//! Readers never panic on malformed input: truncated data, bad headers, dimensions that
+//! do not match the data, unsupported types and NaN grey levels are [`IoError`]s naming
+//! the file, and volumes of more than [`MAX_VOXELS`] voxels are refused before anything
+//! is allocated for them. Each `read_*_bytes` entry point is fuzzed (`fuzz/`).
 //!
 //! **Writing meshes.** A [`QuadMesh`] (positions, quads, `[inner, outer]` labels per
 //! face, named [`FaceGroup`]s) is built from a digital surface by
@@ -46,17 +63,40 @@
 //! None.
 
 mod error;
+mod gltf;
+mod grey;
+mod longvol;
+mod material;
 mod mesh;
+mod nifti;
+mod npy;
 mod obj;
+mod orient;
+mod pgm3d;
 mod ply;
+mod raw;
+mod samples;
 mod vol;
 mod volume;
 mod vox;
+mod vti;
+mod write_volume;
 
 pub use error::IoError;
+pub use gltf::write_gltf;
+pub use grey::{GreyVolume, NotALabel, Voxels};
+pub use longvol::{read_longvol, read_longvol_bytes};
+pub use material::{Material, Palette};
 pub use mesh::{write_mesh, FaceGroup, QuadMesh};
+pub use nifti::{read_nifti, read_nifti_bytes};
+pub use npy::{read_npy, read_npy_bytes};
 pub use obj::write_obj;
+pub use pgm3d::{read_pgm3d, read_pgm3d_bytes};
 pub use ply::write_ply;
+pub use raw::{read_raw, read_raw_bytes, RawSpec};
+pub use samples::{DataType, Endian};
 pub use vol::{read_vol, read_vol_bytes};
-pub use volume::{read_volume, LoadedVolume, MAX_VOXELS};
+pub use volume::{read_volume, read_voxels, LoadedVolume, LoadedVoxels, MAX_VOXELS};
 pub use vox::{read_vox, read_vox_bytes};
+pub use vti::{read_vti, read_vti_bytes};
+pub use write_volume::{write_vol, write_volume, write_vox, VOX_MAX_MODEL};

@@ -7,7 +7,7 @@ use glam::DVec3;
 use voxreg_digisurf::DigitalSurface;
 
 use crate::volume::lowercase_extension;
-use crate::{write_obj, write_ply, IoError};
+use crate::{write_gltf, write_obj, write_ply, IoError, Material, Palette};
 
 /// A mesh of quads with two labels per face and named groups of faces: what the
 /// writers take.
@@ -26,6 +26,11 @@ pub struct QuadMesh {
     pub face_labels: Vec<[u32; 2]>,
     /// Named groups of faces (indices into `quads`); a face belongs to at most one group.
     pub groups: Vec<FaceGroup>,
+    /// Materials the faces refer to (empty: no materials).
+    pub materials: Vec<Material>,
+    /// Per face, an index into `materials`; empty when the mesh has no materials,
+    /// else the same length as `quads`.
+    pub face_materials: Vec<u32>,
 }
 
 /// A named set of faces of a [`QuadMesh`], written as an OBJ group.
@@ -70,7 +75,29 @@ impl QuadMesh {
                 }
             })
             .collect();
-        QuadMesh { positions: positions.to_vec(), quads, face_labels, groups }
+        QuadMesh { positions: positions.to_vec(), quads, face_labels, groups, ..Default::default() }
+    }
+
+    /// Gives each face the material of its solid side's label from `palette`: the
+    /// face's inner label (its normal points out of the inner voxel; with a background,
+    /// whose region comes last, the inner voxel is the solid one). One material per
+    /// label in use, in increasing label order; labels beyond the palette get a grey
+    /// diffuse material.
+    pub fn assign_materials(&mut self, palette: &Palette) {
+        let mut used: Vec<u32> = self.face_labels.iter().map(|l| l[0]).collect();
+        used.sort_unstable();
+        used.dedup();
+        self.materials = used
+            .iter()
+            .map(|&l| {
+                palette
+                    .material(l)
+                    .cloned()
+                    .unwrap_or_else(|| Material::diffuse(format!("color_{l}"), [200, 200, 200, 255]))
+            })
+            .collect();
+        self.face_materials =
+            self.face_labels.iter().map(|l| used.binary_search(&l[0]).unwrap_or(0) as u32).collect();
     }
 
     /// Number of faces.
@@ -96,6 +123,34 @@ impl QuadMesh {
                 self.face_labels.len(),
                 self.quads.len()
             ));
+        }
+        if !self.face_materials.is_empty() {
+            if self.face_materials.len() != self.quads.len() {
+                return Err(format!(
+                    "{} face materials for {} faces",
+                    self.face_materials.len(),
+                    self.quads.len()
+                ));
+            }
+            if let Some(f) = self.face_materials.iter().position(|&m| m as usize >= self.materials.len()) {
+                return Err(format!(
+                    "face {f} names material {}, beyond the {}",
+                    self.face_materials[f],
+                    self.materials.len()
+                ));
+            }
+        }
+        let mut names: Vec<&str> = self.materials.iter().map(|m| m.name.as_str()).collect();
+        names.sort_unstable();
+        if let Some(w) = names.windows(2).find(|w| w[0] == w[1]) {
+            return Err(format!("two materials are named '{}'", w[0]));
+        }
+        if let Some(m) = self
+            .materials
+            .iter()
+            .find(|m| m.name.is_empty() || m.name.chars().any(|c| c.is_whitespace() || c.is_control()))
+        {
+            return Err(format!("material name '{}' is empty or holds whitespace", m.name.escape_debug()));
         }
         let mut grouped = vec![false; self.quads.len()];
         for g in &self.groups {
@@ -123,7 +178,8 @@ impl QuadMesh {
 /// Writes `mesh` to `path`, choosing the format by the extension (case insensitive):
 ///
 /// - `.obj`: Wavefront OBJ, ASCII, with groups, see [`write_obj`];
-/// - `.ply`: binary little-endian PLY with per-face labels, see [`write_ply`].
+/// - `.ply`: binary little-endian PLY with per-face labels (and colours), see [`write_ply`];
+/// - `.glb`, `.gltf`: glTF 2.0 with materials, see [`write_gltf`].
 ///
 /// Fails with [`IoError::UnsupportedExtension`] for any other name, before creating
 /// anything. Like every writer of this crate, it writes a temporary file next to
@@ -133,13 +189,16 @@ pub fn write_mesh(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
     match lowercase_extension(path).as_deref() {
         Some("obj") => write_obj(path, mesh),
         Some("ply") => write_ply(path, mesh),
-        _ => Err(IoError::UnsupportedExtension { path: path.to_path_buf(), expected: ".obj or .ply" }),
+        Some("glb" | "gltf") => write_gltf(path, mesh),
+        _ => Err(IoError::UnsupportedExtension {
+            path: path.to_path_buf(),
+            expected: ".obj, .ply, .glb or .gltf",
+        }),
     }
 }
 
-/// Checks `mesh`, then writes it through `encode` to a temporary file in the directory
-/// of `path`, and renames that onto `path`. On any failure the temporary file is
-/// removed and `path` is left as it was.
+/// Checks `mesh`, then writes it through `encode` atomically (see
+/// [`write_file_atomically`]).
 pub(crate) fn write_atomically(
     path: &Path,
     mesh: &QuadMesh,
@@ -149,6 +208,16 @@ pub(crate) fn write_atomically(
     mesh.check()
         .and_then(|()| check(mesh))
         .map_err(|message| IoError::InvalidMesh { path: path.to_path_buf(), message })?;
+    write_file_atomically(path, |w| encode(mesh, w))
+}
+
+/// Writes through `encode` to a temporary file in the directory of `path`, and renames
+/// that onto `path`. On any failure the temporary file is removed and `path` is left as
+/// it was.
+pub(crate) fn write_file_atomically(
+    path: &Path,
+    encode: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> Result<(), IoError> {
     let dir = match path.parent() {
         Some(dir) if !dir.as_os_str().is_empty() => dir,
         _ => Path::new("."),
@@ -165,7 +234,7 @@ pub(crate) fn write_atomically(
     let mut tmp = builder.tempfile_in(dir).map_err(|e| IoError::io(path, e))?;
     {
         let mut writer = BufWriter::new(tmp.as_file_mut());
-        encode(mesh, &mut writer).and_then(|()| writer.flush()).map_err(|e| IoError::io(path, e))?;
+        encode(&mut writer).and_then(|()| writer.flush()).map_err(|e| IoError::io(path, e))?;
     }
     tmp.persist(path).map_err(|e| IoError::io(path, e.error))?;
     Ok(())
@@ -207,6 +276,7 @@ mod tests {
             quads: vec![[0, 1, 2, 3]],
             face_labels: vec![[1, 0]],
             groups: vec![FaceGroup { name: "a".into(), faces: vec![0] }],
+            ..Default::default()
         };
         assert_eq!(good.check(), Ok(()));
         let cases: Vec<(QuadMesh, &str)> = vec![

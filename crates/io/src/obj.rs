@@ -17,12 +17,55 @@ use crate::{IoError, QuadMesh};
 /// Written to a temporary file renamed onto `path` when complete (see
 /// [`write_mesh`](crate::write_mesh)); an inconsistent mesh is refused with
 /// [`IoError::InvalidMesh`] before anything is created.
+///
+/// A mesh with materials also gets a material library next to it, `<stem>.mtl`
+/// (named by `mtllib` in the OBJ, selected per face by `usemtl`), with the diffuse
+/// colour `Kd` (sRGB), opacity `d`, emission `Ke`, and the PBR extensions `Pm`
+/// (metalness) and `Pr` (roughness) that Blender reads. It is written first, also
+/// atomically, and removed again if the OBJ cannot be written.
 pub fn write_obj(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
-    write_atomically(path, mesh, |_| Ok(()), |mesh, w| encode_obj(mesh, w))
+    if mesh.materials.is_empty() || mesh.face_materials.is_empty() {
+        return write_atomically(path, mesh, |_| Ok(()), |mesh, w| encode_obj(mesh, None, w));
+    }
+    let mtl = path.with_extension("mtl");
+    let mtl_name = mtl.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    if mtl_name.chars().any(char::is_whitespace) {
+        return Err(IoError::InvalidMesh {
+            path: path.to_path_buf(),
+            message: format!(
+                "the material library name '{mtl_name}' holds whitespace, which OBJ cannot name"
+            ),
+        });
+    }
+    let existed = mtl.exists();
+    write_atomically(&mtl, mesh, |_| Ok(()), |mesh, w| encode_mtl(mesh, w))?;
+    let result = write_atomically(path, mesh, |_| Ok(()), |mesh, w| encode_obj(mesh, Some(&mtl_name), w));
+    if result.is_err() && !existed {
+        let _ = std::fs::remove_file(&mtl);
+    }
+    result
+}
+
+/// Writes the MTL text of `mesh`'s materials to `w`.
+pub(crate) fn encode_mtl(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
+    writeln!(w, "# voxreg materials: {}", mesh.materials.len())?;
+    for m in &mesh.materials {
+        let c = m.color.map(|c| f32::from(c) / 255.0);
+        writeln!(w, "\nnewmtl {}", m.name)?;
+        writeln!(w, "Kd {} {} {}", c[0], c[1], c[2])?;
+        writeln!(w, "Ka 0 0 0")?;
+        writeln!(w, "d {}", m.opacity())?;
+        let e = m.emission.clamp(0.0, 1.0);
+        writeln!(w, "Ke {} {} {}", c[0] * e, c[1] * e, c[2] * e)?;
+        writeln!(w, "Pm {}", m.metallic)?;
+        writeln!(w, "Pr {}", m.roughness)?;
+        writeln!(w, "illum 2")?;
+    }
+    Ok(())
 }
 
 /// Writes the OBJ text of `mesh`, assumed consistent, to `w`.
-pub(crate) fn encode_obj(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
+pub(crate) fn encode_obj(mesh: &QuadMesh, mtllib: Option<&str>, w: &mut dyn Write) -> io::Result<()> {
     writeln!(
         w,
         "# voxreg quad mesh: {} vertices, {} quads, {} groups",
@@ -30,10 +73,21 @@ pub(crate) fn encode_obj(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
         mesh.quads.len(),
         mesh.groups.len()
     )?;
+    if let Some(lib) = mtllib {
+        writeln!(w, "mtllib {lib}")?;
+    }
     for p in &mesh.positions {
         writeln!(w, "v {} {} {}", p.x, p.y, p.z)?;
     }
-    let face = |w: &mut dyn Write, f: u32| {
+    let mut current: Option<u32> = None;
+    let mut face = |w: &mut dyn Write, f: u32| {
+        if mtllib.is_some() {
+            let m = mesh.face_materials[f as usize];
+            if current != Some(m) {
+                writeln!(w, "usemtl {}", mesh.materials[m as usize].name)?;
+                current = Some(m);
+            }
+        }
         let [a, b, c, d] = mesh.quads[f as usize].map(|v| u64::from(v) + 1);
         writeln!(w, "f {a} {b} {c} {d}")
     };

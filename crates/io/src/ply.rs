@@ -26,7 +26,9 @@ use crate::{IoError, QuadMesh};
 /// ```
 ///
 /// then the vertices (positions rounded to `f32`) and the faces in face order, each
-/// with its 4 vertex indices (0-based) and `[inner, outer]` labels. Groups are not
+/// with its 4 vertex indices (0-based) and `[inner, outer]` labels. A mesh with
+/// materials adds `property uchar red`, `green`, `blue`, `alpha` to the faces: the
+/// face's material colour (sRGB) and opacity. Groups are not
 /// written: the labels carry the interfaces. Labels and vertex indices must fit the
 /// signed 32-bit `int` of PLY, and positions `f32`; otherwise, or if the mesh is
 /// inconsistent, the mesh is refused with [`IoError::InvalidMesh`] before anything is
@@ -59,10 +61,15 @@ pub(crate) fn encode_ply(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
         "ply\nformat binary_little_endian 1.0\ncomment voxreg quad mesh\n\
          element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
          element face {}\nproperty list uchar int vertex_indices\n\
-         property int inner_label\nproperty int outer_label\nend_header\n",
+         property int inner_label\nproperty int outer_label\n",
         mesh.positions.len(),
         mesh.quads.len()
     )?;
+    let colored = !mesh.face_materials.is_empty();
+    if colored {
+        writeln!(w, "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha")?;
+    }
+    writeln!(w, "end_header")?;
     for p in &mesh.positions {
         let mut record = [0u8; 12];
         for (chunk, c) in record.chunks_exact_mut(4).zip(p.as_vec3().to_array()) {
@@ -70,14 +77,21 @@ pub(crate) fn encode_ply(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
         }
         w.write_all(&record)?;
     }
-    for (quad, labels) in mesh.quads.iter().zip(&mesh.face_labels) {
-        let mut record = [0u8; 25];
+    for (f, (quad, labels)) in mesh.quads.iter().zip(&mesh.face_labels).enumerate() {
+        let mut record = [0u8; 29];
         record[0] = 4;
         let ints = quad.iter().chain(labels);
-        for (chunk, &v) in record[1..].chunks_exact_mut(4).zip(ints) {
+        for (chunk, &v) in record[1..25].chunks_exact_mut(4).zip(ints) {
             chunk.copy_from_slice(&(v as i32).to_le_bytes());
         }
-        w.write_all(&record)?;
+        if colored {
+            let m = &mesh.materials[mesh.face_materials[f] as usize];
+            record[25..28].copy_from_slice(&m.color[..3]);
+            record[28] = (m.opacity() * 255.0).round() as u8;
+            w.write_all(&record)?;
+        } else {
+            w.write_all(&record[..25])?;
+        }
     }
     Ok(())
 }

@@ -42,7 +42,7 @@ pub fn read_vol(path: &Path) -> Result<LabelVolume, IoError> {
 /// (after decompression for version 3): fewer is a truncated file, more a header whose
 /// dimensions do not match the data, and both are [`IoError::Format`] errors.
 pub fn read_vol_bytes(bytes: &[u8], path: &Path) -> Result<LabelVolume, IoError> {
-    let (header, data_start) = parse_header(bytes, path)?;
+    let (header, data_start) = parse_header(bytes, path, ".vol")?;
     let dims = header.dims(path)?;
     if let Some(size) = header.get("Voxel-Size") {
         if size != "1" {
@@ -111,17 +111,17 @@ fn check_len(
 }
 
 /// The header's `(key, value)` fields, in file order.
-struct Header {
+pub(crate) struct Header {
     fields: Vec<(String, String)>,
 }
 
 impl Header {
     /// The value of the first field named `key`, trimmed.
-    fn get(&self, key: &str) -> Option<&str> {
+    pub(crate) fn get(&self, key: &str) -> Option<&str> {
         self.fields.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
     }
 
-    fn dims(&self, path: &Path) -> Result<[u64; 3], IoError> {
+    pub(crate) fn dims(&self, path: &Path) -> Result<[u64; 3], IoError> {
         let parse = |key: &str, text: &str| {
             text.parse::<u64>().map_err(|_| {
                 IoError::format(path, format!("header field {key}: '{text}' is not a non-negative integer"))
@@ -157,9 +157,10 @@ impl Header {
     }
 }
 
-/// Splits the header off `bytes`: its fields and the offset of the voxel data.
-fn parse_header(bytes: &[u8], path: &Path) -> Result<(Header, usize), IoError> {
-    let not_vol = |message: String| IoError::format(path, format!("not a DGtal .vol file: {message}"));
+/// Splits the header off `bytes`: its fields and the offset of the voxel data. `format`
+/// (`.vol`, `.longvol`) names the format in errors.
+pub(crate) fn parse_header(bytes: &[u8], path: &Path, format: &str) -> Result<(Header, usize), IoError> {
+    let not_vol = |message: String| IoError::format(path, format!("not a DGtal {format} file: {message}"));
     if bytes.is_empty() {
         return Err(not_vol("the file is empty".into()));
     }

@@ -4,7 +4,9 @@ use std::path::Path;
 
 use voxreg_digisurf::LabelVolume;
 
-use crate::{read_vol, read_vox, IoError};
+use crate::{
+    read_longvol, read_nifti, read_npy, read_pgm3d, read_vol, read_vox, read_vti, IoError, Palette, Voxels,
+};
 
 /// The largest number of voxels a reader accepts: `2^31`.
 ///
@@ -17,24 +19,78 @@ pub const MAX_VOXELS: u64 = 1 << 31;
 pub struct LoadedVolume {
     /// The labeled voxels, spacing and origin.
     pub volume: LabelVolume,
-    /// Colours as RGBA, indexed by label (`palette[label]`), for formats that have a
-    /// palette (MagicaVoxel `.vox`: 256 entries, entry 0, the background, transparent);
-    /// `None` for formats without (`.vol`).
-    pub palette: Option<Vec<[u8; 4]>>,
+    /// Colours and materials indexed by label, for formats that have a palette
+    /// (MagicaVoxel `.vox`: 256 entries, entry 0, the background, transparent); `None`
+    /// for formats without (`.vol`).
+    pub palette: Option<Palette>,
 }
 
-/// Reads a labeled volume, choosing the format by the file's extension (case
-/// insensitive):
+/// Reads a labeled volume, choosing the format by the file's extension, as
+/// [`read_voxels`] does.
+///
+/// Grey-level data (values that are not all integers in `0..=u32::MAX`) are refused
+/// with [`IoError::Unsupported`]: read them with [`read_voxels`] and threshold them
+/// ([`Voxels::threshold`]).
+pub fn read_volume(path: &Path) -> Result<LoadedVolume, IoError> {
+    let LoadedVoxels { voxels, palette } = read_voxels(path)?;
+    let volume = voxels.into_labels().map_err(|e| {
+        IoError::unsupported(
+            path,
+            format!("grey-level data, {e}: threshold them (read_voxels, Voxels::threshold)"),
+        )
+    })?;
+    Ok(LoadedVolume { volume, palette })
+}
+
+/// The voxels read from a file (labels or grey levels), with its palette if any.
+#[derive(Clone, Debug, PartialEq)]
+pub struct LoadedVoxels {
+    /// The voxels, spacing and origin.
+    pub voxels: Voxels,
+    /// As [`LoadedVolume::palette`].
+    pub palette: Option<Palette>,
+}
+
+/// The extensions [`read_voxels`] knows, for error messages.
+const KNOWN_EXTENSIONS: &str = ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti or .npy";
+
+/// Reads the voxels of a file, labels or grey levels, choosing the format by the
+/// file's extension (case insensitive):
 ///
 /// - `.vol`: DGtal Vol, see [`read_vol`];
-/// - `.vox`: MagicaVoxel, see [`read_vox`].
+/// - `.longvol`: DGtal Longvol, see [`read_longvol`](crate::read_longvol);
+/// - `.pgm3d`: DGtal PGM 3-D, see [`read_pgm3d`](crate::read_pgm3d);
+/// - `.vox`: MagicaVoxel, see [`read_vox`];
+/// - `.nii`, `.nii.gz`: NIfTI-1, see [`read_nifti`](crate::read_nifti);
+/// - `.vti`: VTK XML image data, see [`read_vti`](crate::read_vti);
+/// - `.npy`: NumPy array, see [`read_npy`](crate::read_npy).
 ///
-/// Fails with [`IoError::UnsupportedExtension`] for any other name, before opening it.
-pub fn read_volume(path: &Path) -> Result<LoadedVolume, IoError> {
-    match lowercase_extension(path).as_deref() {
-        Some("vol") => Ok(LoadedVolume { volume: read_vol(path)?, palette: None }),
-        Some("vox") => read_vox(path),
-        _ => Err(IoError::UnsupportedExtension { path: path.to_path_buf(), expected: ".vol or .vox" }),
+/// Fails with [`IoError::UnsupportedExtension`] for any other name, and with
+/// [`IoError::Unsupported`] for `.raw` (which has no header: see
+/// [`read_raw`](crate::read_raw)), before opening the file.
+pub fn read_voxels(path: &Path) -> Result<LoadedVoxels, IoError> {
+    let plain = |voxels| Ok(LoadedVoxels { voxels, palette: None });
+    let is_nii_gz = path
+        .file_name()
+        .and_then(|n| n.to_str())
+        .is_some_and(|n| n.to_ascii_lowercase().ends_with(".nii.gz"));
+    let ext = if is_nii_gz { Some("nii".to_string()) } else { lowercase_extension(path) };
+    match ext.as_deref() {
+        Some("vol") => plain(Voxels::Labels(read_vol(path)?)),
+        Some("longvol") => plain(read_longvol(path)?),
+        Some("pgm3d") => plain(Voxels::Labels(read_pgm3d(path)?)),
+        Some("vox") => {
+            let LoadedVolume { volume, palette } = read_vox(path)?;
+            Ok(LoadedVoxels { voxels: Voxels::Labels(volume), palette })
+        }
+        Some("nii") => plain(read_nifti(path)?),
+        Some("vti") => plain(read_vti(path)?),
+        Some("npy") => plain(read_npy(path)?),
+        Some("raw") => Err(IoError::unsupported(
+            path,
+            "raw voxel data have no header: give their dimensions and type (read_raw with a RawSpec)",
+        )),
+        _ => Err(IoError::UnsupportedExtension { path: path.to_path_buf(), expected: KNOWN_EXTENSIONS }),
     }
 }
 
@@ -68,7 +124,7 @@ mod tests {
 
     #[test]
     fn unknown_extension_is_refused_before_opening() {
-        for name in ["does/not/exist.nii", "no_extension", "weird.VOLUME"] {
+        for name in ["does/not/exist.stl", "no_extension", "weird.VOLUME", "a.gz"] {
             let err = read_volume(Path::new(name)).unwrap_err();
             assert!(matches!(err, IoError::UnsupportedExtension { .. }), "{err}");
             assert!(err.to_string().starts_with(name), "{err}");
@@ -82,6 +138,44 @@ mod tests {
         assert_eq!(checked_voxel_count(p, [1 << 11, 1 << 10, 1 << 10]).unwrap(), 1 << 31);
         assert!(matches!(checked_voxel_count(p, [1 << 11, 1 << 10, 1025]), Err(IoError::TooLarge { .. })));
         assert!(matches!(checked_voxel_count(p, [u64::MAX; 3]), Err(IoError::TooLarge { .. })));
+    }
+
+    #[test]
+    fn dispatch_reads_every_bundled_format() {
+        let data = |name: &str| Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../data")).join(name);
+        let cases: [(&str, [usize; 3]); 6] = [
+            ("cat10.vol", [40; 3]),
+            ("test.longvol", [16; 3]),
+            ("cat10.pgm3d", [40; 3]),
+            ("chr_army1.vox", [8, 7, 12]),
+            ("lobsterCroped2.nii.gz", [101, 101, 41]),
+            ("channels.vti", [250, 250, 100]),
+        ];
+        for (name, dims) in cases {
+            let loaded = read_voxels(&data(name)).unwrap();
+            assert_eq!(loaded.voxels.dims(), dims, "{name}");
+            assert_eq!(loaded.palette.is_some(), name.ends_with(".vox"), "{name}");
+            assert_eq!(read_volume(&data(name)).unwrap().volume.dims(), dims, "{name}");
+        }
+        let err = read_voxels(Path::new("/nonexistent/scan.RAW")).unwrap_err();
+        assert!(matches!(err, IoError::Unsupported { .. }), "{err}");
+        assert!(err.to_string().contains("read_raw"), "{err}");
+    }
+
+    #[test]
+    fn read_volume_refuses_grey_levels() {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join("grey.npy");
+        let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+        let header = "{'descr': '<f4', 'fortran_order': False, 'shape': (1, 1, 2), }\n";
+        bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
+        bytes.extend_from_slice(header.as_bytes());
+        bytes.extend([1.0f32, 0.5].iter().flat_map(|v| v.to_le_bytes()));
+        std::fs::write(&path, &bytes).unwrap();
+        let err = read_volume(&path).unwrap_err();
+        assert!(matches!(err, IoError::Unsupported { .. }), "{err}");
+        assert!(err.to_string().contains("grey level 0.5 at voxel [0, 0, 1] is not a label"), "{err}");
+        assert!(matches!(read_voxels(&path).unwrap().voxels, Voxels::Grey(_)));
     }
 
     #[test]

@@ -6,8 +6,9 @@ use dot_vox::{DotVoxData, Model, SceneNode};
 use glam::DVec3;
 use voxreg_digisurf::LabelVolume;
 
+use crate::material::apply_vox_material;
 use crate::volume::{checked_voxel_count, read_file};
-use crate::{IoError, LoadedVolume};
+use crate::{IoError, LoadedVolume, Palette};
 
 /// Scene graphs nested deeper than this are refused (they are malformed or cyclic).
 const MAX_SCENE_DEPTH: usize = 64;
@@ -32,13 +33,14 @@ pub fn read_vox(path: &Path) -> Result<LoadedVolume, IoError> {
 ///
 /// - A file with one model gives a volume of exactly the model's size, origin `0.5`
 ///   (the model's own transform, if any, is ignored).
-/// - A file with several models places each shape of the scene graph at its
-///   translation, MagicaVoxel's way (a model's centre, `floor(size / 2)`, at the
-///   translation), in one volume spanning them all; where models overlap, the later one
-///   wins. Only the first frame of animated transforms and the first model of animated
-///   shapes are used, and hidden layers are still read. Rotated or mirrored models are
-///   refused with [`IoError::Unsupported`], as is a multi-model file without a scene
-///   graph.
+/// - A file with several models places each shape of the scene graph (format 200:
+///   nested groups, instancing) by the composition of the transforms above it,
+///   MagicaVoxel's way: a model pivots about `floor(size / 2)`, is rotated or mirrored
+///   by the `_r` byte (a signed axis permutation) and translated by `_t`; everything
+///   lands in one volume spanning all models, where overlapping models let the later one
+///   win. Hidden nodes and nodes on hidden layers are skipped. Only the first frame of
+///   animated transforms and the first model of animated shapes are used. A multi-model
+///   file without a scene graph is refused with [`IoError::Unsupported`].
 ///
 /// Files that `dot_vox` cannot parse, with no model, or with a voxel outside its
 /// model's size are [`IoError::Format`] errors; volumes above
@@ -46,9 +48,26 @@ pub fn read_vox(path: &Path) -> Result<LoadedVolume, IoError> {
 pub fn read_vox_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVolume, IoError> {
     let data = dot_vox::load_bytes(bytes)
         .map_err(|e| IoError::format(path, format!("not a valid MagicaVoxel .vox file (dot_vox: {e})")))?;
+    // MagicaVoxel models are at most 256 voxels per axis; a larger declared size is a
+    // corrupt (or hostile) file, refused before allocating anything for it.
+    if let Some((i, m)) = data.models.iter().enumerate().find(|(_, m)| model_size(m).iter().any(|&s| s > 256))
+    {
+        return Err(IoError::format(
+            path,
+            format!(
+                "model {i} declares size {}x{}x{}: MagicaVoxel models are at most 256 per axis",
+                m.size.x, m.size.y, m.size.z
+            ),
+        ));
+    }
     let instances = match data.models.len() {
         0 => return Err(IoError::format(path, "the .vox file holds no model")),
-        1 => vec![Instance { model: 0, min_corner: [0; 3] }],
+        1 => {
+            // One model: exactly its own lattice, whatever its transform.
+            let size = model_size(&data.models[0]);
+            let placement = Placement { translation: size.map(|s| s / 2), ..Placement::IDENTITY };
+            vec![Instance { model: 0, placement }]
+        }
         _ => scene_instances(&data, path)?,
     };
 
@@ -56,10 +75,10 @@ pub fn read_vox_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVolume, IoError
     let mut lo = [i64::MAX; 3];
     let mut hi = [i64::MIN; 3];
     for inst in &instances {
-        let size = model_size(&data.models[inst.model]);
+        let (a, b) = inst.placement.bounds(model_size(&data.models[inst.model]));
         for k in 0..3 {
-            lo[k] = lo[k].min(inst.min_corner[k]);
-            hi[k] = hi[k].max(inst.min_corner[k] + size[k]);
+            lo[k] = lo[k].min(a[k]);
+            hi[k] = hi[k].max(b[k]);
         }
     }
     let dims = [0, 1, 2].map(|k| (hi[k] - lo[k]).max(0) as u64);
@@ -81,7 +100,8 @@ pub fn read_vox_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVolume, IoError
                     ),
                 ));
             }
-            let q = [0, 1, 2].map(|k| (p[k] + inst.min_corner[k] - lo[k]) as usize);
+            let w = inst.placement.voxel(p, size);
+            let q = [0, 1, 2].map(|k| (w[k] - lo[k]) as usize);
             labels[q[0] + dims[0] * (q[1] + dims[1] * q[2])] = u32::from(v.i) + 1;
         }
     }
@@ -91,11 +111,21 @@ pub fn read_vox_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVolume, IoError
     Ok(LoadedVolume { volume, palette: Some(palette(&data)) })
 }
 
-/// The palette as 256 RGBA entries indexed by label (`dot_vox`'s 0-based index + 1).
-fn palette(data: &DotVoxData) -> Vec<[u8; 4]> {
-    let mut palette = vec![[0u8; 4]; 256];
-    for (entry, colour) in palette[1..].iter_mut().zip(&data.palette) {
+/// The palette as 256 RGBA entries indexed by label (`dot_vox`'s 0-based index + 1),
+/// with the `MATL` materials (whose ids are MagicaVoxel's 1-based colour indices, so
+/// they are labels too).
+fn palette(data: &DotVoxData) -> Palette {
+    let mut colors = vec![[0u8; 4]; 256];
+    for (entry, colour) in colors[1..].iter_mut().zip(&data.palette) {
         *entry = colour.into();
+    }
+    let mut palette = Palette::from_colors(colors);
+    for m in &data.materials {
+        if let Some(material) = palette.materials.get_mut(m.id as usize) {
+            if m.id > 0 {
+                apply_vox_material(material, &m.properties);
+            }
+        }
     }
     palette
 }
@@ -104,11 +134,78 @@ fn model_size(model: &Model) -> [i64; 3] {
     [model.size.x, model.size.y, model.size.z].map(i64::from)
 }
 
-/// One model placed in the scene: its index and the MagicaVoxel coordinates of its
-/// minimal corner.
+/// One model placed in the scene: its index and its placement.
 struct Instance {
     model: usize,
-    min_corner: [i64; 3],
+    placement: Placement,
+}
+
+/// A rigid placement of the lattice: `world = rotation * local + translation`, where
+/// `rotation` is a signed permutation (MagicaVoxel's `_r` byte) and `translation` is in
+/// voxels.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+struct Placement {
+    /// Rows of a signed permutation matrix.
+    rotation: [[i64; 3]; 3],
+    translation: [i64; 3],
+}
+
+impl Placement {
+    const IDENTITY: Placement =
+        Placement { rotation: [[1, 0, 0], [0, 1, 0], [0, 0, 1]], translation: [0; 3] };
+
+    /// Decodes MagicaVoxel's rotation byte: bits 0-1 and 2-3 give the column of the
+    /// non-zero entry of rows 0 and 1 (row 2 takes the remaining column), bits 4, 5, 6
+    /// the signs of rows 0, 1, 2 (set: negative). `None` if it is not a permutation.
+    fn rotation_from_byte(byte: u8) -> Option<[[i64; 3]; 3]> {
+        let c0 = (byte & 3) as usize;
+        let c1 = ((byte >> 2) & 3) as usize;
+        if c0 > 2 || c1 > 2 || c0 == c1 {
+            return None;
+        }
+        let c2 = 3 - c0 - c1;
+        let mut r = [[0i64; 3]; 3];
+        for (row, col) in [c0, c1, c2].into_iter().enumerate() {
+            r[row][col] = if byte & (1 << (4 + row)) != 0 { -1 } else { 1 };
+        }
+        Some(r)
+    }
+
+    fn apply(&self, v: [i64; 3]) -> [i64; 3] {
+        [0, 1, 2].map(|i| (0..3).map(|j| self.rotation[i][j] * v[j]).sum::<i64>() + self.translation[i])
+    }
+
+    /// `self` after `child`: the placement of the child's local frame in `self`'s parent.
+    fn then(&self, child: &Placement) -> Placement {
+        let mut rotation = [[0i64; 3]; 3];
+        for i in 0..3 {
+            for j in 0..3 {
+                rotation[i][j] = (0..3).map(|k| self.rotation[i][k] * child.rotation[k][j]).sum();
+            }
+        }
+        Placement { rotation, translation: self.apply(child.translation) }
+    }
+
+    /// World voxel of local voxel `v` of a model of `size`: MagicaVoxel pivots a model
+    /// about `floor(size / 2)`, so the voxel centre `v + 1/2 - floor(size / 2)` is
+    /// rotated and translated; world voxel = that centre minus 1/2. Computed in doubled
+    /// integer coordinates to stay exact.
+    fn voxel(&self, v: [i64; 3], size: [i64; 3]) -> [i64; 3] {
+        let twice_centre = [0, 1, 2].map(|k| 2 * v[k] + 1 - 2 * (size[k] / 2));
+        let rotated = [0, 1, 2].map(|i| (0..3).map(|j| self.rotation[i][j] * twice_centre[j]).sum::<i64>());
+        [0, 1, 2].map(|k| (rotated[k] + 2 * self.translation[k] - 1).div_euclid(2))
+    }
+
+    /// The world box `[lo, hi)` of a model of `size`.
+    fn bounds(&self, size: [i64; 3]) -> ([i64; 3], [i64; 3]) {
+        let a = self.voxel([0; 3], size);
+        let b = self.voxel([0, 1, 2].map(|k| (size[k] - 1).max(0)), size);
+        ([0, 1, 2].map(|k| a[k].min(b[k])), [0, 1, 2].map(|k| a[k].max(b[k]) + 1))
+    }
+}
+
+fn hidden(attributes: &dot_vox::Dict) -> bool {
+    attributes.get("_hidden").is_some_and(|h| h.trim() == "1")
 }
 
 /// The models placed by the scene graph, in scene-graph order.
@@ -120,7 +217,7 @@ fn scene_instances(data: &DotVoxData, path: &Path) -> Result<Vec<Instance>, IoEr
         ));
     }
     let mut instances = Vec::new();
-    walk(data, path, 0, [0; 3], 0, &mut instances)?;
+    walk(data, path, 0, Placement::IDENTITY, 0, &mut instances)?;
     if instances.is_empty() {
         return Err(IoError::format(path, "the scene graph places no model"));
     }
@@ -131,7 +228,7 @@ fn walk(
     data: &DotVoxData,
     path: &Path,
     node: u32,
-    translation: [i64; 3],
+    placement: Placement,
     depth: usize,
     out: &mut Vec<Instance>,
 ) -> Result<(), IoError> {
@@ -142,43 +239,44 @@ fn walk(
         return Err(IoError::format(path, format!("scene graph names node {node}, which does not exist")));
     };
     match scene_node {
-        SceneNode::Transform { frames, child, .. } => {
-            let mut t = translation;
+        SceneNode::Transform { attributes, frames, child, layer_id } => {
+            let layer_hidden = data.layers.get(*layer_id as usize).is_some_and(|l| hidden(&l.attributes));
+            if hidden(attributes) || layer_hidden {
+                return Ok(());
+            }
+            let mut local = Placement::IDENTITY;
             if let Some(frame) = frames.first() {
                 if let Some(r) = frame.attributes.get("_r") {
-                    // Bits 0-1 and 2-3: the columns of the non-zero entries of rows 1 and 2;
-                    // bits 4-6: their signs. The identity is 0b000_01_00.
-                    if r.trim().parse::<u8>().map(|b| b & 0x7f) != Ok(0b0000100) {
-                        return Err(IoError::unsupported(
-                            path,
-                            format!("node {node} rotates or mirrors its models (_r {r})"),
-                        ));
-                    }
+                    local.rotation =
+                        r.trim().parse::<u8>().ok().and_then(Placement::rotation_from_byte).ok_or_else(
+                            || IoError::format(path, format!("node {node}: '{r}' is not a rotation (_r)")),
+                        )?;
                 }
                 if let Some(p) = frame.position() {
-                    t = [
-                        translation[0] + i64::from(p.x),
-                        translation[1] + i64::from(p.y),
-                        translation[2] + i64::from(p.z),
-                    ];
+                    local.translation = [i64::from(p.x), i64::from(p.y), i64::from(p.z)];
                 }
             }
-            walk(data, path, *child, t, depth + 1, out)
+            walk(data, path, *child, placement.then(&local), depth + 1, out)
         }
-        SceneNode::Group { children, .. } => {
-            children.iter().try_for_each(|&c| walk(data, path, c, translation, depth + 1, out))
+        SceneNode::Group { attributes, children } => {
+            if hidden(attributes) {
+                return Ok(());
+            }
+            children.iter().try_for_each(|&c| walk(data, path, c, placement, depth + 1, out))
         }
-        SceneNode::Shape { models, .. } => {
+        SceneNode::Shape { attributes, models } => {
+            if hidden(attributes) {
+                return Ok(());
+            }
             let Some(shape_model) = models.first() else { return Ok(()) };
             let model = shape_model.model_id as usize;
-            let Some(m) = data.models.get(model) else {
+            if data.models.get(model).is_none() {
                 return Err(IoError::format(
                     path,
                     format!("node {node} names model {model}, which does not exist"),
                 ));
-            };
-            let size = model_size(m);
-            out.push(Instance { model, min_corner: [0, 1, 2].map(|k| translation[k] - size[k] / 2) });
+            }
+            out.push(Instance { model, placement });
             Ok(())
         }
     }
@@ -258,7 +356,7 @@ mod tests {
         assert_eq!(v.label([1, 0, 0]), Some(0));
         assert_eq!(v.corner_position([0, 0, 0]), DVec3::ZERO);
         assert_eq!(v.corner_position([2, 3, 4]), DVec3::new(2.0, 3.0, 4.0));
-        let palette = loaded.palette.unwrap();
+        let palette = loaded.palette.unwrap().colors;
         assert_eq!(palette.len(), 256);
         assert_eq!(palette[0], [0, 0, 0, 0]);
         assert_eq!(palette[1], [0, 255, 7, 255]);
@@ -281,13 +379,61 @@ mod tests {
     }
 
     #[test]
-    fn rotated_models_are_refused() {
-        let err = read_vox_bytes(&two_models(Some("36")), Path::new("m.vox")).unwrap_err();
-        assert!(matches!(err, IoError::Unsupported { .. }), "{err}");
-        assert!(err.to_string().starts_with("m.vox: unsupported: node 4 rotates"), "{err}");
-        // The identity rotation is fine, and a garbage one is refused, not a panic.
-        assert!(read_vox_bytes(&two_models(Some("4")), Path::new("m.vox")).is_ok());
-        assert!(read_vox_bytes(&two_models(Some("255")), Path::new("m.vox")).is_err());
+    fn rotated_and_mirrored_models_are_placed() {
+        // _r 36: rows (0, 1, 2) -> columns (0, 1, 2), row 1 negative: mirror y. Model 1
+        // (3x1x1, pivot (1, 0, 0)) at (-5, 2, 1): its voxels' centres y + 1/2 - 0 = 1/2
+        // become -1/2, so they land at y = 2 - 1 = 1.
+        let v = read_vox_bytes(&two_models(Some("36")), Path::new("m.vox")).unwrap().volume;
+        assert_eq!(v.dims(), [8, 2, 2]);
+        assert_eq!(v.corner_position([0, 0, 0]), DVec3::new(-6.0, 0.0, 0.0));
+        assert_eq!(v.label([2, 1, 1]), Some(10));
+        // _r 17: row 0 -> column 1 (negative), row 1 -> column 0: a quarter turn about z.
+        // Model 1 now runs along y, from y = 1 to 3, at x = -6.
+        let v = read_vox_bytes(&two_models(Some("17")), Path::new("m.vox")).unwrap().volume;
+        assert_eq!(v.dims(), [8, 4, 2]);
+        assert_eq!(v.label([0, 3, 1]), Some(10)); // voxel x = 2 of the model
+        assert_eq!(v.labels().iter().filter(|&&l| l == 10).count(), 1);
+        // Not a signed permutation: refused, not a panic.
+        for bad in ["255", "3", "x"] {
+            let err = read_vox_bytes(&two_models(Some(bad)), Path::new("m.vox")).unwrap_err();
+            assert!(err.to_string().contains("is not a rotation"), "{err}");
+        }
+    }
+
+    #[test]
+    fn nested_transforms_compose() {
+        let p = Placement { rotation: Placement::rotation_from_byte(17).unwrap(), translation: [1, 2, 3] };
+        let q = p.then(&p);
+        // Two quarter turns: a half turn about z.
+        assert_eq!(q.rotation, [[-1, 0, 0], [0, -1, 0], [0, 0, 1]]);
+        assert_eq!(q.apply([0, 0, 0]), p.apply(p.apply([0, 0, 0])));
+        assert_eq!(Placement::rotation_from_byte(4), Some(Placement::IDENTITY.rotation));
+    }
+
+    #[test]
+    fn hidden_nodes_and_layers_are_skipped() {
+        let hide = |mut node: SceneNode, layer: u32| {
+            if let SceneNode::Transform { attributes, layer_id, .. } = &mut node {
+                if layer == 0 {
+                    attributes.insert("_hidden".into(), "1".into());
+                }
+                *layer_id = layer;
+            }
+            node
+        };
+        for layer in [0, 1] {
+            let mut data = dot_vox::load_bytes(&two_models(None)).unwrap();
+            data.scenes[4] = hide(data.scenes[4].clone(), layer);
+            let mut hidden_layer = Dict::new();
+            hidden_layer.insert("_hidden".into(), "1".into());
+            data.layers =
+                vec![dot_vox::Layer { attributes: Dict::new() }, dot_vox::Layer { attributes: hidden_layer }];
+            let mut bytes = Vec::new();
+            data.write_vox(&mut bytes).unwrap();
+            let v = read_vox_bytes(&bytes, Path::new("m.vox")).unwrap().volume;
+            assert_eq!(v.dims(), [2, 1, 1], "layer {layer}: only model 0 remains");
+            assert!(v.labels().iter().all(|&l| l != 10));
+        }
     }
 
     #[test]
@@ -298,7 +444,7 @@ mod tests {
 
         let huge = encode(vec![model([u32::MAX, u32::MAX, 2], &[])], Vec::new());
         let err = read_vox_bytes(&huge, Path::new("m.vox")).unwrap_err();
-        assert!(matches!(err, IoError::TooLarge { .. }), "{err}");
+        assert!(err.to_string().contains("at most 256 per axis"), "{err}");
 
         let none = encode(Vec::new(), Vec::new());
         assert!(read_vox_bytes(&none, Path::new("m.vox")).unwrap_err().to_string().contains("no model"));

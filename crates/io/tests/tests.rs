@@ -72,7 +72,7 @@ fn bundled_vox_files() {
         // Lattice corners at integer MagicaVoxel coordinates.
         assert_eq!(volume.corner_position([0, 0, 0]), DVec3::ZERO);
         assert_eq!(volume.corner_position([1, 2, 3]), DVec3::new(1.0, 2.0, 3.0));
-        let palette = palette.expect("a .vox file has a palette");
+        let palette = palette.expect("a .vox file has a palette").colors;
         assert_eq!(palette.len(), 256);
         assert_eq!(palette[0], [0, 0, 0, 0]);
         for l in found.into_iter().filter(|&l| l != 0) {
@@ -105,7 +105,7 @@ fn wrong_format_for_the_extension() {
     assert!(matches!(read_volume(&vox), Err(IoError::Format { .. })));
     let err = read_volume(&data("README.md")).unwrap_err();
     assert!(matches!(err, IoError::UnsupportedExtension { .. }));
-    assert!(err.to_string().ends_with("README.md: unknown file extension (expected .vol or .vox)"), "{err}");
+    assert!(err.to_string().ends_with("README.md: unknown file extension (expected .vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti or .npy)"), "{err}");
 }
 
 // ---------------------------------------------------------------- snapshots
@@ -294,7 +294,10 @@ fn unknown_extension_creates_nothing() {
     for name in ["mesh.stl", "mesh"] {
         let err = write_mesh(&dir.path().join(name), &single_voxel_mesh()).unwrap_err();
         assert!(matches!(err, IoError::UnsupportedExtension { .. }), "{err:?}");
-        assert!(err.to_string().ends_with("unknown file extension (expected .obj or .ply)"), "{err}");
+        assert!(
+            err.to_string().ends_with("unknown file extension (expected .obj, .ply, .glb or .gltf)"),
+            "{err}"
+        );
     }
     assert!(entries(dir.path()).is_empty());
 }

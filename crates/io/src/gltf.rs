@@ -1,0 +1,262 @@
+//! glTF 2.0 output (`.glb` binary, `.gltf` with an embedded buffer).
+
+use std::io::{self, Write};
+use std::path::Path;
+
+use base64::{engine::general_purpose::STANDARD as BASE64, Engine as _};
+use glam::{DVec3, Vec3};
+use gltf::json::{self as gj, validation::Checked, validation::USize64, Index};
+
+use crate::mesh::write_atomically;
+use crate::volume::lowercase_extension;
+use crate::{IoError, Material, QuadMesh};
+
+/// Writes `mesh` to `path` as glTF 2.0: binary `.glb`, or `.gltf` JSON with the buffer
+/// embedded as a base64 data URI (one self-contained file either way).
+///
+/// Quads are split into two triangles along the diagonal from their first vertex (a
+/// triangle of a quad stays in the quad's convex hull, as the papers' Proposition 2
+/// requires). Faces are grouped into one primitive per material, so each face keeps its
+/// material's colour exactly; vertices on a boundary between materials are duplicated.
+/// Per-vertex normals are the area-weighted average of the quad normals around the
+/// vertex, over the whole mesh (so shading is continuous across materials). A mesh
+/// without materials gets one grey diffuse material.
+///
+/// Materials map to glTF's metallic-roughness model: base colour (sRGB converted to
+/// linear), metalness, roughness, emission (`emissiveFactor` = colour x emission), and
+/// transparency (`alphaMode: BLEND` when opacity < 1). Materials are double-sided, since
+/// surfaces of label volumes may be open.
+///
+/// Written to a temporary file renamed onto `path` when complete; an inconsistent mesh
+/// is refused with [`IoError::InvalidMesh`] before anything is created.
+pub fn write_gltf(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
+    let binary = lowercase_extension(path).as_deref() != Some("gltf");
+    write_atomically(path, mesh, check_gltf, |mesh, w| encode_gltf(mesh, binary, w))
+}
+
+fn check_gltf(mesh: &QuadMesh) -> Result<(), String> {
+    if let Some(i) = mesh.positions.iter().position(|p| !p.as_vec3().is_finite()) {
+        return Err(format!("vertex {i} at {} does not fit a glTF float", mesh.positions[i]));
+    }
+    if mesh.quads.is_empty() {
+        return Err("no face to write".into());
+    }
+    Ok(())
+}
+
+/// Area-weighted vertex normals (each quad's normal is half the cross product of its
+/// diagonals, whose length is the quad's area).
+fn vertex_normals(mesh: &QuadMesh) -> Vec<Vec3> {
+    let mut n = vec![DVec3::ZERO; mesh.positions.len()];
+    for q in &mesh.quads {
+        let p = q.map(|v| mesh.positions[v as usize]);
+        let face = 0.5 * (p[2] - p[0]).cross(p[3] - p[1]);
+        for v in q {
+            n[*v as usize] += face;
+        }
+    }
+    n.iter().map(|v| v.normalize_or(DVec3::Z).as_vec3()).collect()
+}
+
+/// One primitive's data: its vertices (indices into the mesh) and triangles.
+struct Part {
+    material: usize,
+    vertices: Vec<u32>,
+    triangles: Vec<u32>,
+}
+
+fn parts(mesh: &QuadMesh) -> Vec<Part> {
+    let n_materials = mesh.materials.len().max(1);
+    let mut faces: Vec<Vec<usize>> = vec![Vec::new(); n_materials];
+    for f in 0..mesh.quads.len() {
+        let m = mesh.face_materials.get(f).map_or(0, |&m| m as usize);
+        faces[m].push(f);
+    }
+    let mut local = vec![u32::MAX; mesh.positions.len()];
+    let mut out = Vec::new();
+    for (m, fs) in faces.into_iter().enumerate().filter(|(_, fs)| !fs.is_empty()) {
+        let mut vertices = Vec::new();
+        let mut triangles = Vec::with_capacity(6 * fs.len());
+        let mut id = |v: u32, vertices: &mut Vec<u32>| {
+            if local[v as usize] == u32::MAX {
+                local[v as usize] = vertices.len() as u32;
+                vertices.push(v);
+            }
+            local[v as usize]
+        };
+        for f in fs {
+            let [a, b, c, d] = mesh.quads[f].map(|v| id(v, &mut vertices));
+            triangles.extend([a, b, c, a, c, d]);
+        }
+        for &v in &vertices {
+            local[v as usize] = u32::MAX;
+        }
+        out.push(Part { material: m, vertices, triangles });
+    }
+    out
+}
+
+fn material_json(m: &Material) -> gj::Material {
+    let [r, g, b] = m.linear_rgb();
+    let opacity = m.opacity();
+    let e = m.emission.clamp(0.0, 1.0);
+    gj::Material {
+        name: Some(m.name.clone()),
+        alpha_mode: Checked::Valid(if opacity < 1.0 {
+            gj::material::AlphaMode::Blend
+        } else {
+            gj::material::AlphaMode::Opaque
+        }),
+        double_sided: true,
+        pbr_metallic_roughness: gj::material::PbrMetallicRoughness {
+            base_color_factor: gj::material::PbrBaseColorFactor([r, g, b, opacity]),
+            metallic_factor: gj::material::StrengthFactor(m.metallic.clamp(0.0, 1.0)),
+            roughness_factor: gj::material::StrengthFactor(m.roughness.clamp(0.0, 1.0)),
+            ..Default::default()
+        },
+        emissive_factor: gj::material::EmissiveFactor([r * e, g * e, b * e]),
+        ..Default::default()
+    }
+}
+
+fn encode_gltf(mesh: &QuadMesh, binary: bool, w: &mut dyn Write) -> io::Result<()> {
+    let normals = vertex_normals(mesh);
+    let parts = parts(mesh);
+    let default_material = [Material::diffuse("default", [200, 200, 200, 255])];
+    let materials: &[Material] = if mesh.materials.is_empty() { &default_material } else { &mesh.materials };
+
+    let mut root = gj::Root {
+        asset: gj::Asset { generator: Some("voxreg".into()), ..Default::default() },
+        ..Default::default()
+    };
+    let material_ids: Vec<Index<gj::Material>> =
+        materials.iter().map(|m| root.push(material_json(m))).collect();
+
+    // One buffer: per part, positions and normals (f32 x 3), then u32 indices.
+    let mut bin: Vec<u8> = Vec::new();
+    let buffer = Index::new(0);
+    let view = |root: &mut gj::Root, bin: &mut Vec<u8>, bytes: &[u8], target| {
+        while bin.len() % 4 != 0 {
+            bin.push(0);
+        }
+        let offset = bin.len();
+        bin.extend_from_slice(bytes);
+        root.push(gj::buffer::View {
+            buffer,
+            byte_length: USize64::from(bytes.len()),
+            byte_offset: Some(USize64::from(offset)),
+            byte_stride: None,
+            name: None,
+            target: Some(Checked::Valid(target)),
+            extensions: None,
+            extras: Default::default(),
+        })
+    };
+    let accessor = |view: Index<gj::buffer::View>, count: usize, component, type_, min, max| gj::Accessor {
+        buffer_view: Some(view),
+        byte_offset: None,
+        count: USize64::from(count),
+        component_type: Checked::Valid(gj::accessor::GenericComponentType(component)),
+        extensions: None,
+        extras: Default::default(),
+        type_: Checked::Valid(type_),
+        min,
+        max,
+        name: None,
+        normalized: false,
+        sparse: None,
+    };
+    let mut primitives = Vec::new();
+    for part in &parts {
+        let pos: Vec<Vec3> = part.vertices.iter().map(|&v| mesh.positions[v as usize].as_vec3()).collect();
+        let lo = pos.iter().fold(Vec3::splat(f32::INFINITY), |a, &b| a.min(b));
+        let hi = pos.iter().fold(Vec3::splat(f32::NEG_INFINITY), |a, &b| a.max(b));
+        let pos_bytes: Vec<u8> = pos.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes).collect();
+        let nrm_bytes: Vec<u8> = part
+            .vertices
+            .iter()
+            .flat_map(|&v| normals[v as usize].to_array())
+            .flat_map(f32::to_le_bytes)
+            .collect();
+        let idx_bytes: Vec<u8> = part.triangles.iter().flat_map(|i| i.to_le_bytes()).collect();
+        let vp = view(&mut root, &mut bin, &pos_bytes, gj::buffer::Target::ArrayBuffer);
+        let vn = view(&mut root, &mut bin, &nrm_bytes, gj::buffer::Target::ArrayBuffer);
+        let vi = view(&mut root, &mut bin, &idx_bytes, gj::buffer::Target::ElementArrayBuffer);
+        let f32c = gj::accessor::ComponentType::F32;
+        let ap = root.push(accessor(
+            vp,
+            pos.len(),
+            f32c,
+            gj::accessor::Type::Vec3,
+            Some(gj::Value::from(lo.to_array().to_vec())),
+            Some(gj::Value::from(hi.to_array().to_vec())),
+        ));
+        let an = root.push(accessor(vn, pos.len(), f32c, gj::accessor::Type::Vec3, None, None));
+        let ai = root.push(accessor(
+            vi,
+            part.triangles.len(),
+            gj::accessor::ComponentType::U32,
+            gj::accessor::Type::Scalar,
+            None,
+            None,
+        ));
+        let mut attributes = std::collections::BTreeMap::new();
+        attributes.insert(Checked::Valid(gj::mesh::Semantic::Positions), ap);
+        attributes.insert(Checked::Valid(gj::mesh::Semantic::Normals), an);
+        primitives.push(gj::mesh::Primitive {
+            attributes,
+            extensions: None,
+            extras: Default::default(),
+            indices: Some(ai),
+            material: Some(material_ids[part.material]),
+            mode: Checked::Valid(gj::mesh::Mode::Triangles),
+            targets: None,
+        });
+    }
+    while bin.len() % 4 != 0 {
+        bin.push(0);
+    }
+    root.push(gj::Buffer {
+        byte_length: USize64::from(bin.len()),
+        name: None,
+        uri: if binary {
+            None
+        } else {
+            Some(format!("data:application/octet-stream;base64,{}", BASE64.encode(&bin)))
+        },
+        extensions: None,
+        extras: Default::default(),
+    });
+    let mesh_id = root.push(gj::Mesh {
+        extensions: None,
+        extras: Default::default(),
+        name: Some("voxreg".into()),
+        primitives,
+        weights: None,
+    });
+    let node = root.push(gj::Node { mesh: Some(mesh_id), name: Some("voxreg".into()), ..Default::default() });
+    let scene = root.push(gj::Scene {
+        extensions: None,
+        extras: Default::default(),
+        name: Some("voxreg".into()),
+        nodes: vec![node],
+    });
+    root.scene = Some(scene);
+
+    let json = gj::serialize::to_vec(&root).map_err(io::Error::other)?;
+    if binary {
+        let mut json = json;
+        while json.len() % 4 != 0 {
+            json.push(b' ');
+        }
+        let glb = gltf::binary::Glb {
+            header: gltf::binary::Header { magic: *b"glTF", version: 2, length: 0 },
+            json: json.into(),
+            bin: Some(bin.into()),
+        };
+        let bytes = glb.to_vec().map_err(io::Error::other)?;
+        w.write_all(&bytes)
+    } else {
+        w.write_all(&json)
+    }
+}

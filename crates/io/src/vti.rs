@@ -1,0 +1,911 @@
+//! VTK XML image data (`.vti`), as written by VTK, ParaView and pyvista.
+//!
+//! The format: an XML document `<VTKFile type="ImageData">` holding an `<ImageData>`
+//! (`WholeExtent`, `Origin`, `Spacing`, `Direction`) with one or more `<Piece>`s, each
+//! with `<PointData>` and `<CellData>` holding `<DataArray>`s. An array's values are
+//! inline ASCII (`format="ascii"`), inline base64 (`format="binary"`), or in the
+//! `<AppendedData>` section at the end of the file (`format="appended"`, at byte
+//! `offset`), raw or base64. Binary data start with a header of `UInt32` or `UInt64`
+//! words (`header_type`): the byte count, or, when compressed, the number of blocks,
+//! the block size, the size of the last block and each block's compressed size.
+
+use std::io::Read;
+use std::path::Path;
+
+use base64::Engine;
+use flate2::read::ZlibDecoder;
+use glam::{DMat3, DVec3};
+use roxmltree::{Document, Node};
+
+use crate::orient::place;
+use crate::samples::{decode, Layout, Order};
+use crate::volume::{checked_voxel_count, read_file};
+use crate::{DataType, Endian, IoError, Voxels};
+
+/// Reads a VTK XML image data file (`.vti`). See [`read_vti_bytes`].
+pub fn read_vti(path: &Path) -> Result<Voxels, IoError> {
+    read_vti_bytes(&read_file(path)?, path)
+}
+
+/// Reads a VTK XML image data file held in memory; `path` only names the file in
+/// errors.
+///
+/// **Which array.** The active scalars of the cell data (its `Scalars` attribute), else
+/// those of the point data, else the first cell-data array, else the first point-data
+/// array. It must have one component, of type `Int8` ... `UInt64`, `Float32` or
+/// `Float64`. Values are labels (background `0`) when all are integers in
+/// `0..=u32::MAX`, grey levels otherwise; a NaN is an error.
+///
+/// **Space.** Cell data: one voxel per cell, the centre of cell `i` at
+/// `Origin + (extent start + i + 0.5) * Spacing` (a flat axis of one point has one
+/// cell, centred on it). Point data: one voxel per point, centred on it. A `Direction`
+/// that only permutes and flips the axes, and negative spacings, are applied exactly
+/// (the volume is re-stored to follow the world axes); an oblique `Direction` is
+/// dropped, keeping spacing and origin.
+///
+/// **Encodings.** `ascii`, `binary` (base64) and `appended` (`raw` or `base64`), in
+/// either `byte_order`, with `UInt32` or `UInt64` headers, uncompressed or compressed by
+/// `vtkZLibDataCompressor` (LZ4 and LZMA are [`IoError::Unsupported`]). Several pieces
+/// are assembled into the whole extent; together they must hold at least as many values
+/// as the whole extent has voxels.
+///
+/// **Refused.** Malformed XML, another root than `VTKFile`, missing or malformed
+/// extents, a piece outside the whole extent, arrays whose size does not match the
+/// extent (truncated or longer data), bad base64 or zlib data are
+/// [`IoError::Format`]; other dataset types, multi-component arrays and other types
+/// are [`IoError::Unsupported`]; extents above [`MAX_VOXELS`](crate::MAX_VOXELS) are
+/// [`IoError::TooLarge`], checked before any allocation.
+pub fn read_vti_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> {
+    let malformed = |message: String| IoError::format(path, message);
+    let (xml, appended) = split_appended(bytes).map_err(malformed)?;
+    let doc =
+        Document::parse(&xml).map_err(|e| malformed(format!("not a VTK XML file: malformed XML: {e}")))?;
+    let root = doc.root_element();
+    if !root.has_tag_name("VTKFile") {
+        return Err(malformed(format!(
+            "not a VTK XML file: the root element is <{}>",
+            root.tag_name().name()
+        )));
+    }
+    match root.attribute("type") {
+        Some("ImageData") => {}
+        Some(other) => {
+            return Err(IoError::unsupported(
+                path,
+                format!("VTK dataset type {other} (only ImageData is read)"),
+            ))
+        }
+        None => return Err(malformed("<VTKFile> has no type attribute".into())),
+    }
+    let endian = match root.attribute("byte_order").unwrap_or("LittleEndian") {
+        "LittleEndian" => Endian::Little,
+        "BigEndian" => Endian::Big,
+        other => return Err(malformed(format!("unknown byte_order '{other}'"))),
+    };
+    let word = match root.attribute("header_type").unwrap_or("UInt32") {
+        "UInt32" => 4,
+        "UInt64" => 8,
+        other => {
+            return Err(IoError::unsupported(
+                path,
+                format!("header_type {other} (UInt32 and UInt64 are read)"),
+            ))
+        }
+    };
+    let compressed = match root.attribute("compressor") {
+        None | Some("") => false,
+        Some("vtkZLibDataCompressor") => true,
+        Some(other) => {
+            return Err(IoError::unsupported(
+                path,
+                format!("compressor {other} (only vtkZLibDataCompressor is read)"),
+            ))
+        }
+    };
+    let codec = Codec { endian, word, compressed };
+
+    let image = child(root, "ImageData").ok_or_else(|| malformed("no <ImageData> element".into()))?;
+    let whole = parse_extent(image.attribute("WholeExtent"), "WholeExtent").map_err(malformed)?;
+    let origin = parse_floats::<3>(image.attribute("Origin"), "Origin", [0.0; 3]).map_err(malformed)?;
+    let spacing = parse_floats::<3>(image.attribute("Spacing"), "Spacing", [1.0; 3]).map_err(malformed)?;
+    let identity = [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0];
+    let direction =
+        parse_floats::<9>(image.attribute("Direction"), "Direction", identity).map_err(malformed)?;
+
+    let pieces: Vec<Node> = image.children().filter(|n| n.has_tag_name("Piece")).collect();
+    let first = pieces.first().ok_or_else(|| malformed("no <Piece> in <ImageData>".into()))?;
+    let (section, name, index) =
+        choose_array(*first).ok_or_else(|| malformed("no <DataArray> in the first <Piece>".into()))?;
+    let cells = section == "CellData";
+    let dims = whole.map(|(lo, hi)| extent_len(lo, hi, cells));
+    let count = checked_voxel_count(path, dims)?;
+    let dims = dims.map(|d| d as usize); // fits: each is at most the voxel count
+
+    let mut dtype = None;
+    let mut assembled: Option<Vec<u8>> = None;
+    let mut covered = 0usize;
+    for (k, piece) in pieces.iter().enumerate() {
+        let where_ = format!("piece {k}");
+        let extent = match piece.attribute("Extent") {
+            Some(_) => parse_extent(piece.attribute("Extent"), "Extent")
+                .map_err(|e| malformed(format!("{where_}: {e}")))?,
+            None => whole,
+        };
+        if (0..3).any(|a| extent[a].0 < whole[a].0 || extent[a].1 > whole[a].1) {
+            return Err(malformed(format!("{where_}: its Extent lies outside the WholeExtent")));
+        }
+        let pdims = extent.map(|(lo, hi)| extent_len(lo, hi, cells) as usize);
+        let offset = [0, 1, 2].map(|a| (extent[a].0 - whole[a].0) as usize);
+        if (0..3).any(|a| offset[a] + pdims[a] > dims[a]) {
+            return Err(malformed(format!("{where_}: its Extent lies outside the WholeExtent")));
+        }
+        let pcount = pdims.iter().product::<usize>(); // at most the whole count
+        let array = find_array(*piece, section, name, index).ok_or_else(|| {
+            malformed(format!("{where_}: no {section} array {}", name.unwrap_or("(unnamed)")))
+        })?;
+        let (t, data) = read_array(array, pcount, codec, appended.as_ref())
+            .map_err(|e| {
+                malformed(format!(
+                    "{where_}, {section} array '{}': {e}",
+                    array.attribute("Name").unwrap_or("")
+                ))
+            })?
+            .map_err(|e| IoError::unsupported(path, e))?;
+        if dtype.is_some_and(|d| d != t) {
+            return Err(malformed(format!("{where_}: the array's type differs from the first piece's")));
+        }
+        dtype = Some(t);
+        covered += pcount;
+        if pdims == dims {
+            assembled = Some(data);
+        } else {
+            let buffer = assembled.get_or_insert_with(Vec::new);
+            if buffer.is_empty() {
+                // Allocate the whole volume only once a piece's data exist (bounded
+                // by the data actually decoded, see the coverage check below).
+                if pcount.saturating_mul(pieces.len()) < count {
+                    return Err(malformed(format!(
+                        "{} pieces of at most {pcount} voxels cannot cover the {count} voxels of the WholeExtent",
+                        pieces.len()
+                    )));
+                }
+                buffer.resize(count * t.size(), 0);
+            }
+            copy_piece(buffer, &data, dims, pdims, offset, t.size());
+        }
+    }
+    if covered < count {
+        return Err(malformed(format!(
+            "the pieces hold {covered} values for the {count} voxels of the WholeExtent"
+        )));
+    }
+    let (Some(dtype), Some(data)) = (dtype, assembled) else {
+        return Err(malformed("no data".into()));
+    };
+    let layout = Layout { dims, dtype, endian: Endian::Little, order: Order::XFastest };
+    let voxels = decode(path, &data, layout, None)?;
+
+    // Index-to-world: world = Origin + Direction * ((start + i + half) * Spacing).
+    let d = |r: usize, c: usize| direction[3 * r + c];
+    let dir = DMat3::from_cols(
+        DVec3::new(d(0, 0), d(1, 0), d(2, 0)),
+        DVec3::new(d(0, 1), d(1, 1), d(2, 1)),
+        DVec3::new(d(0, 2), d(1, 2), d(2, 2)),
+    );
+    let spacing = DVec3::from_array(spacing);
+    let half = |a: usize| if cells && whole[a].1 > whole[a].0 { 0.5 } else { 0.0 };
+    let start =
+        DVec3::new(whole[0].0 as f64 + half(0), whole[1].0 as f64 + half(1), whole[2].0 as f64 + half(2));
+    let matrix = dir * DMat3::from_diagonal(spacing);
+    let translation = DVec3::from_array(origin) + dir * (start * spacing);
+    let (voxels, _) = place(voxels, matrix, translation)
+        .map_err(|source| IoError::Volume { path: path.to_path_buf(), source })?;
+    Ok(voxels)
+}
+
+/// Number of voxels along an axis of extent `lo..=hi`: points, or cells (one for a flat
+/// axis).
+fn extent_len(lo: i64, hi: i64, cells: bool) -> u64 {
+    let points = (hi - lo) as u64 + 1;
+    if cells {
+        (points - 1).max(1)
+    } else {
+        points
+    }
+}
+
+/// Copies the values of a piece of dimensions `pdims` into the whole volume's buffer at
+/// voxel `offset` (`x` fastest, `size` bytes per value).
+fn copy_piece(
+    buffer: &mut [u8],
+    data: &[u8],
+    dims: [usize; 3],
+    pdims: [usize; 3],
+    offset: [usize; 3],
+    size: usize,
+) {
+    let row = pdims[0] * size;
+    for z in 0..pdims[2] {
+        for y in 0..pdims[1] {
+            let src = (z * pdims[1] + y) * row;
+            let dst = (((offset[2] + z) * dims[1] + offset[1] + y) * dims[0] + offset[0]) * size;
+            buffer[dst..dst + row].copy_from_slice(&data[src..src + row]);
+        }
+    }
+}
+
+/// Splits off the `<AppendedData>` section: the XML before it (closed so that it
+/// parses) and the data after its `_` marker, which may be raw binary.
+fn split_appended(bytes: &[u8]) -> Result<(String, Option<Appended>), String> {
+    const TAG: &[u8] = b"<AppendedData";
+    let Some(start) = find(bytes, TAG) else {
+        let text =
+            std::str::from_utf8(bytes).map_err(|_| "not a VTK XML file: not UTF-8 text".to_string())?;
+        return Ok((text.to_owned(), None));
+    };
+    let head =
+        std::str::from_utf8(&bytes[..start]).map_err(|_| "not a VTK XML file: not UTF-8 text".to_string())?;
+    let tag_len = bytes[start..].iter().position(|&b| b == b'>').ok_or("unterminated <AppendedData> tag")?;
+    let tag =
+        std::str::from_utf8(&bytes[start..start + tag_len]).map_err(|_| "malformed <AppendedData> tag")?;
+    let tag = tag.strip_suffix('/').unwrap_or(tag);
+    let encoding = if tag.contains("encoding=\"raw\"") || tag.contains("encoding='raw'") {
+        Encoding::Raw
+    } else if tag.contains("encoding=\"base64\"") || tag.contains("encoding='base64'") {
+        Encoding::Base64
+    } else {
+        return Err("<AppendedData> has no encoding \"raw\" or \"base64\"".into());
+    };
+    let after = &bytes[start + tag_len + 1..];
+    let data = match after.iter().position(|&b| b == b'_') {
+        Some(u) if after[..u].iter().all(u8::is_ascii_whitespace) => &after[u + 1..],
+        _ => return Err("<AppendedData> does not start with '_'".into()),
+    };
+    let data = match encoding {
+        Encoding::Raw => data.to_vec(),
+        // Base64 text runs to the closing tag; whitespace is dropped.
+        Encoding::Base64 => {
+            let end = data.iter().position(|&b| b == b'<').unwrap_or(data.len());
+            data[..end].iter().copied().filter(|b| !b.is_ascii_whitespace()).collect()
+        }
+    };
+    // Close the document: the appended section is a child of <VTKFile>.
+    let xml = format!("{head}<AppendedData/></VTKFile>");
+    Ok((xml, Some(Appended { encoding, data })))
+}
+
+fn find(haystack: &[u8], needle: &[u8]) -> Option<usize> {
+    haystack.windows(needle.len()).position(|w| w == needle)
+}
+
+#[derive(Clone, Copy, PartialEq, Eq)]
+enum Encoding {
+    Raw,
+    Base64,
+}
+
+/// The `<AppendedData>` section's data, after the `_`.
+struct Appended {
+    encoding: Encoding,
+    data: Vec<u8>,
+}
+
+/// How binary data are framed.
+#[derive(Clone, Copy)]
+struct Codec {
+    endian: Endian,
+    /// Bytes per header word: 4 or 8.
+    word: usize,
+    compressed: bool,
+}
+
+fn child<'a, 'i>(node: Node<'a, 'i>, name: &str) -> Option<Node<'a, 'i>> {
+    node.children().find(|n| n.has_tag_name(name))
+}
+
+fn data_arrays<'a, 'i>(section: Node<'a, 'i>) -> impl Iterator<Item = Node<'a, 'i>> {
+    section.children().filter(|n| n.has_tag_name("DataArray"))
+}
+
+/// The array to read, from the first piece: its section, its name (if any) and its
+/// position among the section's arrays.
+fn choose_array<'a>(piece: Node<'a, '_>) -> Option<(&'static str, Option<&'a str>, usize)> {
+    for section in ["CellData", "PointData"] {
+        if let Some(s) = child(piece, section) {
+            if let Some(active) = s.attribute("Scalars") {
+                if let Some(i) = data_arrays(s).position(|a| a.attribute("Name") == Some(active)) {
+                    return Some((section, Some(active), i));
+                }
+            }
+        }
+    }
+    for section in ["CellData", "PointData"] {
+        if let Some(a) = child(piece, section).and_then(|s| data_arrays(s).next()) {
+            return Some((section, a.attribute("Name"), 0));
+        }
+    }
+    None
+}
+
+/// The array of another piece: by name, or by position when unnamed.
+fn find_array<'a, 'i>(
+    piece: Node<'a, 'i>,
+    section: &str,
+    name: Option<&str>,
+    index: usize,
+) -> Option<Node<'a, 'i>> {
+    let s = child(piece, section)?;
+    match name {
+        Some(name) => data_arrays(s).find(|a| a.attribute("Name") == Some(name)),
+        None => data_arrays(s).nth(index),
+    }
+}
+
+fn parse_extent(text: Option<&str>, what: &str) -> Result<[(i64, i64); 3], String> {
+    let text = text.ok_or_else(|| format!("no {what}"))?;
+    let values: Vec<i64> = text
+        .split_ascii_whitespace()
+        .map(|t| t.parse::<i64>().map_err(|_| format!("{what} '{text}' is not six integers")))
+        .collect::<Result<_, _>>()?;
+    let [x0, x1, y0, y1, z0, z1] = values[..] else {
+        return Err(format!("{what} '{text}' is not six integers"));
+    };
+    let extent = [(x0, x1), (y0, y1), (z0, z1)];
+    // Bounded so that lengths cannot overflow (the voxel limit comes later).
+    if extent.iter().any(|&(lo, hi)| lo > hi || lo.unsigned_abs() > 1 << 40 || hi.unsigned_abs() > 1 << 40) {
+        return Err(format!("{what} '{text}': empty or out-of-range extent"));
+    }
+    Ok(extent)
+}
+
+fn parse_floats<const N: usize>(
+    text: Option<&str>,
+    what: &str,
+    default: [f64; N],
+) -> Result<[f64; N], String> {
+    let Some(text) = text else { return Ok(default) };
+    let values: Vec<f64> = text
+        .split_ascii_whitespace()
+        .map(|t| t.parse::<f64>().ok().filter(|v| v.is_finite()))
+        .collect::<Option<_>>()
+        .ok_or_else(|| format!("{what} '{text}' is not {N} finite numbers"))?;
+    values.try_into().map_err(|_| format!("{what} '{text}' is not {N} finite numbers"))
+}
+
+fn data_type(name: &str) -> Option<DataType> {
+    Some(match name {
+        "Int8" | "Char" => DataType::I8,
+        "UInt8" | "UnsignedChar" => DataType::U8,
+        "Int16" | "Short" => DataType::I16,
+        "UInt16" | "UnsignedShort" => DataType::U16,
+        "Int32" | "Int" => DataType::I32,
+        "UInt32" | "UnsignedInt" => DataType::U32,
+        "Int64" | "IdType" => DataType::I64,
+        "UInt64" => DataType::U64,
+        "Float32" | "Float" => DataType::F32,
+        "Float64" | "Double" => DataType::F64,
+        _ => return None,
+    })
+}
+
+/// Reads one `<DataArray>` of `count` values: its type and its bytes, little endian.
+/// The outer error is a malformed file, the inner an unsupported feature.
+fn read_array(
+    array: Node,
+    count: usize,
+    codec: Codec,
+    appended: Option<&Appended>,
+) -> Result<Result<(DataType, Vec<u8>), String>, String> {
+    let type_name = array.attribute("type").ok_or("no type attribute")?;
+    let Some(dtype) = data_type(type_name) else {
+        return Ok(Err(format!("DataArray type {type_name}")));
+    };
+    let components = array.attribute("NumberOfComponents").unwrap_or("1");
+    if components != "1" {
+        return Ok(Err(format!("NumberOfComponents {components} (only scalar arrays are read)")));
+    }
+    if let Some(tuples) = array.attribute("NumberOfTuples") {
+        if tuples.parse::<u64>().ok() != Some(count as u64) {
+            return Err(format!("NumberOfTuples {tuples} for an extent of {count} voxels"));
+        }
+    }
+    let size = dtype.size();
+    let expected = count * size; // at most MAX_VOXELS * 8
+    let mut data = match array.attribute("format").unwrap_or("ascii") {
+        "ascii" => {
+            let data = parse_ascii(array.text().unwrap_or(""), dtype, count)?;
+            return Ok(Ok((dtype, data)));
+        }
+        "binary" => {
+            let text: Vec<u8> =
+                array.text().unwrap_or("").bytes().filter(|b| !b.is_ascii_whitespace()).collect();
+            read_binary(&mut Base64 { text: &text, buf: Vec::new() }, codec, expected)?
+        }
+        "appended" => {
+            let appended = appended.ok_or("format appended, but no <AppendedData>")?;
+            let offset = array.attribute("offset").ok_or("format appended, but no offset")?;
+            let offset =
+                offset.parse::<usize>().map_err(|_| format!("offset '{offset}' is not a byte offset"))?;
+            let data = appended
+                .data
+                .get(offset..)
+                .ok_or_else(|| format!("offset {offset} is past the appended data"))?;
+            match appended.encoding {
+                Encoding::Raw => read_binary(&mut Raw { data }, codec, expected)?,
+                Encoding::Base64 => {
+                    read_binary(&mut Base64 { text: data, buf: Vec::new() }, codec, expected)?
+                }
+            }
+        }
+        other => return Err(format!("unknown format '{other}'")),
+    };
+    if codec.endian == Endian::Big && size > 1 {
+        data.chunks_exact_mut(size).for_each(<[u8]>::reverse);
+    }
+    Ok(Ok((dtype, data)))
+}
+
+/// Parses ASCII values into little-endian bytes.
+fn parse_ascii(text: &str, dtype: DataType, count: usize) -> Result<Vec<u8>, String> {
+    let mut out = Vec::with_capacity((count * dtype.size()).min(text.len() * dtype.size()));
+    let mut n = 0;
+    for token in text.split_ascii_whitespace() {
+        if n == count {
+            return Err(format!("dimensions do not match the data: more than {count} values"));
+        }
+        let bad = || format!("value {n}: '{}' is not a {dtype}", token.escape_debug());
+        match dtype {
+            DataType::U8 => out.push(token.parse::<u8>().map_err(|_| bad())?),
+            DataType::I8 => out.extend(token.parse::<i8>().map_err(|_| bad())?.to_le_bytes()),
+            DataType::U16 => out.extend(token.parse::<u16>().map_err(|_| bad())?.to_le_bytes()),
+            DataType::I16 => out.extend(token.parse::<i16>().map_err(|_| bad())?.to_le_bytes()),
+            DataType::U32 => out.extend(token.parse::<u32>().map_err(|_| bad())?.to_le_bytes()),
+            DataType::I32 => out.extend(token.parse::<i32>().map_err(|_| bad())?.to_le_bytes()),
+            DataType::U64 => out.extend(token.parse::<u64>().map_err(|_| bad())?.to_le_bytes()),
+            DataType::I64 => out.extend(token.parse::<i64>().map_err(|_| bad())?.to_le_bytes()),
+            DataType::F32 => out.extend(token.parse::<f32>().map_err(|_| bad())?.to_le_bytes()),
+            DataType::F64 => out.extend(token.parse::<f64>().map_err(|_| bad())?.to_le_bytes()),
+        }
+        n += 1;
+    }
+    if n < count {
+        return Err(format!("truncated data: {n} values for {count} voxels"));
+    }
+    Ok(out)
+}
+
+/// A source of binary bytes.
+trait Source {
+    /// The next `n` bytes, or an error if there are fewer.
+    fn take(&mut self, n: usize) -> Result<Vec<u8>, String>;
+}
+
+struct Raw<'a> {
+    data: &'a [u8],
+}
+
+impl Source for Raw<'_> {
+    fn take(&mut self, n: usize) -> Result<Vec<u8>, String> {
+        if n > self.data.len() {
+            return Err(format!("truncated data: {n} bytes needed, {} left", self.data.len()));
+        }
+        let (head, tail) = self.data.split_at(n);
+        self.data = tail;
+        Ok(head.to_vec())
+    }
+}
+
+/// Base64 text decoded on demand. VTK encodes the header and the data separately,
+/// each padded, others encode them as one stream: decoding segment by segment, each
+/// ending at a padded group, reads both.
+struct Base64<'a> {
+    text: &'a [u8],
+    /// Decoded bytes not yet taken.
+    buf: Vec<u8>,
+}
+
+impl Source for Base64<'_> {
+    fn take(&mut self, n: usize) -> Result<Vec<u8>, String> {
+        while self.buf.len() < n {
+            if self.text.is_empty() {
+                return Err(format!("truncated base64 data: {n} bytes needed, {} left", self.buf.len()));
+            }
+            // Decode no more groups than needed, and stop after a padded group.
+            let groups = (n - self.buf.len()).div_ceil(3);
+            let mut len = self.text.len().min(groups.saturating_mul(4));
+            if let Some(pad) = self.text[..len].iter().position(|&b| b == b'=') {
+                len = (pad / 4 + 1) * 4;
+            }
+            if len > self.text.len() || len % 4 != 0 {
+                return Err("truncated base64 data (not a whole number of 4-character groups)".into());
+            }
+            let (segment, rest) = self.text.split_at(len);
+            base64::engine::general_purpose::STANDARD
+                .decode_vec(segment, &mut self.buf)
+                .map_err(|e| format!("bad base64 data: {e}"))?;
+            self.text = rest;
+        }
+        let rest = self.buf.split_off(n);
+        Ok(std::mem::replace(&mut self.buf, rest))
+    }
+}
+
+/// Reads binary data: header, then raw or zlib-compressed bytes, exactly `expected`.
+fn read_binary(src: &mut dyn Source, codec: Codec, expected: usize) -> Result<Vec<u8>, String> {
+    let word = |src: &mut dyn Source| -> Result<u64, String> {
+        let b = src.take(codec.word)?;
+        let mut w = [0u8; 8];
+        match (codec.endian, codec.word) {
+            (Endian::Little, _) => w[..codec.word].copy_from_slice(&b),
+            (Endian::Big, k) => {
+                w[..k].copy_from_slice(&b);
+                w[..k].reverse();
+            }
+        }
+        Ok(u64::from_le_bytes(w))
+    };
+    let mismatch = |declared: u64| {
+        let what =
+            if declared < expected as u64 { "truncated data" } else { "dimensions do not match the data" };
+        format!("{what}: the array holds {declared} bytes, the extent needs {expected}")
+    };
+    if !codec.compressed {
+        let n = word(src)?;
+        if n != expected as u64 {
+            return Err(mismatch(n));
+        }
+        return src.take(expected);
+    }
+    let blocks = word(src)?;
+    let block_size = word(src)?;
+    let last = word(src)?;
+    let total = match blocks {
+        0 => 0u128,
+        b => {
+            u128::from(b - 1) * u128::from(block_size) + u128::from(if last == 0 { block_size } else { last })
+        }
+    };
+    if total != expected as u128 {
+        return Err(mismatch(u64::try_from(total).unwrap_or(u64::MAX)));
+    }
+    if last > block_size {
+        return Err(format!("last block of {last} bytes exceeds the block size {block_size}"));
+    }
+    // `blocks` is at most `expected` here (each block holds at least one byte).
+    let mut sizes = Vec::with_capacity(blocks as usize);
+    for _ in 0..blocks {
+        sizes.push(word(src)?);
+    }
+    let mut out = Vec::with_capacity(expected.min(1 << 24));
+    for (k, &size) in sizes.iter().enumerate() {
+        let raw = if k + 1 == sizes.len() && last != 0 { last } else { block_size };
+        let compressed = src.take(usize::try_from(size).map_err(|_| "absurd block size")?)?;
+        let before = out.len();
+        ZlibDecoder::new(&compressed[..])
+            .take(raw + 1)
+            .read_to_end(&mut out)
+            .map_err(|e| format!("block {k}: corrupt zlib data: {e}"))?;
+        if (out.len() - before) as u64 != raw {
+            return Err(format!(
+                "block {k}: {} bytes after decompression, {raw} declared",
+                out.len() - before
+            ));
+        }
+    }
+    Ok(out)
+}
+
+#[cfg(test)]
+mod tests {
+    use std::io::Write;
+
+    use base64::engine::general_purpose::STANDARD;
+    use flate2::write::ZlibEncoder;
+    use flate2::Compression;
+
+    use super::*;
+
+    const P: &str = "img.vti";
+
+    fn read(bytes: &[u8]) -> Result<Voxels, IoError> {
+        read_vti_bytes(bytes, Path::new(P))
+    }
+
+    fn message(bytes: &[u8]) -> String {
+        let text = read(bytes).unwrap_err().to_string();
+        assert!(text.starts_with("img.vti: "), "{text}");
+        text
+    }
+
+    fn labels(v: Voxels) -> voxreg_digisurf::LabelVolume {
+        match v {
+            Voxels::Labels(v) => v,
+            Voxels::Grey(g) => panic!("labels expected, got grey {:?}", g.dims()),
+        }
+    }
+
+    /// A file with one piece, whole extent `extent`, one array in `section`.
+    fn vti(root_attrs: &str, image_attrs: &str, section: &str, array: &str, appended: &[u8]) -> Vec<u8> {
+        let mut s = format!(
+            "<?xml version=\"1.0\"?>\n<VTKFile type=\"ImageData\" version=\"1.0\" {root_attrs}>\n\
+             <ImageData {image_attrs}>\n<Piece>\n<{section}>\n{array}\n</{}>\n</Piece>\n</ImageData>\n",
+            section.split(' ').next().unwrap()
+        )
+        .into_bytes();
+        s.extend_from_slice(appended);
+        s.extend_from_slice(b"</VTKFile>\n");
+        s
+    }
+
+    const EXTENT: &str = "WholeExtent=\"0 2 0 1 0 1\" Origin=\"10 20 30\" Spacing=\"0.5 1 2\"";
+
+    /// The test values: 2x1x1 cells or 3x2x2 points, x + 3 y + 6 z.
+    fn values(n: usize) -> Vec<i32> {
+        (0..n as i32).collect()
+    }
+
+    fn le(values: &[i32]) -> Vec<u8> {
+        values.iter().flat_map(|v| v.to_le_bytes()).collect()
+    }
+
+    fn zlib(data: &[u8]) -> Vec<u8> {
+        let mut enc = ZlibEncoder::new(Vec::new(), Compression::default());
+        enc.write_all(data).unwrap();
+        enc.finish().unwrap()
+    }
+
+    /// Compressed framing: blocks of `block` bytes, UInt32 header.
+    fn compressed(data: &[u8], block: usize) -> (Vec<u8>, Vec<u8>) {
+        let chunks: Vec<Vec<u8>> = data.chunks(block).map(zlib).collect();
+        let last = data.len() % block;
+        let mut header = Vec::new();
+        for w in [chunks.len(), block, last].into_iter().chain(chunks.iter().map(Vec::len)) {
+            header.extend_from_slice(&(w as u32).to_le_bytes());
+        }
+        (header, chunks.concat())
+    }
+
+    #[test]
+    fn bundled_channels() {
+        let bytes = std::fs::read(concat!(env!("CARGO_MANIFEST_DIR"), "/../../data/channels.vti")).unwrap();
+        let v = labels(read(&bytes).unwrap());
+        assert_eq!(v.dims(), [250, 250, 100]);
+        assert_eq!(v.spacing(), DVec3::ONE);
+        assert_eq!(v.origin(), DVec3::splat(0.5));
+        assert_eq!(v.label_counts(), vec![(0, 5184411), (1, 684869), (2, 142051), (3, 214455), (4, 24214)]);
+    }
+
+    #[test]
+    fn ascii_cell_and_point_data() {
+        let array = format!(
+            "<DataArray type=\"Int32\" Name=\"a\" format=\"ascii\">{}</DataArray>",
+            values(2).iter().map(i32::to_string).collect::<Vec<_>>().join(" ")
+        );
+        let v = labels(read(&vti("", EXTENT, "CellData Scalars=\"a\"", &array, b"")).unwrap());
+        assert_eq!(v.dims(), [2, 1, 1]);
+        assert_eq!(v.label([1, 0, 0]), Some(1));
+        // Cell centres: origin + (i + 0.5) * spacing.
+        assert_eq!(v.origin(), DVec3::new(10.25, 20.5, 31.0));
+        assert_eq!(v.spacing(), DVec3::new(0.5, 1.0, 2.0));
+
+        let array = format!(
+            "<DataArray type=\"Float64\" Name=\"p\" format=\"ascii\">\n{}\n</DataArray>",
+            values(12).iter().map(|v| format!("{v}.0")).collect::<Vec<_>>().join("\n")
+        );
+        let v = labels(read(&vti("", EXTENT, "PointData", &array, b"")).unwrap());
+        assert_eq!(v.dims(), [3, 2, 2]);
+        assert_eq!(v.label([2, 1, 1]), Some(11));
+        assert_eq!(v.origin(), DVec3::new(10.0, 20.0, 30.0));
+    }
+
+    #[test]
+    fn binary_inline_raw_compressed_and_split_headers() {
+        let data = le(&values(12));
+        // Header and data encoded together, and separately (as VTK does).
+        let together = STANDARD.encode([(data.len() as u32).to_le_bytes().to_vec(), data.clone()].concat());
+        let apart = STANDARD.encode((data.len() as u32).to_le_bytes()) + &STANDARD.encode(&data);
+        let (h, c) = compressed(&data, 20);
+        let zipped = STANDARD.encode(&h) + &STANDARD.encode(&c);
+        for (root, text) in [("", together), ("", apart), ("compressor=\"vtkZLibDataCompressor\"", zipped)] {
+            let array =
+                format!("<DataArray type=\"Int32\" Name=\"p\" format=\"binary\">\n  {text}\n</DataArray>");
+            let v = labels(read(&vti(root, EXTENT, "PointData", &array, b"")).unwrap());
+            assert_eq!(v.label([2, 1, 1]), Some(11), "{root}");
+            assert_eq!(v.label([1, 1, 0]), Some(4), "{root}");
+        }
+    }
+
+    #[test]
+    fn appended_raw_and_base64_big_endian_uint64_headers() {
+        let data = le(&values(12));
+        // Raw, little endian, two arrays: the second one is read (active scalars).
+        let mut raw = b"<AppendedData encoding=\"raw\">\n_".to_vec();
+        raw.extend_from_slice(&4u32.to_le_bytes());
+        raw.extend_from_slice(&[9, 9, 9, 9]);
+        raw.extend_from_slice(&(data.len() as u32).to_le_bytes());
+        raw.extend_from_slice(&data);
+        raw.extend_from_slice(b"\n</AppendedData>\n");
+        let arrays = "<DataArray type=\"Int32\" Name=\"other\" format=\"appended\" offset=\"0\"/>\n\
+                      <DataArray type=\"Int32\" Name=\"p\" format=\"appended\" offset=\"8\"/>";
+        let v = labels(read(&vti("", EXTENT, "PointData Scalars=\"p\"", arrays, &raw)).unwrap());
+        assert_eq!(v.label([2, 1, 1]), Some(11));
+
+        // Base64, big endian, UInt64 header, compressed.
+        let be: Vec<u8> = values(12).iter().flat_map(|v| (*v as i16).to_be_bytes()).collect();
+        let chunks = [zlib(&be[..16]), zlib(&be[16..])];
+        let mut header = Vec::new();
+        for w in [2, 16, 8, chunks[0].len() as u64, chunks[1].len() as u64] {
+            header.extend_from_slice(&w.to_be_bytes());
+        }
+        let text = STANDARD.encode(&header) + &STANDARD.encode(chunks.concat());
+        let appended = format!("<AppendedData encoding=\"base64\">\n   _{text}\n</AppendedData>\n");
+        let root = "byte_order=\"BigEndian\" header_type=\"UInt64\" compressor=\"vtkZLibDataCompressor\"";
+        let array = "<DataArray type=\"Int16\" Name=\"p\" format=\"appended\" offset=\"0\"/>";
+        let v = labels(read(&vti(root, EXTENT, "PointData", array, appended.as_bytes())).unwrap());
+        assert_eq!(v.label([2, 1, 1]), Some(11));
+        assert_eq!(v.label([0, 1, 1]), Some(9));
+    }
+
+    #[test]
+    fn pieces_direction_and_grey_levels() {
+        // Two pieces of 2x2x1 points each, splitting z; Direction flips x.
+        let text = |vals: &[f32]| vals.iter().map(|v| v.to_string()).collect::<Vec<_>>().join(" ");
+        let s = format!(
+            "<VTKFile type=\"ImageData\"><ImageData WholeExtent=\"0 1 0 1 0 1\" Direction=\"-1 0 0 0 1 0 0 0 1\">\
+             <Piece Extent=\"0 1 0 1 1 1\"><PointData><DataArray type=\"Float32\" Name=\"g\">{}</DataArray></PointData></Piece>\
+             <Piece Extent=\"0 1 0 1 0 0\"><PointData><DataArray type=\"Float32\" Name=\"g\">{}</DataArray></PointData></Piece>\
+             </ImageData></VTKFile>",
+            text(&[4.5, 5.5, 6.5, 7.5]),
+            text(&[0.5, 1.5, 2.5, 3.5]),
+        );
+        let Voxels::Grey(g) = read(s.as_bytes()).unwrap() else { panic!("grey expected") };
+        assert_eq!(g.dims(), [2, 2, 2]);
+        // Stored x = 1 is at world x = -1: the new voxel 0.
+        assert_eq!(g.origin(), DVec3::new(-1.0, 0.0, 0.0));
+        assert_eq!(g.values()[[0, 0, 0]], 1.5);
+        assert_eq!(g.values()[[1, 1, 1]], 6.5);
+    }
+
+    #[test]
+    fn bad_input() {
+        let ascii = |values: &str| {
+            format!("<DataArray type=\"UInt8\" Name=\"a\" format=\"ascii\">{values}</DataArray>")
+        };
+        let cell = |array: &str| vti("", EXTENT, "CellData", array, b"");
+        let cases: Vec<(Vec<u8>, &str)> = vec![
+            (b"".to_vec(), "malformed XML"),
+            (b"\x89PNG\r\n".to_vec(), "not UTF-8"),
+            (b"<VTKFile type=\"ImageData\"><ImageData>".to_vec(), "malformed XML"),
+            (b"<html/>".to_vec(), "the root element is <html>"),
+            (b"<VTKFile type=\"PolyData\"/>".to_vec(), "unsupported: VTK dataset type PolyData"),
+            (b"<VTKFile type=\"ImageData\"/>".to_vec(), "no <ImageData>"),
+            (
+                vti("compressor=\"vtkLZ4DataCompressor\"", EXTENT, "CellData", &ascii("1 2"), b""),
+                "unsupported: compressor",
+            ),
+            (
+                vti("header_type=\"UInt16\"", EXTENT, "CellData", &ascii("1 2"), b""),
+                "unsupported: header_type UInt16",
+            ),
+            (vti("byte_order=\"Middle\"", EXTENT, "CellData", &ascii("1 2"), b""), "unknown byte_order"),
+            (vti("", "WholeExtent=\"0 2 0 1\"", "CellData", &ascii("1 2"), b""), "is not six integers"),
+            (vti("", "WholeExtent=\"2 0 0 1 0 1\"", "CellData", &ascii("1 2"), b""), "empty or out-of-range"),
+            (
+                vti("", "WholeExtent=\"0 2 0 1 0 1\" Spacing=\"1 nan 1\"", "CellData", &ascii("1 2"), b""),
+                "Spacing",
+            ),
+            (
+                vti("", "WholeExtent=\"0 2 0 1 0 1\" Spacing=\"1 0 1\"", "CellData", &ascii("1 2"), b""),
+                "degenerate",
+            ),
+            (vti("", EXTENT, "CellData", "", b""), "no <DataArray>"),
+            (cell(&ascii("1")), "truncated data: 1 values for 2 voxels"),
+            (cell(&ascii("1 2 3")), "dimensions do not match the data"),
+            (cell(&ascii("1 300")), "value 1: '300' is not a u8"),
+            (
+                cell("<DataArray type=\"String\" Name=\"a\">x y</DataArray>"),
+                "unsupported: DataArray type String",
+            ),
+            (
+                cell("<DataArray type=\"UInt8\" NumberOfComponents=\"3\">1 2 3 4 5 6</DataArray>"),
+                "unsupported: NumberOfComponents 3",
+            ),
+            (cell("<DataArray type=\"UInt8\" NumberOfTuples=\"5\">1 2</DataArray>"), "NumberOfTuples 5"),
+            (cell("<DataArray type=\"UInt8\" format=\"hex\">1 2</DataArray>"), "unknown format 'hex'"),
+            (
+                cell("<DataArray type=\"UInt8\" format=\"binary\">AgAAAAE</DataArray>"),
+                "truncated base64 data",
+            ),
+            (
+                cell("<DataArray type=\"UInt8\" format=\"binary\">AwAAAAECAw==</DataArray>"),
+                "the array holds 3 bytes, the extent needs 2",
+            ),
+            (
+                cell("<DataArray type=\"UInt8\" format=\"binary\">AQAAAAE=</DataArray>"),
+                "truncated data: the array holds 1 bytes",
+            ),
+            (cell("<DataArray type=\"UInt8\" format=\"binary\">!!!!AAAA</DataArray>"), "bad base64 data"),
+            (cell("<DataArray type=\"UInt8\" format=\"appended\" offset=\"0\"/>"), "no <AppendedData>"),
+            (
+                cell("<DataArray type=\"Float32\" format=\"ascii\">1 nan</DataArray>"),
+                "grey level NaN at voxel [1, 0, 0]",
+            ),
+            (
+                vti(
+                    "",
+                    EXTENT,
+                    "CellData",
+                    "<DataArray type=\"UInt8\" format=\"appended\" offset=\"99\"/>",
+                    b"<AppendedData encoding=\"raw\">_\x02\0\0\0\x01\x02</AppendedData>",
+                ),
+                "offset 99 is past",
+            ),
+            (
+                vti(
+                    "",
+                    EXTENT,
+                    "CellData",
+                    &ascii("1 2"),
+                    b"<AppendedData encoding=\"gzip\">_</AppendedData>",
+                ),
+                "no encoding",
+            ),
+            (
+                vti(
+                    "",
+                    EXTENT,
+                    "CellData",
+                    &ascii("1 2"),
+                    b"<AppendedData encoding=\"raw\">xx</AppendedData>",
+                ),
+                "does not start with '_'",
+            ),
+            (
+                vti("", "WholeExtent=\"0 100000 0 100000 0 100000\"", "CellData", &ascii("1"), b""),
+                "exceeds the limit",
+            ),
+        ];
+        for (bytes, expected) in cases {
+            let text = message(&bytes);
+            assert!(text.contains(expected), "expected '{expected}' in '{text}'");
+        }
+        // Raw appended data cut short (nothing after them).
+        let mut cut = vti(
+            "",
+            EXTENT,
+            "CellData",
+            "<DataArray type=\"UInt8\" format=\"appended\" offset=\"0\"/>",
+            b"<AppendedData encoding=\"raw\">_\x02\0\0\0\x01",
+        );
+        cut.truncate(cut.len() - "</VTKFile>\n".len());
+        assert!(message(&cut).contains("truncated data: 2 bytes needed, 1 left"));
+        // Compressed: corrupt block, wrong sizes.
+        let data = [1u8, 2];
+        let (h, c) = compressed(&data, 2);
+        let zipped = |h: &[u8], c: &[u8]| {
+            let array = format!(
+                "<DataArray type=\"UInt8\" format=\"binary\">{}{}</DataArray>",
+                STANDARD.encode(h),
+                STANDARD.encode(c)
+            );
+            vti("compressor=\"vtkZLibDataCompressor\"", EXTENT, "CellData", &array, b"")
+        };
+        assert!(read(&zipped(&h, &c)).is_ok());
+        assert!(message(&zipped(&h, &vec![b'!'; c.len()])).contains("corrupt zlib data"));
+        let mut bad = h.clone();
+        bad[4] = 3; // block size 3: 3 bytes declared
+        assert!(message(&zipped(&bad, &c)).contains("the array holds 3 bytes"));
+        let mut huge = h.clone();
+        huge[..4].copy_from_slice(&u32::MAX.to_le_bytes());
+        assert!(message(&zipped(&huge, &c)).contains("dimensions do not match the data"));
+        // A piece outside the whole extent, and pieces that do not cover it.
+        let piece = |extent: &str| {
+            format!(
+                "<VTKFile type=\"ImageData\"><ImageData WholeExtent=\"0 1 0 0 0 0\"><Piece Extent=\"{extent}\">\
+                 <PointData><DataArray type=\"UInt8\">1</DataArray></PointData></Piece></ImageData></VTKFile>"
+            )
+        };
+        assert!(message(piece("0 2 0 0 0 0").as_bytes()).contains("outside the WholeExtent"));
+        assert!(message(piece("1 1 0 0 0 0").as_bytes()).contains("cannot cover"));
+    }
+}

@@ -1,0 +1,10 @@
+//! Fuzzes `read_vox_bytes`: any input is read or refused with an error, never a panic.
+#![no_main]
+
+use std::path::Path;
+
+use libfuzzer_sys::fuzz_target;
+
+fuzz_target!(|data: &[u8]| {
+    let _ = voxreg_io::read_vox_bytes(data, Path::new("fuzz.vox"));
+});
