@@ -3,6 +3,15 @@
 //! - `timings [--runs N] [FILE...]`: times each pipeline stage (read, surface, normals,
 //!   assemble, solve, write) on the given volumes (default: the bundled bunny-128 and
 //!   cat10) and prints a Markdown table of medians, as used in the README.
+//! - `compare [--quick] [--out DIR]`: every meshing method (voxreg with each normal
+//!   estimator, marching cubes, smoothed MC, dual contouring, shrouds) against every
+//!   metric of `voxreg-baselines` on analytic shapes; Markdown and CSV tables in
+//!   `target/xtask/compare/` (see `compare.rs`).
+//! - `table1 [--runs N] [FILE...]`: the paper's Table 1 (normals, precomputation, direct
+//!   and CG solves) on ball+tet 40^3 and bunny-128 (see `table1.rs`).
+
+mod compare;
+mod table1;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -17,8 +26,12 @@ fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     match args.first().map(String::as_str) {
         Some("timings") => timings(&args[1..]),
+        Some("compare") => compare::compare(&args[1..]),
+        Some("table1") => table1::table1(&args[1..]),
         _ => {
             eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
+            eprintln!("       cargo xtask compare [--quick] [--out DIR]");
+            eprintln!("       cargo xtask table1 [--runs N] [FILE...]");
             bail!("unknown or missing command")
         }
     }
@@ -45,7 +58,11 @@ fn run_once(path: &Path, out: &Path) -> Result<Run> {
     let t = Instant::now();
     let loaded = read_volume(path)?;
     let read = t.elapsed().as_secs_f64();
-    let map = if path.extension().is_some_and(|e| e == "vox") { RegionMap::single_solid() } else { RegionMap::per_label() };
+    let map = if path.extension().is_some_and(|e| e == "vox") {
+        RegionMap::single_solid()
+    } else {
+        RegionMap::per_label()
+    };
     let t = Instant::now();
     let surface = DigitalSurface::new(&loaded.volume, &map)?;
     let surf = t.elapsed().as_secs_f64();
@@ -116,6 +133,9 @@ fn timings(args: &[String]) -> Result<()> {
         );
     }
     std::fs::remove_dir_all(&dir).ok();
-    println!("\nmedians of {runs} runs; `cargo xtask timings` on {} cores", std::thread::available_parallelism()?);
+    println!(
+        "\nmedians of {runs} runs; `cargo xtask timings` on {} cores",
+        std::thread::available_parallelism()?
+    );
     Ok(())
 }

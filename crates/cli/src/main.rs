@@ -10,8 +10,11 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
-use voxreg_io::{read_volume, write_mesh, QuadMesh};
-use voxreg_normals::{NormalEstimator, Trivial};
+use voxreg_io::{read_raw, read_voxels, write_mesh, DataType, Endian, Palette, QuadMesh, RawSpec, Voxels};
+use voxreg_normals::{
+    multigrid_radius, AmbrosioTortorelli, AtParams, ConvolvedTrivial, IntegralInvariant, NormalEstimator,
+    Trivial,
+};
 use voxreg_regularize::{DirectSolver, Energy, EnergyParams, EnergyTerms};
 
 /// Regularize voxel data (digital surfaces, multi-label interfaces) into smooth,
@@ -33,11 +36,38 @@ enum Command {
 
 #[derive(Args, Debug)]
 struct InputArgs {
-    /// Input volume: .vol (DGtal), .vox (MagicaVoxel).
+    /// Input volume: .vol, .longvol, .pgm3d (DGtal), .vox (MagicaVoxel), .nii, .nii.gz
+    /// (NIfTI-1), .vti (VTK image data), .npy (NumPy, shape (X, Y, Z)), or raw data with
+    /// --dims.
     input: PathBuf,
-    /// Make a binary volume from a grey-level one: voxels with value > T are inside.
-    #[arg(long, value_name = "T")]
-    threshold: Option<u32>,
+    /// Make a binary volume: voxels whose value (label or grey level) is > T are inside.
+    /// Needed for grey-level data (fractional, negative or scaled values).
+    #[arg(long, value_name = "T", allow_negative_numbers = true, conflicts_with = "labels")]
+    threshold: Option<f64>,
+    /// Keep only these labels; every other label becomes the background.
+    #[arg(long, value_name = "L,L,...", value_delimiter = ',', conflicts_with = "no_background")]
+    labels: Option<Vec<u32>>,
+    /// The background label: empty space, which also fills the outside of the volume
+    /// (default 0).
+    #[arg(long, value_name = "L", conflicts_with = "no_background")]
+    background: Option<u32>,
+    /// No background: every label is a material, and interfaces that reach the border
+    /// of the volume end there as open surfaces.
+    #[arg(long)]
+    no_background: bool,
+    /// Read INPUT as raw data (no header, x fastest) of these dimensions.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_dims)]
+    dims: Option<[u64; 3]>,
+    /// Raw data: the type of a value, u8 (default), u16, u32, f32 (or i8, i16, i32, u64,
+    /// i64, f64).
+    #[arg(long, value_name = "TYPE", requires = "dims")]
+    dtype: Option<DataType>,
+    /// Raw data: the byte order, little (default) or big.
+    #[arg(long, value_name = "ORDER", requires = "dims")]
+    endian: Option<Endian>,
+    /// The size of a voxel, for raw data, or overriding the file's.
+    #[arg(long, value_name = "SX,SY,SZ", value_parser = parse_spacing)]
+    spacing: Option<glam::DVec3>,
     /// How labels form regions: "label" (each label its own region; the default except
     /// for .vox), "solid" (all non-background labels one region; the default for .vox),
     /// or groups such as "1,2,3;7".
@@ -49,7 +79,9 @@ struct InputArgs {
 struct RegularizeArgs {
     #[command(flatten)]
     input: InputArgs,
-    /// Output mesh: .obj (quads, one group per interface) or .ply (binary quads).
+    /// Output mesh: .obj (quads, one group per interface, with an .mtl for coloured
+    /// inputs), .ply (binary quads, face labels and colours), .glb or .gltf (glTF 2.0,
+    /// triangulated, one material per colour).
     #[arg(short, long, value_name = "OUTPUT")]
     output: PathBuf,
     /// Attachment weight (must be > 0).
@@ -61,12 +93,54 @@ struct RegularizeArgs {
     /// Fairness weight.
     #[arg(long, default_value_t = EnergyParams::default().gamma)]
     gamma: f64,
+    /// Normal estimator driving the alignment term.
+    #[arg(long, value_enum, default_value_t = NormalsKind::Ii)]
+    normals: NormalsKind,
+    /// Radius of the ii, convolved and at estimators, in physical units [default: the
+    /// multigrid rule 3 h^(1/3), h the largest voxel spacing: 3 at unit spacing].
+    #[arg(long, value_name = "R")]
+    radius: Option<f64>,
     /// Write a machine-readable JSON report of the run (timings, counts, energies, solver).
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
+}
+
+/// The normal estimators `--normals` can pick.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum NormalsKind {
+    /// Each face's own axis (no smoothing).
+    Trivial,
+    /// Trivial normals averaged over the surface within the radius.
+    Convolved,
+    /// Integral invariant: covariance of a ball intersected with the solid.
+    Ii,
+    /// Ambrosio-Tortorelli regularization of the ii normals: smooth, but keeps sharp features.
+    At,
+}
+
+impl NormalsKind {
+    /// The estimator, with its radius (physical units; `None`: the multigrid default).
+    fn estimator(self, radius: Option<f64>) -> Box<dyn NormalEstimator + Send + Sync> {
+        match self {
+            NormalsKind::Trivial => Box::new(Trivial),
+            NormalsKind::Convolved => Box::new(ConvolvedTrivial { radius }),
+            NormalsKind::Ii => Box::new(IntegralInvariant { radius }),
+            NormalsKind::At => {
+                Box::new(AmbrosioTortorelli::new(AtParams::default(), Box::new(IntegralInvariant { radius })))
+            }
+        }
+    }
+
+    /// The radius the estimator uses on `surface`, or `None` for one without a radius.
+    fn radius(self, radius: Option<f64>, surface: &DigitalSurface) -> Option<f64> {
+        match self {
+            NormalsKind::Trivial => None,
+            _ => Some(radius.unwrap_or_else(|| multigrid_radius(surface.spacing()))),
+        }
+    }
 }
 
 /// Shows a spinner for one stage of work and measures it.
@@ -116,21 +190,93 @@ fn main() -> std::process::ExitCode {
     }
 }
 
-/// Reads the input volume and applies `--threshold`; returns it with its region map.
-fn load(args: &InputArgs) -> Result<(LabelVolume, RegionMap)> {
-    let loaded = read_volume(&args.input)?;
+/// Reads the input volume (see [`read_input`]); returns it with its region map and its
+/// palette (colours and materials per label), if the format has one.
+fn load(args: &InputArgs) -> Result<(LabelVolume, RegionMap, Option<Palette>)> {
+    let (volume, palette) = read_input(args)?;
     let is_vox = args.input.extension().is_some_and(|e| e.eq_ignore_ascii_case("vox"));
-    let mut volume = loaded.volume;
-    if let Some(t) = args.threshold {
-        volume = volume.binarize(|l| l > t);
-    }
     let map = match args.regions.as_deref() {
         None if is_vox => RegionMap::single_solid(),
         None | Some("label") => RegionMap::per_label(),
         Some("solid") => RegionMap::single_solid(),
         Some(spec) => RegionMap::parse(spec).with_context(|| format!("--regions '{spec}'"))?,
     };
-    Ok((volume, map))
+    Ok((volume, map, palette))
+}
+
+/// Reads INPUT (raw with `--dims`, else by extension), applies `--spacing`, then
+/// `--threshold` (or checks that grey levels are labels), `--labels` and the background.
+fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palette>)> {
+    let path = &args.input;
+    let is_raw = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("raw"));
+    let (voxels, palette) = match args.dims {
+        Some(dims) => {
+            let spec = RawSpec {
+                dims,
+                dtype: args.dtype.unwrap_or(DataType::U8),
+                endian: args.endian.unwrap_or_default(),
+                spacing: args.spacing.unwrap_or(glam::DVec3::ONE),
+            };
+            (read_raw(path, &spec)?, None)
+        }
+        None if is_raw => bail!("{}: raw data have no header: give --dims X,Y,Z and --dtype", path.display()),
+        None => {
+            let loaded = read_voxels(path)?;
+            (loaded.voxels, loaded.palette)
+        }
+    };
+    let voxels = match args.spacing {
+        Some(s) => voxels.with_spacing(s).with_context(|| format!("{}: --spacing", path.display()))?,
+        None => voxels,
+    };
+    let mut volume = match (args.threshold, voxels) {
+        (Some(t), _) if t.is_nan() => bail!("--threshold: NaN is not a threshold"),
+        (Some(t), voxels) => voxels.threshold(t),
+        (None, Voxels::Labels(volume)) => volume,
+        (None, Voxels::Grey(grey)) => match grey.to_labels() {
+            Ok(volume) => volume,
+            Err(e) => {
+                let (lo, hi) = grey.range().unwrap_or_default();
+                bail!(
+                    "{}: grey-level data needs --threshold T (values range from {lo} to {hi}; {e})",
+                    path.display()
+                )
+            }
+        },
+    };
+    if let Some(keep) = &args.labels {
+        let background = args.background.or(volume.background()).unwrap_or(0);
+        volume.labels_mut().mapv_inplace(|l| if keep.contains(&l) { l } else { background });
+    }
+    if args.no_background {
+        volume = volume.with_background(None);
+    } else if let Some(b) = args.background {
+        volume = volume.with_background(Some(b));
+    }
+    Ok((volume, palette))
+}
+
+/// Parses three comma-separated values.
+fn parse_three<T: std::str::FromStr>(s: &str, what: &str) -> std::result::Result<[T; 3], String> {
+    let parts: Vec<T> = s
+        .split(',')
+        .map(|p| p.trim().parse::<T>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| format!("'{s}' is not three {what} separated by commas"))?;
+    parts.try_into().map_err(|_| format!("'{s}' is not three {what} separated by commas"))
+}
+
+fn parse_dims(s: &str) -> std::result::Result<[u64; 3], String> {
+    parse_three(s, "dimensions")
+}
+
+fn parse_spacing(s: &str) -> std::result::Result<glam::DVec3, String> {
+    let [x, y, z] = parse_three::<f64>(s, "voxel sizes")?;
+    let spacing = glam::DVec3::new(x, y, z);
+    if !(spacing.is_finite() && spacing.min_element() > 0.0) {
+        return Err(format!("'{s}': voxel sizes must be finite and positive"));
+    }
+    Ok(spacing)
 }
 
 fn surface_of(path: &Path, volume: &LabelVolume, map: &RegionMap) -> Result<DigitalSurface> {
@@ -138,58 +284,74 @@ fn surface_of(path: &Path, volume: &LabelVolume, map: &RegionMap) -> Result<Digi
 }
 
 fn info(args: &InputArgs) -> Result<()> {
-    let (volume, map) = load(args)?;
+    use std::fmt::Write as _;
+    let mut out = String::new();
+    let (volume, map, _) = load(args)?;
     let [x, y, z] = volume.dims();
     let s = volume.spacing();
-    println!("file: {}", args.input.display());
-    println!("dimensions: {x} x {y} x {z} ({} voxels)", volume.len());
-    println!("spacing: {} {} {}", s.x, s.y, s.z);
+    writeln!(out, "file: {}", args.input.display()).ok();
+    writeln!(out, "dimensions: {x} x {y} x {z} ({} voxels)", volume.len()).ok();
+    writeln!(out, "spacing: {} {} {}", s.x, s.y, s.z).ok();
     match volume.background() {
-        Some(b) => println!("background: {b}"),
-        None => println!("background: none"),
-    }
-    println!("labels:");
+        Some(b) => writeln!(out, "background: {b}").ok(),
+        None => writeln!(out, "background: none").ok(),
+    };
+    writeln!(out, "labels:").ok();
     for (label, count) in volume.label_counts() {
-        println!("  {label}: {count} voxels");
+        writeln!(out, "  {label}: {count} voxels").ok();
     }
     let surface = surface_of(&args.input, &volume, &map)?;
     let c = surface.counts();
-    println!("regions: {}", surface.regions().len());
-    println!("surfels: {}", c.surfels);
-    println!("vertices: {}", c.vertices);
-    println!("edges: {}", c.edges);
-    println!("euler characteristic: {}", surface.euler_characteristic());
-    println!(
+    writeln!(out, "regions: {}", surface.regions().len()).ok();
+    writeln!(out, "surfels: {}", c.surfels).ok();
+    writeln!(out, "vertices: {}", c.vertices).ok();
+    writeln!(out, "edges: {}", c.edges).ok();
+    writeln!(out, "euler characteristic: {}", surface.euler_characteristic()).ok();
+    writeln!(
+        out,
         "components: {} ({} closed)",
         c.components,
         surface.components_closed().iter().filter(|&&b| b).count()
-    );
-    println!("interfaces: {}", c.interfaces);
+    )
+    .ok();
+    writeln!(out, "interfaces: {}", c.interfaces).ok();
     for iface in surface.interfaces() {
         let name = |r| {
             let labels = surface.regions().labels(r);
             labels.iter().map(u32::to_string).collect::<Vec<_>>().join("+")
         };
-        println!(
+        writeln!(
+            out,
             "  {} | {}: {} surfels",
             name(iface.regions[0]),
             name(iface.regions[1]),
             iface.surfels.len()
-        );
+        )
+        .ok();
     }
-    println!("boundary vertices: {}", c.boundary_vertices);
-    println!("boundary edges: {}", c.boundary_edges);
-    println!("junction edges: {}", c.junction_edges);
-    println!("pinched edges: {}", c.pinched_edges);
-    println!("pinched vertices: {}", c.pinched_vertices);
-    Ok(())
+    writeln!(out, "boundary vertices: {}", c.boundary_vertices).ok();
+    writeln!(out, "boundary edges: {}", c.boundary_edges).ok();
+    writeln!(out, "junction edges: {}", c.junction_edges).ok();
+    writeln!(out, "pinched edges: {}", c.pinched_edges).ok();
+    writeln!(out, "pinched vertices: {}", c.pinched_vertices).ok();
+    print_stdout(&out)
+}
+
+/// Prints `text` to standard output; a closed pipe (`voxreg info ... | head`) is not an
+/// error.
+fn print_stdout(text: &str) -> Result<()> {
+    use std::io::Write as _;
+    match std::io::stdout().lock().write_all(text.as_bytes()) {
+        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
+        other => Ok(other?),
+    }
 }
 
 fn check_output(path: &Path) -> Result<()> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     match ext.as_deref() {
-        Some("obj" | "ply") => Ok(()),
-        _ => bail!("{}: unsupported output format (expected .obj or .ply)", path.display()),
+        Some("obj" | "ply" | "glb" | "gltf") => Ok(()),
+        _ => bail!("{}: unsupported output format (expected .obj, .ply, .glb or .gltf)", path.display()),
     }
 }
 
@@ -201,17 +363,37 @@ fn regularize(args: &RegularizeArgs) -> Result<()> {
     check_output(&args.output)?;
     let params = EnergyParams { alpha: args.alpha, beta: args.beta, gamma: args.gamma };
     params.validate()?;
+    if let Some(r) = args.radius {
+        if !(r.is_finite() && r > 0.0) {
+            bail!("--radius must be finite and positive, got {r}");
+        }
+    }
     let mut stages = Stages { quiet: args.quiet, timings: Vec::new() };
     let input = &args.input.input;
-    let (volume, map) = stages.run("read", "read volume", || load(&args.input))?;
+    let (volume, map, palette) = stages.run("read", "read volume", || load(&args.input))?;
     let surface = stages.run("surface", "digital surface", || surface_of(input, &volume, &map))?;
-    let normals = stages.run("normals", "normals (trivial)", || Ok(Trivial.estimate(&surface)?))?;
+    let estimator = args.normals.estimator(args.radius);
+    let radius = args.normals.radius(args.radius, &surface);
+    let label = match radius {
+        Some(r) => format!("normals ({}, radius {r:.3})", estimator.name()),
+        None => format!("normals ({})", estimator.name()),
+    };
+    let normals = stages.run("normals", &label, || Ok(estimator.estimate(&surface)?))?;
     let positions = surface.positions();
     let energy = Energy::new(&surface, &normals, &positions, params)?;
-    let mut solver = stages.run("assemble", "analyse operator", || Ok(DirectSolver::new(&surface)?))?;
+    let mut solver = stages.run("analyse", "analyse operator", || Ok(DirectSolver::new(&surface)?))?;
     let (regularized, info) =
-        stages.run("solve", "assemble, factor and solve", || Ok(solver.solve(&energy)?))?;
-    let mesh = QuadMesh::from_surface(&surface, &regularized);
+        stages.run("factor", "assemble, factor and solve", || Ok(solver.solve(&energy)?))?;
+    // Report the solver's own split: `assemble` = operator pattern + numeric assembly,
+    // `solve` = symbolic analysis + numeric factorization + triangular solves.
+    stages.timings.retain(|(k, _)| !matches!(*k, "analyse" | "factor"));
+    stages.timings.push(("assemble", info.pattern_seconds + info.assemble_seconds));
+    stages.timings.push(("solve", info.symbolic_seconds + info.factor_seconds + info.solve_seconds));
+    let mut mesh = QuadMesh::from_surface(&surface, &regularized);
+    if let Some(palette) = &palette {
+        // Colour transfer: each quad takes the colour and material of its solid voxel.
+        mesh.assign_materials(palette);
+    }
     stages.run("write", "write mesh", || Ok(write_mesh(&args.output, &mesh)?))?;
 
     let before = energy.terms(&positions);
@@ -236,7 +418,13 @@ fn regularize(args: &RegularizeArgs) -> Result<()> {
         let report = json!({
             "input": input.display().to_string(),
             "output": args.output.display().to_string(),
-            "params": { "alpha": params.alpha, "beta": params.beta, "gamma": params.gamma, "normals": Trivial.name() },
+            "params": {
+                "alpha": params.alpha,
+                "beta": params.beta,
+                "gamma": params.gamma,
+                "normals": estimator.name(),
+                "radius": radius,
+            },
             "stages": stage_json,
             "counts": {
                 "surfels": c.surfels,

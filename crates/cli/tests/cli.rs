@@ -186,3 +186,74 @@ fn bad_input_is_a_clear_error_and_writes_nothing() {
     // Nothing at all was left in the output directory (no temporary files either).
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
 }
+
+#[test]
+fn vox_to_coloured_gltf() {
+    let dir = tempfile::tempdir().unwrap();
+    let glb = dir.path().join("army.glb");
+    let out =
+        voxreg(&["regularize", data("chr_army1.vox").to_str().unwrap(), "-o", glb.to_str().unwrap(), "-q"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let bytes = std::fs::read(&glb).unwrap();
+    assert_eq!(&bytes[..4], b"glTF");
+    // The JSON chunk names one material per visible colour of the model.
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let json: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    assert_eq!(json["materials"].as_array().unwrap().len(), 7);
+    assert_eq!(json["meshes"][0]["primitives"].as_array().unwrap().len(), 7);
+}
+
+#[test]
+fn vox_scene_graphs_are_assembled() {
+    // axes.vox: 4 models, 10 instances in nested groups; extended.vox: 6 models in layers.
+    for (name, dims, components) in [
+        ("axes.vox", "dimensions: 260 x 287 x 199", "components: 14 (14 closed)"),
+        ("extended.vox", "dimensions: 120 x 86 x 40", "components: 6 (6 closed)"),
+    ] {
+        let out = voxreg(&["info", data(name).to_str().unwrap()]);
+        assert!(out.status.success(), "{}", stderr(&out));
+        let text = String::from_utf8(out.stdout).unwrap();
+        assert!(text.contains(dims) && text.contains(components), "{name}: {text}");
+    }
+}
+
+#[test]
+fn regularize_with_each_normal_estimator_records_it_in_the_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("cat.obj");
+    let report = dir.path().join("report.json");
+    let input = data("cat10.vol");
+    let run = |extra: &[&str]| {
+        let mut args = vec!["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap()];
+        args.extend(["--report", report.to_str().unwrap(), "-q"]);
+        args.extend(extra);
+        let out = voxreg(&args);
+        assert!(out.status.success(), "{extra:?}: {}", stderr(&out));
+        let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        r["params"].clone()
+    };
+    // The default: integral invariant normals at the multigrid radius (3 at unit spacing).
+    let p = run(&[]);
+    assert_eq!((p["normals"].as_str(), p["radius"].as_f64()), (Some("ii"), Some(3.0)));
+    for (kind, radius) in
+        [("ii", Some(4.5)), ("convolved", Some(2.0)), ("convolved", None), ("at", Some(3.5))]
+    {
+        let r = radius.map(|r: f64| r.to_string());
+        let mut extra = vec!["--normals", kind];
+        if let Some(r) = &r {
+            extra.extend(["--radius", r.as_str()]);
+        }
+        let p = run(&extra);
+        assert_eq!(p["normals"], kind);
+        assert_eq!(p["radius"].as_f64(), Some(radius.unwrap_or(3.0)), "{kind}");
+    }
+    let p = run(&["--normals", "trivial"]);
+    assert_eq!((p["normals"].as_str(), p["radius"].is_null()), (Some("trivial"), true));
+
+    let out = voxreg(&["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--radius=0"]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("--radius must be finite and positive"), "{}", stderr(&out));
+    let out =
+        voxreg(&["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--normals", "pca"]);
+    assert!(!out.status.success());
+}

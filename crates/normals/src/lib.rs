@@ -5,8 +5,21 @@
 //! [`NormalEstimator`] trait so callers (the CLI, xtask) can loop over them:
 //!
 //! - [`Trivial`]: the surfel's own axis, oriented from its lower region to its higher one.
+//! - [`AmbrosioTortorelli`]: piecewise-smooth regularization of an initial field by the
+//!   Ambrosio-Tortorelli functional (ref. \[42\]), smooth except across sharp features,
+//!   which it returns as a per-vertex [`FeatureField`].
+//! - [`IntegralInvariant`]: the eigenvector of the smallest eigenvalue of the covariance of
+//!   a ball intersected with the surfel's region (digital integral invariants, ref. \[53\]);
+//!   multigrid convergent, error `O(h^{2/3})` with the default radius
+//!   [`multigrid_radius`] `= 3 h^{1/3}`. Exact digital moments, [`BallMoments`], in
+//!   `O(r^2)` per surfel.
+//! - [`ConvolvedTrivial`]: trivial normals averaged over a geodesic disc of the surface.
 //!
-//! More estimators (integral invariant, anisotropic) plug in behind the same trait.
+//! On multi-label volumes the ball-based and convolution estimators follow the paper's
+//! sec. 3.1: each surfel is estimated once from each of its two regions, treated as the
+//! shape, and the two directions are averaged (orientation forgotten). Estimators read the
+//! regions from the surface alone; no volume is needed.
+//!
 //! The regularization energy only uses each normal's *direction*: orientation is
 //! kept for display and export.
 //!
@@ -26,10 +39,19 @@
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 
+mod at;
+mod convolved;
+mod eigen;
 mod field;
+mod ii;
+mod runs;
+mod sides;
 mod trivial;
 
+pub use at::{AmbrosioTortorelli, AtInfo, AtLinearSolver, AtParams, AtSolver, FeatureField};
+pub use convolved::ConvolvedTrivial;
 pub use field::NormalField;
+pub use ii::{multigrid_radius, BallMoments, IntegralInvariant};
 pub use trivial::Trivial;
 
 use voxreg_digisurf::DigitalSurface;
@@ -40,6 +62,10 @@ pub enum NormalError {
     /// A parameter is out of its valid range.
     #[error("invalid parameter: {0}")]
     InvalidParameter(String),
+    /// A linear solve failed (e.g. a factorization of a matrix that is not positive
+    /// definite).
+    #[error("linear solver failed: {0}")]
+    Solver(String),
 }
 
 /// A way of estimating one normal per surfel.

@@ -139,7 +139,6 @@ impl Operator {
     pub fn assemble(pattern: &OperatorPattern, energy: &Energy<'_>) -> Self {
         let surface = energy.surface();
         let normals = energy.normals();
-        let params = energy.params();
         let n = surface.num_vertices();
         let mut values = vec![0.0f64; pattern.nnz()];
         // Split the values into one chunk per block column (3 scalar columns).
@@ -162,33 +161,37 @@ impl Operator {
                 }
             };
             let vj = VertexId(j as u32);
-            add(j, DMat3::from_diagonal(DVec3::splat(params.alpha)));
+            add(j, DMat3::from_diagonal(DVec3::splat(energy.alpha_at(j))));
             // Alignment: beta * n n^T on the diagonal, minus it for the edge's other end.
             for f in surface.vertex_surfels(vj) {
                 let sf = surface.surfel(*f);
                 let nf = normals[f.index()];
-                let nn = params.beta * DMat3::from_cols(nf * nf.x, nf * nf.y, nf * nf.z);
+                let nn = energy.beta_at(f.index()) * DMat3::from_cols(nf * nf.x, nf * nf.y, nf * nf.z);
                 let i = sf.vertices.iter().position(|&w| w == vj).unwrap_or(0);
                 for w in [sf.vertices[(i + 1) % 4], sf.vertices[(i + 3) % 4]] {
                     add(j, nn);
                     add(w.index(), -nn);
                 }
             }
-            // Fairness: sum over rows r_i of (I - B) whose support holds j.
+            // Fairness: sum over rows r_i of (I - B) whose support holds j: row j itself and
+            // the rows of the vertices whose barycenter holds j (the mask is symmetric, so
+            // those are j's own barycenter neighbours).
             let mut fair = |i: VertexId| {
-                if surface.is_boundary_vertex(i) {
-                    return;
-                }
-                let nb = surface.vertex_neighbours(i);
+                let Some(nb) = energy.fairness_neighbours(i) else { return };
+                let gamma = energy.gamma_at(i.index());
                 let w = 1.0 / nb.len() as f64;
                 let rij = if i == vj { 1.0 } else { -w };
-                add(i.index(), DMat3::from_diagonal(DVec3::splat(params.gamma * rij)));
-                for k in nb {
-                    add(k.index(), DMat3::from_diagonal(DVec3::splat(-params.gamma * w * rij)));
+                add(i.index(), DMat3::from_diagonal(DVec3::splat(gamma * rij)));
+                for k in &nb {
+                    add(k.index(), DMat3::from_diagonal(DVec3::splat(-gamma * w * rij)));
                 }
             };
             fair(vj);
-            for &i in surface.vertex_neighbours(vj) {
+            let own: Vec<VertexId> = match energy.weights().and_then(|w| w.fairness.as_ref()) {
+                Some(mask) => mask.kept_neighbours(surface, vj).collect(),
+                None => surface.vertex_neighbours(vj).to_vec(),
+            };
+            for i in own {
                 fair(i);
             }
         });

@@ -146,6 +146,12 @@ impl DirectSolver {
                 assemble_seconds,
                 factor_seconds,
                 solve_seconds,
+                error_bound: None,
+                error_estimate: None,
+                converged: true,
+                preconditioner: None,
+                operator_applications: 0,
+                clamped_vertices: None,
             },
         ))
     }

@@ -5,7 +5,7 @@ use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, VertexId};
 use voxreg_normals::NormalField;
 
-use crate::RegularizeError;
+use crate::{RegularizeError, Weights};
 
 /// Weights of the three terms of the energy (eq. 2 of the paper).
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -71,12 +71,17 @@ pub struct EnergyTerms {
 /// vertex `i`, across interfaces too (paper, section 3.5). An edge shared by several
 /// faces counts once per face. Evaluation and gradient are matrix-free and parallel;
 /// [`crate::Operator`] holds the same quadratic form as a sparse matrix (eq. 28).
+///
+/// Optional per-element [`Weights`] (attached by [`Energy::with_weights`]) multiply the
+/// three weights per vertex or per surfel and may leave some neighbours out of the
+/// barycenters (texture-aware fairness).
 #[derive(Clone, Copy, Debug)]
 pub struct Energy<'a> {
     surface: &'a DigitalSurface,
     normals: &'a [DVec3],
     input: &'a [DVec3],
     params: EnergyParams,
+    weights: Option<&'a Weights>,
 }
 
 impl<'a> Energy<'a> {
@@ -103,7 +108,91 @@ impl<'a> Energy<'a> {
                 surface.num_vertices()
             )));
         }
-        Ok(Energy { surface, normals: normals.as_slice(), input, params })
+        Ok(Energy { surface, normals: normals.as_slice(), input, params, weights: None })
+    }
+
+    /// The same energy with per-element `weights` (checked against the surface).
+    pub fn with_weights(mut self, weights: &'a Weights) -> Result<Self, RegularizeError> {
+        weights.validate(self.surface)?;
+        self.weights = Some(weights);
+        Ok(self)
+    }
+
+    /// The per-element weights, if any.
+    pub fn weights(&self) -> Option<&'a Weights> {
+        self.weights
+    }
+
+    /// The attachment weight of vertex `v`: `alpha` times its multiplier.
+    #[inline]
+    pub fn alpha_at(&self, v: usize) -> f64 {
+        let w = self.weights.and_then(|w| w.alpha.as_ref()).map_or(1.0, |a| a[v]);
+        self.params.alpha * w
+    }
+
+    /// The alignment weight of surfel `f`: `beta` times its multiplier.
+    #[inline]
+    pub fn beta_at(&self, f: usize) -> f64 {
+        let w = self.weights.and_then(|w| w.beta.as_ref()).map_or(1.0, |b| b[f]);
+        self.params.beta * w
+    }
+
+    /// The fairness weight of vertex `v`: `gamma` times its multiplier.
+    #[inline]
+    pub fn gamma_at(&self, v: usize) -> f64 {
+        let w = self.weights.and_then(|w| w.gamma.as_ref()).map_or(1.0, |g| g[v]);
+        self.params.gamma * w
+    }
+
+    /// The smallest attachment weight over the vertices: a lower bound of the operator's
+    /// eigenvalues, used by the iterative solvers' error bound.
+    pub fn min_alpha(&self) -> f64 {
+        self.params.alpha * self.weights.map_or(1.0, Weights::min_alpha)
+    }
+
+    /// The neighbours of `v` that enter its barycenter `b^_v`, or `None` when `v` has no
+    /// fairness term (a rim vertex, or all its neighbours masked out).
+    pub fn fairness_neighbours(&self, v: VertexId) -> Option<Vec<VertexId>> {
+        if self.surface.is_boundary_vertex(v) {
+            return None;
+        }
+        let nb: Vec<VertexId> = match self.weights.and_then(|w| w.fairness.as_ref()) {
+            Some(mask) => mask.kept_neighbours(self.surface, v).collect(),
+            None => self.surface.vertex_neighbours(v).to_vec(),
+        };
+        (!nb.is_empty()).then_some(nb)
+    }
+
+    /// Calls `f` on each neighbour of `v` entering `v`'s barycenter (boundary vertices
+    /// included: the mask, not the rim, decides), and returns their number.
+    #[inline]
+    fn for_kept_neighbours(&self, v: VertexId, mut f: impl FnMut(VertexId)) -> usize {
+        let nb = self.surface.vertex_neighbours(v);
+        match self.weights.and_then(|w| w.fairness.as_ref()) {
+            Some(mask) => {
+                let mut count = 0;
+                for (slot, &w) in nb.iter().enumerate() {
+                    if mask.keeps(v, slot) {
+                        f(w);
+                        count += 1;
+                    }
+                }
+                count
+            }
+            None => {
+                nb.iter().for_each(|&w| f(w));
+                nb.len()
+            }
+        }
+    }
+
+    /// Number of neighbours in `v`'s barycenter, 0 when `v` has no fairness term.
+    #[inline]
+    fn fairness_degree(&self, v: VertexId) -> usize {
+        if self.surface.is_boundary_vertex(v) {
+            return 0;
+        }
+        self.for_kept_neighbours(v, |_| ())
     }
 
     /// The weights.
@@ -126,73 +215,83 @@ impl<'a> Energy<'a> {
         self.normals
     }
 
+    /// `p_v - b^_v`, zero when `v` has no fairness term.
     fn barycenter_residual(&self, p: &[DVec3], v: usize) -> DVec3 {
         let vid = VertexId(v as u32);
         if self.surface.is_boundary_vertex(vid) {
             return DVec3::ZERO;
         }
-        let nb = self.surface.vertex_neighbours(vid);
-        let sum: DVec3 = nb.iter().map(|w| p[w.index()]).sum();
-        p[v] - sum / nb.len() as f64
+        let mut sum = DVec3::ZERO;
+        let count = self.for_kept_neighbours(vid, |w| sum += p[w.index()]);
+        if count == 0 {
+            return DVec3::ZERO;
+        }
+        p[v] - sum / count as f64
     }
 
     /// The value of each term at positions `p`.
     pub fn terms(&self, p: &[DVec3]) -> EnergyTerms {
-        let EnergyParams { alpha, beta, gamma } = self.params;
-        let attachment =
-            alpha * p.par_iter().zip(self.input).map(|(a, b)| (*a - *b).length_squared()).sum::<f64>();
-        let alignment = beta
-            * self
-                .surface
-                .surfels()
-                .par_iter()
-                .zip(self.normals)
-                .map(|(s, n)| {
-                    (0..4)
+        let attachment = p
+            .par_iter()
+            .zip(self.input)
+            .enumerate()
+            .map(|(i, (a, b))| self.alpha_at(i) * (*a - *b).length_squared())
+            .sum::<f64>();
+        let alignment = self
+            .surface
+            .surfels()
+            .par_iter()
+            .zip(self.normals)
+            .enumerate()
+            .map(|(f, (s, n))| {
+                self.beta_at(f)
+                    * (0..4)
                         .map(|i| {
                             let e = p[s.vertices[i].index()] - p[s.vertices[(i + 1) % 4].index()];
                             e.dot(*n).powi(2)
                         })
                         .sum::<f64>()
-                })
-                .sum::<f64>();
-        let fairness = gamma
-            * (0..p.len())
-                .into_par_iter()
-                .map(|v| self.barycenter_residual(p, v).length_squared())
-                .sum::<f64>();
+            })
+            .sum::<f64>();
+        let fairness = (0..p.len())
+            .into_par_iter()
+            .map(|v| self.gamma_at(v) * self.barycenter_residual(p, v).length_squared())
+            .sum::<f64>();
         EnergyTerms { attachment, alignment, fairness, total: attachment + alignment + fairness }
     }
 
     /// The exact gradient `dE/dp^` at positions `p`, one 3-vector per vertex.
     pub fn gradient(&self, p: &[DVec3]) -> Vec<DVec3> {
-        let EnergyParams { alpha, beta, gamma } = self.params;
         let s = self.surface;
-        let residual: Vec<DVec3> =
-            (0..p.len()).into_par_iter().map(|v| self.barycenter_residual(p, v)).collect();
+        // gamma_w (p_w - b^_w) / |S_w|: what w's fairness term sends to each of its neighbours.
+        let scaled: Vec<(DVec3, DVec3)> = (0..p.len())
+            .into_par_iter()
+            .map(|v| {
+                let r = self.gamma_at(v) * self.barycenter_residual(p, v);
+                let deg = self.fairness_degree(VertexId(v as u32));
+                (r, if deg == 0 { DVec3::ZERO } else { r / deg as f64 })
+            })
+            .collect();
         (0..p.len())
             .into_par_iter()
             .map(|v| {
                 let vid = VertexId(v as u32);
-                let mut g = 2.0 * alpha * (p[v] - self.input[v]);
+                let mut g = 2.0 * self.alpha_at(v) * (p[v] - self.input[v]);
                 // Alignment: the two edges of each incident face that touch v.
                 for f in s.vertex_surfels(vid) {
                     let sf = s.surfel(*f);
                     let n = self.normals[f.index()];
+                    let beta = self.beta_at(f.index());
                     let i = sf.vertices.iter().position(|&w| w == vid).unwrap_or(0);
                     for j in [(i + 1) % 4, (i + 3) % 4] {
                         let d = (p[v] - p[sf.vertices[j].index()]).dot(n);
                         g += 2.0 * beta * d * n;
                     }
                 }
-                // Fairness: v's own residual, and v's share in its neighbours' barycenters.
-                g += 2.0 * gamma * residual[v];
-                for w in s.vertex_neighbours(vid) {
-                    if !s.is_boundary_vertex(*w) {
-                        let deg = s.vertex_neighbours(*w).len() as f64;
-                        g -= 2.0 * gamma * residual[w.index()] / deg;
-                    }
-                }
+                // Fairness: v's own residual, and v's share in its neighbours' barycenters
+                // (the mask is symmetric: v is in w's barycenter iff w is in v's).
+                g += 2.0 * scaled[v].0;
+                self.for_kept_neighbours(vid, |w| g -= 2.0 * scaled[w.index()].1);
                 g
             })
             .collect()

@@ -39,12 +39,20 @@
 //! ```
 
 mod assemble;
+mod cg;
 mod direct;
 mod energy;
+mod multigrid;
+mod stencil;
+mod vecops;
+mod weights;
 
 pub use assemble::{Operator, OperatorPattern};
+pub use cg::{CgParams, CgSolver, Preconditioner, StoppingRule};
 pub use direct::DirectSolver;
 pub use energy::{Energy, EnergyParams, EnergyTerms};
+pub use multigrid::MultigridParams;
+pub use weights::{colour_discontinuities, FairnessMask, Weights};
 
 use glam::DVec3;
 use voxreg_digisurf::DigitalSurface;
@@ -70,26 +78,63 @@ pub enum RegularizeError {
 /// What a solver reports about its solve.
 #[derive(Clone, Debug, PartialEq)]
 pub struct SolveInfo {
-    /// The solver: `"direct"`.
+    /// The solver: `"direct"`, `"cg"` or `"gd"`.
     pub solver: &'static str,
     /// Iterations (for the direct solver: 1 + refinement steps).
     pub iterations: usize,
     /// Certificate: `|grad E(p*)| / |grad E(p)|`, the gradient norm at the result
-    /// relative to the one at the input positions (0 when the input is optimal).
+    /// relative to the one at the input positions (0 when the input is optimal). For the
+    /// clamped descent, the norm of the projected gradient (see [`descent`](crate::descent)).
     pub relative_gradient: f64,
     /// Entries of the Cholesky factor, for the direct solver.
     pub factor_nnz: Option<usize>,
-    /// Seconds spent building the operator's sparsity pattern (once per surface).
+    /// Seconds spent building the operator's sparsity pattern or connectivity (once per
+    /// surface).
     pub pattern_seconds: f64,
     /// Seconds of symbolic analysis: fill-reducing ordering and symbolic factorization
     /// (once per surface).
     pub symbolic_seconds: f64,
-    /// Seconds of numeric assembly.
+    /// Seconds of numeric assembly (for CG: coefficients and coarse operators).
     pub assemble_seconds: f64,
-    /// Seconds of numeric factorization.
+    /// Seconds of numeric factorization (for CG: of the coarsest multigrid level).
     pub factor_seconds: f64,
-    /// Seconds of triangular solves and refinement.
+    /// Seconds of triangular solves and refinement, or of the iterations.
     pub solve_seconds: f64,
+    /// For the iterative solvers: a guaranteed bound, in voxels, on the distance of every
+    /// vertex to the exact minimizer, `|grad E|_2 / (2 alpha_min h)` (see
+    /// [`CgParams::tolerance`]); `None` for the direct solver (exact up to rounding) and
+    /// the clamped descent (whose minimizer is another one).
+    pub error_bound: Option<f64>,
+    /// For the iterative solvers: the estimated distance, in voxels, of the farthest vertex
+    /// to the exact minimizer (see [`StoppingRule::Estimate`]).
+    pub error_estimate: Option<f64>,
+    /// Whether the stopping rule was met (always true for the direct solver).
+    pub converged: bool,
+    /// The preconditioner of CG (`"jacobi"`, `"block-jacobi"`, `"multigrid"`).
+    pub preconditioner: Option<&'static str>,
+    /// Products by the operator `H` (matrix-free), for the iterative solvers.
+    pub operator_applications: usize,
+    /// For the clamped descent: vertices held on the boundary of their cube at the end.
+    pub clamped_vertices: Option<usize>,
+}
+
+/// What an iterative solver reports after each iteration (for progress bars).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct Progress {
+    /// Iterations done.
+    pub iteration: usize,
+    /// The energy at the current iterate.
+    pub energy: f64,
+    /// `|grad E|_2` at the current iterate (for the clamped descent: of the projected
+    /// gradient).
+    pub gradient_norm: f64,
+    /// `gradient_norm` relative to its value at the input positions.
+    pub relative_gradient: f64,
+    /// The current guaranteed error bound in voxels (`gradient_norm / (2 alpha_min h)`),
+    /// which the iterative solvers drive below their tolerance.
+    pub error_bound: f64,
+    /// The current estimate of that distance in voxels (see [`StoppingRule::Estimate`]).
+    pub error_estimate: f64,
 }
 
 /// The result of [`regularize`].

@@ -131,7 +131,8 @@ impl Shape for Torus {
 }
 
 /// DGtal's "goursat" surface: `-(8 - 0.03 (x^4 + y^4 + z^4) + 2 (x^2 + y^2 + z^2)) <= 0`,
-/// a rounded cube with dimples, within about `[-8.4, 8.4]^3`.
+/// a rounded cube with dimples. It reaches `|x| = 8.39` on the axes but `9.66` off them
+/// (at `|y| = |z| = 1/sqrt(0.03)`), so its bounds are `[-9.7, 9.7]^3`.
 #[derive(Copy, Clone, Debug, Default)]
 pub struct Goursat;
 
@@ -144,7 +145,7 @@ impl Shape for Goursat {
         0.12 * p * p * p - 4.0 * p
     }
     fn bounds(&self) -> (DVec3, DVec3) {
-        (DVec3::splat(-8.5), DVec3::splat(8.5))
+        (DVec3::splat(-9.7), DVec3::splat(9.7))
     }
     fn name(&self) -> &'static str {
         "goursat"
@@ -267,5 +268,24 @@ mod tests {
         assert!(((c / 0.5).round() - c / 0.5).length() < 1e-12);
         let inside = v.labels().iter().filter(|&&l| l == 1).count();
         assert!(inside > 100 && inside < 400, "{inside}"); // 4/3 pi 4^3 = 268
+    }
+
+    #[test]
+    fn bounds_contain_the_shapes() {
+        // A shape sticking out of its bounds would be cut flat by the digitization's box.
+        let shapes: Vec<Box<dyn Shape>> = vec![
+            Box::new(Sphere { radius: 3.0 }),
+            Box::new(Torus { major: 6.0, minor: 2.0 }),
+            Box::new(Goursat),
+            Box::new(Cuboid { half: DVec3::new(1.0, 2.0, 3.0) }),
+        ];
+        for s in &shapes {
+            let v = digitize(s.as_ref(), 0.25);
+            let [nx, ny, nz] = v.dims();
+            for ((x, y, z), &l) in v.labels().indexed_iter() {
+                let border = x == 0 || y == 0 || z == 0 || x + 1 == nx || y + 1 == ny || z + 1 == nz;
+                assert!(!(border && l == 1), "{}: voxel {x} {y} {z} inside on the border", s.name());
+            }
+        }
     }
 }

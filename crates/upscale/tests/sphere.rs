@@ -11,7 +11,8 @@ fn upscaled_ball_is_closer_to_the_sphere_than_blocks() {
     let sphere = Sphere { radius: 6.3 };
     let coarse = digitize(&sphere, 1.0);
     let s = DigitalSurface::from_volume(&coarse).unwrap();
-    let normals = NormalField::new((0..s.num_surfels()).map(|i| sphere.normal_near(surfel_centre(&s, i))).collect());
+    let normals =
+        NormalField::new((0..s.num_surfels()).map(|i| sphere.normal_near(surfel_centre(&s, i))).collect());
     let r = regularize(&s, &normals, EnergyParams::default()).unwrap();
     let k = 4;
     let smooth = upscale(&s, &r.positions, &coarse, &UpscaleParams { factor: k }).unwrap();

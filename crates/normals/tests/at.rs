@@ -1,0 +1,534 @@
+//! The Ambrosio-Tortorelli estimator against shapes with known normals and creases.
+//!
+//! Index:
+//! - `cube_creases_stay_sharp`, `lens_crease_stays_sharp`: the crease angle between nearby
+//!   surfels on either side of a crease (within 2 voxels) is kept, `v` has a valley along
+//!   the crease and is close to 1 far from it: from exact normals with 10 degrees of noise
+//!   (cube: within 5 degrees; lens: within 8, see the test) and from the default input
+//!   (integral invariants: AT must sharpen, not blur).
+//! - `sphere_error_not_worse_than_input`: on a smooth shape AT does not degrade its input.
+//! - `normals_are_unit_and_features_per_vertex`, `multi_label_volume`, `open_border_volume`:
+//!   shapes of the output on every kind of complex.
+//! - `uniform_spacing_does_not_change_the_result`, `anisotropic_spacing_keeps_box_creases`:
+//!   lengths are measured in grid steps from the physical positions.
+//! - `solver_is_reusable`, `invalid_parameters_are_rejected`.
+//!
+//! Unit tests beside the code (`src/at.rs`) check that the assembled systems are the exact
+//! Hessians of the discrete energy and that CG and Cholesky agree.
+//!
+//! Run in release mode: `cargo test --release -p voxreg-normals --test at -- --nocapture`
+//! prints the measurements.
+
+use std::collections::HashMap;
+
+use glam::DVec3;
+use voxreg_digisurf::{DigitalSurface, LabelVolume, VertexId};
+use voxreg_normals::{
+    AmbrosioTortorelli, AtParams, AtSolver, FeatureField, NormalError, NormalEstimator, NormalField, Trivial,
+};
+use voxreg_testkit::{angles_deg, digitize, mean_max, surfel_centre, true_normals, Cuboid, Shape, Sphere};
+
+// ---- helpers ----------------------------------------------------------------------
+
+/// The trivial normals averaged over the surfels whose centres lie within `radius` grid
+/// steps: a smooth input whose creases are rounded over a few voxels (like integral
+/// invariants), for AT to sharpen.
+struct Blurred {
+    radius: f64,
+}
+
+impl NormalEstimator for Blurred {
+    fn name(&self) -> &'static str {
+        "blurred"
+    }
+
+    fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
+        let h = surface.spacing().min_element();
+        let r = self.radius * h;
+        let centres: Vec<DVec3> = (0..surface.num_surfels()).map(|s| surfel_centre(surface, s)).collect();
+        let cell = |p: DVec3| (p / r).floor().as_ivec3();
+        let mut grid: HashMap<glam::IVec3, Vec<usize>> = HashMap::new();
+        for (s, c) in centres.iter().enumerate() {
+            grid.entry(cell(*c)).or_default().push(s);
+        }
+        let trivial = Trivial.estimate(surface)?;
+        let t = trivial.as_slice();
+        let normals = centres
+            .iter()
+            .map(|c| {
+                let k = cell(*c);
+                let mut sum = DVec3::ZERO;
+                for dx in -1..=1 {
+                    for dy in -1..=1 {
+                        for dz in -1..=1 {
+                            for &s in grid.get(&(k + glam::IVec3::new(dx, dy, dz))).into_iter().flatten() {
+                                if centres[s].distance(*c) <= r {
+                                    sum += t[s];
+                                }
+                            }
+                        }
+                    }
+                }
+                sum
+            })
+            .collect();
+        Ok(NormalField::new(normals))
+    }
+}
+
+/// The intersection of two balls of radius `radius` centred at `(-offset, 0, 0)` and
+/// `(offset, 0, 0)`: a lens with a circular crease of radius `sqrt(radius^2 - offset^2)`
+/// in the plane `x = 0`.
+struct Lens {
+    radius: f64,
+    offset: f64,
+}
+
+impl Lens {
+    fn centres(&self) -> [DVec3; 2] {
+        [DVec3::new(-self.offset, 0.0, 0.0), DVec3::new(self.offset, 0.0, 0.0)]
+    }
+
+    fn crease_radius(&self) -> f64 {
+        (self.radius * self.radius - self.offset * self.offset).sqrt()
+    }
+
+    /// Angle between the normals on either side of the crease, in degrees.
+    fn crease_angle_deg(&self) -> f64 {
+        let rho = self.crease_radius();
+        let n1 = DVec3::new(self.offset, rho, 0.0) / self.radius;
+        let n2 = DVec3::new(-self.offset, rho, 0.0) / self.radius;
+        n1.angle_between(n2).to_degrees()
+    }
+
+    fn crease_distance(&self, p: DVec3) -> f64 {
+        let r = (p.y * p.y + p.z * p.z).sqrt();
+        (p.x * p.x + (r - self.crease_radius()).powi(2)).sqrt()
+    }
+}
+
+impl Shape for Lens {
+    fn value(&self, p: DVec3) -> f64 {
+        let [a, b] = self.centres();
+        (p.distance(a) - self.radius).max(p.distance(b) - self.radius)
+    }
+    fn gradient(&self, p: DVec3) -> DVec3 {
+        let [a, b] = self.centres();
+        let c = if p.distance(a) >= p.distance(b) { a } else { b };
+        (p - c).normalize_or_zero()
+    }
+    fn bounds(&self) -> (DVec3, DVec3) {
+        let (w, rho) = (self.radius - self.offset, self.crease_radius());
+        (DVec3::new(-w, -rho, -rho), DVec3::new(w, rho, rho))
+    }
+    fn name(&self) -> &'static str {
+        "lens"
+    }
+    fn project(&self, p: DVec3) -> DVec3 {
+        let [a, b] = self.centres();
+        let mut candidates = Vec::new();
+        for (c, other) in [(a, b), (b, a)] {
+            let q = c + (p - c).normalize_or(DVec3::X) * self.radius;
+            if q.distance(other) <= self.radius + 1e-12 {
+                candidates.push(q);
+            }
+        }
+        let r = DVec3::new(0.0, p.y, p.z).normalize_or(DVec3::Y) * self.crease_radius();
+        candidates.push(r);
+        candidates.into_iter().min_by(|x, y| x.distance(p).total_cmp(&y.distance(p))).unwrap()
+    }
+}
+
+/// Crease measurements: for each surfel `a` of `side_a` and the surfel `b` of `side_b`
+/// nearest to it (by centre), how much the angle between the normals of `a` and `b`
+/// differs from the angle between their `reference` normals (degrees): mean and max.
+fn crease_deviation(
+    surface: &DigitalSurface,
+    normals: &NormalField,
+    reference: &[DVec3],
+    side_a: &[usize],
+    side_b: &[usize],
+) -> (f64, f64) {
+    assert!(!side_a.is_empty() && !side_b.is_empty());
+    let n = normals.as_slice();
+    let devs: Vec<f64> = side_a
+        .iter()
+        .map(|&a| {
+            let ca = surfel_centre(surface, a);
+            let b = *side_b
+                .iter()
+                .min_by(|&&x, &&y| {
+                    surfel_centre(surface, x).distance(ca).total_cmp(&surfel_centre(surface, y).distance(ca))
+                })
+                .unwrap();
+            (n[a].angle_between(n[b]) - reference[a].angle_between(reference[b])).abs().to_degrees()
+        })
+        .collect();
+    mean_max(&devs)
+}
+
+/// Mean, min and max of `v` at the vertices where `select(position)` holds.
+fn v_stats(surface: &DigitalSurface, v: &FeatureField, select: impl Fn(DVec3) -> bool) -> (f64, f64, f64) {
+    let values: Vec<f64> = (0..surface.num_vertices())
+        .filter(|&i| select(surface.vertex_position(VertexId(i as u32))))
+        .map(|i| v.as_slice()[i])
+        .collect();
+    assert!(!values.is_empty());
+    let (mean, max) = mean_max(&values);
+    (mean, values.iter().copied().fold(f64::INFINITY, f64::min), max)
+}
+
+fn at_with(initial: Box<dyn NormalEstimator + Send + Sync>) -> AmbrosioTortorelli {
+    AmbrosioTortorelli::new(AtParams::default(), initial)
+}
+
+fn assert_unit(normals: &NormalField) {
+    for n in normals.as_slice() {
+        assert!((n.length() - 1.0).abs() < 1e-12, "{n} is not unit");
+    }
+}
+
+// ---- creases ----------------------------------------------------------------------
+
+/// Crease measurements of one AT run: the crease-angle deviation (mean, max, degrees) of
+/// the input and of AT over the two bands; the mean over `crease_points` of the lowest `v`
+/// within 1.5 voxels (the valley of `v` along the crease); and `v` (mean, min) at the
+/// vertices more than 5 voxels from the crease.
+struct Crease {
+    input: (f64, f64),
+    at: (f64, f64),
+    valley: f64,
+    far: (f64, f64),
+}
+
+fn crease_run(
+    surface: &DigitalSurface,
+    input: &NormalField,
+    reference: &[DVec3],
+    sides: (&[usize], &[usize]),
+    crease_points: &[DVec3],
+    distance: impl Fn(DVec3) -> f64,
+) -> Crease {
+    let (u, v, info) = AtSolver::new(surface).unwrap().solve(input, &AtParams::default()).unwrap();
+    assert_unit(&u);
+    let positions = surface.positions();
+    let minima: Vec<f64> = crease_points
+        .iter()
+        .map(|c| {
+            positions
+                .iter()
+                .zip(v.as_slice())
+                .filter(|(p, _)| p.distance(*c) < 1.5)
+                .map(|(_, &x)| x)
+                .fold(f64::INFINITY, f64::min)
+        })
+        .collect();
+    let far = v_stats(surface, &v, |p| distance(p) > 5.0);
+    let c = Crease {
+        input: crease_deviation(surface, input, reference, sides.0, sides.1),
+        at: crease_deviation(surface, &u, reference, sides.0, sides.1),
+        valley: mean_max(&minima).0,
+        far: (far.0, far.1),
+    };
+    println!(
+        "  crease angle deviation: input mean {:.2} max {:.2}, AT mean {:.2} max {:.2} deg; v: valley along the \
+         crease {:.3}, far from it mean {:.3} min {:.3}; iterations {:?}",
+        c.input.0, c.input.1, c.at.0, c.at.1, c.valley, c.far.0, c.far.1, info.iterations
+    );
+    c
+}
+
+/// `normals` rotated by random angles of up to about `degrees` (deterministic): a sharp
+/// but noisy input.
+fn noisy(normals: &[DVec3], degrees: f64) -> NormalField {
+    let mut state = 0x9E37_79B9_7F4A_7C15u64;
+    let mut uniform = move || {
+        // splitmix64
+        state = state.wrapping_add(0x9E37_79B9_7F4A_7C15);
+        let mut z = state;
+        z = (z ^ (z >> 30)).wrapping_mul(0xBF58_476D_1CE4_E5B9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94D0_49BB_1331_11EB);
+        ((z ^ (z >> 31)) >> 11) as f64 / (1u64 << 53) as f64 * 2.0 - 1.0
+    };
+    let amplitude = degrees.to_radians();
+    let normals = normals
+        .iter()
+        .map(|&n| {
+            let w = loop {
+                let w = DVec3::new(uniform(), uniform(), uniform());
+                if w.length_squared() <= 1.0 {
+                    break w;
+                }
+            };
+            n + amplitude * w.reject_from(n)
+        })
+        .collect();
+    NormalField::new(normals)
+}
+
+/// A cube of half side 10 voxels: right-angled creases along the grid axes.
+#[test]
+fn cube_creases_stay_sharp() {
+    let surface = DigitalSurface::from_volume(&digitize(&Cuboid { half: DVec3::splat(10.0) }, 1.0)).unwrap();
+    // The digital cube spans +-10.5 voxels; distance of a surface point from the crease
+    // between the faces of axes i and j, and from the nearest crease.
+    let half = 10.5;
+    let crease =
+        |p: DVec3, i: usize, j: usize| ((half - p[i].abs()).powi(2) + (half - p[j].abs()).powi(2)).sqrt();
+    let nearest_crease = |p: DVec3| crease(p, 0, 1).min(crease(p, 1, 2)).min(crease(p, 0, 2));
+    // Surfels within 2 voxels of the crease between faces +x and +y, 3 voxels away from the
+    // cube's corners.
+    let band = |axis: usize, other: usize| -> Vec<usize> {
+        (0..surface.num_surfels())
+            .filter(|&s| {
+                let sf = &surface.surfels()[s];
+                let c = surfel_centre(&surface, s);
+                sf.axis as usize == axis && !sf.flipped && half - c[other] < 2.0 && c.z.abs() < half - 3.0
+            })
+            .collect()
+    };
+    let (side_x, side_y) = (band(0, 1), band(1, 0));
+
+    // The trivial normals are the exact normals of a box.
+    let exact = Trivial.estimate(&surface).unwrap();
+    let exact = exact.as_slice();
+    println!("cube, exact input with noise of up to 10 degrees:");
+    let points: Vec<DVec3> = (-7..=7).map(|z| DVec3::new(half, half, z as f64)).collect();
+    let c = crease_run(&surface, &noisy(exact, 10.0), exact, (&side_x, &side_y), &points, nearest_crease);
+    assert!(c.at.0 < 5.0 && c.at.1 < 10.0, "crease angle off by {:?} degrees", c.at);
+    assert!(c.valley < 0.3, "v along the crease {}", c.valley);
+    assert!(c.far.0 > 0.95, "v far from the creases {:?}", c.far);
+
+    println!("cube, default input ({}):", AmbrosioTortorelli::default().initial.name());
+    let input = AmbrosioTortorelli::default().initial.estimate(&surface).unwrap();
+    let c = crease_run(&surface, &input, exact, (&side_x, &side_y), &points, nearest_crease);
+    assert!(c.at.0 < c.input.0, "AT blurs the crease: {:?} vs input {:?}", c.at, c.input);
+    assert!(c.valley < 0.3, "v along the crease {}", c.valley);
+    assert!(c.far.0 > 0.95, "v far from the creases {:?}", c.far);
+}
+
+/// A lens (two balls of radius 20 voxels, centres 12 voxels from the crease plane): a
+/// circular crease of about 74 degrees, not aligned with the grid.
+#[test]
+fn lens_crease_stays_sharp() {
+    let lens = Lens { radius: 20.0, offset: 12.0 };
+    let angle = lens.crease_angle_deg();
+    let surface = DigitalSurface::from_volume(&digitize(&lens, 1.0)).unwrap();
+    let band = |sign: f64| -> Vec<usize> {
+        (0..surface.num_surfels())
+            .filter(|&s| {
+                let c = surfel_centre(&surface, s);
+                lens.crease_distance(c) < 2.0 && c.x * sign > 0.5
+            })
+            .collect()
+    };
+    let (left, right) = (band(-1.0), band(1.0));
+    let truth = true_normals(&surface, &lens);
+    let distance = |p: DVec3| lens.crease_distance(p);
+    let rho = lens.crease_radius();
+    let points: Vec<DVec3> = (0..64)
+        .map(|k| {
+            let t = k as f64 * std::f64::consts::TAU / 64.0;
+            DVec3::new(0.0, rho * t.cos(), rho * t.sin())
+        })
+        .collect();
+
+    println!("lens ({angle:.1} degrees), true normals with noise of up to 10 degrees:");
+    let c = crease_run(&surface, &noisy(&truth, 10.0), &truth, (&left, &right), &points, distance);
+    // Even from the exact normals AT turns each side by about 3 degrees towards the other
+    // here (a pair deviation of 6.7 degrees): the digital crease of a lens is a fin one
+    // voxel wide whose top surfels are coupled to both sides.
+    assert!(c.at.0 < 8.0 && c.at.1 < 12.0, "crease angle off by {:?} degrees", c.at);
+    assert!(c.valley < 0.3, "v along the crease {}", c.valley);
+    // On a sphere of radius R voxels, v tends to 1 / (1 + 1 / (lambda R^2)) = 0.91 at R = 20.
+    assert!(c.far.0 > 0.85, "v far from the crease {:?}", c.far);
+
+    println!("lens, default input ({}):", AmbrosioTortorelli::default().initial.name());
+    let input = AmbrosioTortorelli::default().initial.estimate(&surface).unwrap();
+    let c = crease_run(&surface, &input, &truth, (&left, &right), &points, distance);
+    let (u, _) = AmbrosioTortorelli::default().estimate_with_features(&surface).unwrap();
+    let (err_in, _) = mean_max(&angles_deg(input.as_slice(), &truth));
+    let (err_at, _) = mean_max(&angles_deg(u.as_slice(), &truth));
+    println!("  mean error input {err_in:.2}, AT {err_at:.2} deg");
+    assert!(c.at.0 < c.input.0, "AT blurs the crease: {:?} vs input {:?}", c.at, c.input);
+    assert!(err_at < err_in, "AT {err_at:.2} vs input {err_in:.2}");
+    assert!(c.valley < 0.3, "v along the crease {}", c.valley);
+    assert!(c.far.0 > 0.85, "v far from the crease {:?}", c.far);
+}
+
+// ---- smooth shapes ------------------------------------------------------------------
+
+#[test]
+fn sphere_error_not_worse_than_input() {
+    let sphere = Sphere { radius: 20.0 };
+    let surface = DigitalSurface::from_volume(&digitize(&sphere, 1.0)).unwrap();
+    let truth = true_normals(&surface, &sphere);
+    for (name, initial) in [
+        ("blurred", Box::new(Blurred { radius: 3.0 }) as Box<dyn NormalEstimator + Send + Sync>),
+        ("default", AmbrosioTortorelli::default().initial),
+    ] {
+        let input = initial.estimate(&surface).unwrap();
+        let (u, v) = at_with(initial).estimate_with_features(&surface).unwrap();
+        let (err_in, max_in) = mean_max(&angles_deg(input.as_slice(), &truth));
+        let (err_at, max_at) = mean_max(&angles_deg(u.as_slice(), &truth));
+        let (v_mean, _) = mean_max(v.as_slice());
+        println!(
+            "sphere/{name}: mean/max error input {err_in:.2}/{max_in:.2}, AT {err_at:.2}/{max_at:.2} deg; mean v \
+             {v_mean:.3}"
+        );
+        assert!(err_at <= err_in + 0.5, "sphere/{name}: AT {err_at:.2} vs input {err_in:.2}");
+    }
+}
+
+// ---- complexes ----------------------------------------------------------------------
+
+#[test]
+fn normals_are_unit_and_features_per_vertex() {
+    let surface = DigitalSurface::from_volume(&digitize(&Sphere { radius: 6.0 }, 1.0)).unwrap();
+    let (u, v) = AmbrosioTortorelli::default().estimate_with_features(&surface).unwrap();
+    assert_eq!(u.len(), surface.num_surfels());
+    assert_eq!(v.len(), surface.num_vertices());
+    assert_unit(&u);
+    assert!(v.as_slice().iter().all(|x| x.is_finite() && *x > -0.5 && *x < 1.0 + 1e-9));
+    assert_eq!(v.on_edges(&surface).len(), surface.num_edges());
+    assert_eq!(v.on_surfels(&surface).len(), surface.num_surfels());
+    // The trait returns the same field.
+    assert_eq!(AmbrosioTortorelli::default().estimate(&surface).unwrap(), u);
+}
+
+/// A ball split into two labels inside background: two interfaces with the background
+/// and a flat interface between the labels, meeting along junction edges.
+#[test]
+fn multi_label_volume() {
+    let volume = LabelVolume::from_fn([24, 24, 24], |[x, y, z]| {
+        let d = |c: usize| c as f64 - 11.5;
+        if d(x).powi(2) + d(y).powi(2) + d(z).powi(2) > 81.0 {
+            0
+        } else if x < 12 {
+            1
+        } else {
+            2
+        }
+    });
+    let surface = DigitalSurface::from_volume(&volume).unwrap();
+    assert_eq!(surface.interfaces().len(), 3);
+    assert!(surface.counts().junction_edges > 0);
+    for initial in [
+        Box::new(Blurred { radius: 3.0 }) as Box<dyn NormalEstimator + Send + Sync>,
+        AmbrosioTortorelli::default().initial,
+    ] {
+        let (u, v) = at_with(initial).estimate_with_features(&surface).unwrap();
+        assert_eq!(u.len(), surface.num_surfels());
+        assert_unit(&u);
+        assert!(v.as_slice().iter().all(|x| x.is_finite()));
+        // The flat interface between labels 1 and 2 keeps its normal +-x (its surfels far
+        // from the junction circle).
+        for (s, sf) in surface.surfels().iter().enumerate() {
+            let c = surfel_centre(&surface, s) - DVec3::splat(11.5);
+            if sf.labels == [1, 2] && c.y * c.y + c.z * c.z < 16.0 {
+                let angle = u.as_slice()[s].angle_between(DVec3::X).to_degrees();
+                assert!(angle < 2.0, "{s}: {} ({angle} degrees)", u.as_slice()[s]);
+            }
+        }
+    }
+}
+
+/// Without background, interfaces end on the domain border (rim edges).
+#[test]
+fn open_border_volume() {
+    let volume = LabelVolume::from_fn([16, 16, 16], |[x, y, _]| u32::from(x + y > 14)).with_background(None);
+    let surface = DigitalSurface::from_volume(&volume).unwrap();
+    assert!(surface.counts().boundary_edges > 0);
+    let (u, v) = at_with(Box::new(Blurred { radius: 3.0 })).estimate_with_features(&surface).unwrap();
+    assert_unit(&u);
+    assert!(v.as_slice().iter().all(|x| x.is_finite()));
+    // A digital plane x + y = const: AT recovers its normal (1, 1, 0) / sqrt 2 away from the rim.
+    let expected = DVec3::new(1.0, 1.0, 0.0).normalize();
+    let inner: Vec<f64> = (0..surface.num_surfels())
+        .filter(|&s| {
+            let c = surfel_centre(&surface, s);
+            (4.0..12.0).contains(&c.z) && (4.0..12.0).contains(&c.x)
+        })
+        .map(|s| u.as_slice()[s].angle_between(expected).to_degrees())
+        .collect();
+    let (mean, max) = mean_max(&inner);
+    println!("open border: plane normal error mean {mean:.3} max {max:.3} deg");
+    assert!(max < 2.0, "{mean} {max}");
+}
+
+// ---- units --------------------------------------------------------------------------
+
+#[test]
+fn uniform_spacing_does_not_change_the_result() {
+    let volume = digitize(&Sphere { radius: 8.0 }, 1.0);
+    let a = DigitalSurface::from_volume(&volume).unwrap();
+    let b = DigitalSurface::from_volume(&volume.clone().with_spacing(DVec3::splat(0.37)).unwrap()).unwrap();
+    let input = Blurred { radius: 3.0 }.estimate(&a).unwrap();
+    let params = AtParams::default();
+    let (ua, va, _) = AtSolver::new(&a).unwrap().solve(&input, &params).unwrap();
+    let (ub, vb, _) = AtSolver::new(&b).unwrap().solve(&input, &params).unwrap();
+    // Equal up to rounding (acos resolves about 1e-6 degrees near 0).
+    let du = ua.as_slice().iter().zip(ub.as_slice()).map(|(x, y)| (*x - *y).length()).fold(0.0, f64::max);
+    assert!(du < 1e-9, "{du}");
+    let dv = va.as_slice().iter().zip(vb.as_slice()).map(|(x, y)| (x - y).abs()).fold(0.0, f64::max);
+    assert!(dv < 1e-8, "{dv}");
+}
+
+/// A box sampled twice as coarsely along z (spacing 1 x 1 x 2, 20 x 20 x 10 voxels) with a
+/// noisy version of its exact normals: AT denoises the faces and keeps the creases.
+#[test]
+fn anisotropic_spacing_keeps_box_creases() {
+    let volume = LabelVolume::from_fn([24, 24, 14], |[x, y, z]| {
+        u32::from((2..22).contains(&x) && (2..22).contains(&y) && (2..12).contains(&z))
+    })
+    .with_spacing(DVec3::new(1.0, 1.0, 2.0))
+    .unwrap();
+    let surface = DigitalSurface::from_volume(&volume).unwrap();
+    let exact = Trivial.estimate(&surface).unwrap();
+    let noisy = noisy(exact.as_slice(), 10.0);
+    let (u, v, _) = AtSolver::new(&surface).unwrap().solve(&noisy, &AtParams::default()).unwrap();
+    let (in_mean, _) = mean_max(&angles_deg(noisy.as_slice(), exact.as_slice()));
+    let (mean, max) = mean_max(&angles_deg(u.as_slice(), exact.as_slice()));
+    let (v_mean, _) = mean_max(v.as_slice());
+    println!("anisotropic box: error input mean {in_mean:.2}, AT mean {mean:.3} max {max:.3} deg, mean v {v_mean:.3}");
+    assert!(mean < 0.5 * in_mean && max < 10.0, "{mean} {max}");
+}
+
+// ---- API ----------------------------------------------------------------------------
+
+#[test]
+fn solver_is_reusable() {
+    let surface = DigitalSurface::from_volume(&digitize(&Sphere { radius: 6.0 }, 1.0)).unwrap();
+    let input = Blurred { radius: 3.0 }.estimate(&surface).unwrap();
+    let mut solver = AtSolver::new(&surface).unwrap();
+    let params = AtParams::default();
+    let (u1, v1, info) = solver.solve(&input, &params).unwrap();
+    let (u2, v2, _) = solver.solve(&input, &params).unwrap();
+    assert_eq!((&u1, &v1), (&u2, &v2));
+    assert_eq!(info.iterations.len(), params.epsilons.len());
+    assert!(info.iterations.iter().all(|&k| (1..=params.max_iterations).contains(&k)));
+    let (u3, v3) = at_with(Box::new(Blurred { radius: 3.0 })).estimate_with_features(&surface).unwrap();
+    assert_eq!((&u1, &v1), (&u3, &v3));
+    // A field of the wrong size is refused.
+    assert!(matches!(
+        solver.solve(&NormalField::new(vec![DVec3::X; 3]), &params),
+        Err(NormalError::InvalidParameter(_))
+    ));
+}
+
+#[test]
+fn invalid_parameters_are_rejected() {
+    let surface = DigitalSurface::from_volume(&digitize(&Sphere { radius: 3.0 }, 1.0)).unwrap();
+    let bad = [
+        AtParams { alpha: 0.0, ..AtParams::default() },
+        AtParams { lambda: f64::NAN, ..AtParams::default() },
+        AtParams { epsilons: vec![], ..AtParams::default() },
+        AtParams { epsilons: vec![1.0, -0.5], ..AtParams::default() },
+        AtParams { max_iterations: 0, ..AtParams::default() },
+        AtParams { tolerance: -1.0, ..AtParams::default() },
+    ];
+    for params in bad {
+        let at = AmbrosioTortorelli { params, ..AmbrosioTortorelli::default() };
+        assert!(matches!(at.estimate(&surface), Err(NormalError::InvalidParameter(_))), "{at:?}");
+    }
+}

@@ -1,0 +1,699 @@
+//! Aggregation multigrid over the voxel hierarchy: the preconditioner of [`crate::CgSolver`].
+//!
+//! Level 0 is the surface itself, with the matrix-free operator. Level `l` groups the
+//! vertices whose lattice corners fall in one cell of `2^l` voxels; its operator is the
+//! Galerkin product `P^T H P` for the piecewise-constant prolongation `P` (each coarse
+//! node moves its fine vertices by one translation: the energy's near-kernel, since
+//! translations only pay the small attachment term). Coarse operators are 3x3-block
+//! sparse rows, stored in `f32` (they only precondition: the answer's accuracy is set by
+//! the fine, `f64` operator). The coarsest level is factored by sparse Cholesky. The
+//! cycle is a symmetric V-cycle with block l1-Jacobi smoothing (convergent without any
+//! eigenvalue estimate), so it is a fixed symmetric positive definite preconditioner.
+
+use std::time::Instant;
+
+use faer::dyn_stack::{MemBuffer, MemStack};
+use faer::linalg::cholesky::llt::factor::LltRegularization;
+use faer::sparse::linalg::cholesky::{
+    factorize_symbolic_cholesky, CholeskySymbolicParams, LltRef, SymbolicCholesky, SymmetricOrdering,
+};
+use faer::sparse::{SparseColMat, SymbolicSparseColMat};
+use faer::{Conj, MatMut, Side};
+use glam::DVec3;
+use rayon::prelude::*;
+use voxreg_digisurf::DigitalSurface;
+
+use crate::stencil::{Coefficients, Stencil, CHUNK};
+use crate::vecops::{sym_inverse, sym_mul};
+use crate::RegularizeError;
+
+/// Settings of the multigrid preconditioner.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct MultigridParams {
+    /// Stop coarsening at a level of at most this many nodes, and factor it exactly.
+    /// Default: `800`.
+    pub coarsest_nodes: usize,
+    /// At most this many levels, the surface included. Default: `16`.
+    pub max_levels: usize,
+    /// Smoothing sweeps before and after each coarse correction. Default: `1`.
+    pub smoothing_steps: usize,
+    /// Damping of the smoother: the step along `M^-1 r`, `M >= H` a block-diagonal
+    /// majorant, convergent for any damping in `(0, 2)`. Default: `1.8`.
+    pub damping: f64,
+}
+
+impl Default for MultigridParams {
+    fn default() -> Self {
+        MultigridParams { coarsest_nodes: 800, max_levels: 16, smoothing_steps: 1, damping: 1.8 }
+    }
+}
+
+/// The aggregation of one level into the next: structure only.
+#[derive(Clone, Debug)]
+struct Aggregation {
+    /// For each node of the finer level, its aggregate (a node of the coarser level).
+    parent: Vec<u32>,
+    /// Members of each aggregate: `members[offsets[a]..offsets[a + 1]]`.
+    offsets: Vec<u32>,
+    members: Vec<u32>,
+}
+
+impl Aggregation {
+    fn len(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    fn members(&self, a: usize) -> &[u32] {
+        &self.members[self.offsets[a] as usize..self.offsets[a + 1] as usize]
+    }
+}
+
+/// The voxel hierarchy of a surface: which vertices each coarse node groups.
+#[derive(Clone, Debug)]
+pub(crate) struct Hierarchy {
+    aggregations: Vec<Aggregation>,
+    params: MultigridParams,
+}
+
+/// Groups nodes by `cell >> 1`; returns the aggregation and the coarse cells, numbered in
+/// lexicographic (z, y, x) cell order.
+fn aggregate(cells: &[[u32; 3]], shift: u32) -> (Aggregation, Vec<[u32; 3]>) {
+    let key = |c: &[u32; 3]| {
+        ((c[2] as u64 >> shift) << 42) | ((c[1] as u64 >> shift) << 21) | (c[0] as u64 >> shift)
+    };
+    let mut order: Vec<(u64, u32)> = cells.par_iter().enumerate().map(|(i, c)| (key(c), i as u32)).collect();
+    order.par_sort_unstable();
+    let mut parent = vec![0u32; cells.len()];
+    let mut offsets = vec![0u32];
+    let mut members = Vec::with_capacity(cells.len());
+    let mut coarse = Vec::new();
+    for group in order.chunk_by(|a, b| a.0 == b.0) {
+        let a = coarse.len() as u32;
+        let c = cells[group[0].1 as usize];
+        coarse.push([c[0] >> shift, c[1] >> shift, c[2] >> shift]);
+        for &(_, i) in group {
+            parent[i as usize] = a;
+            members.push(i);
+        }
+        offsets.push(members.len() as u32);
+    }
+    (Aggregation { parent, offsets, members }, coarse)
+}
+
+impl Hierarchy {
+    /// The hierarchy of `surface` (whose vertices are `stencil`'s).
+    pub(crate) fn new(
+        surface: &DigitalSurface,
+        stencil: &Stencil,
+        params: &MultigridParams,
+    ) -> Result<Self, RegularizeError> {
+        let _ = surface;
+        let mut aggregations = Vec::new();
+        let mut cells = stencil.corners.clone();
+        while cells.len() > params.coarsest_nodes.max(1) && aggregations.len() + 1 < params.max_levels.max(1)
+        {
+            let (agg, coarse) = aggregate(&cells, 1);
+            if coarse.len() * 10 > cells.len() * 9 {
+                break; // no longer coarsening
+            }
+            aggregations.push(agg);
+            cells = coarse;
+        }
+        Ok(Hierarchy { aggregations, params: *params })
+    }
+
+    /// Number of levels, the surface included.
+    pub(crate) fn levels(&self) -> usize {
+        self.aggregations.len() + 1
+    }
+
+    /// The coarse operators, smoothers and coarsest factorization of one energy.
+    pub(crate) fn numeric(
+        &self,
+        stencil: &Stencil,
+        coef: &Coefficients<'_>,
+    ) -> Result<Vcycle, RegularizeError> {
+        let clock = Instant::now();
+        let lap = |what: &str| {
+            if std::env::var("VOXREG_MG_TIMING").is_ok() {
+                eprintln!("  mg {what}: {:.1} ms", clock.elapsed().as_secs_f64() * 1e3);
+            }
+        };
+        let fine_smoother = fine_majorant(stencil, coef);
+        lap("fine majorant");
+        let mut levels = Vec::with_capacity(self.aggregations.len());
+        let mut rows: Option<Rows> = None;
+        for (l, agg) in self.aggregations.iter().enumerate() {
+            let coarse_rows = match &rows {
+                None => galerkin_from_stencil(stencil, coef, agg),
+                Some(finer) => galerkin_from_rows(finer, agg),
+            };
+            let _ = l;
+            if let Some(finer) = rows.take() {
+                let last: &mut Level = levels.last_mut().expect("a previous level");
+                last.matrix = Bsr::from_rows(&finer);
+                last.smoother = l1_smoother(&finer, self.params.damping);
+            }
+            rows = Some(coarse_rows);
+            lap(&format!(
+                "galerkin level {} ({} nodes, {:.1} blocks/row)",
+                l + 1,
+                agg.len(),
+                rows.as_ref().map_or(0, |r| r.nnz()) as f64 / agg.len() as f64
+            ));
+            levels.push(Level { matrix: Bsr::default(), smoother: Vec::new(), n: agg.len() });
+        }
+        let t = Instant::now();
+        let coarsest = match rows {
+            Some(rows) => {
+                let last = levels.last_mut().expect("a coarse level");
+                last.smoother = Vec::new();
+                Some(Coarsest::new(&rows)?)
+            }
+            None => None,
+        };
+        let factor_seconds = t.elapsed().as_secs_f64();
+        lap("coarsest factor");
+        let work =
+            |n: usize| Work { r: vec![DVec3::ZERO; n], x: vec![DVec3::ZERO; n], t: vec![DVec3::ZERO; n] };
+        let mut works = vec![work(stencil.len())];
+        works.extend(levels.iter().map(|l| work(l.n)));
+        Ok(Vcycle {
+            fine_smoother: fine_smoother
+                .iter()
+                .map(|d| scale6(&sym_inverse(d), self.params.damping))
+                .collect(),
+            levels,
+            aggregations: self.aggregations.clone(),
+            coarsest,
+            works,
+            steps: self.params.smoothing_steps.max(1),
+            factor_seconds,
+        })
+    }
+}
+
+fn scale6(m: &[f64; 6], s: f64) -> [f64; 6] {
+    m.map(|x| x * s)
+}
+
+/// A block-diagonal majorant `M >= H` of the fine operator (a block l1-Jacobi): each
+/// edge term `beta n n^T (x_i - x_j)^2` is at most twice `beta n n^T` at both ends, and
+/// each fairness row `gamma_k (rho_k . x)^2 <= gamma_k |rho_k|_1 sum_j |rho_kj| x_j^2`. So
+/// `M = alpha I + 4 sum_f beta_f n_f n_f^T + 2 (gamma_i + sum_{k in S_i} gamma_k / |S_k|) I`,
+/// which keeps the smoother convergent without any eigenvalue estimate while leaving the
+/// tangential directions (where alignment has no stiffness) undamped.
+fn fine_majorant(stencil: &Stencil, coef: &Coefficients<'_>) -> Vec<[f64; 6]> {
+    (0..stencil.len())
+        .into_par_iter()
+        .map(|i| {
+            let nb = stencil.fair_neighbours(i);
+            let mut fair = coef.fair[i] * nb.len() as f64;
+            for &k in nb {
+                fair += coef.fair[k as usize];
+            }
+            let a = coef.alpha.get(i) + 2.0 * fair;
+            let mut d = [a, a, a, 0.0, 0.0, 0.0];
+            for s in stencil.faces(i) {
+                let n = coef.normals[s.face as usize];
+                let b = 4.0 * coef.beta.get(s.face as usize);
+                d[0] += b * n.x * n.x;
+                d[1] += b * n.y * n.y;
+                d[2] += b * n.z * n.z;
+                d[3] += b * n.x * n.y;
+                d[4] += b * n.x * n.z;
+                d[5] += b * n.y * n.z;
+            }
+            d
+        })
+        .collect()
+}
+
+/// One row of a coarse operator under construction: sorted columns and blocks, each the
+/// sum of an alignment part (a 3x3 block, column-major, entries `0..9`: positive
+/// semi-definite on the diagonal, negative semi-definite off it) and a multiple of the
+/// identity (entry `9`: attachment and fairness). Kept apart so that the smoother's
+/// majorant needs no eigenvalues.
+/// The rows of an operator under construction, flat.
+struct Rows {
+    offsets: Vec<usize>,
+    cols: Vec<u32>,
+    /// Accumulated in `f64`, stored in `f32`: they only precondition.
+    vals: Vec<[f32; 10]>,
+}
+
+impl Rows {
+    fn len(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    fn nnz(&self) -> usize {
+        self.cols.len()
+    }
+
+    fn row(&self, i: usize) -> impl Iterator<Item = (u32, [f64; 10])> + '_ {
+        let r = self.offsets[i]..self.offsets[i + 1];
+        self.cols[r.clone()].iter().zip(&self.vals[r]).map(|(c, v)| (*c, v.map(f64::from)))
+    }
+
+    /// Builds `n` rows with `f(accumulator, row)`, columns in `0..cols`, in parallel
+    /// chunks of rows (one marker array and one output buffer per chunk).
+    fn build(n: usize, cols: usize, f: impl Fn(&mut Accumulator, usize) + Sync) -> Rows {
+        const ROWS: usize = 1024;
+        type Part = (Vec<usize>, Vec<u32>, Vec<[f32; 10]>);
+        let parts: Vec<Part> = (0..n.div_ceil(ROWS))
+            .into_par_iter()
+            .map(|c| {
+                let mut acc = Accumulator { slot: vec![u32::MAX; cols], row: Vec::with_capacity(64) };
+                let mut part: Part = (Vec::with_capacity(ROWS), Vec::new(), Vec::new());
+                for i in c * ROWS..((c + 1) * ROWS).min(n) {
+                    f(&mut acc, i);
+                    part.0.push(acc.row.len());
+                    acc.flush_into(&mut part.1, &mut part.2);
+                }
+                part
+            })
+            .collect();
+        let total = parts.iter().map(|p| p.1.len()).sum();
+        let mut offsets = Vec::with_capacity(n + 1);
+        offsets.push(0);
+        let (mut all_cols, mut vals) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        for (lens, c, v) in parts {
+            for l in lens {
+                offsets.push(offsets.last().unwrap() + l);
+            }
+            all_cols.extend(c);
+            vals.extend(v);
+        }
+        Rows { offsets, cols: all_cols, vals }
+    }
+}
+
+/// Row accumulator with a dense marker.
+struct Accumulator {
+    slot: Vec<u32>,
+    row: Vec<(u32, [f64; 10])>,
+}
+
+impl Accumulator {
+    #[inline]
+    fn entry(&mut self, col: u32) -> &mut [f64; 10] {
+        let s = &mut self.slot[col as usize];
+        if *s == u32::MAX {
+            *s = self.row.len() as u32;
+            self.row.push((col, [0.0; 10]));
+        }
+        &mut self.row[*s as usize].1
+    }
+
+    fn add_scalar(&mut self, col: u32, v: f64) {
+        self.entry(col)[9] += v;
+    }
+
+    /// Adds `s` times the outer product `nn` (column-major).
+    fn add_outer(&mut self, col: u32, s: f64, nn: &[f64; 9]) {
+        let e = self.entry(col);
+        for t in 0..9 {
+            e[t] += s * nn[t];
+        }
+    }
+
+    /// Appends the row, sorted by column, to `cols` and `vals`, and clears it.
+    fn flush_into(&mut self, cols: &mut Vec<u32>, vals: &mut Vec<[f32; 10]>) {
+        for (c, _) in &self.row {
+            self.slot[*c as usize] = u32::MAX;
+        }
+        self.row.sort_unstable_by_key(|e| e.0);
+        cols.extend(self.row.iter().map(|e| e.0));
+        vals.extend(self.row.iter().map(|e| e.1.map(|x| x as f32)));
+        self.row.clear();
+    }
+}
+
+/// `P^T H P` of the matrix-free fine operator, one coarse row per aggregate.
+fn galerkin_from_stencil(stencil: &Stencil, coef: &Coefficients<'_>, agg: &Aggregation) -> Rows {
+    let nc = agg.len();
+    let parent = &agg.parent;
+    Rows::build(nc, nc, |acc, a| {
+        let me = a as u32;
+        for &i in agg.members(a) {
+            let i = i as usize;
+            acc.add_scalar(me, coef.alpha.get(i));
+            for s in stencil.faces(i) {
+                let n = coef.normals[s.face as usize];
+                let b = coef.beta.get(s.face as usize);
+                let nn = [
+                    n.x * n.x,
+                    n.y * n.x,
+                    n.z * n.x,
+                    n.x * n.y,
+                    n.y * n.y,
+                    n.z * n.y,
+                    n.x * n.z,
+                    n.y * n.z,
+                    n.z * n.z,
+                ];
+                acc.add_outer(me, 2.0 * b, &nn);
+                acc.add_outer(parent[s.prev as usize], -b, &nn);
+                acc.add_outer(parent[s.next as usize], -b, &nn);
+            }
+            // Fairness rows k holding i: k = i (coefficient 1) and the rows of i's
+            // barycenter neighbours (coefficient -1/|S_k|).
+            let mut row_k = |k: usize, coeff: f64| {
+                let ck = coef.fair[k];
+                if ck == 0.0 {
+                    return;
+                }
+                let nbk = stencil.fair_neighbours(k);
+                let gk = ck * nbk.len() as f64;
+                let w = gk * coeff;
+                acc.add_scalar(parent[k], w);
+                let share = -w / nbk.len() as f64;
+                for &j in nbk {
+                    acc.add_scalar(parent[j as usize], share);
+                }
+            };
+            row_k(i, 1.0);
+            for &k in stencil.fair_neighbours(i) {
+                let dk = stencil.fair_neighbours(k as usize).len();
+                if dk > 0 {
+                    row_k(k as usize, -1.0 / dk as f64);
+                }
+            }
+        }
+    })
+}
+
+/// `P^T A P` of an assembled level.
+fn galerkin_from_rows(rows: &Rows, agg: &Aggregation) -> Rows {
+    let nc = agg.len();
+    Rows::build(nc, nc, |acc, a| {
+        for &i in agg.members(a) {
+            for (j, block) in rows.row(i as usize) {
+                let e = acc.entry(agg.parent[j as usize]);
+                for t in 0..10 {
+                    e[t] += block[t];
+                }
+            }
+        }
+    })
+}
+
+/// The inverse blocks of a block-diagonal majorant `M >= A` of an assembled level,
+/// damped: `M_I = A_II + sum_{J != I} (-N_IJ + |s_IJ| I)` for off-diagonal blocks
+/// `N_IJ + s_IJ I` with `N_IJ <= 0` (alignment) — since `[[0, B], [B, 0]] <= diag(C, C)`
+/// whenever `C >= +-B`.
+fn l1_smoother(rows: &Rows, damping: f64) -> Vec<[f64; 6]> {
+    (0..rows.len())
+        .into_par_iter()
+        .map(|i| {
+            let mut d = [0.0; 6];
+            for (j, b) in rows.row(i) {
+                let sym = [b[0], b[4], b[8], 0.5 * (b[3] + b[1]), 0.5 * (b[6] + b[2]), 0.5 * (b[7] + b[5])];
+                let (sign, s) = if j as usize == i { (1.0, b[9]) } else { (-1.0, b[9].abs()) };
+                for t in 0..6 {
+                    d[t] += sign * sym[t];
+                }
+                for t in 0..3 {
+                    d[t] += s;
+                }
+            }
+            scale6(&sym_inverse(&d), damping)
+        })
+        .collect()
+}
+
+/// A 3x3-block sparse row matrix in `f32`.
+#[derive(Clone, Debug, Default)]
+pub(crate) struct Bsr {
+    offsets: Vec<u32>,
+    cols: Vec<u32>,
+    /// Column-major 3x3 blocks.
+    blocks: Vec<[f32; 9]>,
+}
+
+impl Bsr {
+    fn from_rows(rows: &Rows) -> Self {
+        let offsets = rows.offsets.iter().map(|&o| o as u32).collect();
+        let cols = rows.cols.clone();
+        let blocks = rows
+            .vals
+            .par_iter()
+            .map(|b| {
+                let mut m = [0.0f32; 9];
+                m.copy_from_slice(&b[..9]);
+                for t in [0, 4, 8] {
+                    m[t] += b[9];
+                }
+                m
+            })
+            .collect();
+        Bsr { offsets, cols, blocks }
+    }
+
+    fn len(&self) -> usize {
+        self.offsets.len().saturating_sub(1)
+    }
+
+    /// Bytes read by one product.
+    pub(crate) fn bytes(&self) -> usize {
+        4 * self.offsets.len() + 4 * self.cols.len() + 36 * self.blocks.len()
+    }
+
+    /// `y = b - A x` (`with_rhs`) or `y = A x`.
+    fn residual(&self, x: &[DVec3], b: Option<&[DVec3]>, y: &mut [DVec3]) {
+        y.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
+            let base = k * CHUNK;
+            for (o, yi) in out.iter_mut().enumerate() {
+                let i = base + o;
+                let (mut s0, mut s1, mut s2) = (0.0f64, 0.0f64, 0.0f64);
+                for k in self.offsets[i] as usize..self.offsets[i + 1] as usize {
+                    let m = &self.blocks[k];
+                    let v = x[self.cols[k] as usize];
+                    let (a, bb, c) = (v.x as f32, v.y as f32, v.z as f32);
+                    s0 += f64::from(m[0] * a + m[3] * bb + m[6] * c);
+                    s1 += f64::from(m[1] * a + m[4] * bb + m[7] * c);
+                    s2 += f64::from(m[2] * a + m[5] * bb + m[8] * c);
+                }
+                let ax = DVec3::new(s0, s1, s2);
+                *yi = match b {
+                    Some(b) => b[i] - ax,
+                    None => ax,
+                };
+            }
+        });
+    }
+}
+
+/// Sparse Cholesky of the coarsest level.
+struct Coarsest {
+    symbolic: SymbolicCholesky<usize>,
+    factor: Vec<f64>,
+    n: usize,
+}
+
+impl std::fmt::Debug for Coarsest {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Coarsest").field("n", &self.n).finish()
+    }
+}
+
+impl Coarsest {
+    fn new(rows: &Rows) -> Result<Self, RegularizeError> {
+        let n = rows.len();
+        let dim = 3 * n;
+        // Full symmetric CSC: block row i is block column i transposed.
+        let mut col_ptr = Vec::with_capacity(dim + 1);
+        let mut row_idx = Vec::new();
+        let mut values = Vec::new();
+        col_ptr.push(0usize);
+        for i in 0..n {
+            for c in 0..3 {
+                for (j, block) in rows.row(i) {
+                    for r in 0..3 {
+                        // Column 3i + c, row 3j + r: entry (3j + r, 3i + c) = A_ji[r][c]
+                        // = A_ij[c][r] (symmetry), block stored column-major.
+                        row_idx.push(3 * j as usize + r);
+                        let diag = if r == c { block[9] } else { 0.0 };
+                        values.push(block[3 * r + c] + diag);
+                    }
+                }
+                col_ptr.push(row_idx.len());
+            }
+        }
+        let symbolic = SymbolicSparseColMat::new_checked(dim, dim, col_ptr, None, row_idx);
+        let matrix = SparseColMat::new(symbolic, values);
+        let chol = factorize_symbolic_cholesky(
+            matrix.symbolic(),
+            Side::Lower,
+            SymmetricOrdering::Amd,
+            CholeskySymbolicParams::default(),
+        )
+        .map_err(|e| RegularizeError::Factorization(format!("coarse symbolic analysis failed: {e:?}")))?;
+        let mut factor = vec![0.0; chol.len_val()];
+        let par = faer::Par::Seq;
+        let mut mem = MemBuffer::try_new(chol.factorize_numeric_llt_scratch::<f64>(par, Default::default()))
+            .map_err(|_| RegularizeError::OutOfMemory("coarse Cholesky workspace".into()))?;
+        chol.factorize_numeric_llt::<f64>(
+            &mut factor,
+            matrix.as_ref(),
+            Side::Lower,
+            LltRegularization::default(),
+            par,
+            MemStack::new(&mut mem),
+            Default::default(),
+        )
+        .map_err(|e| RegularizeError::Factorization(format!("coarse Cholesky failed: {e:?}")))?;
+        Ok(Coarsest { symbolic: chol, factor, n })
+    }
+
+    fn solve(&self, b: &[DVec3], x: &mut [DVec3]) {
+        let mut rhs: Vec<f64> = b.iter().flat_map(|v| v.to_array()).collect();
+        let par = faer::Par::Seq;
+        let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
+        LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(
+            Conj::No,
+            MatMut::from_column_major_slice_mut(&mut rhs, 3 * self.n, 1),
+            par,
+            MemStack::new(&mut mem),
+        );
+        for (xi, v) in x.iter_mut().zip(rhs.chunks_exact(3)) {
+            *xi = DVec3::new(v[0], v[1], v[2]);
+        }
+    }
+}
+
+#[derive(Debug)]
+struct Level {
+    /// The operator (empty on the coarsest level, which is factored instead).
+    matrix: Bsr,
+    smoother: Vec<[f64; 6]>,
+    n: usize,
+}
+
+#[derive(Debug)]
+struct Work {
+    r: Vec<DVec3>,
+    x: Vec<DVec3>,
+    t: Vec<DVec3>,
+}
+
+/// One energy's multigrid preconditioner: `z = V(r)`.
+#[derive(Debug)]
+pub(crate) struct Vcycle {
+    fine_smoother: Vec<[f64; 6]>,
+    levels: Vec<Level>,
+    aggregations: Vec<Aggregation>,
+    coarsest: Option<Coarsest>,
+    works: Vec<Work>,
+    steps: usize,
+    /// Seconds spent factoring the coarsest level.
+    pub(crate) factor_seconds: f64,
+}
+
+fn smooth(m: &[[f64; 6]], r: &[DVec3], x: &mut [DVec3], add: bool) {
+    x.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(m.par_chunks(CHUNK)).for_each(|((x, r), m)| {
+        for i in 0..x.len() {
+            let d = sym_mul(&m[i], r[i]);
+            x[i] = if add { x[i] + d } else { d };
+        }
+    });
+}
+
+fn restrict(agg: &Aggregation, fine: &[DVec3], coarse: &mut [DVec3]) {
+    coarse.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
+        for (o, c) in out.iter_mut().enumerate() {
+            *c = agg.members(k * CHUNK + o).iter().map(|&i| fine[i as usize]).sum();
+        }
+    });
+}
+
+fn prolong_add(parent: &[u32], coarse: &[DVec3], fine: &mut [DVec3]) {
+    fine.par_chunks_mut(CHUNK).zip(parent.par_chunks(CHUNK)).for_each(|(f, p)| {
+        for i in 0..f.len() {
+            f[i] += coarse[p[i] as usize];
+        }
+    });
+}
+
+impl Vcycle {
+    /// Bytes read by the coarse operators in one cycle (for the bandwidth model).
+    pub(crate) fn coarse_bytes(&self) -> usize {
+        self.levels.iter().map(|l| l.matrix.bytes()).sum()
+    }
+
+    /// Number of levels, the surface included.
+    pub(crate) fn levels(&self) -> usize {
+        self.levels.len() + 1
+    }
+
+    /// `z = V(r)`: one symmetric V-cycle.
+    pub(crate) fn apply(&mut self, stencil: &Stencil, coef: &Coefficients<'_>, r: &[DVec3], z: &mut [DVec3]) {
+        let steps = self.steps;
+        if self.levels.is_empty() {
+            smooth(&self.fine_smoother, r, z, false);
+            return;
+        }
+        // Fine level: pre-smooth from zero, restrict the residual.
+        let mut works = std::mem::take(&mut self.works);
+        let (fine, rest) = works.split_at_mut(1);
+        let w = &mut fine[0];
+        smooth(&self.fine_smoother, r, z, false);
+        for s in 0..steps {
+            stencil.apply(coef, z, &mut w.r, &mut w.t, true);
+            sub_from(r, &mut w.r);
+            if s + 1 < steps {
+                smooth(&self.fine_smoother, &w.r, z, true);
+            }
+        }
+        restrict(&self.aggregations[0], &w.r, &mut rest[0].r);
+        self.coarse_cycle(0, rest);
+        prolong_add(&self.aggregations[0].parent, &rest[0].x, z);
+        for _ in 0..steps {
+            stencil.apply(coef, z, &mut w.r, &mut w.t, true);
+            sub_from(r, &mut w.r);
+            smooth(&self.fine_smoother, &w.r, z, true);
+        }
+        self.works = works;
+    }
+
+    /// Solves approximately on coarse level `l + 1` (`works[l]`): `x = V(r)`.
+    fn coarse_cycle(&self, l: usize, works: &mut [Work]) {
+        let last = l + 1 == self.levels.len();
+        if last {
+            let w = &mut works[0];
+            self.coarsest.as_ref().expect("factored").solve(&w.r, &mut w.x);
+            return;
+        }
+        let steps = self.steps;
+        let (here, rest) = works.split_at_mut(1);
+        let w = &mut here[0];
+        let level = &self.levels[l];
+        smooth(&level.smoother, &w.r, &mut w.x, false);
+        for s in 0..steps {
+            level.matrix.residual(&w.x, Some(&w.r), &mut w.t);
+            if s + 1 < steps {
+                smooth(&level.smoother, &w.t, &mut w.x, true);
+            }
+        }
+        restrict(&self.aggregations[l + 1], &w.t, &mut rest[0].r);
+        self.coarse_cycle(l + 1, rest);
+        let level = &self.levels[l];
+        let (here, rest) = works.split_at_mut(1);
+        let w = &mut here[0];
+        prolong_add(&self.aggregations[l + 1].parent, &rest[0].x, &mut w.x);
+        for _ in 0..steps {
+            level.matrix.residual(&w.x, Some(&w.r), &mut w.t);
+            smooth(&level.smoother, &w.t, &mut w.x, true);
+        }
+    }
+}
+
+/// `y <- r - y`.
+fn sub_from(r: &[DVec3], y: &mut [DVec3]) {
+    y.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).for_each(|(y, r)| {
+        for i in 0..y.len() {
+            y[i] = r[i] - y[i];
+        }
+    });
+}

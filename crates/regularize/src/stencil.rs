@@ -1,0 +1,274 @@
+//! The operator `H` applied matrix-free, vertex-parallel, for the iterative solvers.
+//!
+//! `H x` gathers, for each vertex, over its incident faces (alignment) and its
+//! barycenter neighbours (fairness, in two passes), so each application reads the mesh
+//! connectivity and the normals once instead of the `~13` 3x3 blocks per vertex of the
+//! assembled operator: about 3 times fewer bytes per product, and no assembly.
+
+use glam::DVec3;
+use rayon::prelude::*;
+use voxreg_digisurf::{DigitalSurface, VertexId};
+
+use crate::{Energy, FairnessMask, RegularizeError};
+
+/// Vertices per parallel task: small enough to balance, large enough to amortize.
+pub(crate) const CHUNK: usize = 2048;
+
+/// A vertex's slot in an incident face: the face and the face's two vertices next to it.
+#[derive(Copy, Clone, Debug, Default)]
+pub(crate) struct FaceSlot {
+    pub(crate) face: u32,
+    pub(crate) prev: u32,
+    pub(crate) next: u32,
+}
+
+/// The connectivity the matrix-free operator reads: built once per surface (and
+/// fairness mask), reused across weights and normals.
+#[derive(Clone, Debug)]
+pub(crate) struct Stencil {
+    face_offsets: Vec<u32>,
+    face_slots: Vec<FaceSlot>,
+    /// Barycenter neighbours (all vertices, rim ones included: the mask, not the rim,
+    /// decides who is in whose barycenter).
+    fair_offsets: Vec<u32>,
+    fair_nbrs: Vec<u32>,
+    /// Lattice corner of each vertex (for the multigrid aggregation).
+    pub(crate) corners: Vec<[u32; 3]>,
+}
+
+/// Per-solve numbers: the weights and the normals of one energy, laid out for the
+/// operator.
+#[derive(Clone, Debug)]
+pub(crate) struct Coefficients<'a> {
+    pub(crate) normals: &'a [DVec3],
+    /// Per vertex, `alpha_i` (or one value for all).
+    pub(crate) alpha: PerItem,
+    /// Per face, `beta_f`.
+    pub(crate) beta: PerItem,
+    /// Per vertex, `gamma_i / |S_i|`, or 0 without fairness term.
+    pub(crate) fair: Vec<f64>,
+}
+
+/// One value per item, or one value for all.
+#[derive(Clone, Debug)]
+pub(crate) enum PerItem {
+    Uniform(f64),
+    Each(Vec<f64>),
+}
+
+impl PerItem {
+    #[inline(always)]
+    pub(crate) fn get(&self, i: usize) -> f64 {
+        match self {
+            PerItem::Uniform(x) => *x,
+            PerItem::Each(v) => v[i],
+        }
+    }
+}
+
+/// Prefix sums of `len(v)` for `v` in `0..n`, as `u32` offsets.
+fn offsets(n: usize, len: impl Fn(usize) -> usize + Sync) -> Result<Vec<u32>, RegularizeError> {
+    let lens: Vec<u32> = (0..n).into_par_iter().map(|v| len(v) as u32).collect();
+    let mut out = Vec::with_capacity(n + 1);
+    let mut total = 0u64;
+    out.push(0);
+    for l in lens {
+        total += u64::from(l);
+        out.push(u32::try_from(total).map_err(|_| RegularizeError::OutOfMemory("more than 2^32 slots".into()))?);
+    }
+    Ok(out)
+}
+
+/// A flat array with `offsets`, each vertex's slice filled by `f(v, slice)`, in parallel.
+fn fill<T: Copy + Default + Send>(offsets: &[u32], f: impl Fn(usize, &mut [T]) + Sync) -> Vec<T> {
+    let n = offsets.len() - 1;
+    let mut out = vec![T::default(); offsets[n] as usize];
+    let mut chunks = Vec::with_capacity(n.div_ceil(CHUNK));
+    let mut rest: &mut [T] = &mut out;
+    for start in (0..n).step_by(CHUNK) {
+        let end = (start + CHUNK).min(n);
+        let (head, tail) = rest.split_at_mut((offsets[end] - offsets[start]) as usize);
+        chunks.push((start, end, head));
+        rest = tail;
+    }
+    chunks.into_par_iter().for_each(|(start, end, chunk)| {
+        let base = offsets[start] as usize;
+        for v in start..end {
+            f(v, &mut chunk[offsets[v] as usize - base..offsets[v + 1] as usize - base]);
+        }
+    });
+    out
+}
+
+impl Stencil {
+    /// The connectivity of `surface`, with the fairness `mask` if any.
+    pub(crate) fn new(
+        surface: &DigitalSurface,
+        mask: Option<&FairnessMask>,
+    ) -> Result<Self, RegularizeError> {
+        let n = surface.num_vertices();
+        let vid = |v: usize| VertexId(v as u32);
+        let face_offsets = offsets(n, |v| surface.vertex_surfels(vid(v)).len())?;
+        let face_slots = fill(&face_offsets, |v, out: &mut [FaceSlot]| {
+            for (slot, f) in out.iter_mut().zip(surface.vertex_surfels(vid(v))) {
+                let sf = surface.surfel(*f);
+                let i = sf.vertices.iter().position(|&w| w == vid(v)).unwrap_or(0);
+                *slot = FaceSlot { face: f.0, prev: sf.vertices[(i + 3) % 4].0, next: sf.vertices[(i + 1) % 4].0 };
+            }
+        });
+        let (fair_offsets, fair_nbrs) = match mask {
+            None => {
+                let offs = offsets(n, |v| surface.vertex_neighbours(vid(v)).len())?;
+                let nbrs = fill(&offs, |v, out: &mut [u32]| {
+                    for (o, w) in out.iter_mut().zip(surface.vertex_neighbours(vid(v))) {
+                        *o = w.0;
+                    }
+                });
+                (offs, nbrs)
+            }
+            Some(m) => {
+                let offs = offsets(n, |v| m.kept_neighbours(surface, vid(v)).count())?;
+                let nbrs = fill(&offs, |v, out: &mut [u32]| {
+                    for (o, w) in out.iter_mut().zip(m.kept_neighbours(surface, vid(v))) {
+                        *o = w.0;
+                    }
+                });
+                (offs, nbrs)
+            }
+        };
+        let corners = (0..n).map(|v| surface.vertex_corner(VertexId(v as u32))).collect();
+        Ok(Stencil { face_offsets, face_slots, fair_offsets, fair_nbrs, corners })
+    }
+
+    /// Number of vertices.
+    pub(crate) fn len(&self) -> usize {
+        self.face_offsets.len() - 1
+    }
+
+    #[inline(always)]
+    pub(crate) fn faces(&self, v: usize) -> &[FaceSlot] {
+        &self.face_slots[self.face_offsets[v] as usize..self.face_offsets[v + 1] as usize]
+    }
+
+    #[inline(always)]
+    pub(crate) fn fair_neighbours(&self, v: usize) -> &[u32] {
+        &self.fair_nbrs[self.fair_offsets[v] as usize..self.fair_offsets[v + 1] as usize]
+    }
+
+    /// Bytes of connectivity read by one product (for the bandwidth model).
+    pub(crate) fn bytes(&self) -> usize {
+        4 * (self.face_offsets.len() + self.fair_offsets.len() + self.fair_nbrs.len())
+            + std::mem::size_of::<FaceSlot>() * self.face_slots.len()
+    }
+
+    /// The numbers of `energy` (which must be on this stencil's surface and mask).
+    pub(crate) fn coefficients<'a>(&self, energy: &Energy<'a>) -> Coefficients<'a> {
+        let n = self.len();
+        let weights = energy.weights();
+        let alpha = match weights.and_then(|w| w.alpha.as_ref()) {
+            Some(_) => PerItem::Each((0..n).map(|i| energy.alpha_at(i)).collect()),
+            None => PerItem::Uniform(energy.params().alpha),
+        };
+        let beta = match weights.and_then(|w| w.beta.as_ref()) {
+            Some(_) => PerItem::Each((0..energy.normals().len()).map(|f| energy.beta_at(f)).collect()),
+            None => PerItem::Uniform(energy.params().beta),
+        };
+        let surface = energy.surface();
+        let fair = (0..n)
+            .into_par_iter()
+            .map(|v| {
+                let deg = self.fair_neighbours(v).len();
+                if deg == 0 || surface.is_boundary_vertex(VertexId(v as u32)) {
+                    0.0
+                } else {
+                    energy.gamma_at(v) / deg as f64
+                }
+            })
+            .collect();
+        Coefficients { normals: energy.normals(), alpha, beta, fair }
+    }
+
+    /// `y = H x`, or `y = (H - diag(alpha)) x` when `with_alpha` is false (the part of
+    /// `H` that only sees differences of positions: exact on absolute positions).
+    /// `t` is scratch of the same length.
+    pub(crate) fn apply(
+        &self,
+        c: &Coefficients<'_>,
+        x: &[DVec3],
+        y: &mut [DVec3],
+        t: &mut [DVec3],
+        with_alpha: bool,
+    ) {
+        // Pass 1: t_i = gamma_i / |S_i| (x_i - b_i).
+        t.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
+            let base = k * CHUNK;
+            for (o, ti) in out.iter_mut().enumerate() {
+                let i = base + o;
+                let ci = c.fair[i];
+                *ti = if ci == 0.0 {
+                    DVec3::ZERO
+                } else {
+                    let nb = self.fair_neighbours(i);
+                    let mut sum = DVec3::ZERO;
+                    for &j in nb {
+                        sum += x[j as usize];
+                    }
+                    ci * (x[i] - sum / nb.len() as f64)
+                };
+            }
+        });
+        // Pass 2: attachment, alignment, and (I - B)^T of the fairness residuals.
+        let t = &*t;
+        y.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
+            let base = k * CHUNK;
+            for (o, yi) in out.iter_mut().enumerate() {
+                let i = base + o;
+                let xi = x[i];
+                let mut acc = if with_alpha { c.alpha.get(i) * xi } else { DVec3::ZERO };
+                for s in self.faces(i) {
+                    let n = c.normals[s.face as usize];
+                    let d = (xi - x[s.prev as usize]).dot(n) + (xi - x[s.next as usize]).dot(n);
+                    acc += (c.beta.get(s.face as usize) * d) * n;
+                }
+                let nb = self.fair_neighbours(i);
+                let mut sum = DVec3::ZERO;
+                for &j in nb {
+                    sum += t[j as usize];
+                }
+                *yi = acc + (nb.len() as f64) * t[i] - sum;
+            }
+        });
+    }
+
+    /// The 3x3 diagonal blocks of `H`, as symmetric `[xx, yy, zz, xy, xz, yz]`.
+    pub(crate) fn diagonal(&self, c: &Coefficients<'_>) -> Vec<[f64; 6]> {
+        (0..self.len())
+            .into_par_iter()
+            .map(|i| {
+                let a = c.alpha.get(i);
+                // Fairness: own row (gamma_i = |S_i| c_i) and rows of i's neighbours.
+                let nb = self.fair_neighbours(i);
+                let mut fair = c.fair[i] * nb.len() as f64;
+                for &j in nb {
+                    let j = j as usize;
+                    let dj = self.fair_neighbours(j).len();
+                    if dj > 0 {
+                        fair += c.fair[j] / dj as f64;
+                    }
+                }
+                let mut d = [a + fair, a + fair, a + fair, 0.0, 0.0, 0.0];
+                for s in self.faces(i) {
+                    let n = c.normals[s.face as usize];
+                    let b = 2.0 * c.beta.get(s.face as usize);
+                    d[0] += b * n.x * n.x;
+                    d[1] += b * n.y * n.y;
+                    d[2] += b * n.z * n.z;
+                    d[3] += b * n.x * n.y;
+                    d[4] += b * n.x * n.z;
+                    d[5] += b * n.y * n.z;
+                }
+                d
+            })
+            .collect()
+    }
+}
