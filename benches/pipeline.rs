@@ -4,6 +4,8 @@
 //! `cargo bench --bench pipeline -- surface`. Inputs: the bundled bunny-128 volume
 //! (55k surfels) and a synthetic 256^3 ball volume for the surface extraction.
 
+#![allow(missing_docs)] // criterion_group! generates an undocumented function.
+
 use std::hint::black_box;
 use std::path::Path;
 

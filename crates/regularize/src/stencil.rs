@@ -5,6 +5,9 @@
 //! connectivity and the normals once instead of the `~13` 3x3 blocks per vertex of the
 //! assembled operator: about 3 times fewer bytes per product, and no assembly.
 
+// Work in progress (issue 4): helpers kept for the bandwidth model and experiments.
+#![allow(dead_code)]
+
 use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, VertexId};
@@ -74,7 +77,9 @@ fn offsets(n: usize, len: impl Fn(usize) -> usize + Sync) -> Result<Vec<u32>, Re
     out.push(0);
     for l in lens {
         total += u64::from(l);
-        out.push(u32::try_from(total).map_err(|_| RegularizeError::OutOfMemory("more than 2^32 slots".into()))?);
+        out.push(
+            u32::try_from(total).map_err(|_| RegularizeError::OutOfMemory("more than 2^32 slots".into()))?,
+        );
     }
     Ok(out)
 }
@@ -113,7 +118,11 @@ impl Stencil {
             for (slot, f) in out.iter_mut().zip(surface.vertex_surfels(vid(v))) {
                 let sf = surface.surfel(*f);
                 let i = sf.vertices.iter().position(|&w| w == vid(v)).unwrap_or(0);
-                *slot = FaceSlot { face: f.0, prev: sf.vertices[(i + 3) % 4].0, next: sf.vertices[(i + 1) % 4].0 };
+                *slot = FaceSlot {
+                    face: f.0,
+                    prev: sf.vertices[(i + 3) % 4].0,
+                    next: sf.vertices[(i + 1) % 4].0,
+                };
             }
         });
         let (fair_offsets, fair_nbrs) = match mask {

@@ -183,9 +183,11 @@ pub fn upscale(
     // quad centres by the source voxel that holds them.
     let cell_of = |p: DVec3| -> Option<[usize; 3]> {
         let c = ((p - corner0) / volume.spacing()).floor();
-        (0..3)
-            .all(|a| c[a] >= 0.0 && (c[a] as usize) < dims[a])
-            .then(|| [c.x as usize, c.y as usize, c.z as usize])
+        (0..3).all(|a| c[a] >= 0.0 && (c[a] as usize) < dims[a]).then_some([
+            c.x as usize,
+            c.y as usize,
+            c.z as usize,
+        ])
     };
     let mut bucket_of: Vec<(usize, u32)> = boundary
         .iter()
