@@ -10,12 +10,17 @@ use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
-use voxreg_io::{read_raw, read_voxels, write_mesh, DataType, Endian, Palette, QuadMesh, RawSpec, Voxels};
+use voxreg_io::{
+    read_mesh, read_raw, read_voxels, write_mesh, DataType, Endian, Palette, QuadMesh, RawSpec, Voxels,
+};
 use voxreg_normals::{
     multigrid_radius, AmbrosioTortorelli, AtParams, ConvolvedTrivial, IntegralInvariant, NormalEstimator,
     Trivial,
 };
-use voxreg_regularize::{DirectSolver, Energy, EnergyParams, EnergyTerms};
+use voxreg_regularize::{
+    self_intersections, Energy, EnergyParams, EnergyTerms, FairnessMask, Progress, SolveInfo, Solver,
+    SolverChoice, SolverParams, Weights,
+};
 
 /// Regularize voxel data (digital surfaces, multi-label interfaces) into smooth,
 /// faithful quad meshes that keep one quad per voxel face.
@@ -32,6 +37,15 @@ enum Command {
     Regularize(RegularizeArgs),
     /// Describe INPUT: dimensions, labels, and its digital surface's cells.
     Info(InputArgs),
+    /// Count the self-intersections of MESH (.obj or .ply, quads split into two triangles;
+    /// faces sharing a vertex do not count); exits with an error if there are any.
+    Check(CheckArgs),
+}
+
+#[derive(Args, Debug)]
+struct CheckArgs {
+    /// The mesh: .obj or .ply (as written by voxreg regularize).
+    mesh: PathBuf,
 }
 
 #[derive(Args, Debug)]
@@ -100,12 +114,42 @@ struct RegularizeArgs {
     /// multigrid rule 3 h^(1/3), h the largest voxel spacing: 3 at unit spacing].
     #[arg(long, value_name = "R")]
     radius: Option<f64>,
+    /// Solver: auto (exact factorization for small surfaces, else cg), direct (sparse
+    /// Cholesky), cg (multigrid conjugate gradient) or gd (gradient descent).
+    #[arg(long, value_enum, default_value_t = SolverKind::Auto)]
+    solver: SolverKind,
+    /// Keep every vertex in the cube of edge (1 - EPS) voxel around its input position,
+    /// which rules out self-intersections (paper, Proposition 2); EPS in voxels, 0.01 when
+    /// omitted. Implies --solver gd.
+    #[arg(long, value_name = "EPS", num_args = 0..=1, default_missing_value = "0.01")]
+    clamp: Option<f64>,
+    /// Iterative solvers: stop when every vertex is estimated within this many voxels of
+    /// the exact minimizer.
+    #[arg(long, value_name = "VOXELS", default_value_t = 1e-3)]
+    tolerance: f64,
+    /// Texture-aware fairness (paper, sec. 4.5): barycenters leave out the neighbours
+    /// across a colour (label) boundary, so quad edges follow colour boundaries.
+    #[arg(long)]
+    texture_aware: bool,
     /// Write a machine-readable JSON report of the run (timings, counts, energies, solver).
     #[arg(long, value_name = "FILE.json")]
     report: Option<PathBuf>,
     /// Print nothing but errors.
     #[arg(short, long)]
     quiet: bool,
+}
+
+/// The solvers `--solver` can pick.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum SolverKind {
+    /// Exact factorization when its factor is small (a few thousand vertices), else cg.
+    Auto,
+    /// Sparse Cholesky: exact to rounding; memory grows fast with the surface.
+    Direct,
+    /// Multigrid-preconditioned conjugate gradient: fast, memory linear in the surface.
+    Cg,
+    /// Gradient descent (multigrid-preconditioned): the only one that can --clamp.
+    Gd,
 }
 
 /// The normal estimators `--normals` can pick.
@@ -172,6 +216,7 @@ fn main() -> std::process::ExitCode {
     let result = match cli.command {
         Command::Info(args) => info(&args),
         Command::Regularize(args) => regularize(&args),
+        Command::Check(args) => check(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
@@ -380,10 +425,15 @@ fn regularize(args: &RegularizeArgs) -> Result<()> {
     };
     let normals = stages.run("normals", &label, || Ok(estimator.estimate(&surface)?))?;
     let positions = surface.positions();
-    let energy = Energy::new(&surface, &normals, &positions, params)?;
-    let mut solver = stages.run("analyse", "analyse operator", || Ok(DirectSolver::new(&surface)?))?;
-    let (regularized, info) =
-        stages.run("factor", "assemble, factor and solve", || Ok(solver.solve(&energy)?))?;
+    let weights = Weights {
+        fairness: args.texture_aware.then(|| FairnessMask::texture_aware(&surface)),
+        ..Default::default()
+    };
+    let energy = Energy::new(&surface, &normals, &positions, params)?.with_weights(&weights)?;
+    let solver_params = solver_params(args)?;
+    let mut solver =
+        stages.run("analyse", "analyse operator", || Ok(Solver::new(&surface, &solver_params)?))?;
+    let (regularized, info) = solve(&mut stages, &mut solver, &energy, args.tolerance)?;
     // Report the solver's own split: `assemble` = operator pattern + numeric assembly,
     // `solve` = symbolic analysis + numeric factorization + triangular solves.
     stages.timings.retain(|(k, _)| !matches!(*k, "analyse" | "factor"));
@@ -447,9 +497,102 @@ fn regularize(args: &RegularizeArgs) -> Result<()> {
                 "assemble_seconds": info.assemble_seconds,
                 "factor_seconds": info.factor_seconds,
                 "solve_seconds": info.solve_seconds,
+                "converged": info.converged,
+                "error_bound": info.error_bound,
+                "error_estimate": info.error_estimate,
+                "tolerance": (info.solver != "direct").then_some(args.tolerance),
+                "preconditioner": info.preconditioner,
+                "operator_applications": info.operator_applications,
+                "clamp": args.clamp,
+                "clamped_vertices": info.clamped_vertices,
+                "memory_bytes": info.memory_bytes,
+                "texture_aware": args.texture_aware,
             },
         });
         write_report(path, &report)?;
+    }
+    Ok(())
+}
+
+/// The solver settings of `--solver`, `--clamp` and `--tolerance`.
+fn solver_params(args: &RegularizeArgs) -> Result<SolverParams> {
+    if !(args.tolerance.is_finite() && args.tolerance > 0.0) {
+        bail!("--tolerance must be finite and positive, got {}", args.tolerance);
+    }
+    let choice = match (args.solver, args.clamp) {
+        (SolverKind::Direct | SolverKind::Cg, Some(_)) => {
+            bail!("--clamp needs the gd solver (--solver gd or auto)")
+        }
+        (_, Some(eps)) if !(eps > 0.0 && eps < 1.0) => {
+            bail!("--clamp: EPS must be in (0, 1) voxel, got {eps}")
+        }
+        (_, Some(_)) | (SolverKind::Gd, None) => SolverChoice::Gd,
+        (SolverKind::Auto, None) => SolverChoice::Auto,
+        (SolverKind::Direct, None) => SolverChoice::Direct,
+        (SolverKind::Cg, None) => SolverChoice::Cg,
+    };
+    let mut params = SolverParams { choice, ..Default::default() };
+    params.cg.tolerance = args.tolerance;
+    params.descent.tolerance = args.tolerance;
+    params.descent.clamp = args.clamp;
+    Ok(params)
+}
+
+/// Runs `solver` on `energy`, with a progress bar for the iterative solvers (iteration,
+/// estimated distance to the minimizer against the tolerance, relative gradient).
+fn solve(
+    stages: &mut Stages,
+    solver: &mut Solver,
+    energy: &Energy<'_>,
+    tolerance: f64,
+) -> Result<(Vec<glam::DVec3>, SolveInfo)> {
+    let message = match solver.kind() {
+        "direct" => "assemble, factor and solve".to_string(),
+        kind => format!("solve ({kind})"),
+    };
+    let quiet = stages.quiet;
+    stages.run("factor", &message, || {
+        let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::new_spinner() };
+        bar.set_style(ProgressStyle::with_template("{spinner} {msg} {elapsed}").expect("valid template"));
+        bar.enable_steady_tick(Duration::from_millis(100));
+        let mut report = |p: &Progress| {
+            bar.set_message(format!(
+                "iteration {}: estimated error {:.1e} voxel (tolerance {tolerance:.0e}), relative gradient {:.1e}",
+                p.iteration, p.error_estimate, p.relative_gradient
+            ));
+        };
+        let out = solver.solve_with(energy, &mut report);
+        bar.finish_and_clear();
+        if !quiet {
+            if let Ok((_, info)) = &out {
+                if info.solver != "direct" {
+                    let status = if info.converged { "converged" } else { "NOT converged" };
+                    eprintln!(
+                        "{} {status} in {} iterations: estimated error {:.1e} voxel, relative gradient {:.1e}",
+                        info.solver,
+                        info.iterations,
+                        info.error_estimate.unwrap_or(0.0),
+                        info.relative_gradient
+                    );
+                }
+            }
+        }
+        Ok(out?)
+    })
+}
+
+/// `voxreg check`: counts the mesh's self-intersections.
+fn check(args: &CheckArgs) -> Result<()> {
+    let mesh = read_mesh(&args.mesh)?;
+    let pairs = self_intersections(&mesh.positions, &mesh.quads);
+    print_stdout(&format!(
+        "{}: {} faces, {} self-intersecting face pairs\n",
+        args.mesh.display(),
+        mesh.quads.len(),
+        pairs.len()
+    ))?;
+    if let Some((a, b)) = pairs.first() {
+        bail!("{}: {} self-intersections (first: faces {a} and {b})", args.mesh.display(), pairs.len());
     }
     Ok(())
 }

@@ -98,8 +98,15 @@ fn regularize_writes_a_closed_quad_mesh_and_a_report() {
         assert!(r["energy"]["before"][term].is_number() && r["energy"]["after"][term].is_number());
     }
     assert!(r["energy"]["after"]["total"].as_f64() < r["energy"]["before"]["total"].as_f64());
-    assert_eq!(r["solver"]["kind"], "direct");
-    assert!(r["solver"]["relative_gradient"].as_f64().unwrap() <= 1e-9);
+    // The automatic choice: exact factorization for small surfaces, else CG to 1e-3 voxel.
+    match r["solver"]["kind"].as_str().unwrap() {
+        "direct" => assert!(r["solver"]["relative_gradient"].as_f64().unwrap() <= 1e-9),
+        kind => {
+            assert_eq!(kind, "cg");
+            assert_eq!(r["solver"]["converged"], true);
+            assert!(r["solver"]["error_estimate"].as_f64().unwrap() <= 1e-3);
+        }
+    }
     assert!(r["counts"]["edges"].as_u64().unwrap() > 0 && r["counts"]["interfaces"] == 1);
     assert_eq!(r["counts"]["boundary_vertices"], 0);
 }
@@ -255,5 +262,136 @@ fn regularize_with_each_normal_estimator_records_it_in_the_report() {
     assert!(stderr(&out).contains("--radius must be finite and positive"), "{}", stderr(&out));
     let out =
         voxreg(&["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--normals", "pca"]);
+    assert!(!out.status.success());
+}
+
+/// Vertex positions of an OBJ file.
+fn obj_positions(path: &Path) -> Vec<[f64; 3]> {
+    std::fs::read_to_string(path)
+        .unwrap()
+        .lines()
+        .filter_map(|l| l.strip_prefix("v "))
+        .map(|l| {
+            let c: Vec<f64> = l.split_whitespace().map(|t| t.parse().unwrap()).collect();
+            [c[0], c[1], c[2]]
+        })
+        .collect()
+}
+
+#[test]
+fn every_solver_reaches_the_same_surface_and_reports_itself() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = data("cat10.vol");
+    let run = |solver: &str, extra: &[&str]| {
+        let obj = dir.path().join(format!("{solver}.obj"));
+        let report = dir.path().join(format!("{solver}.json"));
+        let mut args = vec![
+            "regularize",
+            input.to_str().unwrap(),
+            "-o",
+            obj.to_str().unwrap(),
+            "--report",
+            report.to_str().unwrap(),
+            "--quiet",
+            "--solver",
+            solver,
+        ];
+        let extra: Vec<&str> = extra.to_vec();
+        args.extend(extra);
+        let out = voxreg(&args);
+        assert!(out.status.success(), "{solver}: {}", stderr(&out));
+        let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+        (obj_positions(&obj), r)
+    };
+    let (exact, r) = run("direct", &[]);
+    assert_eq!(r["solver"]["kind"], "direct");
+    for (solver, kind) in [("cg", "cg"), ("gd", "gd")] {
+        let (x, r) = run(solver, &["--tolerance", "1e-4"]);
+        assert_eq!(r["solver"]["kind"], kind);
+        assert_eq!(r["solver"]["converged"], true);
+        assert_eq!(r["solver"]["preconditioner"], "multigrid");
+        assert!(r["solver"]["iterations"].as_u64().unwrap() > 0);
+        assert!(r["solver"]["error_estimate"].as_f64().unwrap() <= 1e-4);
+        let err = x
+            .iter()
+            .zip(&exact)
+            .map(|(a, b)| (0..3).map(|k| (a[k] - b[k]).powi(2)).sum::<f64>().sqrt())
+            .fold(0.0, f64::max);
+        assert!(err < 1e-4, "{solver}: {err}");
+    }
+}
+
+#[test]
+fn clamped_output_stays_in_cubes_and_passes_the_check() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("clamped.obj");
+    let report = dir.path().join("clamped.json");
+    let free = dir.path().join("free.obj");
+    let input = data("cat10.vol");
+    let out = voxreg(&[
+        "regularize",
+        input.to_str().unwrap(),
+        "-o",
+        obj.to_str().unwrap(),
+        "--report",
+        report.to_str().unwrap(),
+        "--clamp",
+        "--alpha",
+        "1e-4",
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    assert_eq!(r["solver"]["kind"], "gd");
+    assert_eq!(r["solver"]["clamp"], 0.01);
+    assert!(r["solver"]["clamped_vertices"].as_u64().is_some());
+    // Against the staircase (the regularization with an overwhelming attachment).
+    let out = voxreg(&[
+        "regularize",
+        input.to_str().unwrap(),
+        "-o",
+        free.to_str().unwrap(),
+        "--alpha",
+        "1e9",
+        "--quiet",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    for (a, b) in obj_positions(&obj).iter().zip(&obj_positions(&free)) {
+        for k in 0..3 {
+            assert!((a[k] - b[k]).abs() <= 0.495 + 1e-6, "{a:?} left the cube of {b:?}");
+        }
+    }
+    let out = voxreg(&["check", obj.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains(" 0 self-intersecting face pairs"));
+    // Clamping needs the descent.
+    let out = voxreg(&[
+        "regularize",
+        input.to_str().unwrap(),
+        "-o",
+        obj.to_str().unwrap(),
+        "--clamp",
+        "--solver",
+        "cg",
+    ]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("--clamp needs the gd solver"), "{}", stderr(&out));
+}
+
+#[test]
+fn check_reports_self_intersections_and_fails() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("crossing.obj");
+    // Two unit squares crossing each other, sharing no vertex.
+    std::fs::write(
+        &path,
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 0.5 -1\nv 0.6 0.5 -1\nv 0.6 0.5 1\nv 0.5 0.5 1\nf 1 2 3 4\nf 5 6 7 8\n",
+    )
+    .unwrap();
+    let out = voxreg(&["check", path.to_str().unwrap()]);
+    assert!(!out.status.success());
+    assert!(String::from_utf8_lossy(&out.stdout).contains("2 faces, 1 self-intersecting face pairs"));
+    assert!(stderr(&out).contains("1 self-intersections (first: faces 0 and 1)"), "{}", stderr(&out));
+    let out = voxreg(&["check", dir.path().join("missing.obj").to_str().unwrap()]);
     assert!(!out.status.success());
 }

@@ -6,23 +6,11 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
-use crate::multigrid::{Hierarchy, MultigridParams, Vcycle};
-use crate::stencil::{Coefficients, Stencil, CHUNK};
-use crate::vecops::{cg_update, dot, norm, scale_add, sym_inverse, sym_mul, tail_estimate};
-use crate::{Energy, FairnessMask, Progress, RegularizeError, SolveInfo};
-
-/// The preconditioner of [`CgSolver`].
-#[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
-pub enum Preconditioner {
-    /// The scalar diagonal of `H`.
-    Jacobi,
-    /// The 3x3 diagonal blocks of `H` (couples the coordinates through the normals).
-    BlockJacobi,
-    /// One V-cycle of aggregation multigrid over the voxel hierarchy (see
-    /// [`MultigridParams`]): the default, several times fewer iterations.
-    #[default]
-    Multigrid,
-}
+use crate::iterative::{Preconditioner, Setup};
+use crate::multigrid::MultigridParams;
+use crate::stencil::CHUNK;
+use crate::vecops::{cg_update, dot, norm, scale_add, tail_estimate};
+use crate::{Energy, Progress, RegularizeError, SolveInfo};
 
 /// When an iterative solver stops.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
@@ -30,9 +18,12 @@ pub enum StoppingRule {
     /// Stop when the *estimated* largest distance of a vertex to the exact minimizer is at
     /// most the tolerance: the largest vertex correction of the last iteration,
     /// `max_i |x_i^(k+1) - x_i^(k)|`, extrapolated as a geometric series with the recent
-    /// residual reduction rate `rho`: `correction / (1 - rho)`. Measured on spheres, tori
-    /// and random volumes, the true error at the stop is 1.3 to 4 times below the
-    /// tolerance (see the crate's tests), but it is an estimate.
+    /// residual reduction rate `rho` and a safety factor of 2: `2 correction / (1 - rho)`.
+    /// Measured with the multigrid preconditioner on spheres, tori and random volumes, the
+    /// true error at the stop is 2 to 10 times below the tolerance (see the crate's
+    /// tests), but it is an estimate: with weaker preconditioners CG can plateau (the
+    /// error stalls while the corrections are tiny) and stop early; use
+    /// [`StoppingRule::Guaranteed`] with those.
     #[default]
     Estimate,
     /// Stop when the distance of every vertex to the exact minimizer is *guaranteed* below
@@ -75,19 +66,16 @@ impl Default for CgParams {
 /// A preconditioned conjugate gradient solver for the energy's linear system
 /// `H x = alpha p`, reusable across solves on one surface.
 ///
-/// [`CgSolver::new`] builds the surface's connectivity for the matrix-free operator and,
-/// for the multigrid preconditioner, the aggregation hierarchy; each
-/// [`CgSolver::solve`] only computes the numeric coefficients (and coarse operators) of
-/// its energy, then iterates from the input positions (solving for the displacement,
-/// like [`crate::DirectSolver`]). Memory: about 0.3 KiB per vertex with multigrid.
+/// [`CgSolver::new`] builds the surface's connectivity for the matrix-free operator
+/// ([`Operator`](crate::Operator) is never assembled) and, for the multigrid
+/// preconditioner, the aggregation hierarchy; each [`CgSolver::solve`] only computes the
+/// coefficients (and coarse operators) of its energy, then iterates from the input
+/// positions, solving for the displacement like [`crate::DirectSolver`]. Memory: about
+/// 0.6 KiB per vertex with multigrid (see [`SolveInfo::memory_bytes`]).
 #[derive(Debug)]
 pub struct CgSolver {
     params: CgParams,
-    stencil: Stencil,
-    mask: Option<FairnessMask>,
-    hierarchy: Option<Hierarchy>,
-    spacing: f64,
-    structure_seconds: f64,
+    setup: Setup,
 }
 
 /// Work vectors of one solve.
@@ -100,31 +88,21 @@ struct Buffers {
     t: Vec<DVec3>,
 }
 
+pub(crate) fn check_tolerance(tolerance: f64) -> Result<(), RegularizeError> {
+    if tolerance > 0.0 && tolerance.is_finite() {
+        Ok(())
+    } else {
+        Err(RegularizeError::InvalidParams(format!(
+            "the tolerance must be positive and finite, got {tolerance}"
+        )))
+    }
+}
+
 impl CgSolver {
-    /// Prepares a solver for energies on `surface` (without fairness mask: a masked
-    /// energy makes [`CgSolver::solve`] rebuild the connectivity once).
+    /// Prepares a solver for energies on `surface`.
     pub fn new(surface: &DigitalSurface, params: CgParams) -> Result<Self, RegularizeError> {
-        if !(params.tolerance > 0.0 && params.tolerance.is_finite()) {
-            return Err(RegularizeError::InvalidParams(format!(
-                "the tolerance must be positive and finite, got {}",
-                params.tolerance
-            )));
-        }
-        let t = Instant::now();
-        let stencil = Stencil::new(surface, None)?;
-        let hierarchy = match params.preconditioner {
-            Preconditioner::Multigrid => Some(Hierarchy::new(surface, &stencil, &params.multigrid)?),
-            _ => None,
-        };
-        let spacing = surface.spacing().min_element();
-        Ok(CgSolver {
-            params,
-            stencil,
-            mask: None,
-            hierarchy,
-            spacing,
-            structure_seconds: t.elapsed().as_secs_f64(),
-        })
+        check_tolerance(params.tolerance)?;
+        Ok(CgSolver { params, setup: Setup::new(surface, params.preconditioner, params.multigrid)? })
     }
 
     /// The parameters.
@@ -132,9 +110,9 @@ impl CgSolver {
         &self.params
     }
 
-    /// Number of multigrid levels (1 without multigrid).
+    /// Number of multigrid levels, the surface included (1 without multigrid).
     pub fn levels(&self) -> usize {
-        self.hierarchy.as_ref().map_or(1, |h| h.levels())
+        self.setup.levels()
     }
 
     /// Minimizes `energy` from its input positions; returns the positions and a report.
@@ -157,54 +135,22 @@ impl CgSolver {
         energy: &Energy<'_>,
         mut progress: Option<&mut dyn FnMut(&Progress)>,
     ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
-        let surface = energy.surface();
-        let n = self.stencil.len();
-        if energy.input().len() != n || surface.num_vertices() != n {
-            return Err(RegularizeError::SizeMismatch("the energy is not on this solver's surface".into()));
-        }
-        let mask = energy.weights().and_then(|w| w.fairness.as_ref());
-        let mut structure_seconds = self.structure_seconds;
-        if mask != self.mask.as_ref() {
-            let t = Instant::now();
-            self.stencil = Stencil::new(surface, mask)?;
-            self.mask = mask.cloned();
-            structure_seconds += t.elapsed().as_secs_f64();
-        }
+        let mut prepared = self.setup.prepare(energy)?;
+        let stencil = &self.setup.stencil;
+        let coef = &prepared.coef;
+        let n = stencil.len();
         let input = energy.input();
-
-        let t = Instant::now();
-        let coef = self.stencil.coefficients(energy);
-        let mut pre = match self.params.preconditioner {
-            Preconditioner::Jacobi => Pre::Jacobi(
-                self.stencil
-                    .diagonal(&coef)
-                    .iter()
-                    .map(|d| DVec3::new(1.0 / d[0], 1.0 / d[1], 1.0 / d[2]))
-                    .collect(),
-            ),
-            Preconditioner::BlockJacobi => {
-                Pre::Block(self.stencil.diagonal(&coef).iter().map(sym_inverse).collect())
-            }
-            Preconditioner::Multigrid => {
-                let h = self.hierarchy.as_ref().expect("built with the multigrid");
-                Pre::Multigrid(Box::new(h.numeric(&self.stencil, &coef)?))
-            }
-        };
-        let (assemble_seconds, factor_seconds) = match &pre {
-            Pre::Multigrid(v) => (t.elapsed().as_secs_f64() - v.factor_seconds, v.factor_seconds),
-            _ => (t.elapsed().as_secs_f64(), 0.0),
-        };
 
         let t = Instant::now();
         let zero = || vec![DVec3::ZERO; n];
         let mut b = Buffers { u: zero(), r: zero(), z: zero(), p: zero(), q: zero(), t: zero() };
         // r = alpha p - H p = -(H - diag(alpha)) p: only differences of positions, exact.
-        self.stencil.apply(&coef, input, &mut b.r, &mut b.t, false);
+        stencil.apply(coef, input, &mut b.r, &mut b.t, false);
         b.r.par_chunks_mut(CHUNK).for_each(|c| c.iter_mut().for_each(|x| *x = -*x));
         let rhs = b.r.clone();
         let r0 = norm(&b.r);
         let alpha_min = energy.min_alpha();
-        let h = self.spacing;
+        let h = self.setup.spacing;
         let tol = self.params.tolerance * h;
         let guaranteed = alpha_min * tol;
         let e0 = if progress.is_some() { energy.terms(input).total } else { 0.0 };
@@ -216,11 +162,11 @@ impl CgSolver {
         let mut residuals = vec![r0];
         let mut restarts = 0;
         'outer: while rnorm > guaranteed && iterations < self.params.max_iterations {
-            pre.apply(&self.stencil, &coef, &b.r, &mut b.z);
+            prepared.pre.apply(stencil, coef, &b.r, &mut b.z);
             scale_add(&mut b.p, 0.0, &b.z);
             let mut rz = dot(&b.r, &b.z);
             loop {
-                self.stencil.apply(&coef, &b.p, &mut b.q, &mut b.t, true);
+                stencil.apply(coef, &b.p, &mut b.q, &mut b.t, true);
                 applications += 1;
                 let pq = dot(&b.p, &b.q);
                 if !(pq > 0.0 && rz > 0.0) {
@@ -231,22 +177,15 @@ impl CgSolver {
                 rnorm = r2.sqrt();
                 residuals.push(rnorm);
                 iterations += 1;
-                estimate = tail_estimate(a * p2.sqrt(), &residuals);
+                estimate = 2.0 * tail_estimate(a * p2.sqrt(), &residuals);
                 let done = match self.params.stopping {
                     StoppingRule::Estimate => estimate <= tol || rnorm <= guaranteed,
                     StoppingRule::Guaranteed => rnorm <= guaranteed,
                 };
                 if done || iterations >= self.params.max_iterations {
                     // The recursive residual drifts from the true one: report the latter.
-                    self.stencil.apply(&coef, &b.u, &mut b.q, &mut b.t, true);
+                    stencil.residual(coef, &b.u, &rhs, &mut b.r, &mut b.t);
                     applications += 1;
-                    b.r.par_chunks_mut(CHUNK).zip(rhs.par_chunks(CHUNK)).zip(b.q.par_chunks(CHUNK)).for_each(
-                        |((r, f), q)| {
-                            for i in 0..r.len() {
-                                r[i] = f[i] - q[i];
-                            }
-                        },
-                    );
                     rnorm = norm(&b.r);
                     let drifted = self.params.stopping == StoppingRule::Guaranteed && rnorm > guaranteed;
                     if drifted && restarts < 3 && iterations < self.params.max_iterations {
@@ -255,7 +194,7 @@ impl CgSolver {
                     }
                     break 'outer;
                 }
-                pre.apply(&self.stencil, &coef, &b.r, &mut b.z);
+                prepared.pre.apply(stencil, coef, &b.r, &mut b.z);
                 let rz_new = dot(&b.r, &b.z);
                 if let Some(report) = progress.as_mut() {
                     // E(p + u) = E(p) - u.b - u.r for the quadratic with H u = b - r.
@@ -277,12 +216,16 @@ impl CgSolver {
         let solve_seconds = t.elapsed().as_secs_f64();
         let relative = if r0 > 0.0 { rnorm / r0 } else { 0.0 };
         let bound = rnorm / alpha_min / h;
-        let estimate = if r0 > 0.0 { estimate.min(bound * h) / h } else { 0.0 };
+        let estimate = if r0 > 0.0 { (estimate / h).min(bound) } else { 0.0 };
         let converged = match self.params.stopping {
-            StoppingRule::Estimate => estimate <= self.params.tolerance || bound <= self.params.tolerance,
+            StoppingRule::Estimate => estimate <= self.params.tolerance,
             StoppingRule::Guaranteed => bound <= self.params.tolerance,
         };
         tracing::debug!(iterations, relative, bound, estimate, "conjugate gradient done");
+        // Per iteration: one product, dot(p, q), the update (u, r, p, q), dot(r, z), p's
+        // update (p, z), and the preconditioner.
+        let traffic = self.setup.traffic_model(&prepared, 1, 2 + 6 + 2 + 3);
+        let memory = self.setup.memory_bytes(&prepared) + 7 * 24 * n;
         Ok((
             x,
             SolveInfo {
@@ -290,63 +233,49 @@ impl CgSolver {
                 iterations,
                 relative_gradient: relative,
                 factor_nnz: None,
-                pattern_seconds: structure_seconds,
+                pattern_seconds: self.setup.structure_seconds,
                 symbolic_seconds: 0.0,
-                assemble_seconds,
-                factor_seconds,
+                assemble_seconds: prepared.assemble_seconds,
+                factor_seconds: prepared.factor_seconds,
                 solve_seconds,
                 error_bound: Some(bound),
                 error_estimate: Some(estimate),
                 converged,
-                preconditioner: Some(match self.params.preconditioner {
-                    Preconditioner::Jacobi => "jacobi",
-                    Preconditioner::BlockJacobi => "block-jacobi",
-                    Preconditioner::Multigrid => "multigrid",
-                }),
+                preconditioner: Some(self.params.preconditioner.name()),
                 operator_applications: applications,
                 clamped_vertices: None,
+                memory_bytes: memory,
+                bytes_per_iteration: Some(traffic),
             },
         ))
     }
 }
 
-enum Pre {
-    Jacobi(Vec<DVec3>),
-    Block(Vec<[f64; 6]>),
-    Multigrid(Box<Vcycle>),
-}
-
-impl Pre {
-    fn apply(&mut self, stencil: &Stencil, coef: &Coefficients<'_>, r: &[DVec3], z: &mut [DVec3]) {
-        match self {
-            Pre::Jacobi(d) => {
-                z.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(d.par_chunks(CHUNK)).for_each(
-                    |((z, r), d)| {
-                        for i in 0..z.len() {
-                            z[i] = r[i] * d[i];
-                        }
-                    },
-                )
-            }
-            Pre::Block(d) => {
-                z.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(d.par_chunks(CHUNK)).for_each(
-                    |((z, r), d)| {
-                        for i in 0..z.len() {
-                            z[i] = sym_mul(&d[i], r[i]);
-                        }
-                    },
-                )
-            }
-            Pre::Multigrid(v) => v.apply(stencil, coef, r, z),
-        }
-    }
-}
-
 #[cfg(test)]
-mod bench_tests {
+mod kernel_timings {
+    //! `cargo test --release -p voxreg-regularize --lib kernel_timings -- --ignored --nocapture`
+    //! (`R=` sphere radius, default 140): timings of the iteration's kernels and the
+    //! memory bandwidth they are compared with.
     use super::*;
+    use crate::iterative::Pre;
+    use crate::multigrid::Hierarchy;
+    use crate::stencil::Stencil;
+    use crate::vecops::sym_inverse;
     use crate::{Energy, EnergyParams};
     use voxreg_testkit::{digitize, true_normals, Sphere};
+
+    /// Median of 20 runs, in milliseconds.
+    fn time(f: &mut dyn FnMut()) -> f64 {
+        let mut v: Vec<f64> = (0..20)
+            .map(|_| {
+                let t = Instant::now();
+                f();
+                t.elapsed().as_secs_f64() * 1e3
+            })
+            .collect();
+        v.sort_by(f64::total_cmp);
+        v[10]
+    }
 
     #[test]
     #[ignore]
@@ -359,72 +288,44 @@ mod bench_tests {
         let st = Stencil::new(&s, None).unwrap();
         let c = st.coefficients(&e);
         let n = st.len();
-        let mut y = vec![DVec3::ZERO; n];
-        let mut t = vec![DVec3::ZERO; n];
-        let mut u = vec![DVec3::ONE; n];
-        fn cpu_ns() -> u64 {
-            std::fs::read_dir("/proc/self/task")
-                .unwrap()
-                .map(|e| {
-                    let p = e.unwrap().path().join("schedstat");
-                    std::fs::read_to_string(p)
-                        .unwrap()
-                        .split_whitespace()
-                        .next()
-                        .unwrap()
-                        .parse::<u64>()
-                        .unwrap()
-                })
-                .sum()
-        }
-        let time = |name: &str, f: &mut dyn FnMut()| {
-            let mut v = Vec::new();
-            let c0 = cpu_ns();
-            for _ in 0..20 {
-                let t = Instant::now();
-                f();
-                v.push(t.elapsed().as_secs_f64());
-            }
-            let cpu = (cpu_ns() - c0) as f64 / 20.0 * 1e-6;
-            v.sort_by(f64::total_cmp);
-            eprintln!("{name}: wall min {:.3} median {:.3} ms, cpu {cpu:.3} ms", v[0] * 1e3, v[10] * 1e3);
-        };
-        eprintln!("n = {n}, stencil bytes {}", st.bytes());
-        time("apply", &mut || st.apply(&c, &input, &mut y, &mut t, true));
-        if std::env::var("ONLY_APPLY").is_ok() {
-            for _ in 0..200 {
-                st.apply(&c, &input, &mut y, &mut t, true);
-            }
-            return;
-        }
-        time("dot", &mut || {
+        let (mut y, mut t, mut u) = (vec![DVec3::ZERO; n], vec![DVec3::ZERO; n], vec![DVec3::ONE; n]);
+        // Streaming bandwidth: a triad over three arrays of this size (4 x 24 n bytes with
+        // the write-allocate).
+        let triad = time(&mut || {
+            y.par_chunks_mut(CHUNK).zip(input.par_chunks(CHUNK)).zip(u.par_chunks(CHUNK)).for_each(
+                |((y, a), b)| {
+                    for i in 0..y.len() {
+                        y[i] = a[i] + 0.5 * b[i];
+                    }
+                },
+            )
+        });
+        eprintln!("n = {n}: triad {:.2} GB/s", 4.0 * 24.0 * n as f64 / triad * 1e-6);
+        let apply = time(&mut || st.apply(&c, &input, &mut y, &mut t, true));
+        let bytes = st.bytes() + 24 * normals.len() + 8 * n + 5 * 24 * n;
+        eprintln!(
+            "product: {apply:.3} ms, {:.1} MB -> {:.2} GB/s",
+            bytes as f64 * 1e-6,
+            bytes as f64 / apply * 1e-6
+        );
+        let d = time(&mut || {
             std::hint::black_box(dot(&y, &t));
         });
-        time("cg_update", &mut || {
+        eprintln!("dot: {d:.3} ms");
+        let upd = time(&mut || {
             std::hint::black_box(cg_update(&mut u, &mut y, 0.1, &t, &input));
         });
-        let d: Vec<[f64; 6]> = st.diagonal(&c).iter().map(sym_inverse).collect();
-        let mut pre = Pre::Block(d);
-        time("block jacobi", &mut || pre.apply(&st, &c, &y, &mut t));
-        let env = |k: &str, d: f64| std::env::var(k).map(|v| v.parse().unwrap()).unwrap_or(d);
-        let mg = MultigridParams {
-            max_levels: env("LEVELS", 16.0) as usize,
-            coarsest_nodes: env("COARSEST", 800.0) as usize,
-            smoothing_steps: env("STEPS", 1.0) as usize,
-            damping: env("DAMP", 1.8),
-        };
-        let h = Hierarchy::new(&s, &st, &mg).unwrap();
-        if std::env::var("ONLY_MG").is_ok() {
-            for _ in 0..20 {
+        eprintln!("cg update: {upd:.3} ms");
+        let mut block = Pre::Block(st.diagonal(&c).iter().map(sym_inverse).collect());
+        eprintln!("block jacobi: {:.3} ms", time(&mut || block.apply(&st, &c, &y, &mut t)));
+        let h = Hierarchy::new(&st, &MultigridParams::default());
+        eprintln!(
+            "multigrid numeric: {:.3} ms",
+            time(&mut || {
                 std::hint::black_box(h.numeric(&st, &c).unwrap());
-            }
-            return;
-        }
-        time("mg numeric", &mut || {
-            std::hint::black_box(h.numeric(&st, &c).unwrap());
-        });
+            })
+        );
         let mut v = h.numeric(&st, &c).unwrap();
-        eprintln!("levels {} coarse bytes {}", v.levels(), v.coarse_bytes());
-        time("vcycle", &mut || v.apply(&st, &c, &y, &mut t));
+        eprintln!("v-cycle: {:.3} ms ({} levels)", time(&mut || v.apply(&st, &c, &y, &mut t)), h.levels());
     }
 }

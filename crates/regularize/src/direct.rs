@@ -152,6 +152,8 @@ impl DirectSolver {
                 preconditioner: None,
                 operator_applications: 0,
                 clamped_vertices: None,
+                memory_bytes: 8 * self.factor.len() + 16 * self.pattern.nnz() / 9,
+                bytes_per_iteration: None,
             },
         ))
     }

@@ -12,18 +12,35 @@
 //!
 //! with defaults `alpha = 1e-3, beta = 1, gamma = 0.1` ([`EnergyParams`]). Entry points:
 //!
-//! - [`regularize`]: the one-shot form.
+//! - [`regularize`]: the one-shot form (exact solve).
+//! - [`Solver`] ([`SolverParams`], [`SolverChoice`]): picks one of the solvers below;
+//!   `Auto` factors small surfaces exactly and iterates on the others.
 //! - [`DirectSolver`]: exact sparse Cholesky (faer) that keeps its symbolic analysis
-//!   for repeated solves on the same surface.
-//! - [`Energy`]: value per term and exact gradient, matrix-free; [`Operator`] and
-//!   [`OperatorPattern`]: the same quadratic form as a sparse matrix (eq. 28).
+//!   for repeated solves on the same surface. Fast to a few thousand vertices; its factor
+//!   grows like `n^1.27` (1.6 GB at 120k vertices).
+//! - [`CgSolver`] ([`CgParams`]): matrix-free conjugate gradient with a multigrid
+//!   preconditioner over the voxel hierarchy ([`MultigridParams`], [`Preconditioner`]),
+//!   stopping at a tolerance in voxels ([`StoppingRule`]): memory linear in the surface,
+//!   about 20 iterations on smooth normal fields (2 s for 367k quads on 2 cores).
+//! - [`DescentSolver`] ([`DescentParams`]): gradient descent with the exact gradient and
+//!   optimal steps, optionally *clamped* so that every vertex stays in a cube around its
+//!   input position (paper, sec. 3.4), which rules out self-intersections
+//!   ([`self_intersections`] checks meshes).
+//! - [`Energy`]: value per term and exact gradient, matrix-free, with optional
+//!   per-element [`Weights`] and texture-aware fairness ([`FairnessMask`]); [`Operator`]
+//!   and [`OperatorPattern`]: the same quadratic form as a sparse matrix (eq. 28).
+//!
+//! Iterative solvers report each iteration ([`Progress`]: energy, gradient norm, error
+//! estimate) for progress bars, and every solver returns a [`SolveInfo`] certificate: the
+//! gradient norm at the result relative to the input's, and for the iterative ones a
+//! guaranteed and an estimated distance to the exact minimizer.
 //!
 //! # Example
 //!
 //! ```
 //! use voxreg_digisurf::{DigitalSurface, LabelVolume};
 //! use voxreg_normals::{NormalEstimator, Trivial};
-//! use voxreg_regularize::{regularize, EnergyParams};
+//! use voxreg_regularize::{regularize, CgParams, CgSolver, Energy, EnergyParams};
 //!
 //! // A digital ball of radius 4.
 //! let volume = LabelVolume::from_fn([11, 11, 11], |[x, y, z]| {
@@ -35,23 +52,41 @@
 //! let result = regularize(&surface, &normals, EnergyParams::default())?;
 //! assert!(result.after.total < result.before.total);
 //! assert!(result.info.relative_gradient <= 1e-9);
+//!
+//! // The same minimizer by multigrid CG, to 1e-3 voxel.
+//! let input = surface.positions();
+//! let energy = Energy::new(&surface, &normals, &input, EnergyParams::default())?;
+//! let (x, info) = CgSolver::new(&surface, CgParams::default())?.solve(&energy)?;
+//! assert!(info.converged && x.iter().zip(&result.positions).all(|(a, b)| a.distance(*b) < 1e-3));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
+//!
+//! # Features
+//!
+//! None.
 
 mod assemble;
 mod cg;
+mod descent;
 mod direct;
 mod energy;
+mod intersections;
+mod iterative;
 mod multigrid;
+mod solver;
 mod stencil;
 mod vecops;
 mod weights;
 
 pub use assemble::{Operator, OperatorPattern};
-pub use cg::{CgParams, CgSolver, Preconditioner, StoppingRule};
+pub use cg::{CgParams, CgSolver, StoppingRule};
+pub use descent::{DescentParams, DescentSolver};
 pub use direct::DirectSolver;
 pub use energy::{Energy, EnergyParams, EnergyTerms};
+pub use intersections::{self_intersections, triangles_intersect};
+pub use iterative::Preconditioner;
 pub use multigrid::MultigridParams;
+pub use solver::{estimate_factor_nnz, Solver, SolverChoice, SolverParams};
 pub use weights::{colour_discontinuities, FairnessMask, Weights};
 
 use glam::DVec3;
@@ -84,7 +119,7 @@ pub struct SolveInfo {
     pub iterations: usize,
     /// Certificate: `|grad E(p*)| / |grad E(p)|`, the gradient norm at the result
     /// relative to the one at the input positions (0 when the input is optimal). For the
-    /// clamped descent, the norm of the projected gradient (see [`descent`](crate::descent)).
+    /// clamped descent, the norm of the projected gradient (see [`DescentSolver`]).
     pub relative_gradient: f64,
     /// Entries of the Cholesky factor, for the direct solver.
     pub factor_nnz: Option<usize>,
@@ -116,6 +151,12 @@ pub struct SolveInfo {
     pub operator_applications: usize,
     /// For the clamped descent: vertices held on the boundary of their cube at the end.
     pub clamped_vertices: Option<usize>,
+    /// Bytes of the solver's data (factor, or connectivity, coarse levels and vectors).
+    pub memory_bytes: usize,
+    /// For the iterative solvers: a model of the bytes one iteration moves between memory
+    /// and the cores (every array read or written once per pass), to compare the time
+    /// per iteration with the memory bandwidth.
+    pub bytes_per_iteration: Option<usize>,
 }
 
 /// What an iterative solver reports after each iteration (for progress bars).

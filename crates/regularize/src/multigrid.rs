@@ -6,12 +6,18 @@
 //! node moves its fine vertices by one translation: the energy's near-kernel, since
 //! translations only pay the small attachment term). Coarse operators are 3x3-block
 //! sparse rows, stored in `f32` (they only precondition: the answer's accuracy is set by
-//! the fine, `f64` operator). The coarsest level is factored by sparse Cholesky. The
-//! cycle is a symmetric V-cycle with block l1-Jacobi smoothing (convergent without any
-//! eigenvalue estimate), so it is a fixed symmetric positive definite preconditioner.
-
-// Work in progress (issue 4): helpers kept for the bandwidth model and experiments.
-#![allow(dead_code)]
+//! the fine, `f64` operator). The coarsest level (at most `coarsest_nodes` nodes; the
+//! surface itself when it is that small) is factored by sparse Cholesky. The cycle is a
+//! symmetric V-cycle whose smoother steps along `M^-1 r` for a block-diagonal majorant
+//! `M >= H` (a block l1-Jacobi that leaves tangential directions undamped), convergent
+//! for any damping in `(0, 2)` without eigenvalue estimates: a fixed symmetric positive
+//! definite preconditioner.
+//!
+//! Measured (spheres, exact normals): about 20 CG iterations to 1e-3 voxel whatever the
+//! size, against 200-640 with block Jacobi; about 55 with the trivial (axis) normals,
+//! whose alignment couplings are strongly anisotropic, which piecewise-constant
+//! aggregation captures poorly (a two-level cycle with exact coarse solve and 8 smoothing
+//! steps still needs 22).
 
 use std::time::Instant;
 
@@ -24,7 +30,6 @@ use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Side};
 use glam::DVec3;
 use rayon::prelude::*;
-use voxreg_digisurf::DigitalSurface;
 
 use crate::stencil::{Coefficients, Stencil, CHUNK};
 use crate::vecops::{sym_inverse, sym_mul};
@@ -80,10 +85,8 @@ pub(crate) struct Hierarchy {
 
 /// Groups nodes by `cell >> 1`; returns the aggregation and the coarse cells, numbered in
 /// lexicographic (z, y, x) cell order.
-fn aggregate(cells: &[[u32; 3]], shift: u32) -> (Aggregation, Vec<[u32; 3]>) {
-    let key = |c: &[u32; 3]| {
-        ((c[2] as u64 >> shift) << 42) | ((c[1] as u64 >> shift) << 21) | (c[0] as u64 >> shift)
-    };
+fn aggregate(cells: &[[u32; 3]]) -> (Aggregation, Vec<[u32; 3]>) {
+    let key = |c: &[u32; 3]| ((c[2] as u64 >> 1) << 42) | ((c[1] as u64 >> 1) << 21) | (c[0] as u64 >> 1);
     let mut order: Vec<(u64, u32)> = cells.par_iter().enumerate().map(|(i, c)| (key(c), i as u32)).collect();
     order.par_sort_unstable();
     let mut parent = vec![0u32; cells.len()];
@@ -93,7 +96,7 @@ fn aggregate(cells: &[[u32; 3]], shift: u32) -> (Aggregation, Vec<[u32; 3]>) {
     for group in order.chunk_by(|a, b| a.0 == b.0) {
         let a = coarse.len() as u32;
         let c = cells[group[0].1 as usize];
-        coarse.push([c[0] >> shift, c[1] >> shift, c[2] >> shift]);
+        coarse.push([c[0] >> 1, c[1] >> 1, c[2] >> 1]);
         for &(_, i) in group {
             parent[i as usize] = a;
             members.push(i);
@@ -105,24 +108,29 @@ fn aggregate(cells: &[[u32; 3]], shift: u32) -> (Aggregation, Vec<[u32; 3]>) {
 
 impl Hierarchy {
     /// The hierarchy of `surface` (whose vertices are `stencil`'s).
-    pub(crate) fn new(
-        surface: &DigitalSurface,
-        stencil: &Stencil,
-        params: &MultigridParams,
-    ) -> Result<Self, RegularizeError> {
-        let _ = surface;
+    pub(crate) fn new(stencil: &Stencil, params: &MultigridParams) -> Self {
         let mut aggregations = Vec::new();
         let mut cells = stencil.corners.clone();
         while cells.len() > params.coarsest_nodes.max(1) && aggregations.len() + 1 < params.max_levels.max(1)
         {
-            let (agg, coarse) = aggregate(&cells, 1);
+            let (agg, coarse) = aggregate(&cells);
             if coarse.len() * 10 > cells.len() * 9 {
                 break; // no longer coarsening
             }
             aggregations.push(agg);
             cells = coarse;
         }
-        Ok(Hierarchy { aggregations, params: *params })
+        if aggregations.is_empty() {
+            // A small surface: factor its own operator (the identity aggregation), which
+            // makes the preconditioner exact up to the `f32` rounding of the factor's input.
+            let n = cells.len() as u32;
+            aggregations.push(Aggregation {
+                parent: (0..n).collect(),
+                offsets: (0..=n).collect(),
+                members: (0..n).collect(),
+            });
+        }
+        Hierarchy { aggregations, params: *params }
     }
 
     /// Number of levels, the surface included.
@@ -454,10 +462,6 @@ impl Bsr {
         Bsr { offsets, cols, blocks }
     }
 
-    fn len(&self) -> usize {
-        self.offsets.len().saturating_sub(1)
-    }
-
     /// Bytes read by one product.
     pub(crate) fn bytes(&self) -> usize {
         4 * self.offsets.len() + 4 * self.cols.len() + 36 * self.blocks.len()
@@ -620,14 +624,25 @@ fn prolong_add(parent: &[u32], coarse: &[DVec3], fine: &mut [DVec3]) {
 }
 
 impl Vcycle {
-    /// Bytes read by the coarse operators in one cycle (for the bandwidth model).
-    pub(crate) fn coarse_bytes(&self) -> usize {
-        self.levels.iter().map(|l| l.matrix.bytes()).sum()
+    /// Bytes of the coarse levels, smoothers and work vectors.
+    pub(crate) fn memory_bytes(&self) -> usize {
+        let agg: usize =
+            self.aggregations.iter().map(|a| 4 * (a.parent.len() + a.members.len() + a.offsets.len())).sum();
+        let levels: usize = self.levels.iter().map(|l| l.matrix.bytes() + 48 * l.n).sum();
+        let works: usize = self.works.iter().map(|w| 72 * w.r.len()).sum();
+        let coarsest = self.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len());
+        48 * self.fine_smoother.len() + agg + levels + works + coarsest
     }
 
-    /// Number of levels, the surface included.
-    pub(crate) fn levels(&self) -> usize {
-        self.levels.len() + 1
+    /// Bytes moved by one cycle (`product`: bytes of one fine product by `H`).
+    pub(crate) fn traffic(&self, product: usize, n: usize) -> usize {
+        let s = self.steps;
+        // Fine: products, smoothing (r, M, z), residual updates, restriction, prolongation.
+        let fine = 2 * s * product + 2 * s * 120 * n + 2 * s * 72 * n + 60 * n;
+        let coarse: usize =
+            self.levels.iter().map(|l| 2 * s * (l.matrix.bytes() + 3 * 24 * l.n) + 10 * 24 * l.n).sum();
+        let coarsest = self.coarsest.as_ref().map_or(0, |c| 2 * 8 * c.factor.len());
+        fine + coarse + coarsest
     }
 
     /// `z = V(r)`: one symmetric V-cycle.
@@ -643,8 +658,7 @@ impl Vcycle {
         let w = &mut fine[0];
         smooth(&self.fine_smoother, r, z, false);
         for s in 0..steps {
-            stencil.apply(coef, z, &mut w.r, &mut w.t, true);
-            sub_from(r, &mut w.r);
+            stencil.residual(coef, z, r, &mut w.r, &mut w.t);
             if s + 1 < steps {
                 smooth(&self.fine_smoother, &w.r, z, true);
             }
@@ -653,8 +667,7 @@ impl Vcycle {
         self.coarse_cycle(0, rest);
         prolong_add(&self.aggregations[0].parent, &rest[0].x, z);
         for _ in 0..steps {
-            stencil.apply(coef, z, &mut w.r, &mut w.t, true);
-            sub_from(r, &mut w.r);
+            stencil.residual(coef, z, r, &mut w.r, &mut w.t);
             smooth(&self.fine_smoother, &w.r, z, true);
         }
         self.works = works;
@@ -690,13 +703,4 @@ impl Vcycle {
             smooth(&level.smoother, &w.t, &mut w.x, true);
         }
     }
-}
-
-/// `y <- r - y`.
-fn sub_from(r: &[DVec3], y: &mut [DVec3]) {
-    y.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).for_each(|(y, r)| {
-        for i in 0..y.len() {
-            y[i] = r[i] - y[i];
-        }
-    });
 }

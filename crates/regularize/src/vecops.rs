@@ -1,8 +1,5 @@
 //! Parallel vector kernels on `[DVec3]` for the iterative solvers.
 
-// Work in progress (issue 4): helpers kept for the bandwidth model and experiments.
-#![allow(dead_code)]
-
 use glam::DVec3;
 use rayon::prelude::*;
 

@@ -1,0 +1,292 @@
+//! Gradient descent with the exact gradient, optionally clamped (paper, sec. 3.4).
+
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+use voxreg_digisurf::DigitalSurface;
+
+use crate::cg::check_tolerance;
+use crate::iterative::{Preconditioner, Setup};
+use crate::multigrid::MultigridParams;
+use crate::stencil::CHUNK;
+use crate::vecops::{dot, norm, tail_estimate};
+use crate::{Energy, Progress, RegularizeError, SolveInfo};
+
+/// Parameters of [`DescentSolver`].
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct DescentParams {
+    /// Stop when the estimated remaining movement of the farthest vertex, in voxels, is at
+    /// most this: its last correction extrapolated with the recent reduction rate of the
+    /// (projected) gradient, times 2 (as [`StoppingRule::Estimate`](crate::StoppingRule)).
+    /// Default: `1e-3`.
+    pub tolerance: f64,
+    /// Give up after this many iterations. Default: `10000`.
+    pub max_iterations: usize,
+    /// Clamping (paper, sec. 3.4, rule (ii) of Proposition 2): when `Some(eps)`, every
+    /// vertex stays in the closed axis-aligned box of edge `(1 - eps) h` centred on its
+    /// input position, `h` the voxel spacing along each axis and `eps` in voxels,
+    /// `0 < eps < 1`. With faces embedded in the convex hull of their vertices (two
+    /// triangles per quad), the result then has no self-intersection. Default: `None`.
+    pub clamp: Option<f64>,
+    /// The metric of the descent: the direction is `-M^-1 grad E` (restricted to the free
+    /// coordinates when clamping); [`Preconditioner::Identity`] is plain steepest
+    /// descent. Default: [`Preconditioner::Multigrid`].
+    pub preconditioner: Preconditioner,
+    /// Multigrid settings. Default: [`MultigridParams::default`].
+    pub multigrid: MultigridParams,
+}
+
+impl Default for DescentParams {
+    fn default() -> Self {
+        DescentParams {
+            tolerance: 1e-3,
+            max_iterations: 10_000,
+            clamp: None,
+            preconditioner: Preconditioner::Multigrid,
+            multigrid: MultigridParams::default(),
+        }
+    }
+}
+
+/// Gradient descent on the energy with the exact (matrix-free) gradient and the optimal
+/// step of the quadratic along each direction, `t = (g . d) / (2 d^T H d)`, reusable
+/// across solves on one surface.
+///
+/// Each iteration moves along `d = -M^-1 g` (`M` the preconditioner; `M = I` is the
+/// papers' descent), then, when clamping, projects each coordinate back into its box and
+/// halves the step until the energy does not increase: the energy decreases
+/// monotonically, and coordinates held on their box with the gradient pushing outwards
+/// are frozen for that iteration (projected gradient). Unclamped, it converges to the
+/// same minimizer as [`crate::DirectSolver`] and [`crate::CgSolver`] (more slowly than
+/// the latter); clamped, to the minimizer of the energy over the boxes.
+#[derive(Debug)]
+pub struct DescentSolver {
+    params: DescentParams,
+    setup: Setup,
+}
+
+impl DescentSolver {
+    /// Prepares a descent for energies on `surface`.
+    pub fn new(surface: &DigitalSurface, params: DescentParams) -> Result<Self, RegularizeError> {
+        check_tolerance(params.tolerance)?;
+        if let Some(eps) = params.clamp {
+            if !(eps > 0.0 && eps < 1.0) {
+                return Err(RegularizeError::InvalidParams(format!(
+                    "the clamping margin must be in (0, 1) voxel, got {eps}"
+                )));
+            }
+        }
+        Ok(DescentSolver { params, setup: Setup::new(surface, params.preconditioner, params.multigrid)? })
+    }
+
+    /// The parameters.
+    pub fn params(&self) -> &DescentParams {
+        &self.params
+    }
+
+    /// Minimizes `energy` from its input positions.
+    pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+        self.solve_with(energy, &mut |_| {})
+    }
+
+    /// [`DescentSolver::solve`], calling `progress` after each iteration.
+    pub fn solve_with(
+        &mut self,
+        energy: &Energy<'_>,
+        progress: &mut dyn FnMut(&Progress),
+    ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+        let mut prepared = self.setup.prepare(energy)?;
+        let stencil = &self.setup.stencil;
+        let coef = &prepared.coef;
+        let n = stencil.len();
+        let input = energy.input();
+        let h = self.setup.spacing;
+        let half = self.params.clamp.map(|eps| (1.0 - eps) * 0.5 * energy.surface().spacing());
+
+        let t0 = Instant::now();
+        let zero = || vec![DVec3::ZERO; n];
+        // u: displacement from the input; r = -grad E / 2 = b - H u.
+        let (mut u, mut r, mut z, mut q, mut tmp, mut trial) =
+            (zero(), zero(), zero(), zero(), zero(), zero());
+        let mut rp = zero();
+        stencil.apply(coef, input, &mut r, &mut tmp, false);
+        r.par_iter_mut().for_each(|x| *x = -*x);
+        let rhs = r.clone();
+        let r0 = norm(&r);
+        let alpha_min = energy.min_alpha();
+        let tol = self.params.tolerance * h;
+        let mut e = energy.terms(input).total;
+        let mut applications = 1;
+        let mut residuals = Vec::new();
+        let mut estimate = f64::INFINITY;
+        let mut correction = None;
+        let mut iterations = 0;
+        loop {
+            // Projected residual: zero the coordinates held on their box by the gradient.
+            rp.copy_from_slice(&r);
+            if let Some(w) = half {
+                project_residual(&u, w, &mut rp);
+            }
+            let rp_norm = norm(&rp);
+            residuals.push(rp_norm);
+            if let Some(c) = correction {
+                estimate = 2.0 * tail_estimate(c, &residuals[residuals.len().saturating_sub(6)..]);
+                progress(&Progress {
+                    iteration: iterations,
+                    energy: e,
+                    gradient_norm: 2.0 * rp_norm,
+                    relative_gradient: if r0 > 0.0 { rp_norm / r0 } else { 0.0 },
+                    error_bound: rp_norm / alpha_min / h,
+                    error_estimate: estimate / h,
+                });
+            }
+            let done = rp_norm == 0.0 || (half.is_none() && rp_norm <= alpha_min * tol) || estimate <= tol;
+            if done || iterations >= self.params.max_iterations {
+                break;
+            }
+            prepared.pre.apply(stencil, coef, &rp, &mut z);
+            if let Some(w) = half {
+                freeze(&u, &r, w, &mut z);
+            }
+            let rd = dot(&r, &z);
+            stencil.apply(coef, &z, &mut q, &mut tmp, true);
+            applications += 1;
+            let dq = dot(&z, &q);
+            if !(rd > 0.0 && dq > 0.0) {
+                break; // converged to rounding
+            }
+            let mut step = rd / dq;
+            match half {
+                None => {
+                    u.par_chunks_mut(CHUNK).zip(z.par_chunks(CHUNK)).for_each(|(u, z)| {
+                        u.iter_mut().zip(z).for_each(|(u, z)| *u += step * *z);
+                    });
+                    r.par_chunks_mut(CHUNK).zip(q.par_chunks(CHUNK)).for_each(|(r, q)| {
+                        r.iter_mut().zip(q).for_each(|(r, q)| *r -= step * *q);
+                    });
+                    e -= step * rd;
+                    correction = Some(step * z.par_iter().map(|v| v.length()).reduce(|| 0.0, f64::max));
+                }
+                Some(w) => {
+                    // Project, and halve the step until the energy does not increase:
+                    // E(u + s) - E(u) = -2 r.s + s.H s.
+                    let mut accepted = false;
+                    let mut de = 0.0;
+                    for _ in 0..40 {
+                        trial
+                            .par_chunks_mut(CHUNK)
+                            .zip(u.par_chunks(CHUNK))
+                            .zip(z.par_chunks(CHUNK))
+                            .for_each(|((s, u), z)| {
+                                for i in 0..s.len() {
+                                    s[i] = (u[i] + step * z[i]).clamp(-w, w) - u[i];
+                                }
+                            });
+                        stencil.apply(coef, &trial, &mut q, &mut tmp, true);
+                        applications += 1;
+                        de = -2.0 * dot(&r, &trial) + dot(&trial, &q);
+                        if de <= 0.0 {
+                            accepted = true;
+                            break;
+                        }
+                        step *= 0.5;
+                    }
+                    if !accepted {
+                        break;
+                    }
+                    e += de;
+                    u.par_chunks_mut(CHUNK).zip(trial.par_chunks(CHUNK)).for_each(|(u, s)| {
+                        for i in 0..u.len() {
+                            u[i] = (u[i] + s[i]).clamp(-w, w);
+                        }
+                    });
+                    r.par_chunks_mut(CHUNK).zip(q.par_chunks(CHUNK)).for_each(|(r, q)| {
+                        r.iter_mut().zip(q).for_each(|(r, q)| *r -= *q);
+                    });
+                    correction = Some(trial.par_iter().map(|v| v.length()).reduce(|| 0.0, f64::max));
+                }
+            }
+            iterations += 1;
+            if iterations % 50 == 0 {
+                // Refresh the residual: the updates drift from b - H u.
+                stencil.residual(coef, &u, &rhs, &mut r, &mut tmp);
+                applications += 1;
+            }
+        }
+        // The certificate, on the true residual.
+        stencil.residual(coef, &u, &rhs, &mut r, &mut tmp);
+        applications += 1;
+        rp.copy_from_slice(&r);
+        let clamped = half.map(|w| {
+            project_residual(&u, w, &mut rp);
+            u.iter().filter(|d| (d.abs() - w).max_element() >= -1e-12 * w.max_element()).count()
+        });
+        let rp_norm_true = norm(&rp);
+        let x: Vec<DVec3> = input.par_iter().zip(&u).map(|(p, u)| *p + *u).collect();
+        let solve_seconds = t0.elapsed().as_secs_f64();
+        let estimate = if r0 > 0.0 { estimate / h } else { 0.0 };
+        let bound = (half.is_none()).then(|| rp_norm_true / alpha_min / h);
+        let converged =
+            estimate <= self.params.tolerance || bound.is_some_and(|b| b <= self.params.tolerance);
+        let traffic = self.setup.traffic_model(&prepared, 1 + usize::from(half.is_some()), 14);
+        let memory = self.setup.memory_bytes(&prepared) + 9 * 24 * n;
+        Ok((
+            x,
+            SolveInfo {
+                solver: "gd",
+                iterations,
+                relative_gradient: if r0 > 0.0 { rp_norm_true / r0 } else { 0.0 },
+                factor_nnz: None,
+                pattern_seconds: self.setup.structure_seconds,
+                symbolic_seconds: 0.0,
+                assemble_seconds: prepared.assemble_seconds,
+                factor_seconds: prepared.factor_seconds,
+                solve_seconds,
+                error_bound: bound,
+                error_estimate: Some(estimate),
+                converged,
+                preconditioner: Some(self.params.preconditioner.name()),
+                operator_applications: applications,
+                clamped_vertices: clamped,
+                memory_bytes: memory,
+                bytes_per_iteration: Some(traffic),
+            },
+        ))
+    }
+}
+
+/// Whether coordinate `u` is on the bound `+-w` towards which `r` (the descent direction
+/// of the unpreconditioned gradient) pushes.
+#[inline]
+fn held(u: f64, r: f64, w: f64) -> bool {
+    let eps = 1e-12 * w;
+    (u >= w - eps && r > 0.0) || (u <= -w + eps && r < 0.0)
+}
+
+/// Zeroes the residual's coordinates held on their bound.
+fn project_residual(u: &[DVec3], w: DVec3, r: &mut [DVec3]) {
+    r.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).for_each(|(r, u)| {
+        for i in 0..r.len() {
+            for a in 0..3 {
+                if held(u[i][a], r[i][a], w[a]) {
+                    r[i][a] = 0.0;
+                }
+            }
+        }
+    });
+}
+
+/// Zeroes the direction's coordinates held on their bound (by the gradient `r`), so that
+/// it stays a descent direction: `r . d = rp^T M^-1 rp > 0`.
+fn freeze(u: &[DVec3], r: &[DVec3], w: DVec3, d: &mut [DVec3]) {
+    d.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).zip(r.par_chunks(CHUNK)).for_each(|((d, u), r)| {
+        for i in 0..d.len() {
+            for a in 0..3 {
+                if held(u[i][a], r[i][a], w[a]) {
+                    d[i][a] = 0.0;
+                }
+            }
+        }
+    });
+}

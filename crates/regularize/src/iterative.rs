@@ -1,0 +1,206 @@
+//! What the iterative solvers share: the matrix-free operator's connectivity, the
+//! preconditioners, and the memory-traffic model.
+
+use std::time::Instant;
+
+use glam::DVec3;
+use rayon::prelude::*;
+use voxreg_digisurf::DigitalSurface;
+
+use crate::multigrid::{Hierarchy, MultigridParams, Vcycle};
+use crate::stencil::{Coefficients, Stencil, CHUNK};
+use crate::vecops::{sym_inverse, sym_mul};
+use crate::{Energy, FairnessMask, RegularizeError};
+
+/// The preconditioner of the iterative solvers ([`crate::CgSolver`],
+/// [`crate::DescentSolver`]).
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
+pub enum Preconditioner {
+    /// None: plain conjugate gradient or steepest descent.
+    Identity,
+    /// The scalar diagonal of `H`.
+    Jacobi,
+    /// The 3x3 diagonal blocks of `H` (couples the coordinates through the normals).
+    BlockJacobi,
+    /// One symmetric V-cycle of aggregation multigrid over the voxel hierarchy (see
+    /// [`MultigridParams`]): several times fewer iterations than the others.
+    #[default]
+    Multigrid,
+}
+
+impl Preconditioner {
+    /// A short name for reports: `"identity"`, `"jacobi"`, `"block-jacobi"`, `"multigrid"`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Preconditioner::Identity => "identity",
+            Preconditioner::Jacobi => "jacobi",
+            Preconditioner::BlockJacobi => "block-jacobi",
+            Preconditioner::Multigrid => "multigrid",
+        }
+    }
+}
+
+/// The structure an iterative solver keeps across solves on one surface.
+#[derive(Debug)]
+pub(crate) struct Setup {
+    pub(crate) stencil: Stencil,
+    mask: Option<FairnessMask>,
+    hierarchy: Option<Hierarchy>,
+    preconditioner: Preconditioner,
+    multigrid: MultigridParams,
+    /// The smallest voxel spacing: the unit of tolerances.
+    pub(crate) spacing: f64,
+    /// Seconds spent on structure (connectivity, hierarchy) so far.
+    pub(crate) structure_seconds: f64,
+}
+
+/// One energy's numbers and preconditioner, ready to iterate.
+pub(crate) struct Prepared<'a> {
+    pub(crate) coef: Coefficients<'a>,
+    pub(crate) pre: Pre,
+    pub(crate) assemble_seconds: f64,
+    pub(crate) factor_seconds: f64,
+}
+
+impl Setup {
+    pub(crate) fn new(
+        surface: &DigitalSurface,
+        preconditioner: Preconditioner,
+        multigrid: MultigridParams,
+    ) -> Result<Self, RegularizeError> {
+        let t = Instant::now();
+        let stencil = Stencil::new(surface, None)?;
+        let hierarchy = match preconditioner {
+            Preconditioner::Multigrid => Some(Hierarchy::new(&stencil, &multigrid)),
+            _ => None,
+        };
+        Ok(Setup {
+            stencil,
+            mask: None,
+            hierarchy,
+            preconditioner,
+            multigrid,
+            spacing: surface.spacing().min_element(),
+            structure_seconds: t.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Number of multigrid levels (1 without multigrid).
+    pub(crate) fn levels(&self) -> usize {
+        self.hierarchy.as_ref().map_or(1, Hierarchy::levels)
+    }
+
+    /// Checks that `energy` is on this surface, rebuilds the connectivity if its fairness
+    /// mask changed, and computes its coefficients and preconditioner.
+    pub(crate) fn prepare<'a>(&mut self, energy: &Energy<'a>) -> Result<Prepared<'a>, RegularizeError> {
+        let surface = energy.surface();
+        let n = self.stencil.len();
+        if energy.input().len() != n || surface.num_vertices() != n {
+            return Err(RegularizeError::SizeMismatch("the energy is not on this solver's surface".into()));
+        }
+        let mask = energy.weights().and_then(|w| w.fairness.as_ref());
+        if mask != self.mask.as_ref() {
+            let t = Instant::now();
+            self.stencil = Stencil::new(surface, mask)?;
+            self.mask = mask.cloned();
+            self.structure_seconds += t.elapsed().as_secs_f64();
+        }
+        let t = Instant::now();
+        let coef = self.stencil.coefficients(energy);
+        let pre = match self.preconditioner {
+            Preconditioner::Identity => Pre::Identity,
+            Preconditioner::Jacobi => Pre::Jacobi(
+                self.stencil
+                    .diagonal(&coef)
+                    .iter()
+                    .map(|d| DVec3::new(1.0 / d[0], 1.0 / d[1], 1.0 / d[2]))
+                    .collect(),
+            ),
+            Preconditioner::BlockJacobi => {
+                Pre::Block(self.stencil.diagonal(&coef).iter().map(sym_inverse).collect())
+            }
+            Preconditioner::Multigrid => {
+                let h = self.hierarchy.get_or_insert_with(|| Hierarchy::new(&self.stencil, &self.multigrid));
+                Pre::Multigrid(Box::new(h.numeric(&self.stencil, &coef)?))
+            }
+        };
+        let factor_seconds = match &pre {
+            Pre::Multigrid(v) => v.factor_seconds,
+            _ => 0.0,
+        };
+        Ok(Prepared {
+            coef,
+            pre,
+            assemble_seconds: t.elapsed().as_secs_f64() - factor_seconds,
+            factor_seconds,
+        })
+    }
+
+    /// Bytes of the connectivity and per-solve numbers (normals borrowed, not counted).
+    pub(crate) fn memory_bytes(&self, prepared: &Prepared<'_>) -> usize {
+        self.stencil.bytes() + 8 * self.stencil.len() + prepared.pre.memory_bytes()
+    }
+
+    /// A model of the bytes one iteration moves between memory and the cores: `products`
+    /// products by `H` (connectivity, normals and 5 vectors), `streams` other vector
+    /// passes over `n` 3-vectors, and the preconditioner.
+    pub(crate) fn traffic_model(&self, prepared: &Prepared<'_>, products: usize, streams: usize) -> usize {
+        let n = self.stencil.len();
+        let product = self.stencil.bytes() + prepared.coef.normals.len() * 24 + 8 * n + 5 * 24 * n;
+        products * product + streams * 24 * n + prepared.pre.traffic(product, n)
+    }
+}
+
+/// A preconditioner with its numbers: `z = M^-1 r`.
+pub(crate) enum Pre {
+    Identity,
+    Jacobi(Vec<DVec3>),
+    Block(Vec<[f64; 6]>),
+    Multigrid(Box<Vcycle>),
+}
+
+impl Pre {
+    pub(crate) fn apply(&mut self, stencil: &Stencil, coef: &Coefficients<'_>, r: &[DVec3], z: &mut [DVec3]) {
+        match self {
+            Pre::Identity => z.copy_from_slice(r),
+            Pre::Jacobi(d) => {
+                z.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(d.par_chunks(CHUNK)).for_each(
+                    |((z, r), d)| {
+                        for i in 0..z.len() {
+                            z[i] = r[i] * d[i];
+                        }
+                    },
+                )
+            }
+            Pre::Block(d) => {
+                z.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(d.par_chunks(CHUNK)).for_each(
+                    |((z, r), d)| {
+                        for i in 0..z.len() {
+                            z[i] = sym_mul(&d[i], r[i]);
+                        }
+                    },
+                )
+            }
+            Pre::Multigrid(v) => v.apply(stencil, coef, r, z),
+        }
+    }
+
+    fn memory_bytes(&self) -> usize {
+        match self {
+            Pre::Identity => 0,
+            Pre::Jacobi(d) => 24 * d.len(),
+            Pre::Block(d) => 48 * d.len(),
+            Pre::Multigrid(v) => v.memory_bytes(),
+        }
+    }
+
+    /// Bytes moved by one application (`product`: bytes of one fine product).
+    fn traffic(&self, product: usize, n: usize) -> usize {
+        match self {
+            Pre::Identity => 48 * n,
+            Pre::Jacobi(_) => 72 * n,
+            Pre::Block(_) => 96 * n,
+            Pre::Multigrid(v) => v.traffic(product, n),
+        }
+    }
+}
