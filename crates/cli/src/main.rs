@@ -11,7 +11,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
 use voxreg_io::{
-    read_mesh, read_raw, read_voxels, write_mesh, DataType, Endian, Palette, QuadMesh, RawSpec, Voxels,
+    read_mesh, read_raw, read_voxels, write_mesh, write_volume, DataType, Endian, Palette, QuadMesh, RawSpec,
+    Voxels,
 };
 use voxreg_normals::{
     multigrid_radius, AmbrosioTortorelli, AtParams, ConvolvedTrivial, IntegralInvariant, NormalEstimator,
@@ -21,6 +22,7 @@ use voxreg_regularize::{
     self_intersections, Energy, EnergyParams, EnergyTerms, FairnessMask, Progress, SolveInfo, Solver,
     SolverChoice, SolverParams, Weights,
 };
+use voxreg_upscale::{upscale, UpscaleParams};
 
 /// Regularize voxel data (digital surfaces, multi-label interfaces) into smooth,
 /// faithful quad meshes that keep one quad per voxel face.
@@ -37,9 +39,25 @@ enum Command {
     Regularize(RegularizeArgs),
     /// Describe INPUT: dimensions, labels, and its digital surface's cells.
     Info(InputArgs),
+    /// Regularize INPUT's surface, then voxelize it at K times the resolution (papers,
+    /// Fig. 13): a finer voxel model whose staircase follows the smooth surface.
+    Upscale(UpscaleArgs),
     /// Count the self-intersections of MESH (.obj or .ply, quads split into two triangles;
     /// faces sharing a vertex do not count); exits with an error if there are any.
     Check(CheckArgs),
+}
+
+#[derive(Args, Debug)]
+#[command(mut_arg("output", |a| a.help(
+    "Output volume: .vox (MagicaVoxel; split into models of at most 256 voxels per axis, \
+     placed by a scene graph) or .vol (DGtal)"
+)))]
+struct UpscaleArgs {
+    #[command(flatten)]
+    regularize: RegularizeArgs,
+    /// Refinement factor per axis (2, 4 or 8 are typical; 1 to 16).
+    #[arg(short = 'k', long, value_name = "K", default_value_t = 2)]
+    factor: usize,
 }
 
 #[derive(Args, Debug)]
@@ -120,9 +138,14 @@ struct RegularizeArgs {
     solver: SolverKind,
     /// Keep every vertex in the cube of edge (1 - EPS) voxel around its input position,
     /// which rules out self-intersections (paper, Proposition 2); EPS in voxels, 0.01 when
-    /// omitted. Implies --solver gd.
+    /// omitted. Implies --solver gd. On by default for .vox inputs (voxel art must come
+    /// out clean) unless --no-clamp or --solver direct|cg.
     #[arg(long, value_name = "EPS", num_args = 0..=1, default_missing_value = "0.01")]
     clamp: Option<f64>,
+    /// Do not clamp, even for .vox inputs (faster; the result may self-intersect where
+    /// thin parts collapse: check it with `voxreg check`).
+    #[arg(long, conflicts_with = "clamp")]
+    no_clamp: bool,
     /// Iterative solvers: stop when every vertex is estimated within this many voxels of
     /// the exact minimizer.
     #[arg(long, value_name = "VOXELS", default_value_t = 1e-3)]
@@ -215,7 +238,8 @@ fn main() -> std::process::ExitCode {
     let cli = Cli::parse();
     let result = match cli.command {
         Command::Info(args) => info(&args),
-        Command::Regularize(args) => regularize(&args),
+        Command::Regularize(args) => regularize(&args, Product::Mesh),
+        Command::Upscale(args) => regularize(&args.regularize, Product::Volume { factor: args.factor }),
         Command::Check(args) => check(&args),
     };
     match result {
@@ -235,13 +259,18 @@ fn main() -> std::process::ExitCode {
     }
 }
 
+/// Whether `path` is a MagicaVoxel file (voxel art: one solid region and clamping by
+/// default).
+fn is_vox(path: &Path) -> bool {
+    path.extension().is_some_and(|e| e.eq_ignore_ascii_case("vox"))
+}
+
 /// Reads the input volume (see [`read_input`]); returns it with its region map and its
 /// palette (colours and materials per label), if the format has one.
 fn load(args: &InputArgs) -> Result<(LabelVolume, RegionMap, Option<Palette>)> {
     let (volume, palette) = read_input(args)?;
-    let is_vox = args.input.extension().is_some_and(|e| e.eq_ignore_ascii_case("vox"));
     let map = match args.regions.as_deref() {
-        None if is_vox => RegionMap::single_solid(),
+        None if is_vox(&args.input) => RegionMap::single_solid(),
         None | Some("label") => RegionMap::per_label(),
         Some("solid") => RegionMap::single_solid(),
         Some(spec) => RegionMap::parse(spec).with_context(|| format!("--regions '{spec}'"))?,
@@ -392,11 +421,31 @@ fn print_stdout(text: &str) -> Result<()> {
     }
 }
 
-fn check_output(path: &Path) -> Result<()> {
+/// What `regularize` makes of the regularized surface.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+enum Product {
+    /// The quad mesh (`voxreg regularize`).
+    Mesh,
+    /// A labeled volume `factor` times finer (`voxreg upscale`).
+    Volume { factor: usize },
+}
+
+fn check_output(path: &Path, product: Product) -> Result<()> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
-    match ext.as_deref() {
-        Some("obj" | "ply" | "glb" | "gltf") => Ok(()),
-        _ => bail!("{}: unsupported output format (expected .obj, .ply, .glb or .gltf)", path.display()),
+    match (product, ext.as_deref()) {
+        (Product::Mesh, Some("obj" | "ply" | "glb" | "gltf")) => Ok(()),
+        (Product::Mesh, _) => {
+            bail!("{}: unsupported output format (expected .obj, .ply, .glb or .gltf)", path.display())
+        }
+        (Product::Volume { factor }, Some("vox" | "vol")) => {
+            if !(1..=16).contains(&factor) {
+                bail!("--factor {factor}: must be in 1..=16");
+            }
+            Ok(())
+        }
+        (Product::Volume { .. }, _) => {
+            bail!("{}: unsupported output format (expected .vox or .vol)", path.display())
+        }
     }
 }
 
@@ -404,8 +453,8 @@ fn terms_json(t: &EnergyTerms) -> serde_json::Value {
     json!({ "attachment": t.attachment, "alignment": t.alignment, "fairness": t.fairness, "total": t.total })
 }
 
-fn regularize(args: &RegularizeArgs) -> Result<()> {
-    check_output(&args.output)?;
+fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
+    check_output(&args.output, product)?;
     let params = EnergyParams { alpha: args.alpha, beta: args.beta, gamma: args.gamma };
     params.validate()?;
     if let Some(r) = args.radius {
@@ -439,12 +488,24 @@ fn regularize(args: &RegularizeArgs) -> Result<()> {
     stages.timings.retain(|(k, _)| !matches!(*k, "analyse" | "factor"));
     stages.timings.push(("assemble", info.pattern_seconds + info.assemble_seconds));
     stages.timings.push(("solve", info.symbolic_seconds + info.factor_seconds + info.solve_seconds));
-    let mut mesh = QuadMesh::from_surface(&surface, &regularized);
-    if let Some(palette) = &palette {
-        // Colour transfer: each quad takes the colour and material of its solid voxel.
-        mesh.assign_materials(palette);
+    match product {
+        Product::Mesh => {
+            let mut mesh = QuadMesh::from_surface(&surface, &regularized);
+            if let Some(palette) = &palette {
+                // Colour transfer: each quad takes the colour and material of its solid voxel.
+                mesh.assign_materials(palette);
+            }
+            stages.run("write", "write mesh", || Ok(write_mesh(&args.output, &mesh)?))?;
+        }
+        Product::Volume { factor } => {
+            let fine = stages.run("upscale", &format!("upscale x{factor}"), || {
+                upscale(&surface, &regularized, &volume, &UpscaleParams { factor })
+                    .with_context(|| format!("{}: cannot upscale", input.display()))
+            })?;
+            stages
+                .run("write", "write volume", || Ok(write_volume(&args.output, &fine, palette.as_ref())?))?;
+        }
     }
-    stages.run("write", "write mesh", || Ok(write_mesh(&args.output, &mesh)?))?;
 
     let before = energy.terms(&positions);
     let after = energy.terms(&regularized);
@@ -503,7 +564,7 @@ fn regularize(args: &RegularizeArgs) -> Result<()> {
                 "tolerance": (info.solver != "direct").then_some(args.tolerance),
                 "preconditioner": info.preconditioner,
                 "operator_applications": info.operator_applications,
-                "clamp": args.clamp,
+                "clamp": solver_params.descent.clamp.filter(|_| info.solver == "gd"),
                 "clamped_vertices": info.clamped_vertices,
                 "memory_bytes": info.memory_bytes,
                 "texture_aware": args.texture_aware,
@@ -519,7 +580,12 @@ fn solver_params(args: &RegularizeArgs) -> Result<SolverParams> {
     if !(args.tolerance.is_finite() && args.tolerance > 0.0) {
         bail!("--tolerance must be finite and positive, got {}", args.tolerance);
     }
-    let choice = match (args.solver, args.clamp) {
+    let clamp = match (args.clamp, args.no_clamp, args.solver) {
+        (Some(eps), _, _) => Some(eps),
+        (None, false, SolverKind::Auto | SolverKind::Gd) if is_vox(&args.input.input) => Some(0.01),
+        _ => None,
+    };
+    let choice = match (args.solver, clamp) {
         (SolverKind::Direct | SolverKind::Cg, Some(_)) => {
             bail!("--clamp needs the gd solver (--solver gd or auto)")
         }
@@ -534,7 +600,7 @@ fn solver_params(args: &RegularizeArgs) -> Result<SolverParams> {
     let mut params = SolverParams { choice, ..Default::default() };
     params.cg.tolerance = args.tolerance;
     params.descent.tolerance = args.tolerance;
-    params.descent.clamp = args.clamp;
+    params.descent.clamp = clamp;
     Ok(params)
 }
 

@@ -35,6 +35,16 @@ pub struct DescentParams {
     pub preconditioner: Preconditioner,
     /// Multigrid settings. Default: [`MultigridParams::default`].
     pub multigrid: MultigridParams,
+    /// When clamping: accelerate the descent with conjugate directions on the coordinates
+    /// strictly inside their boxes (a preconditioned MPRGP: CG on the current face,
+    /// projected gradient steps to add bounds, proportioning steps to release them). Tens
+    /// of times fewer iterations than the projected descent, with the same guarantees
+    /// (feasible iterates, monotone energy). It starts from the unconstrained minimizer
+    /// (found by the same iteration without bounds, i.e. preconditioned CG) projected into
+    /// the boxes when that lowers the energy, else from the input; [`SolveInfo::iterations`]
+    /// counts the bounded iterations only, [`SolveInfo::operator_applications`] all.
+    /// `false`: plain projected descent. Default: `true`.
+    pub conjugate: bool,
 }
 
 impl Default for DescentParams {
@@ -45,6 +55,7 @@ impl Default for DescentParams {
             clamp: None,
             preconditioner: Preconditioner::Multigrid,
             multigrid: MultigridParams::default(),
+            conjugate: true,
         }
     }
 }
@@ -122,7 +133,58 @@ impl DescentSolver {
         let mut estimate = f64::INFINITY;
         let mut correction = None;
         let mut iterations = 0;
-        loop {
+        if let (Some(w), true) = (half, self.params.conjugate) {
+            // Warm start: the unconstrained minimizer (the same iteration without bounds,
+            // i.e. PCG) projected into the boxes, so that the bounded iteration starts
+            // with nearly the right set of clamped coordinates.
+            let free = crate::boxqp::minimize_in_boxes(
+                stencil,
+                &mut prepared,
+                DVec3::splat(f64::INFINITY),
+                &mut u,
+                &mut r,
+                &rhs,
+                tol,
+                self.params.max_iterations,
+                e,
+                r0,
+                alpha_min,
+                h,
+                &mut |_| {},
+            );
+            applications += free.applications;
+            u.par_iter_mut().for_each(|d| *d = d.clamp(-w, w));
+            let start = energy.terms(&input.iter().zip(&u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
+            if start <= e {
+                e = start;
+            } else {
+                // The projection can cost more than it gained: start from the input.
+                u.iter_mut().for_each(|d| *d = DVec3::ZERO);
+            }
+            stencil.residual(&prepared.coef, &u, &rhs, &mut r, &mut tmp);
+            applications += 1;
+            let stats = crate::boxqp::minimize_in_boxes(
+                stencil,
+                &mut prepared,
+                w,
+                &mut u,
+                &mut r,
+                &rhs,
+                tol,
+                self.params.max_iterations,
+                e,
+                r0,
+                alpha_min,
+                h,
+                progress,
+            );
+            iterations = stats.iterations;
+            applications += stats.applications;
+            estimate = stats.estimate;
+            e += stats.energy_change;
+        }
+        let coef = &prepared.coef;
+        while !(half.is_some() && self.params.conjugate) {
             // Projected residual: zero the coordinates held on their box by the gradient.
             rp.copy_from_slice(&r);
             if let Some(w) = half {

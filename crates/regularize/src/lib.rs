@@ -66,6 +66,7 @@
 //! None.
 
 mod assemble;
+mod boxqp;
 mod cg;
 mod descent;
 mod direct;

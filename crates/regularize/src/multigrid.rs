@@ -146,9 +146,7 @@ impl Hierarchy {
     ) -> Result<Vcycle, RegularizeError> {
         let clock = Instant::now();
         let lap = |what: &str| {
-            if std::env::var("VOXREG_MG_TIMING").is_ok() {
-                eprintln!("  mg {what}: {:.1} ms", clock.elapsed().as_secs_f64() * 1e3);
-            }
+            tracing::trace!(stage = what, ms = clock.elapsed().as_secs_f64() * 1e3, "multigrid setup");
         };
         let fine_smoother = fine_majorant(stencil, coef);
         lap("fine majorant");

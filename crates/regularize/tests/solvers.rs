@@ -450,3 +450,48 @@ fn regression_small_surface_plateau() {
     assert!(max_distance(&x, &y) < 1e-4, "{info:?}");
     assert!(info.iterations <= 3, "{info:?}");
 }
+
+/// The clamped minimizer satisfies the optimality (KKT) conditions of the box-constrained
+/// problem: zero gradient on the coordinates inside their box, and a gradient pushing
+/// outwards on those held on a bound; the conjugate (MPRGP) and the plain projected
+/// descent reach the same energy.
+#[test]
+fn clamped_minimizer_satisfies_the_optimality_conditions() {
+    let mut rng = Lcg(15);
+    for (name, volume) in thin_structures() {
+        let s = DigitalSurface::from_volume(&volume).unwrap();
+        let input = s.positions();
+        let normals = random_normals(&s, &mut rng);
+        let energy =
+            Energy::new(&s, &normals, &input, EnergyParams { alpha: 1e-3, beta: 1.0, gamma: 0.1 }).unwrap();
+        let eps = 0.01;
+        let half = (1.0 - eps) * 0.5;
+        let tight =
+            DescentParams { clamp: Some(eps), tolerance: 1e-7, max_iterations: 20_000, ..Default::default() };
+        let (x, info) = DescentSolver::new(&s, tight).unwrap().solve(&energy).unwrap();
+        assert!(info.converged, "{name}: {info:?}");
+        let g = energy.gradient(&x);
+        let scale = energy.gradient(&input).iter().map(|v| v.abs().max_element()).fold(0.0, f64::max);
+        let mut held = 0;
+        for (v, ((p, q), g)) in x.iter().zip(&input).zip(&g).enumerate() {
+            for a in 0..3 {
+                let d = p[a] - q[a];
+                let ga = g[a] / scale;
+                if d >= half - 1e-9 {
+                    held += 1;
+                    assert!(ga <= 1e-5, "{name}: vertex {v} axis {a} on its upper bound with gradient {ga}");
+                } else if d <= -half + 1e-9 {
+                    held += 1;
+                    assert!(ga >= -1e-5, "{name}: vertex {v} axis {a} on its lower bound with gradient {ga}");
+                } else {
+                    assert!(ga.abs() <= 1e-5, "{name}: vertex {v} axis {a} inside with gradient {ga}");
+                }
+            }
+        }
+        assert!(held > 0, "{name}: the boxes should bind somewhere");
+        let plain = DescentParams { conjugate: false, ..tight };
+        let (y, _) = DescentSolver::new(&s, plain).unwrap().solve(&energy).unwrap();
+        let (ex, ey) = (energy.terms(&x).total, energy.terms(&y).total);
+        assert!(ex <= ey * (1.0 + 1e-6), "{name}: conjugate {ex} vs projected descent {ey}");
+    }
+}

@@ -1,0 +1,173 @@
+//! Voxel art end to end (issue 5): every bundled MagicaVoxel model, with default options,
+//! gives a valid, coloured, self-intersection-free mesh; `voxreg upscale` doubles a model
+//! into a .vox that dot_vox reads back.
+
+use std::path::{Path, PathBuf};
+use std::process::{Command, Output};
+
+use glam::DVec3;
+use voxreg_digisurf::{DigitalSurface, RegionMap};
+use voxreg_io::{read_mesh, read_voxels, Voxels};
+use voxreg_regularize::self_intersections;
+
+/// The bundled .vox models (data/README.md gives their sources and licences).
+const MODELS: [&str; 6] = [
+    "chr_army1.vox",
+    "veh_fire.vox",
+    "axes.vox",
+    "extended.vox",
+    "metal-material.vox",
+    "placeholder-with-materials.vox",
+];
+
+fn data(name: &str) -> PathBuf {
+    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data").join(name)
+}
+
+fn voxreg(args: &[&str]) -> Output {
+    Command::new(env!("CARGO_BIN_EXE_voxreg")).args(args).output().expect("voxreg runs")
+}
+
+fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// The digital surface the CLI builds for a .vox model by default (one solid region).
+fn surface_of(name: &str) -> DigitalSurface {
+    let loaded = read_voxels(&data(name)).unwrap();
+    let Voxels::Labels(volume) = loaded.voxels else { panic!("{name}: .vox models are labels") };
+    DigitalSurface::new(&volume, &RegionMap::single_solid()).unwrap()
+}
+
+/// Runs the Khronos validator on `files`; `None` when node is missing outside CI.
+fn validate_gltf(files: &[PathBuf]) -> Option<String> {
+    let tool = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/gltf-validate");
+    let have_node = Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
+    if !have_node {
+        assert!(std::env::var_os("CI").is_none(), "CI needs node for the glTF validator");
+        return None;
+    }
+    if !tool.join("node_modules/gltf-validator").exists() {
+        let ok = Command::new("npm")
+            .args(["ci", "--silent", "--prefix"])
+            .arg(&tool)
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "npm ci in tools/gltf-validate failed");
+    }
+    let out = Command::new("node").arg(tool.join("validate.mjs")).args(files).output().unwrap();
+    let report = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "validator: {report}{}", String::from_utf8_lossy(&out.stderr));
+    Some(report)
+}
+
+#[test]
+fn every_bundled_vox_model_gives_a_clean_coloured_mesh_by_default() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut glbs = Vec::new();
+    for name in MODELS {
+        let surface = surface_of(name);
+        // PLY: positions, faces and the labels on both sides of each face.
+        let ply = dir.path().join(format!("{name}.ply"));
+        let out = voxreg(&["regularize", data(name).to_str().unwrap(), "-o", ply.to_str().unwrap(), "-q"]);
+        assert!(out.status.success(), "{name}: {}", stderr(&out));
+        let mesh = read_mesh(&ply).unwrap();
+        assert_eq!(mesh.quads.len(), surface.num_surfels(), "{name}");
+        // Colours per quad: each face carries the palette index of its solid voxel.
+        for (s, labels) in surface.surfels().iter().zip(&mesh.face_labels) {
+            let solid = if s.labels[0] != 0 { s.labels[0] } else { s.labels[1] };
+            assert!(labels.contains(&solid) && labels.contains(&0), "{name}: {labels:?} vs {:?}", s.labels);
+        }
+        // Clean by default: clamped into the cubes of Proposition 2, so no intersections.
+        let half = 0.5 * (1.0 - 0.01) + 1e-4;
+        for (p, q) in surface.positions().iter().zip(&mesh.positions) {
+            assert!((*p - *q).abs().max_element() <= half, "{name}: {p} moved to {q}");
+        }
+        let pairs = self_intersections(&mesh.positions, &mesh.quads);
+        assert!(pairs.is_empty(), "{name}: {} self-intersecting face pairs", pairs.len());
+        assert!(mesh.positions.iter().zip(surface.positions()).any(|(q, p)| q.distance(p) > 0.1));
+
+        // glTF: one material per colour of the model, every quad as two triangles.
+        let glb = dir.path().join(format!("{name}.glb"));
+        let out = voxreg(&["regularize", data(name).to_str().unwrap(), "-o", glb.to_str().unwrap(), "-q"]);
+        assert!(out.status.success(), "{name}: {}", stderr(&out));
+        let bytes = std::fs::read(&glb).unwrap();
+        assert_eq!(&bytes[..4], b"glTF");
+        let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+        let json: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+        let colours: std::collections::BTreeSet<u32> =
+            mesh.face_labels.iter().map(|l| l[0].max(l[1])).collect();
+        assert_eq!(json["materials"].as_array().unwrap().len(), colours.len(), "{name}");
+        let accessors = json["accessors"].as_array().unwrap();
+        let triangles: u64 = json["meshes"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .flat_map(|m| m["primitives"].as_array().unwrap())
+            .map(|p| accessors[p["indices"].as_u64().unwrap() as usize]["count"].as_u64().unwrap() / 3)
+            .sum();
+        assert_eq!(triangles as usize, 2 * mesh.quads.len(), "{name}");
+        glbs.push(glb);
+    }
+    if let Some(report) = validate_gltf(&glbs) {
+        assert_eq!(report.lines().filter(|l| l.contains(": 0 errors")).count(), glbs.len(), "{report}");
+    }
+}
+
+#[test]
+fn no_clamp_is_faster_but_may_self_intersect() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("fire.ply");
+    let input = data("veh_fire.vox");
+    let out =
+        voxreg(&["regularize", input.to_str().unwrap(), "-o", ply.to_str().unwrap(), "-q", "--no-clamp"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let mesh = read_mesh(&ply).unwrap();
+    assert!(!self_intersections(&mesh.positions, &mesh.quads).is_empty());
+    let out = voxreg(&["check", ply.to_str().unwrap()]);
+    assert!(!out.status.success() && stderr(&out).contains("self-intersections"));
+    // --no-clamp and --clamp contradict each other.
+    let out = voxreg(&["regularize", input.to_str().unwrap(), "-o", "x.ply", "--no-clamp", "--clamp"]);
+    assert!(!out.status.success());
+}
+
+#[test]
+fn upscale_doubles_a_model_that_round_trips_through_dot_vox() {
+    let dir = tempfile::tempdir().unwrap();
+    let vox = dir.path().join("army2.vox");
+    let input = data("chr_army1.vox");
+    let out =
+        voxreg(&["upscale", input.to_str().unwrap(), "--factor", "2", "-o", vox.to_str().unwrap(), "-q"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+
+    let source = dot_vox::load(input.to_str().unwrap()).unwrap();
+    let fine = dot_vox::load(vox.to_str().unwrap()).unwrap();
+    let (s, f) = (&source.models[0], &fine.models[0]);
+    assert_eq!([f.size.x, f.size.y, f.size.z], [2 * s.size.x, 2 * s.size.y, 2 * s.size.z]);
+    // The fine model uses the source's colours only, with the same palette entries.
+    let used = |m: &dot_vox::Model| m.voxels.iter().map(|v| v.i).collect::<std::collections::BTreeSet<u8>>();
+    assert!(used(f).is_subset(&used(s)) && !used(f).is_empty());
+    for i in used(f) {
+        assert_eq!(fine.palette[i as usize], source.palette[i as usize], "colour {i}");
+    }
+    // About 8 times the voxels (the smooth surface gains and loses a little).
+    let ratio = f.voxels.len() as f64 / (8 * s.voxels.len()) as f64;
+    assert!((0.8..1.2).contains(&ratio), "fine/source volume ratio {ratio}");
+
+    // Through voxreg's reader too, at half the spacing... of the same physical size.
+    let out = voxreg(&["info", vox.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(String::from_utf8_lossy(&out.stdout).contains("dimensions: 16 x 14 x 24"));
+
+    // Bad requests are clear errors that write nothing.
+    let bad = dir.path().join("bad.vox");
+    for (args, message) in [(vec!["--factor", "0"], "--factor 0"), (vec!["--factor", "17"], "--factor 17")] {
+        let mut all = vec!["upscale", input.to_str().unwrap(), "-o", bad.to_str().unwrap()];
+        all.extend(args);
+        let out = voxreg(&all);
+        assert!(!out.status.success() && stderr(&out).contains(message), "{}", stderr(&out));
+        assert!(!bad.exists());
+    }
+    let out = voxreg(&["upscale", input.to_str().unwrap(), "-o", dir.path().join("x.obj").to_str().unwrap()]);
+    assert!(!out.status.success() && stderr(&out).contains("expected .vox or .vol"));
+}
