@@ -220,7 +220,7 @@ pub(crate) fn minimize_in_boxes(
             prepared.pre.apply(stencil, coef, &phi, &mut z);
             restrict_to_face(u, w, &mut z);
             let rz_new = dot(&phi, &z);
-            if !(rz_new > 0.0) {
+            if rz_new.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
                 break;
             }
             if restart {
@@ -236,7 +236,7 @@ pub(crate) fn minimize_in_boxes(
             stencil.apply(coef, &p, &mut q, &mut t, true);
             applications += 1;
             let pq = dot(&p, &q);
-            if !(pq > 0.0) {
+            if pq.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
                 break;
             }
             let rpd = dot(r, &p);
