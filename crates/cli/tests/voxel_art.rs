@@ -5,7 +5,6 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
-use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, RegionMap};
 use voxreg_io::{read_mesh, read_voxels, Voxels};
 use voxreg_regularize::self_intersections;
