@@ -148,9 +148,9 @@ fn multi_label_surfaces_are_refined_per_interface() {
 fn clamping_keeps_every_vertex_in_its_box() {
     let surface = two_balls();
     let normals: NormalField = IntegralInvariant { radius: Some(3.0) }.estimate(&surface).unwrap();
-    let mut params = PipelineParams::default();
-    params.solver = SolverParams { choice: SolverChoice::Gd, ..Default::default() };
-    params.solver.descent.clamp = Some(0.01);
+    let mut solver = SolverParams { choice: SolverChoice::Gd, ..Default::default() };
+    solver.descent.clamp = Some(0.01);
+    let params = PipelineParams { solver, ..Default::default() };
     let out = run_pipeline(&surface, &normals, None, &params, &mut |_| {}).unwrap();
     let input = surface.positions();
     assert_eq!(out.targets, input, "clamping keeps the targets (the boxes' centres) at the input");
