@@ -20,7 +20,7 @@ use voxreg_baselines::{
 };
 use voxreg_digisurf::DigitalSurface;
 use voxreg_normals::{AmbrosioTortorelli, IntegralInvariant, NormalEstimator, Trivial};
-use voxreg_regularize::{regularize, EnergyParams};
+use voxreg_regularize::{regularize, run_pipeline, EnergyParams, PipelineParams};
 use voxreg_testkit::{digitize, Goursat, Shape, Sphere, Torus};
 
 /// The test kit's shapes seen as the baselines' [`Implicit`].
@@ -330,6 +330,12 @@ fn run_case(case: &Case) -> Result<Vec<Row>> {
         })?;
         rows.push(measure(case, &format!("voxreg ({})", est.name()), &mesh, &digital, s));
     }
+    let (mesh, s) = timed(|| {
+        let normals = IntegralInvariant::default().estimate(&surface)?;
+        let out = run_pipeline(&surface, &normals, None, &PipelineParams::default(), &mut |_| {})?;
+        Ok(Mesh::from_surface(&surface, &out.positions))
+    })?;
+    rows.push(measure(case, "voxreg pipeline (ii, default)", &mesh, &digital, s));
     let (mc, s) = timed(|| Ok(marching_cubes_volume(&volume, |l| l == 1)))?;
     rows.push(measure(case, "marching cubes", &mc, &digital, s));
     let (lap, s) = timed(|| Ok(laplacian_smooth(&mc, &LaplacianParams::default())))?;

@@ -19,8 +19,8 @@ use voxreg_normals::{
     Trivial,
 };
 use voxreg_regularize::{
-    self_intersections, Energy, EnergyParams, EnergyTerms, FairnessMask, Progress, SolveInfo, Solver,
-    SolverChoice, SolverParams, Weights,
+    run_pipeline, self_intersections, Energy, EnergyParams, EnergyTerms, FairnessMask, PipelineOutput,
+    PipelineParams, Progress, SolverChoice, SolverParams, Weights,
 };
 use voxreg_upscale::{upscale, UpscaleParams};
 
@@ -116,8 +116,9 @@ struct RegularizeArgs {
     /// triangulated, one material per colour).
     #[arg(short, long, value_name = "OUTPUT")]
     output: PathBuf,
-    /// Attachment weight (must be > 0).
-    #[arg(long, default_value_t = EnergyParams::default().alpha)]
+    /// Attachment weight (must be > 0; the papers use 1e-3, which lets thin curved shapes
+    /// shrink).
+    #[arg(long, default_value_t = PipelineParams::ENERGY.alpha)]
     alpha: f64,
     /// Alignment weight.
     #[arg(long, default_value_t = EnergyParams::default().beta)]
@@ -150,6 +151,16 @@ struct RegularizeArgs {
     /// the exact minimizer.
     #[arg(long, value_name = "VOXELS", default_value_t = 1e-3)]
     tolerance: f64,
+    /// Normal refinement rounds: re-estimate the normals from the regularized quads
+    /// (keeping sharp edges) and solve again, K times [default: 2; 0 for .vox inputs,
+    /// whose blocky art is not a sampled smooth shape, and where each round is a clamped
+    /// solve].
+    #[arg(long, value_name = "K")]
+    refine: Option<usize>,
+    /// Do not re-centre the attachment targets between refinement rounds (the papers'
+    /// behaviour: thin curved shapes shrink).
+    #[arg(long)]
+    no_preserve_size: bool,
     /// Texture-aware fairness (paper, sec. 4.5): barycenters leave out the neighbours
     /// across a colour (label) boundary, so quad edges follow colour boundaries.
     #[arg(long)]
@@ -478,19 +489,29 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
         fairness: args.texture_aware.then(|| FairnessMask::texture_aware(&surface)),
         ..Default::default()
     };
-    let energy = Energy::new(&surface, &normals, &positions, params)?.with_weights(&weights)?;
-    let solver_params = solver_params(args)?;
-    let mut solver =
-        stages.run("analyse", "analyse operator", || Ok(Solver::new(&surface, &solver_params)?))?;
-    let (regularized, info) = solve(&mut stages, &mut solver, &energy, args.tolerance)?;
-    // Report the solver's own split: `assemble` = operator pattern + numeric assembly,
-    // `solve` = symbolic analysis + numeric factorization + triangular solves.
-    stages.timings.retain(|(k, _)| !matches!(*k, "analyse" | "factor"));
-    stages.timings.push(("assemble", info.pattern_seconds + info.assemble_seconds));
-    stages.timings.push(("solve", info.symbolic_seconds + info.factor_seconds + info.solve_seconds));
+    let pipeline = PipelineParams {
+        energy: params,
+        refine: args.refine.unwrap_or(if is_vox(input) { 0 } else { PipelineParams::default().refine }),
+        preserve_size: !args.no_preserve_size,
+        solver: solver_params(args)?,
+        ..Default::default()
+    };
+    let out = solve(&mut stages, &surface, &normals, &weights, &pipeline, args.tolerance)?;
+    let info = out.solves.last().expect("at least one solve").clone();
+    // Report the solvers' own split, summed over the rounds: `assemble` = operator pattern
+    // + numeric assembly, `solve` = symbolic analysis + numeric factorization + triangular
+    // solves (or iterations), `refine` = normal refinement and re-centring.
+    stages.timings.retain(|(k, _)| *k != "factor");
+    let sum = |f: fn(&voxreg_regularize::SolveInfo) -> f64| out.solves.iter().map(f).sum::<f64>();
+    stages.timings.push(("assemble", sum(|i| i.pattern_seconds + i.assemble_seconds)));
+    stages.timings.push(("solve", sum(|i| i.symbolic_seconds + i.factor_seconds + i.solve_seconds)));
+    stages.timings.push(("refine", out.refine_seconds));
+    let regularized = &out.positions;
+    // The energy of the last round (its normals and attachment targets).
+    let energy = Energy::new(&surface, &out.normals, &out.targets, params)?.with_weights(&weights)?;
     match product {
         Product::Mesh => {
-            let mut mesh = QuadMesh::from_surface(&surface, &regularized);
+            let mut mesh = QuadMesh::from_surface(&surface, regularized);
             if let Some(palette) = &palette {
                 // Colour transfer: each quad takes the colour and material of its solid voxel.
                 mesh.assign_materials(palette);
@@ -499,7 +520,7 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
         }
         Product::Volume { factor } => {
             let fine = stages.run("upscale", &format!("upscale x{factor}"), || {
-                upscale(&surface, &regularized, &volume, &UpscaleParams { factor })
+                upscale(&surface, regularized, &volume, &UpscaleParams { factor })
                     .with_context(|| format!("{}: cannot upscale", input.display()))
             })?;
             stages
@@ -508,7 +529,7 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
     }
 
     let before = energy.terms(&positions);
-    let after = energy.terms(&regularized);
+    let after = energy.terms(regularized);
     let c = surface.counts();
     if !args.quiet {
         eprintln!(
@@ -535,6 +556,8 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
                 "gamma": params.gamma,
                 "normals": estimator.name(),
                 "radius": radius,
+                "refine": pipeline.refine,
+                "preserve_size": pipeline.preserve_size,
             },
             "stages": stage_json,
             "counts": {
@@ -551,6 +574,7 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
             "solver": {
                 "kind": info.solver,
                 "iterations": info.iterations,
+                "solves": out.solves.len(),
                 "relative_gradient": info.relative_gradient,
                 "factor_nnz": info.factor_nnz,
                 "pattern_seconds": info.pattern_seconds,
@@ -564,7 +588,7 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
                 "tolerance": (info.solver != "direct").then_some(args.tolerance),
                 "preconditioner": info.preconditioner,
                 "operator_applications": info.operator_applications,
-                "clamp": solver_params.descent.clamp.filter(|_| info.solver == "gd"),
+                "clamp": pipeline.solver.descent.clamp.filter(|_| info.solver == "gd"),
                 "clamped_vertices": info.clamped_vertices,
                 "memory_bytes": info.memory_bytes,
                 "texture_aware": args.texture_aware,
@@ -604,18 +628,18 @@ fn solver_params(args: &RegularizeArgs) -> Result<SolverParams> {
     Ok(params)
 }
 
-/// Runs `solver` on `energy`, with a progress bar for the iterative solvers (iteration,
-/// estimated distance to the minimizer against the tolerance, relative gradient).
+/// Runs the regularization pipeline (solve, then `--refine` rounds), with a progress bar
+/// for the iterative solvers (iteration, estimated distance to the minimizer against the
+/// tolerance, relative gradient).
 fn solve(
     stages: &mut Stages,
-    solver: &mut Solver,
-    energy: &Energy<'_>,
+    surface: &DigitalSurface,
+    normals: &voxreg_normals::NormalField,
+    weights: &Weights,
+    params: &PipelineParams,
     tolerance: f64,
-) -> Result<(Vec<glam::DVec3>, SolveInfo)> {
-    let message = match solver.kind() {
-        "direct" => "assemble, factor and solve".to_string(),
-        kind => format!("solve ({kind})"),
-    };
+) -> Result<PipelineOutput> {
+    let message = format!("solve ({} refinement rounds)", params.refine);
     let quiet = stages.quiet;
     stages.run("factor", &message, || {
         let bar = if quiet { ProgressBar::hidden() } else { ProgressBar::new_spinner() };
@@ -627,11 +651,11 @@ fn solve(
                 p.iteration, p.error_estimate, p.relative_gradient
             ));
         };
-        let out = solver.solve_with(energy, &mut report);
+        let out = run_pipeline(surface, normals, Some(weights), params, &mut report);
         bar.finish_and_clear();
         if !quiet {
-            if let Ok((_, info)) = &out {
-                if info.solver != "direct" {
+            if let Ok(PipelineOutput { solves, .. }) = &out {
+                for info in solves.iter().filter(|i| i.solver != "direct") {
                     let status = if info.converged { "converged" } else { "NOT converged" };
                     eprintln!(
                         "{} {status} in {} iterations: estimated error {:.1e} voxel, relative gradient {:.1e}",
