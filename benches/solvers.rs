@@ -13,8 +13,11 @@ use std::hint::black_box;
 
 use criterion::{criterion_group, criterion_main, Criterion};
 use voxreg::digisurf::DigitalSurface;
+use voxreg::normals::NormalEstimator;
 use voxreg::normals::NormalField;
-use voxreg::regularize::{CgParams, CgSolver, DirectSolver, Energy, EnergyParams, Preconditioner};
+use voxreg::regularize::{
+    CgParams, CgSolver, DescentParams, DescentSolver, DirectSolver, Energy, EnergyParams, Preconditioner,
+};
 use voxreg_testkit::{digitize, true_normals, Sphere};
 
 fn sphere(radius: f64) -> (DigitalSurface, NormalField) {
@@ -50,6 +53,19 @@ fn solvers(c: &mut Criterion) {
             });
         }
     }
+    // The clamped descent (the default for voxel art) on a bundled MagicaVoxel model.
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("data/veh_fire.vox");
+    let loaded = voxreg::io::read_voxels(&path).expect("bundled model");
+    let voxreg::io::Voxels::Labels(volume) = loaded.voxels else { panic!(".vox models are labels") };
+    let surface =
+        DigitalSurface::new(&volume, &voxreg::digisurf::RegionMap::single_solid()).expect("surface");
+    let normals = voxreg::normals::IntegralInvariant { radius: None }.estimate(&surface).expect("normals");
+    let input = surface.positions();
+    let energy = Energy::new(&surface, &normals, &input, EnergyParams::default()).expect("valid energy");
+    let clamped = DescentParams { clamp: Some(0.01), ..Default::default() };
+    g.bench_function("gd-clamped/veh_fire", |b| {
+        b.iter(|| DescentSolver::new(black_box(&surface), clamped).unwrap().solve(&energy).unwrap())
+    });
     g.finish();
 }
 
