@@ -9,9 +9,10 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
+use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId, RegionMap};
 use voxreg_io::{
-    read_mesh, read_raw, read_voxels, write_mesh, DataType, Endian, Palette, QuadMesh, RawSpec, Voxels,
+    interface_name, read_mesh, read_raw, read_voxels, region_name, write_mesh, DataType, Endian, MeshBatch,
+    Palette, QuadMesh, RawSpec, Voxels,
 };
 use voxreg_normals::{
     multigrid_radius, AmbrosioTortorelli, AtParams, ConvolvedTrivial, IntegralInvariant, NormalEstimator,
@@ -96,8 +97,23 @@ struct RegularizeArgs {
     /// Output mesh: .obj (quads, one group per interface, with an .mtl for coloured
     /// inputs), .ply (binary quads, face labels and colours), .glb or .gltf (glTF 2.0,
     /// triangulated, one material per colour).
+    /// With --split interfaces or regions, a directory (created if missing).
     #[arg(short, long, value_name = "OUTPUT")]
     output: PathBuf,
+    /// One file (none), one file per interface between two regions, named
+    /// interface_A_B.EXT after their smallest labels (interfaces), or one closed,
+    /// outward-oriented surface per region, region_A.EXT (regions; open along the volume
+    /// border with --no-background). Vertices shared by several files have identical
+    /// coordinates in each.
+    #[arg(long, value_enum, default_value_t = Split::None)]
+    split: Split,
+    /// The format of the files --split writes.
+    #[arg(long, value_enum, value_name = "EXT", default_value_t = SplitFormat::Ply)]
+    split_format: SplitFormat,
+    /// With --split: duplicate pinched edges and vertices (two voxels of a region touching
+    /// only along an edge or at a corner) so each file is a 2-manifold mesh.
+    #[arg(long)]
+    manifold: bool,
     /// Attachment weight (must be > 0).
     #[arg(long, default_value_t = EnergyParams::default().alpha)]
     alpha: f64,
@@ -150,6 +166,41 @@ enum SolverKind {
     Cg,
     /// Gradient descent (multigrid-preconditioned): the only one that can --clamp.
     Gd,
+}
+
+/// How `--split` divides the output.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Split {
+    /// One mesh file.
+    None,
+    /// One file per interface (pair of regions).
+    Interfaces,
+    /// One outward-oriented surface per region (the background excepted).
+    Regions,
+}
+
+/// The file formats of `--split-format`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum SplitFormat {
+    /// Binary PLY with face labels.
+    Ply,
+    /// Wavefront OBJ with one group per interface.
+    Obj,
+    /// Binary glTF.
+    Glb,
+    /// glTF JSON with an embedded buffer.
+    Gltf,
+}
+
+impl SplitFormat {
+    fn extension(self) -> &'static str {
+        match self {
+            SplitFormat::Ply => "ply",
+            SplitFormat::Obj => "obj",
+            SplitFormat::Glb => "glb",
+            SplitFormat::Gltf => "gltf",
+        }
+    }
 }
 
 /// The normal estimators `--normals` can pick.
@@ -404,8 +455,78 @@ fn terms_json(t: &EnergyTerms) -> serde_json::Value {
     json!({ "attachment": t.attachment, "alignment": t.alignment, "fairness": t.fairness, "total": t.total })
 }
 
+/// The meshes of `--split interfaces|regions` as `(file name, mesh)`, in interface or
+/// region order; each vertex copies its position from `positions` bit for bit.
+fn split_meshes(
+    args: &RegularizeArgs,
+    surface: &DigitalSurface,
+    positions: &[glam::DVec3],
+) -> Vec<(String, QuadMesh)> {
+    let params = PatchParams { manifold: args.manifold };
+    let ext = args.split_format.extension();
+    match args.split {
+        Split::None => Vec::new(),
+        Split::Interfaces => (0..surface.interfaces().len() as u32)
+            .map(|i| {
+                let patch = surface.interface_patch(InterfaceId(i), &params);
+                let name = format!("{}.{ext}", interface_name(surface, InterfaceId(i)));
+                (name, QuadMesh::from_patch(surface, &patch, positions))
+            })
+            .collect(),
+        Split::Regions => (0..surface.regions().len() as u32)
+            .map(RegionId)
+            .filter(|&r| Some(r) != surface.regions().background())
+            .map(|r| {
+                let patch = surface.region_patch(r, &params);
+                (
+                    format!("{}.{ext}", region_name(surface, r)),
+                    QuadMesh::from_patch(surface, &patch, positions),
+                )
+            })
+            .filter(|(_, mesh)| mesh.num_faces() > 0)
+            .collect(),
+    }
+}
+
+/// Writes the regularized surface: one file, or with `--split` a directory of files
+/// written all or nothing. Returns what was written, for the summary line.
+fn write_output(
+    args: &RegularizeArgs,
+    surface: &DigitalSurface,
+    positions: &[glam::DVec3],
+    palette: Option<&Palette>,
+) -> Result<String> {
+    let colour = |mut mesh: QuadMesh| {
+        if let Some(palette) = palette {
+            // Colour transfer: each quad takes the colour and material of its solid voxel.
+            mesh.assign_materials(palette);
+        }
+        mesh
+    };
+    if args.split == Split::None {
+        write_mesh(&args.output, &colour(QuadMesh::from_surface(surface, positions)))?;
+        return Ok(args.output.display().to_string());
+    }
+    let mut batch = MeshBatch::new(&args.output)?;
+    let meshes = split_meshes(args, surface, positions);
+    for (name, mesh) in meshes {
+        batch.write(&name, &colour(mesh))?;
+    }
+    let files = batch.commit()?;
+    Ok(format!("{} files in {}", files.len(), args.output.display()))
+}
+
 fn regularize(args: &RegularizeArgs) -> Result<()> {
-    check_output(&args.output)?;
+    match args.split {
+        Split::None if args.manifold => {
+            bail!("--manifold needs --split interfaces or regions (where three regions meet, one mesh cannot be manifold)")
+        }
+        Split::None => check_output(&args.output)?,
+        _ if args.output.is_file() => {
+            bail!("{}: --split writes a directory, but this is a file", args.output.display())
+        }
+        _ => {}
+    }
     let params = EnergyParams { alpha: args.alpha, beta: args.beta, gamma: args.gamma };
     params.validate()?;
     if let Some(r) = args.radius {
@@ -439,25 +560,16 @@ fn regularize(args: &RegularizeArgs) -> Result<()> {
     stages.timings.retain(|(k, _)| !matches!(*k, "analyse" | "factor"));
     stages.timings.push(("assemble", info.pattern_seconds + info.assemble_seconds));
     stages.timings.push(("solve", info.symbolic_seconds + info.factor_seconds + info.solve_seconds));
-    let mut mesh = QuadMesh::from_surface(&surface, &regularized);
-    if let Some(palette) = &palette {
-        // Colour transfer: each quad takes the colour and material of its solid voxel.
-        mesh.assign_materials(palette);
-    }
-    stages.run("write", "write mesh", || Ok(write_mesh(&args.output, &mesh)?))?;
+    let written =
+        stages.run("write", "write mesh", || write_output(args, &surface, &regularized, palette.as_ref()))?;
 
     let before = energy.terms(&positions);
     let after = energy.terms(&regularized);
     let c = surface.counts();
     if !args.quiet {
         eprintln!(
-            "{} quads, {} vertices; energy {:.6e} -> {:.6e}; relative gradient {:.1e}; wrote {}",
-            c.surfels,
-            c.vertices,
-            before.total,
-            after.total,
-            info.relative_gradient,
-            args.output.display()
+            "{} quads, {} vertices; energy {:.6e} -> {:.6e}; relative gradient {:.1e}; wrote {written}",
+            c.surfels, c.vertices, before.total, after.total, info.relative_gradient,
         );
     }
     if let Some(path) = &args.report {
