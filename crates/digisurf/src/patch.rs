@@ -5,6 +5,10 @@ use crate::{DigitalSurface, InterfaceId, RegionId, SurfelId, VertexId, Voxel};
 
 const NONE: u32 = u32::MAX;
 
+/// Two pairs of face slots (`4 * face + edge index`) of one edge: each pair's faces are
+/// joined across the edge, the two pairs are not.
+type Pairing = [(u32, u32); 2];
+
 /// A part of a [`DigitalSurface`] as a mesh of its own: some of its surfels, each kept
 /// or flipped, over local vertices that copy surface vertices.
 ///
@@ -115,9 +119,10 @@ impl DigitalSurface {
 
     /// For each surfel of `surfels` and each of its corners, a class id: two corners
     /// share a class when they are the same surface vertex and their faces are joined
-    /// around it through edges of the patch, where at an edge with four faces of the
-    /// patch forming two pairs on two voxels of region `side`, faces are joined only
-    /// within a pair.
+    /// around it through edges of the patch. At a pinch (an edge with four faces of the
+    /// patch, two on each of two diagonal voxels of region `side`), faces are joined
+    /// only within a pair: per voxel of `side`, or per voxel of the other side where
+    /// that alone keeps the two copies of the edge on distinct vertices.
     fn split_corners(&self, surfels: &[SurfelId], side: RegionId) -> Vec<[u32; 4]> {
         // (edge, face-local slot) for every edge of every face.
         let mut slots: Vec<(u32, u32)> = Vec::with_capacity(4 * surfels.len());
@@ -153,7 +158,7 @@ impl DigitalSurface {
         };
         // The pairs of slots of a four-face edge lying on the same voxel (of `side` when
         // `own`, else of the other side), if the faces pair up that way.
-        let pairs = |group: &[(u32, u32)], own: bool| -> Option<[(u32, u32); 2]> {
+        let pairs = |group: &[(u32, u32)], own: bool| -> Option<Pairing> {
             let v: Vec<Voxel> = group.iter().map(|&(_, slot)| voxel(slot, own)).collect();
             let k = (1..4).find(|&k| v[k] == v[0])?;
             let rest: Vec<usize> = (1..4).filter(|&j| j != k).collect();
@@ -177,7 +182,7 @@ impl DigitalSurface {
         // then the other side's two voxels are kept apart instead. Choices interact
         // along chains of pinches, so they are revised until none collides (a few
         // rounds; pinches are rare).
-        let collide = |parent: &mut Vec<u32>, [(a, _), (b, _)]: [(u32, u32); 2]| {
+        let collide = |parent: &mut Vec<u32>, [(a, _), (b, _)]: Pairing| {
             let (fa, ia) = (a / 4, (a % 4) as usize);
             let va = self.surfel(surfels[fa as usize]).vertices;
             [ia, (ia + 1) % 4].iter().all(|&ka| {
@@ -185,7 +190,7 @@ impl DigitalSurface {
                 find(parent, corner(a, k)) == find(parent, corner(b, k))
             })
         };
-        let options: Vec<[Option<[(u32, u32); 2]>; 2]> =
+        let options: Vec<[Option<Pairing>; 2]> =
             pinches.iter().map(|g| [pairs(g, true), pairs(g, false)]).collect();
         let mut choice = vec![0usize; pinches.len()];
         let base = parent.clone();
