@@ -9,8 +9,11 @@
 //!   `target/xtask/compare/` (see `compare.rs`).
 //! - `table1 [--runs N] [FILE...]`: the paper's Table 1 (normals, precomputation, direct
 //!   and CG solves) on ball+tet 40^3 and bunny-128 (see `table1.rs`).
+//! - `synth-labels [--dims X,Y,Z] [--out FILE.npy]`: a deterministic 25-label volume of
+//!   500 x 470 x 136 voxels, like a tissue segmentation (see `synth.rs`).
 
 mod compare;
+mod synth;
 mod table1;
 
 use std::path::{Path, PathBuf};
@@ -28,10 +31,12 @@ fn main() -> Result<()> {
         Some("timings") => timings(&args[1..]),
         Some("compare") => compare::compare(&args[1..]),
         Some("table1") => table1::table1(&args[1..]),
+        Some("synth-labels") => synth::synth_labels(&args[1..]),
         _ => {
             eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
             eprintln!("       cargo xtask compare [--quick] [--out DIR]");
             eprintln!("       cargo xtask table1 [--runs N] [FILE...]");
+            eprintln!("       cargo xtask synth-labels [--dims X,Y,Z] [--out FILE.npy]");
             bail!("unknown or missing command")
         }
     }

@@ -9,10 +9,10 @@ use anyhow::{bail, Context, Result};
 use clap::{Args, Parser, Subcommand};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
+use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId, RegionMap};
 use voxreg_io::{
-    read_mesh, read_raw, read_voxels, write_mesh, write_volume, DataType, Endian, Palette, QuadMesh, RawSpec,
-    Voxels,
+    interface_name, read_mesh, read_raw, read_voxels, region_name, write_mesh, write_volume, DataType,
+    Endian, MeshBatch, Palette, QuadMesh, RawSpec, Voxels,
 };
 use voxreg_normals::{
     multigrid_radius, AmbrosioTortorelli, AtParams, ConvolvedTrivial, IntegralInvariant, NormalEstimator,
@@ -114,8 +114,23 @@ struct RegularizeArgs {
     /// Output mesh: .obj (quads, one group per interface, with an .mtl for coloured
     /// inputs), .ply (binary quads, face labels and colours), .glb or .gltf (glTF 2.0,
     /// triangulated, one material per colour).
+    /// With --split interfaces or regions, a directory (created if missing).
     #[arg(short, long, value_name = "OUTPUT")]
     output: PathBuf,
+    /// One file (none), one file per interface between two regions, named
+    /// interface_A_B.EXT after their smallest labels (interfaces), or one closed,
+    /// outward-oriented surface per region, region_A.EXT (regions; open along the volume
+    /// border with --no-background). Vertices shared by several files have identical
+    /// coordinates in each.
+    #[arg(long, value_enum, default_value_t = Split::None)]
+    split: Split,
+    /// The format of the files --split writes.
+    #[arg(long, value_enum, value_name = "EXT", default_value_t = SplitFormat::Ply)]
+    split_format: SplitFormat,
+    /// With --split: duplicate pinched edges and vertices (two voxels of a region touching
+    /// only along an edge or at a corner) so each file is a 2-manifold mesh.
+    #[arg(long)]
+    manifold: bool,
     /// Attachment weight (must be > 0; the papers use 1e-3, which lets thin curved shapes
     /// shrink).
     #[arg(long, default_value_t = PipelineParams::ENERGY.alpha)]
@@ -184,6 +199,41 @@ enum SolverKind {
     Cg,
     /// Gradient descent (multigrid-preconditioned): the only one that can --clamp.
     Gd,
+}
+
+/// How `--split` divides the output.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum Split {
+    /// One mesh file.
+    None,
+    /// One file per interface (pair of regions).
+    Interfaces,
+    /// One outward-oriented surface per region (the background excepted).
+    Regions,
+}
+
+/// The file formats of `--split-format`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+enum SplitFormat {
+    /// Binary PLY with face labels.
+    Ply,
+    /// Wavefront OBJ with one group per interface.
+    Obj,
+    /// Binary glTF.
+    Glb,
+    /// glTF JSON with an embedded buffer.
+    Gltf,
+}
+
+impl SplitFormat {
+    fn extension(self) -> &'static str {
+        match self {
+            SplitFormat::Ply => "ply",
+            SplitFormat::Obj => "obj",
+            SplitFormat::Glb => "glb",
+            SplitFormat::Gltf => "gltf",
+        }
+    }
 }
 
 /// The normal estimators `--normals` can pick.
@@ -464,8 +514,85 @@ fn terms_json(t: &EnergyTerms) -> serde_json::Value {
     json!({ "attachment": t.attachment, "alignment": t.alignment, "fairness": t.fairness, "total": t.total })
 }
 
+/// The meshes of `--split interfaces|regions` as `(file name, mesh)`, in interface or
+/// region order; each vertex copies its position from `positions` bit for bit.
+fn split_meshes(
+    args: &RegularizeArgs,
+    surface: &DigitalSurface,
+    positions: &[glam::DVec3],
+) -> Vec<(String, QuadMesh)> {
+    let params = PatchParams { manifold: args.manifold };
+    let ext = args.split_format.extension();
+    match args.split {
+        Split::None => Vec::new(),
+        Split::Interfaces => (0..surface.interfaces().len() as u32)
+            .map(|i| {
+                let patch = surface.interface_patch(InterfaceId(i), &params);
+                let name = format!("{}.{ext}", interface_name(surface, InterfaceId(i)));
+                (name, QuadMesh::from_patch(surface, &patch, positions))
+            })
+            .collect(),
+        Split::Regions => (0..surface.regions().len() as u32)
+            .map(RegionId)
+            .filter(|&r| Some(r) != surface.regions().background())
+            .map(|r| {
+                let patch = surface.region_patch(r, &params);
+                (
+                    format!("{}.{ext}", region_name(surface, r)),
+                    QuadMesh::from_patch(surface, &patch, positions),
+                )
+            })
+            .filter(|(_, mesh)| mesh.num_faces() > 0)
+            .collect(),
+    }
+}
+
+/// Writes the regularized surface: one file, or with `--split` a directory of files
+/// written all or nothing. Returns what was written, for the summary line.
+fn write_output(
+    args: &RegularizeArgs,
+    surface: &DigitalSurface,
+    positions: &[glam::DVec3],
+    palette: Option<&Palette>,
+) -> Result<String> {
+    let colour = |mut mesh: QuadMesh| {
+        if let Some(palette) = palette {
+            // Colour transfer: each quad takes the colour and material of its solid voxel.
+            mesh.assign_materials(palette);
+        }
+        mesh
+    };
+    if args.split == Split::None {
+        write_mesh(&args.output, &colour(QuadMesh::from_surface(surface, positions)))?;
+        return Ok(args.output.display().to_string());
+    }
+    let mut batch = MeshBatch::new(&args.output)?;
+    let meshes = split_meshes(args, surface, positions);
+    for (name, mesh) in meshes {
+        batch.write(&name, &colour(mesh))?;
+    }
+    let files = batch.commit()?;
+    Ok(format!("{} files in {}", files.len(), args.output.display()))
+}
+
 fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
-    check_output(&args.output, product)?;
+    match (product, args.split) {
+        (Product::Volume { .. }, Split::None) if args.manifold => {
+            bail!("--manifold applies to split meshes (voxreg regularize --split), not to voxreg upscale")
+        }
+        (Product::Volume { .. }, Split::None) => check_output(&args.output, product)?,
+        (Product::Volume { .. }, _) => {
+            bail!("--split applies to meshes (voxreg regularize), not to voxreg upscale")
+        }
+        (Product::Mesh, Split::None) if args.manifold => {
+            bail!("--manifold needs --split interfaces or regions (where three regions meet, one mesh cannot be manifold)")
+        }
+        (Product::Mesh, Split::None) => check_output(&args.output, product)?,
+        _ if args.output.is_file() => {
+            bail!("{}: --split writes a directory, but this is a file", args.output.display())
+        }
+        _ => {}
+    }
     let params = EnergyParams { alpha: args.alpha, beta: args.beta, gamma: args.gamma };
     params.validate()?;
     if let Some(r) = args.radius {
@@ -509,15 +636,9 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
     let regularized = &out.positions;
     // The energy of the last round (its normals and attachment targets).
     let energy = Energy::new(&surface, &out.normals, &out.targets, params)?.with_weights(&weights)?;
-    match product {
-        Product::Mesh => {
-            let mut mesh = QuadMesh::from_surface(&surface, regularized);
-            if let Some(palette) = &palette {
-                // Colour transfer: each quad takes the colour and material of its solid voxel.
-                mesh.assign_materials(palette);
-            }
-            stages.run("write", "write mesh", || Ok(write_mesh(&args.output, &mesh)?))?;
-        }
+    let written = match product {
+        Product::Mesh => stages
+            .run("write", "write mesh", || write_output(args, &surface, regularized, palette.as_ref()))?,
         Product::Volume { factor } => {
             let fine = stages.run("upscale", &format!("upscale x{factor}"), || {
                 upscale(&surface, regularized, &volume, &UpscaleParams { factor })
@@ -525,21 +646,17 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
             })?;
             stages
                 .run("write", "write volume", || Ok(write_volume(&args.output, &fine, palette.as_ref())?))?;
+            args.output.display().to_string()
         }
-    }
+    };
 
     let before = energy.terms(&positions);
     let after = energy.terms(regularized);
     let c = surface.counts();
     if !args.quiet {
         eprintln!(
-            "{} quads, {} vertices; energy {:.6e} -> {:.6e}; relative gradient {:.1e}; wrote {}",
-            c.surfels,
-            c.vertices,
-            before.total,
-            after.total,
-            info.relative_gradient,
-            args.output.display()
+            "{} quads, {} vertices; energy {:.6e} -> {:.6e}; relative gradient {:.1e}; wrote {written}",
+            c.surfels, c.vertices, before.total, after.total, info.relative_gradient,
         );
     }
     if let Some(path) = &args.report {

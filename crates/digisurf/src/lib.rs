@@ -13,6 +13,11 @@
 //!   junction between interfaces or an edge pinch ([`EdgeKind`]),
 //! - interfaces ([`Interface`]): the surfels of each unordered region pair.
 //!
+//! Parts of the surface become meshes of their own as [`Patch`]es: one interface
+//! ([`DigitalSurface::interface_patch`]) or the outward-oriented surface of one region
+//! ([`DigitalSurface::region_patch`]), optionally made 2-manifold by splitting pinches
+//! ([`PatchParams::manifold`]).
+//!
 //! The crate holds structure only: ids ([`SurfelId`], [`VertexId`], [`EdgeId`],
 //! [`InterfaceId`], [`RegionId`]) and incidences. Quantities such as normals and
 //! positions live in plain arrays indexed by those ids, in the crates above.
@@ -47,6 +52,7 @@
 mod csr;
 mod error;
 mod ids;
+mod patch;
 mod regions;
 mod surface;
 mod volume;
@@ -54,6 +60,7 @@ mod volume;
 pub use csr::Lists;
 pub use error::SurfaceError;
 pub use ids::{EdgeId, InterfaceId, RegionId, SurfelId, VertexId};
+pub use patch::{Patch, PatchParams};
 pub use regions::{RegionMap, Regions};
 pub use surface::{DigitalSurface, Edge, EdgeKind, Interface, SurfaceCounts, Surfel};
 pub use volume::{LabelVolume, Voxel};

@@ -7,7 +7,11 @@
 use std::collections::HashMap;
 
 use proptest::prelude::*;
-use voxreg_digisurf::{DigitalSurface, EdgeKind, LabelVolume, RegionMap, SurfaceError, VertexId};
+use proptest::test_runner::TestCaseError;
+use voxreg_digisurf::{
+    DigitalSurface, EdgeKind, InterfaceId, LabelVolume, Patch, PatchParams, RegionId, RegionMap,
+    SurfaceError, VertexId,
+};
 
 /// A random volume of dimensions 1..=5 per axis with labels in `0..labels`.
 fn volume(labels: u32) -> impl Strategy<Value = LabelVolume> {
@@ -317,4 +321,173 @@ fn grouped_regions_have_no_inner_surfels() {
     assert_eq!(per_label.num_surfels(), 11);
     assert_eq!(grouped.num_surfels(), 10);
     assert_eq!(grouped.interfaces().len(), 1);
+}
+
+// ---- patches: per-interface and per-region meshes ------------------------------------
+
+/// Checks that `p` is an oriented 2-manifold, possibly with boundary: every edge has
+/// one or two faces, each direction used once (consistent orientation), and the faces
+/// around every vertex form a single fan (its link is one cycle, or one path on the
+/// rim). Returns the rim edges as pairs of surface vertices, and `V - E + F`.
+fn check_manifold(p: &Patch) -> Result<(Vec<[VertexId; 2]>, i64), TestCaseError> {
+    let mut directed = HashMap::new();
+    for q in &p.quads {
+        for k in 0..4 {
+            *directed.entry((q[k], q[(k + 1) % 4])).or_insert(0) += 1;
+        }
+    }
+    prop_assert!(directed.values().all(|&n| n == 1), "an edge is used twice in one direction");
+    let mut rim = Vec::new();
+    let mut edges = 0i64;
+    for &(a, b) in directed.keys() {
+        if !directed.contains_key(&(b, a)) {
+            rim.push([p.vertices[a as usize], p.vertices[b as usize]]);
+        }
+        if a < b || !directed.contains_key(&(b, a)) {
+            edges += 1;
+        }
+    }
+    // Links: each face around v adds the link edge between v's two neighbours in it.
+    let mut links: Vec<Vec<(u32, u32)>> = vec![Vec::new(); p.vertices.len()];
+    for q in &p.quads {
+        for k in 0..4 {
+            links[q[k] as usize].push((q[(k + 3) % 4], q[(k + 1) % 4]));
+        }
+    }
+    for (v, link) in links.iter().enumerate() {
+        // A single path or cycle: walk from a link vertex with no incoming link edge
+        // (or from anywhere on a cycle) and visit every link edge.
+        let next: HashMap<u32, u32> = link.iter().copied().collect();
+        prop_assert_eq!(next.len(), link.len());
+        let targets: std::collections::HashSet<u32> = link.iter().map(|e| e.1).collect();
+        let start = link.iter().map(|e| e.0).find(|a| !targets.contains(a)).unwrap_or(link[0].0);
+        let (mut at, mut walked) = (start, 0);
+        while let Some(&n) = next.get(&at) {
+            walked += 1;
+            at = n;
+            if at == start || walked > link.len() {
+                break;
+            }
+        }
+        prop_assert_eq!(walked, link.len(), "vertex {} has several fans", v);
+    }
+    Ok((rim, p.vertices.len() as i64 - edges + p.quads.len() as i64))
+}
+
+/// Number of edge-connected components of the faces of `p`.
+fn patch_components(p: &Patch) -> i64 {
+    let mut by_edge: HashMap<(u32, u32), Vec<usize>> = HashMap::new();
+    for (f, q) in p.quads.iter().enumerate() {
+        for k in 0..4 {
+            let (a, b) = (q[k], q[(k + 1) % 4]);
+            by_edge.entry((a.min(b), a.max(b))).or_default().push(f);
+        }
+    }
+    let mut comp = vec![usize::MAX; p.quads.len()];
+    let mut n = 0;
+    for start in 0..p.quads.len() {
+        if comp[start] != usize::MAX {
+            continue;
+        }
+        comp[start] = n;
+        let mut stack = vec![start];
+        while let Some(f) = stack.pop() {
+            let q = p.quads[f];
+            for k in 0..4 {
+                let (a, b) = (q[k], q[(k + 1) % 4]);
+                for &g in &by_edge[&(a.min(b), a.max(b))] {
+                    if comp[g] == usize::MAX {
+                        comp[g] = n;
+                        stack.push(g);
+                    }
+                }
+            }
+        }
+        n += 1;
+    }
+    n as i64
+}
+
+proptest! {
+    #![proptest_config(ProptestConfig::with_cases(200))]
+
+    /// With pinches split, every region's surface is an oriented 2-manifold: closed when
+    /// the volume has a background (Euler characteristic even, at most 2 per
+    /// component, and twice the solid's when the region has no pinch), otherwise open exactly
+    /// along the domain border. Interface patches are manifolds with boundary. Vertices
+    /// are copies of the complex's.
+    #[test]
+    fn manifold_patches(vol in volume(3), open in any::<bool>()) {
+        let vol = if open { vol.with_background(None) } else { vol };
+        let Ok(s) = DigitalSurface::from_volume(&vol) else { return Ok(()) };
+        let params = PatchParams { manifold: true };
+        let dims = vol.dims();
+        let on_border = |v: VertexId, axis: usize| {
+            let c = s.vertex_corner(v);
+            (0..3).any(|k| k != axis && (c[k] == 0 || c[k] as usize == dims[k]))
+        };
+        let mut faces = 0;
+        for r in 0..s.regions().len() {
+            let r = RegionId(r as u32);
+            if Some(r) == s.regions().background() {
+                continue;
+            }
+            let p = s.region_patch(r, &params);
+            faces += p.quads.len();
+            let (rim, chi) = check_manifold(&p)?;
+            if open {
+                for [a, b] in rim {
+                    let axis = (0..3).find(|&k| s.vertex_corner(a)[k] != s.vertex_corner(b)[k]).unwrap();
+                    prop_assert!(on_border(a, axis) && on_border(b, axis), "rim edge inside the domain");
+                }
+            } else {
+                prop_assert!(rim.is_empty(), "open region surface with a background");
+                prop_assert_eq!(chi % 2, 0);
+                prop_assert!(chi <= 2 * patch_components(&p));
+                // Nothing split: the region's closed union of cubes is a manifold.
+                let unsplit = s.region_patch(r, &PatchParams::default());
+                if unsplit.vertices.len() == p.vertices.len() {
+                    let label = s.regions().labels(r)[0];
+                    prop_assert_eq!(chi, 2 * cubical_euler(dims, 1, |v| vol.label(v) == Some(label)));
+                }
+            }
+            for (q, &surfel) in p.quads.iter().zip(&p.surfels) {
+                let mut copied = q.map(|v| p.vertices[v as usize]);
+                copied.sort_unstable();
+                let mut own = s.surfel(surfel).vertices;
+                own.sort_unstable();
+                prop_assert_eq!(copied, own);
+            }
+        }
+        // Every surfel lies in two region surfaces (one when the other side is the background).
+        let expected: usize = s.surfels().iter().map(|sf| {
+            2 - usize::from(s.regions().background().is_some_and(|b| sf.regions.contains(&b)))
+        }).sum();
+        prop_assert_eq!(faces, expected);
+        for i in 0..s.interfaces().len() {
+            check_manifold(&s.interface_patch(InterfaceId(i as u32), &params))?;
+        }
+    }
+}
+
+/// Regions of the diagonal-pinch fixtures: each voxel its own sphere when split.
+#[test]
+fn diagonal_pinch_fixtures_become_spheres() {
+    let edge = LabelVolume::from_fn([2, 2, 1], |[x, y, _]| u32::from(x == y));
+    let corner = LabelVolume::from_fn([2, 2, 2], |[x, y, z]| u32::from(x == y && y == z));
+    // Both pinches at once, plus a third voxel of another label on the pinched edge.
+    let both = LabelVolume::from_fn([3, 3, 3], |p| match p {
+        [0, 0, 0] | [1, 1, 0] | [2, 2, 1] => 1,
+        [1, 0, 0] => 2,
+        _ => 0,
+    });
+    for (vol, spheres) in [(edge, 2), (corner, 2), (both, 3)] {
+        let s = DigitalSurface::from_volume(&vol).unwrap();
+        let r = s.regions().region_of(1).unwrap();
+        let p = s.region_patch(r, &PatchParams { manifold: true });
+        let (rim, chi) = check_manifold(&p).unwrap();
+        assert!(rim.is_empty());
+        assert_eq!(chi, 2 * spheres);
+        assert_eq!(p.vertices.len() as i64, 8 * spheres);
+    }
 }

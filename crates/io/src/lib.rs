@@ -35,7 +35,10 @@
 //! [`QuadMesh::from_surface`] and written by [`write_mesh`], which picks the format by
 //! extension: ASCII OBJ with one group per interface ([`write_obj`]) or binary PLY with
 //! per-face labels ([`write_ply`]). Writers go through a temporary file renamed onto
-//! the target, so a failed write leaves no partial file.
+//! the target, so a failed write leaves no partial file. Parts of the surface (one
+//! interface, one region's closed surface: a [`Patch`](voxreg_digisurf::Patch)) become
+//! meshes by [`QuadMesh::from_patch`], and [`MeshBatch`] writes many into a directory
+//! all or nothing.
 //!
 //! # Example
 //!
@@ -88,7 +91,7 @@ pub use gltf::write_gltf;
 pub use grey::{GreyVolume, NotALabel, Voxels};
 pub use longvol::{read_longvol, read_longvol_bytes};
 pub use material::{Material, Palette};
-pub use mesh::{write_mesh, FaceGroup, QuadMesh};
+pub use mesh::{interface_name, region_name, write_mesh, FaceGroup, MeshBatch, QuadMesh};
 pub use nifti::{read_nifti, read_nifti_bytes};
 pub use npy::{read_npy, read_npy_bytes};
 pub use obj::write_obj;

@@ -4,7 +4,7 @@ use std::io::{self, BufWriter, Write};
 use std::path::Path;
 
 use glam::DVec3;
-use voxreg_digisurf::DigitalSurface;
+use voxreg_digisurf::{DigitalSurface, InterfaceId, Patch, RegionId};
 
 use crate::volume::lowercase_extension;
 use crate::{write_gltf, write_obj, write_ply, IoError, Material, Palette};
@@ -63,19 +63,66 @@ impl QuadMesh {
         let surfels = surface.surfels();
         let quads = surfels.iter().map(|s| s.vertices.map(|v| v.0)).collect();
         let face_labels = surfels.iter().map(|s| s.labels).collect();
-        let regions = surface.regions();
         let groups = surface
             .interfaces()
             .iter()
-            .map(|interface| {
-                let [a, b] = interface.regions.map(|r| regions.labels(r).first().copied().unwrap_or(0));
-                FaceGroup {
-                    name: format!("interface_{a}_{b}"),
-                    faces: interface.surfels.iter().map(|s| s.0).collect(),
-                }
+            .enumerate()
+            .map(|(i, interface)| FaceGroup {
+                name: interface_name(surface, InterfaceId(i as u32)),
+                faces: interface.surfels.iter().map(|s| s.0).collect(),
             })
             .collect();
         QuadMesh { positions: positions.to_vec(), quads, face_labels, groups, ..Default::default() }
+    }
+
+    /// The mesh of `patch`, a part of `surface` (see [`Patch`]), with surface vertex `v`
+    /// at `positions[v]`: one quad per patch surfel, in patch order, oriented as in the
+    /// patch; `[inner, outer]` labels swapped on flipped surfels (so the normal still
+    /// points from the inner label to the outer one); one group per interface present,
+    /// in interface order, named as by [`interface_name`].
+    ///
+    /// Local vertex `i` is at `positions[patch.vertices[i]]`: the same `f64` in every
+    /// patch that shares the surface vertex, so meshes of adjacent patches meet exactly.
+    ///
+    /// # Panics
+    ///
+    /// If `positions.len()` differs from `surface.num_vertices()`.
+    pub fn from_patch(surface: &DigitalSurface, patch: &Patch, positions: &[DVec3]) -> QuadMesh {
+        assert_eq!(
+            positions.len(),
+            surface.num_vertices(),
+            "QuadMesh::from_patch: one position per vertex of the surface"
+        );
+        let face_labels = patch
+            .surfels
+            .iter()
+            .zip(&patch.flipped)
+            .map(|(&s, &flipped)| {
+                let [a, b] = surface.surfel(s).labels;
+                if flipped {
+                    [b, a]
+                } else {
+                    [a, b]
+                }
+            })
+            .collect();
+        let mut by_interface: Vec<(InterfaceId, u32)> =
+            patch.surfels.iter().enumerate().map(|(f, &s)| (surface.surfel(s).interface, f as u32)).collect();
+        by_interface.sort_unstable();
+        let groups = by_interface
+            .chunk_by(|a, b| a.0 == b.0)
+            .map(|run| FaceGroup {
+                name: interface_name(surface, run[0].0),
+                faces: run.iter().map(|&(_, f)| f).collect(),
+            })
+            .collect();
+        QuadMesh {
+            positions: patch.vertices.iter().map(|v| positions[v.index()]).collect(),
+            quads: patch.quads.clone(),
+            face_labels,
+            groups,
+            ..Default::default()
+        }
     }
 
     /// Gives each face the material of its solid side's label from `palette`: the
@@ -172,6 +219,85 @@ impl QuadMesh {
             }
         }
         Ok(())
+    }
+}
+
+/// The name of interface `i` of `surface`: `interface_{a}_{b}`, where `a` and `b` are
+/// the smallest labels of its lower and higher regions (the background's region comes
+/// last). Distinct interfaces have distinct names. Used for OBJ groups and, by
+/// `voxreg regularize --split interfaces`, for file names.
+pub fn interface_name(surface: &DigitalSurface, i: InterfaceId) -> String {
+    let [a, b] = surface.interfaces()[i.index()].regions.map(|r| first_label(surface, r));
+    format!("interface_{a}_{b}")
+}
+
+/// The name of region `r` of `surface`: `region_{a}`, where `a` is its smallest label.
+pub fn region_name(surface: &DigitalSurface, r: RegionId) -> String {
+    format!("region_{}", first_label(surface, r))
+}
+
+fn first_label(surface: &DigitalSurface, r: RegionId) -> u32 {
+    surface.regions().labels(r).first().copied().unwrap_or(0)
+}
+
+/// Writes several meshes into one directory, all or nothing.
+///
+/// [`MeshBatch::write`] writes each mesh (any format of [`write_mesh`]) into a hidden
+/// temporary directory inside the target directory; [`MeshBatch::commit`] then renames
+/// every file into place. Dropping the batch before `commit` (after an error, say)
+/// removes the temporary directory and everything in it, so a failed run leaves no
+/// partial output. Renames within one directory are atomic per file; should one of
+/// them fail (a full disk cannot cause it), `commit` stops and reports which file.
+#[derive(Debug)]
+pub struct MeshBatch {
+    dir: std::path::PathBuf,
+    staging: tempfile::TempDir,
+    names: Vec<String>,
+}
+
+impl MeshBatch {
+    /// Starts a batch writing into `dir`, created (with its parents) if missing.
+    pub fn new(dir: &Path) -> Result<MeshBatch, IoError> {
+        std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, e))?;
+        let staging =
+            tempfile::Builder::new().prefix(".voxreg-").tempdir_in(dir).map_err(|e| IoError::io(dir, e))?;
+        Ok(MeshBatch { dir: dir.to_path_buf(), staging, names: Vec::new() })
+    }
+
+    /// Writes `mesh` as `name` (a plain file name with a mesh extension) in the staging
+    /// directory; errors name the final path.
+    pub fn write(&mut self, name: &str, mesh: &QuadMesh) -> Result<(), IoError> {
+        let target = self.dir.join(name);
+        if Path::new(name).file_name().map(|n| n.to_string_lossy()) != Some(name.into()) {
+            return Err(IoError::InvalidMesh {
+                path: target,
+                message: format!("'{name}' is not a plain file name"),
+            });
+        }
+        let staged = self.staging.path().join(name);
+        write_mesh(&staged, mesh).map_err(|e| match e {
+            IoError::InvalidMesh { message, .. } => IoError::InvalidMesh { path: target, message },
+            other => other,
+        })?;
+        self.names.push(name.to_string());
+        Ok(())
+    }
+
+    /// Moves every file written so far (and companions such as `.mtl` libraries) into
+    /// the target directory, replacing files of the same names, and removes the
+    /// staging directory. Returns the paths written.
+    pub fn commit(self) -> Result<Vec<std::path::PathBuf>, IoError> {
+        let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(self.staging.path())
+            .and_then(|entries| entries.map(|e| e.map(|e| e.path())).collect())
+            .map_err(|e| IoError::io(self.staging.path(), e))?;
+        files.sort();
+        let mut written = Vec::with_capacity(files.len());
+        for file in files {
+            let target = self.dir.join(file.file_name().unwrap_or_default());
+            std::fs::rename(&file, &target).map_err(|e| IoError::io(&target, e))?;
+            written.push(target);
+        }
+        Ok(written)
     }
 }
 

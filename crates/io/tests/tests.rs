@@ -16,8 +16,11 @@ use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use voxreg_digisurf::{DigitalSurface, LabelVolume};
-use voxreg_io::{read_volume, write_mesh, write_obj, write_ply, FaceGroup, IoError, LoadedVolume, QuadMesh};
+use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams};
+use voxreg_io::{
+    interface_name, read_volume, region_name, write_mesh, write_obj, write_ply, FaceGroup, IoError,
+    LoadedVolume, MeshBatch, QuadMesh,
+};
 
 fn data(name: &str) -> PathBuf {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../data")).join(name)
@@ -334,4 +337,91 @@ fn write_replaces_an_existing_file() {
     write_mesh(&path, &single_voxel_mesh()).unwrap();
     assert!(std::fs::read_to_string(&path).unwrap().starts_with("# voxreg quad mesh: 8 vertices, 6 quads"));
     assert_eq!(entries(dir.path()), [path]);
+}
+
+// ---------------------------------------------------------------- patches and batches
+
+/// Labels 3 and 5 side by side in a 4x3x3 volume of background 0: three interfaces.
+fn two_labels() -> DigitalSurface {
+    let volume = LabelVolume::from_fn([4, 3, 3], |p| match p {
+        [1, 1, 1] => 3,
+        [2, 1, 1] => 5,
+        _ => 0,
+    });
+    DigitalSurface::from_volume(&volume).unwrap()
+}
+
+/// Region 5's closed surface: its 1|2 surfel flipped (labels `[5, 3]`), groups
+/// `interface_3_5` and `interface_5_0`.
+#[test]
+fn region_patch_snapshots() {
+    let surface = two_labels();
+    let r = surface.regions().region_of(5).unwrap();
+    let patch = surface.region_patch(r, &PatchParams::default());
+    let mesh = QuadMesh::from_patch(&surface, &patch, &surface.positions());
+    assert_eq!(region_name(&surface, r), "region_5");
+    let names: Vec<&str> = mesh.groups.iter().map(|g| g.name.as_str()).collect();
+    assert_eq!(names, ["interface_3_5", "interface_5_0"]);
+    assert_eq!(mesh.face_labels.iter().filter(|l| **l == [5, 3]).count(), 1);
+    let dir = tempfile::tempdir().unwrap();
+    write_mesh(&dir.path().join("r.obj"), &mesh).unwrap();
+    write_mesh(&dir.path().join("r.ply"), &mesh).unwrap();
+    insta::assert_snapshot!("region_5_obj", std::fs::read_to_string(dir.path().join("r.obj")).unwrap());
+    insta::assert_snapshot!(
+        "region_5_ply",
+        ply_dump(&std::fs::read(dir.path().join("r.ply")).unwrap(), 8, 6)
+    );
+}
+
+#[test]
+fn interface_patches_share_exact_positions() {
+    let surface = two_labels();
+    // Regularized-like positions with no short decimal form.
+    let positions: Vec<DVec3> = surface
+        .positions()
+        .iter()
+        .map(|p| *p + DVec3::new(0.1, 1.0 / 3.0, std::f64::consts::PI / 7.0))
+        .collect();
+    let meshes: Vec<(String, QuadMesh)> = (0..surface.interfaces().len())
+        .map(|i| {
+            let i = InterfaceId(i as u32);
+            let patch = surface.interface_patch(i, &PatchParams::default());
+            (interface_name(&surface, i), QuadMesh::from_patch(&surface, &patch, &positions))
+        })
+        .collect();
+    let names: Vec<&str> = meshes.iter().map(|m| m.0.as_str()).collect();
+    assert_eq!(names, ["interface_3_5", "interface_3_0", "interface_5_0"]);
+    // The 3|5 square's 4 corners lie on both other interfaces, bit for bit.
+    for p in &meshes[0].1.positions {
+        for (_, other) in &meshes[1..] {
+            assert!(other
+                .positions
+                .iter()
+                .any(|q| q.to_array().map(f64::to_bits) == p.to_array().map(f64::to_bits)));
+        }
+    }
+}
+
+#[test]
+fn mesh_batch_is_all_or_nothing() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("new").join("out");
+    let mut batch = MeshBatch::new(&out).unwrap();
+    batch.write("a.ply", &single_voxel_mesh()).unwrap();
+    batch.write("b.obj", &single_voxel_mesh()).unwrap();
+    // Staged only: nothing visible but the hidden staging directory.
+    assert!(entries(&out).iter().all(|p| p.file_name().unwrap().to_string_lossy().starts_with(".voxreg-")));
+    let written = batch.commit().unwrap();
+    assert_eq!(written, [out.join("a.ply"), out.join("b.obj")]);
+    assert_eq!(entries(&out), [out.join("a.ply"), out.join("b.obj")]);
+
+    // A failure midway: the batch is dropped, nothing new appears, old files stay.
+    let mut batch = MeshBatch::new(&out).unwrap();
+    batch.write("c.ply", &single_voxel_mesh()).unwrap();
+    let bad = QuadMesh { quads: vec![[0, 1, 2, 99]], face_labels: vec![[1, 0]], ..single_voxel_mesh() };
+    let err = batch.write("d.ply", &bad).unwrap_err();
+    assert!(err.to_string().contains(&out.join("d.ply").display().to_string()), "{err}");
+    assert!(batch.write("../e.ply", &single_voxel_mesh()).is_err());
+    drop(batch);
+    assert_eq!(entries(&out), [out.join("a.ply"), out.join("b.obj")]);
 }

@@ -1,0 +1,127 @@
+//! `cargo xtask synth-labels`: a deterministic multi-label volume the size of a tissue
+//! segmentation, for end-to-end runs of `voxreg regularize` (README, "Large label
+//! volumes").
+//!
+//! The volume (500 x 470 x 136 voxels by default, `u8` labels, written as NumPy `.npy`
+//! of shape `(X, Y, Z)`): background `0` (air) around an ellipsoidal body filling the
+//! box; a skin shell (label `1`) about 4 voxels thick at the body's surface; inside, 23
+//! "organs" (labels `2..=24`), the cells of a power diagram (Voronoi cells with
+//! per-seed weights, so sizes vary) of seeds drawn by a fixed-seed generator. 25 labels in
+//! all; every organ touches its neighbours along triple and quadruple junctions, and
+//! the skin touches the outermost organs.
+
+use std::io::Write;
+use std::path::PathBuf;
+
+use anyhow::{bail, Context, Result};
+
+/// SplitMix64: a tiny deterministic generator (no dependency needed for a fixture).
+struct SplitMix(u64);
+
+impl SplitMix {
+    fn next(&mut self) -> u64 {
+        self.0 = self.0.wrapping_add(0x9e37_79b9_7f4a_7c15);
+        let mut z = self.0;
+        z = (z ^ (z >> 30)).wrapping_mul(0xbf58_476d_1ce4_e5b9);
+        z = (z ^ (z >> 27)).wrapping_mul(0x94d0_49bb_1331_11eb);
+        z ^ (z >> 31)
+    }
+
+    /// Uniform in `[0, 1)`.
+    fn unit(&mut self) -> f64 {
+        (self.next() >> 11) as f64 / (1u64 << 53) as f64
+    }
+}
+
+/// The label of voxel `[x, y, z]` of a `dims` volume with the given organ seeds
+/// `(position, weight)`.
+fn label(p: [f64; 3], dims: [usize; 3], seeds: &[([f64; 3], f64)]) -> u8 {
+    let c = dims.map(|d| 0.5 * (d as f64 - 1.0));
+    let r = dims.map(|d| 0.5 * d as f64 - 2.0);
+    let q: [f64; 3] = std::array::from_fn(|k| (p[k] - c[k]) / r[k]);
+    let rho = (q[0] * q[0] + q[1] * q[1] + q[2] * q[2]).sqrt();
+    if rho > 1.0 {
+        return 0;
+    }
+    // Skin: about 4 voxels thick along the shortest radius.
+    if rho > 1.0 - 4.0 / r.iter().copied().fold(f64::INFINITY, f64::min) {
+        return 1;
+    }
+    let mut best = (f64::INFINITY, 0usize);
+    for (i, (s, w)) in seeds.iter().enumerate() {
+        let d = (0..3).map(|k| (p[k] - s[k]).powi(2)).sum::<f64>() - w;
+        if d < best.0 {
+            best = (d, i);
+        }
+    }
+    2 + best.1 as u8
+}
+
+/// Runs `synth-labels [--dims X,Y,Z] [--out FILE.npy]`.
+pub(crate) fn synth_labels(args: &[String]) -> Result<()> {
+    let mut dims = [500usize, 470, 136];
+    let mut out = crate::root().join("target/xtask/synth/tissue.npy");
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--dims" => {
+                let v = it.next().context("--dims needs X,Y,Z")?;
+                let parts: Vec<usize> = v.split(',').map(str::parse).collect::<Result<_, _>>()?;
+                dims = parts.try_into().map_err(|_| anyhow::anyhow!("--dims needs X,Y,Z"))?;
+            }
+            "--out" => out = PathBuf::from(it.next().context("--out needs a file")?),
+            other => bail!("synth-labels: unknown argument {other}"),
+        }
+    }
+    if dims.iter().any(|&d| d < 8) {
+        bail!("synth-labels: dimensions must be at least 8");
+    }
+    let mut rng = SplitMix(0x766f_7872_6567); // "voxreg"
+    let c = dims.map(|d| 0.5 * (d as f64 - 1.0));
+    let r = dims.map(|d| 0.5 * d as f64 - 2.0);
+    let mut seeds = Vec::new();
+    while seeds.len() < 23 {
+        let q: [f64; 3] = std::array::from_fn(|_| 2.0 * rng.unit() - 1.0);
+        if q.iter().map(|v| v * v).sum::<f64>() > 0.8 {
+            continue;
+        }
+        let s: [f64; 3] = std::array::from_fn(|k| c[k] + q[k] * r[k]);
+        // Weights of up to a quarter of the mean cell's squared radius: cells of
+        // varied sizes.
+        let cell = (r[0] * r[1] * r[2] / 23.0).cbrt();
+        seeds.push((s, rng.unit() * 0.25 * cell * cell));
+    }
+    // C order, shape (X, Y, Z): z fastest.
+    let [nx, ny, nz] = dims;
+    let mut data = vec![0u8; nx * ny * nz];
+    for x in 0..nx {
+        for y in 0..ny {
+            for z in 0..nz {
+                data[(x * ny + y) * nz + z] = label([x as f64, y as f64, z as f64], dims, &seeds);
+            }
+        }
+    }
+    let mut header = format!("{{'descr': '|u1', 'fortran_order': False, 'shape': ({nx}, {ny}, {nz}), }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    if let Some(dir) = out.parent() {
+        std::fs::create_dir_all(dir)?;
+    }
+    let mut f = std::io::BufWriter::new(
+        std::fs::File::create(&out).with_context(|| format!("{}: cannot create", out.display()))?,
+    );
+    f.write_all(b"\x93NUMPY\x01\x00")?;
+    f.write_all(&(header.len() as u16).to_le_bytes())?;
+    f.write_all(header.as_bytes())?;
+    f.write_all(&data)?;
+    f.flush()?;
+    let mut counts = [0u64; 256];
+    for &l in &data {
+        counts[l as usize] += 1;
+    }
+    let used = counts.iter().filter(|&&c| c > 0).count();
+    println!("wrote {} ({nx} x {ny} x {nz} voxels, {used} labels)", out.display());
+    Ok(())
+}
