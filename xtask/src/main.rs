@@ -9,8 +9,12 @@
 //!   `target/xtask/compare/` (see `compare.rs`).
 //! - `table1 [--runs N] [FILE...]`: the paper's Table 1 (normals, precomputation, direct
 //!   and CG solves) on ball+tet 40^3 and bunny-128 (see `table1.rs`).
+//! - `figures [--quick] [--out DIR]`: the papers' Figs. 4, 7, 8, 9, 10, 11 and 15 as PNG
+//!   renders and charts with an `index.html`, in `target/xtask/figures/` (see
+//!   `figures.rs`).
 
 mod compare;
+mod figures;
 mod table1;
 
 use std::path::{Path, PathBuf};
@@ -28,10 +32,12 @@ fn main() -> Result<()> {
         Some("timings") => timings(&args[1..]),
         Some("compare") => compare::compare(&args[1..]),
         Some("table1") => table1::table1(&args[1..]),
+        Some("figures") => figures::figures(&args[1..]),
         _ => {
             eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
             eprintln!("       cargo xtask compare [--quick] [--out DIR]");
             eprintln!("       cargo xtask table1 [--runs N] [FILE...]");
+            eprintln!("       cargo xtask figures [--quick] [--out DIR]");
             bail!("unknown or missing command")
         }
     }

@@ -166,12 +166,14 @@ impl Image {
         self.draw_text(cx - 0.5 * w, y, size, colour, text);
     }
 
-    /// The image encoded as PNG (RGB8, default compression: deterministic).
+    /// The image encoded as PNG (RGB8, best compression, adaptive filters: deterministic).
     pub fn to_png(&self) -> io::Result<Vec<u8>> {
         let mut bytes = Vec::new();
         let mut encoder = png::Encoder::new(&mut bytes, self.width, self.height);
         encoder.set_color(png::ColorType::Rgb);
         encoder.set_depth(png::BitDepth::Eight);
+        encoder.set_compression(png::Compression::Best);
+        encoder.set_adaptive_filter(png::AdaptiveFilterType::Adaptive);
         let mut writer = encoder.write_header().map_err(io::Error::other)?;
         writer.write_image_data(&self.data).map_err(io::Error::other)?;
         writer.finish().map_err(io::Error::other)?;
@@ -240,7 +242,10 @@ mod tests {
             for x in 0..120 {
                 if img.pixel(x, y) != [255; 3] {
                     inked += 1;
-                    assert!(x >= 3 && f64::from(x) <= 6.0 + f64::from(w) && y >= 3 && y < 26, "({x}, {y})");
+                    assert!(
+                        x >= 3 && f64::from(x) <= 6.0 + f64::from(w) && (3..26).contains(&y),
+                        "({x}, {y})"
+                    );
                 }
             }
         }
