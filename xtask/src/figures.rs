@@ -36,6 +36,8 @@ use crate::compare::{AsImplicit, BallTet};
 
 /// Panel size in pixels (square).
 const PANEL: u32 = 280;
+/// Meshes with more faces are drawn without wireframe.
+const MAX_WIRED_FACES: usize = 2500;
 /// Height of a panel's caption band.
 const CAPTION: u32 = 22;
 const TEXT: [u8; 3] = [20, 20, 20];
@@ -72,7 +74,8 @@ fn panel(shot: &Shot, camera: &Camera) -> Image {
         width: PANEL,
         height: PANEL,
         shading: shot.shading,
-        wireframe: shot.wireframe.then_some([70, 70, 75]),
+        // Wires closer than a few pixels apart only darken the panel.
+        wireframe: (shot.wireframe && shot.mesh.num_faces() <= MAX_WIRED_FACES).then_some([70, 70, 75]),
         wire_width: 0.5,
         ..RenderParams::default()
     };
@@ -262,10 +265,10 @@ fn fig7(index: &mut Index, quick: bool) -> Result<()> {
             Err(_) => shots.push(("shrouds", None, "non-manifold input")),
         }
         let x = voxreg(&surface, &normals, EnergyParams::default())?;
-        shots.push(("voxreg", Some(Shot::new("voxreg (ii)", Mesh::from_surface(&surface, &x))), ""));
+        shots.push(("voxreg (ii)", Some(Shot::new("voxreg (ii)", Mesh::from_surface(&surface, &x))), ""));
         let xc = voxreg_clamped(&surface, &normals, CLAMP_EPS)?;
         shots.push((
-            "voxreg clamped",
+            "voxreg (ii) clamped",
             Some(Shot::new("voxreg (ii), clamped", Mesh::from_surface(&surface, &xc))),
             "",
         ));
@@ -339,7 +342,8 @@ fn fig7_chart(points: &[Point], ns: &[usize]) -> Result<Image> {
             } else {
                 ("face aspect ratio, mean (log scale)", |p| p.aspect_mean)
             };
-            let y_max = points.iter().map(value).fold(1.0f64, f64::max) * 1.2;
+            // Headroom of a decade above the data for the legend.
+            let y_max = points.iter().map(value).fold(1.0f64, f64::max) * 10.0;
             let y_min = if k == 0 { 0.5 } else { 0.8 };
             let mut chart = ChartBuilder::on(area)
                 .caption(title, ("sans-serif", 16))
