@@ -64,6 +64,11 @@ fn camera_for(min: DVec3, max: DVec3) -> Camera {
     Camera::fit(min, max, DVec3::new(-0.55, -0.8, -0.45), DVec3::Z)
 }
 
+/// The bunny volumes have -y up: a side view from slightly above.
+fn bunny_camera(min: DVec3, max: DVec3) -> Camera {
+    Camera::fit(min, max, DVec3::new(0.3, 0.35, 1.0), DVec3::NEG_Y)
+}
+
 fn bounds(points: &[DVec3]) -> (DVec3, DVec3) {
     points.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(lo, hi), p| (lo.min(*p), hi.max(*p)))
 }
@@ -453,7 +458,7 @@ fn fig8_9(index: &mut Index, path: &Path) -> Result<()> {
     let (_, surface) = load(path)?;
     let input = surface.positions();
     let (lo, hi) = bounds(&input);
-    let camera = Camera::fit(lo, hi, DVec3::new(-0.3, 0.9, -0.35), DVec3::NEG_Y);
+    let camera = bunny_camera(lo, hi);
     let normals = ii_normals(&surface)?;
     let x = voxreg(&surface, &normals, EnergyParams::default())?;
     let x_no_fair = voxreg(&surface, &normals, EnergyParams { gamma: 0.0, ..EnergyParams::default() })?;
@@ -540,7 +545,7 @@ fn fig4(index: &mut Index, path: &Path) -> Result<()> {
     let (_, surface) = load(path)?;
     let input = surface.positions();
     let (lo, hi) = bounds(&input);
-    let camera = Camera::fit(lo, hi, DVec3::new(-0.3, 0.9, -0.35), DVec3::NEG_Y);
+    let camera = bunny_camera(lo, hi);
     let normals = ii_normals(&surface)?;
     let free = voxreg(&surface, &normals, EnergyParams::default())?;
     let clamped = voxreg_clamped(&surface, &normals, CLAMP_EPS)?;
@@ -732,7 +737,7 @@ fn fig11_15(index: &mut Index, path: &Path) -> Result<()> {
          alignment only fairness and attachment remain (the surface shrinks and rounds); without fairness \
          the quads follow the normals but their sizes vary and some fold; with almost no attachment \
          (alpha = 1e-5; at alpha = 0 the energy is not strictly convex and a single point minimizes it) the surface \
-         shrinks."
+         shrinks to a small blob."
             .into(),
         &img,
     )
