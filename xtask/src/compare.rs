@@ -20,11 +20,11 @@ use voxreg_baselines::{
 };
 use voxreg_digisurf::DigitalSurface;
 use voxreg_normals::{AmbrosioTortorelli, IntegralInvariant, NormalEstimator, Trivial};
-use voxreg_regularize::{regularize, run_pipeline, EnergyParams, PipelineParams};
+use voxreg_regularize::{regularize, run_pipeline, self_intersections, EnergyParams, PipelineParams};
 use voxreg_testkit::{digitize, Goursat, Shape, Sphere, Torus};
 
 /// The test kit's shapes seen as the baselines' [`Implicit`].
-struct AsImplicit<'a>(&'a dyn Shape);
+pub(crate) struct AsImplicit<'a>(pub(crate) &'a dyn Shape);
 
 impl Implicit for AsImplicit<'_> {
     fn value(&self, p: DVec3) -> f64 {
@@ -248,7 +248,7 @@ struct Row {
 }
 
 /// Names of [`Row::values`], in order (CSV header).
-const COLUMNS: [&str; 19] = [
+const COLUMNS: [&str; 20] = [
     "dist_mean",
     "dist_max",
     "bias",
@@ -267,6 +267,7 @@ const COLUMNS: [&str; 19] = [
     "inverted",
     "to_digital_mean",
     "to_digital_max",
+    "self_intersections",
     "seconds",
 ];
 
@@ -300,9 +301,35 @@ fn measure(case: &Case, method: &str, mesh: &Mesh, digital: &TriangleIndex, seco
             q.inverted as f64,
             d.mean,
             d.max,
+            self_intersection_count(mesh) as f64,
             seconds,
         ],
     }
+}
+
+/// Pairs of faces of `mesh` that intersect without sharing a vertex (touching counts),
+/// by `voxreg_regularize::self_intersections`: polygons are cut into a fan of quads (and a
+/// last triangle, as a quad with a repeated vertex) that all share the polygon's first
+/// vertex, so pieces of one polygon are never reported against each other.
+pub(crate) fn self_intersection_count(mesh: &Mesh) -> usize {
+    let mut pieces = Vec::new();
+    let mut owner = Vec::new();
+    for (f, face) in mesh.faces().enumerate() {
+        let mut i = 1;
+        while i + 1 < face.len() {
+            let last = face[(i + 2).min(face.len() - 1)];
+            pieces.push([face[0], face[i], face[i + 1], last]);
+            owner.push(f);
+            i += 2;
+        }
+    }
+    let mut pairs: Vec<(usize, usize)> = self_intersections(&mesh.positions, &pieces)
+        .into_iter()
+        .map(|(a, b)| (owner[a].min(owner[b]), owner[a].max(owner[b])))
+        .collect();
+    pairs.sort_unstable();
+    pairs.dedup();
+    pairs.len()
 }
 
 fn timed<T>(f: impl FnOnce() -> Result<T>) -> Result<(T, f64)> {
@@ -402,13 +429,13 @@ fn fmt(v: f64) -> String {
 /// The Markdown table of one case: the main metrics.
 fn markdown(rows: &[Row]) -> String {
     let mut s = String::from(
-        "| method | faces | closed manifold | chi | distance mean / max | bias | normal error mean / max (deg) | aspect mean / p95 | scaled Jacobian min / mean | area CV | degenerate | to digital mean / max |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n",
+        "| method | faces | closed manifold | chi | distance mean / max | bias | normal error mean / max (deg) | aspect mean / p95 | scaled Jacobian min / mean | area CV | degenerate | self-int. | to digital mean / max |\n|---|---|---|---|---|---|---|---|---|---|---|---|---|\n",
     );
     for r in rows {
         let v = &r.values;
         let _ = writeln!(
             s,
-            "| {} | {} | {} | {} | {} / {} | {} | {} / {} | {} / {} | {} / {} | {} | {} | {} / {} |",
+            "| {} | {} | {} | {} | {} / {} | {} | {} / {} | {} / {} | {} / {} | {} | {} | {} | {} / {} |",
             r.method,
             r.faces,
             if r.closed { "yes" } else { "no" },
@@ -424,6 +451,7 @@ fn markdown(rows: &[Row]) -> String {
             fmt(v[9]),
             fmt(v[11]),
             fmt(v[14]),
+            fmt(v[18]),
             fmt(v[16]),
             fmt(v[17]),
         );
@@ -446,7 +474,7 @@ bias = mean signed distance (negative: shrinkage), to digital = vertex distance 
 (Proposition 1: O(h)). Normal error: area-weighted mean and max angle between face normals and the true \
 normals, orientation included. Aspect: largest over second eigenvalue of the face vertices' covariance \
 (paper Fig. 9; 1 = square or equilateral). Scaled Jacobian: min corner sine per face (1 = square). \
-Degenerate: aspect > 10 or area < 1% of the mean. closed manifold: every edge in exactly two faces, consistently oriented (pinched digital edges have four). \
+Degenerate: aspect > 10 or area < 1% of the mean. Self-int.: pairs of faces that intersect without sharing a vertex (touching counts). closed manifold: every edge in exactly two faces, consistently oriented (pinched digital edges have four). \
 voxreg: default weights (alpha 1e-3, beta 1, gamma 0.1), exact solve. MC: marching cubes at iso 0.5 \
 (face rule: inside 6-connected). Laplacian: 10 steps, lambda 0.5. Taubin: 10 pairs, lambda 0.5, mu -0.53. \
 DC: Hermite data from the binary map (midpoints, central-difference gradients), SVD truncation 0.1, no clamping. \
@@ -478,7 +506,7 @@ pub(crate) fn compare(args: &[String]) -> Result<()> {
             "{}: {:.1} s ({})",
             case.label,
             t.elapsed().as_secs_f64(),
-            rows.iter().map(|r| format!("{} {:.2}s", r.method, r.values[18])).collect::<Vec<_>>().join(", ")
+            rows.iter().map(|r| format!("{} {:.2}s", r.method, r.values[19])).collect::<Vec<_>>().join(", ")
         );
         let _ = write!(md, "## {}\n\n{}\n", case.label, markdown(&rows));
         all.extend(rows);
@@ -539,5 +567,150 @@ mod tests {
             let inside = s.in_ball(*p) || s.tet_value(*p) <= 0.0;
             assert_eq!(s.value(*p) <= 0.0, inside);
         }
+    }
+
+    /// The metrics of `method` in `rows`; see [`COLUMNS`] for the indices.
+    fn metrics<'a>(rows: &'a [Row], method: &str) -> &'a [f64] {
+        &rows.iter().find(|r| r.method == method).unwrap_or_else(|| panic!("no row {method}")).values
+    }
+
+    const NORMAL: usize = 3;
+    const ASPECT: usize = 5;
+    const DEGENERATE: usize = 14;
+    const TO_DIGITAL: usize = 16;
+    const SELF_INT: usize = 18;
+
+    fn case(shape: Box<dyn Shape>, h: f64) -> Vec<Row> {
+        let label = format!("{} h={h}", shape.name());
+        run_case(&Case { shape, h, label }).unwrap()
+    }
+
+    /// The papers' claims (sec. 4.2, Figs. 7-9) on closed smooth shapes, on the same rows
+    /// as `cargo xtask compare --quick`: with integral-invariant normals, regularization
+    /// beats marching cubes on normal error and both marching cubes and Shrouds on face
+    /// quality (mean aspect ratio, degenerate faces), and stays within O(h) of the input
+    /// (Proposition 1; here: half a voxel on average).
+    ///
+    /// Not claimed here because it does not hold: on the coarse sphere (h = 1, radius 10
+    /// voxels) Shrouds' normals are better (1.3 against 3.7 degrees).
+    fn check_smooth_shape(rows: &[Row]) {
+        let (ours, mc, shrouds) =
+            (metrics(rows, "voxreg (ii)"), metrics(rows, "marching cubes"), metrics(rows, "shrouds"));
+        let case = &rows[0].case;
+        assert!(
+            ours[NORMAL] < 0.5 * mc[NORMAL],
+            "{case}: normal error {} vs MC {}",
+            ours[NORMAL],
+            mc[NORMAL]
+        );
+        assert!(ours[ASPECT] < mc[ASPECT], "{case}: aspect {} vs MC {}", ours[ASPECT], mc[ASPECT]);
+        assert!(
+            ours[ASPECT] < shrouds[ASPECT],
+            "{case}: aspect {} vs Shrouds {}",
+            ours[ASPECT],
+            shrouds[ASPECT]
+        );
+        assert!(
+            ours[DEGENERATE] * 5.0 < shrouds[DEGENERATE],
+            "{case}: degenerate faces {} vs Shrouds {}",
+            ours[DEGENERATE],
+            shrouds[DEGENERATE]
+        );
+        assert!(ours[TO_DIGITAL] < 0.5, "{case}: distance to the input {} voxel", ours[TO_DIGITAL]);
+        // The input digital surface has no self-intersection; neither has MC.
+        assert_eq!(metrics(rows, "digital surface (input)")[SELF_INT], 0.0, "{case}");
+        assert_eq!(mc[SELF_INT], 0.0, "{case}");
+    }
+
+    #[test]
+    fn claims_on_a_coarse_sphere() {
+        check_smooth_shape(&case(Box::new(Sphere { radius: 10.0 }), 1.0));
+    }
+
+    #[test]
+    fn claims_on_a_torus() {
+        let rows = case(Box::new(Torus { major: 6.0, minor: 2.0 }), 0.5);
+        check_smooth_shape(&rows);
+        // On the torus Shrouds' normals are worse too.
+        assert!(metrics(&rows, "voxreg (ii)")[NORMAL] < metrics(&rows, "shrouds")[NORMAL]);
+    }
+
+    /// What holds on the ball+tetrahedron at 20^3: voxreg's normals beat marching
+    /// cubes', and it stays within half a voxel of the input on average.
+    #[test]
+    fn ball_tet_normals_beat_marching_cubes_at_20() {
+        let rows = run_case(&Case { shape: Box::new(BallTet::new()), h: 1.0, label: "ball+tet 20^3".into() })
+            .unwrap();
+        let (ours, mc) = (metrics(&rows, "voxreg (ii)"), metrics(&rows, "marching cubes"));
+        assert!(ours[NORMAL] < mc[NORMAL], "{} vs {}", ours[NORMAL], mc[NORMAL]);
+        assert!(ours[TO_DIGITAL] < 0.5, "{}", ours[TO_DIGITAL]);
+    }
+
+    /// The papers' Fig. 7 claim in full: on the ball+tetrahedron at 10^3 and 20^3,
+    /// regularization beats marching cubes and Shrouds on normal error and on face
+    /// quality, and stays within O(h) of the input. NOT reproduced by this implementation
+    /// with default weights (see README, "Comparison with other methods"): the thin shape
+    /// shrinks (about 1.6 voxel at 10^3, issue 8) and the tetrahedron's tilted flat faces
+    /// fold into slivers (mean aspect 26 to 44 against 3.3 to 3.6 for MC). Kept as an
+    /// ignored test that fails today: `cargo test --release -p xtask -- --ignored`.
+    #[test]
+    #[ignore = "the Fig. 7 claim on ball+tet is not reproduced yet (shrinkage, slivers): issue 8"]
+    fn ball_tet_full_claims_of_fig_7() {
+        for n in [10, 20] {
+            let rows = run_case(&Case {
+                shape: Box::new(BallTet::new()),
+                h: 20.0 / n as f64,
+                label: format!("ball+tet {n}^3"),
+            })
+            .unwrap();
+            let (ours, mc, shrouds) =
+                (metrics(&rows, "voxreg (ii)"), metrics(&rows, "marching cubes"), metrics(&rows, "shrouds"));
+            assert!(
+                ours[NORMAL] < mc[NORMAL].min(shrouds[NORMAL]),
+                "{n}^3 normals: {:?}",
+                (ours[NORMAL], mc[NORMAL], shrouds[NORMAL])
+            );
+            assert!(
+                ours[ASPECT] < mc[ASPECT].min(shrouds[ASPECT]),
+                "{n}^3 aspect: {:?}",
+                (ours[ASPECT], mc[ASPECT], shrouds[ASPECT])
+            );
+            assert!(ours[TO_DIGITAL] < 0.5, "{n}^3 distance to the input: {}", ours[TO_DIGITAL]);
+        }
+    }
+
+    #[test]
+    fn self_intersections_of_polygons_and_triangles() {
+        // Two triangles crossing each other, a quad far away, and a pentagon touching
+        // nothing: one pair.
+        let p = vec![
+            DVec3::new(0., 0., 0.),
+            DVec3::new(2., 0., 0.),
+            DVec3::new(0., 2., 0.),
+            DVec3::new(0.5, 0.5, -1.),
+            DVec3::new(0.5, 0.5, 1.),
+            DVec3::new(0.6, 0.7, 1.),
+            DVec3::new(10., 0., 0.),
+            DVec3::new(11., 0., 0.),
+            DVec3::new(11., 1., 0.),
+            DVec3::new(10., 1., 0.),
+            DVec3::new(20., 0., 0.),
+            DVec3::new(21., 0., 0.),
+            DVec3::new(21.5, 1., 0.),
+            DVec3::new(20.5, 2., 0.),
+            DVec3::new(19.5, 1., 0.),
+        ];
+        let mut mesh = Mesh::new(p);
+        mesh.push_face(&[0, 1, 2]);
+        mesh.push_face(&[3, 4, 5]);
+        mesh.push_face(&[6, 7, 8, 9]);
+        mesh.push_face(&[10, 11, 12, 13, 14]);
+        assert_eq!(self_intersection_count(&mesh), 1);
+        // A pentagon folded through the quad's plane region: the pentagon's pieces never
+        // count against each other, but against the quad they do.
+        let mut folded = mesh.clone();
+        folded.positions[12] = DVec3::new(10.5, 0.5, -1.0);
+        folded.positions[13] = DVec3::new(10.5, 0.5, 1.0);
+        assert_eq!(self_intersection_count(&folded), 2);
     }
 }

@@ -11,8 +11,12 @@
 //!   and CG solves) on ball+tet 40^3 and bunny-128 (see `table1.rs`).
 //! - `synth-labels [--dims X,Y,Z] [--out FILE.npy]`: a deterministic 25-label volume of
 //!   500 x 470 x 136 voxels, like a tissue segmentation (see `synth.rs`).
+//! - `figures [--quick] [--out DIR]`: the papers' Figs. 4, 7, 8, 9, 10, 11 and 15 as PNG
+//!   renders and charts with an `index.html`, in `target/xtask/figures/` (see
+//!   `figures.rs`).
 
 mod compare;
+mod figures;
 mod synth;
 mod table1;
 
@@ -32,11 +36,13 @@ fn main() -> Result<()> {
         Some("compare") => compare::compare(&args[1..]),
         Some("table1") => table1::table1(&args[1..]),
         Some("synth-labels") => synth::synth_labels(&args[1..]),
+        Some("figures") => figures::figures(&args[1..]),
         _ => {
             eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
             eprintln!("       cargo xtask compare [--quick] [--out DIR]");
             eprintln!("       cargo xtask table1 [--runs N] [FILE...]");
             eprintln!("       cargo xtask synth-labels [--dims X,Y,Z] [--out FILE.npy]");
+            eprintln!("       cargo xtask figures [--quick] [--out DIR]");
             bail!("unknown or missing command")
         }
     }
