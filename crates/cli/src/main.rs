@@ -11,7 +11,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
 use voxreg_io::{
-    read_mesh, read_raw, read_voxels, write_mesh, DataType, Endian, Palette, QuadMesh, RawSpec, Voxels,
+    read_mesh, read_raw, read_voxels, write_mesh, write_ply_with_vertex_scalar, DataType, Endian, Palette,
+    QuadMesh, RawSpec, Voxels,
 };
 use voxreg_normals::{
     multigrid_radius, AmbrosioTortorelli, AtParams, ConvolvedTrivial, IntegralInvariant, NormalEstimator,
@@ -114,6 +115,11 @@ struct RegularizeArgs {
     /// multigrid rule 3 h^(1/3), h the largest voxel spacing: 3 at unit spacing].
     #[arg(long, value_name = "R")]
     radius: Option<f64>,
+    /// With --normals at: also write the Ambrosio-Tortorelli feature field v (low on sharp
+    /// features, about 1 elsewhere) on the output mesh, as a binary PLY with a per-vertex
+    /// float property `feature` and a colour ramp (dark red 0, amber 0.5, light grey 1).
+    #[arg(long, value_name = "FILE.ply")]
+    features: Option<PathBuf>,
     /// Solver: auto (exact factorization for small surfaces, else cg), direct (sparse
     /// Cholesky), cg (multigrid conjugate gradient) or gd (gradient descent).
     #[arg(long, value_enum, default_value_t = SolverKind::Auto)]
@@ -172,9 +178,7 @@ impl NormalsKind {
             NormalsKind::Trivial => Box::new(Trivial),
             NormalsKind::Convolved => Box::new(ConvolvedTrivial { radius }),
             NormalsKind::Ii => Box::new(IntegralInvariant { radius }),
-            NormalsKind::At => {
-                Box::new(AmbrosioTortorelli::new(AtParams::default(), Box::new(IntegralInvariant { radius })))
-            }
+            NormalsKind::At => Box::new(at_estimator(radius)),
         }
     }
 
@@ -185,6 +189,11 @@ impl NormalsKind {
             _ => Some(radius.unwrap_or_else(|| multigrid_radius(surface.spacing()))),
         }
     }
+}
+
+/// The `at` estimator: Ambrosio-Tortorelli on integral invariants of the given radius.
+fn at_estimator(radius: Option<f64>) -> AmbrosioTortorelli {
+    AmbrosioTortorelli::new(AtParams::default(), Box::new(IntegralInvariant { radius }))
 }
 
 /// Shows a spinner for one stage of work and measures it.
@@ -406,6 +415,14 @@ fn terms_json(t: &EnergyTerms) -> serde_json::Value {
 
 fn regularize(args: &RegularizeArgs) -> Result<()> {
     check_output(&args.output)?;
+    if let Some(path) = &args.features {
+        if args.normals != NormalsKind::At {
+            bail!("--features {}: only --normals at has a feature field", path.display());
+        }
+        if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
+            bail!("{}: --features writes PLY only (expected .ply)", path.display());
+        }
+    }
     let params = EnergyParams { alpha: args.alpha, beta: args.beta, gamma: args.gamma };
     params.validate()?;
     if let Some(r) = args.radius {
@@ -423,7 +440,13 @@ fn regularize(args: &RegularizeArgs) -> Result<()> {
         Some(r) => format!("normals ({}, radius {r:.3})", estimator.name()),
         None => format!("normals ({})", estimator.name()),
     };
-    let normals = stages.run("normals", &label, || Ok(estimator.estimate(&surface)?))?;
+    let (normals, features) = stages.run("normals", &label, || match &args.features {
+        Some(_) => {
+            let (u, v) = at_estimator(args.radius).estimate_with_features(&surface)?;
+            Ok((u, Some(v)))
+        }
+        None => Ok((estimator.estimate(&surface)?, None)),
+    })?;
     let positions = surface.positions();
     let weights = Weights {
         fairness: args.texture_aware.then(|| FairnessMask::texture_aware(&surface)),
@@ -444,7 +467,13 @@ fn regularize(args: &RegularizeArgs) -> Result<()> {
         // Colour transfer: each quad takes the colour and material of its solid voxel.
         mesh.assign_materials(palette);
     }
-    stages.run("write", "write mesh", || Ok(write_mesh(&args.output, &mesh)?))?;
+    stages.run("write", "write mesh", || {
+        write_mesh(&args.output, &mesh)?;
+        if let (Some(path), Some(v)) = (&args.features, &features) {
+            write_ply_with_vertex_scalar(path, &mesh, "feature", v.as_slice())?;
+        }
+        Ok(())
+    })?;
 
     let before = energy.terms(&positions);
     let after = energy.terms(&regularized);

@@ -258,7 +258,8 @@ impl SpdSystem {
         self.sync_full();
         let n = self.n;
         let zero = vec![[0.0; K]; n];
-        let (mut r, mut u, mut w, mut p, mut s) = (zero.clone(), zero.clone(), zero.clone(), zero.clone(), zero);
+        let (mut r, mut u, mut w, mut p, mut s) =
+            (zero.clone(), zero.clone(), zero.clone(), zero.clone(), zero);
         // r = b - A x, u = D^-1 r; sums |b|^2, |r|^2, r.u.
         self.apply(x, &mut w);
         let inv_diag = &self.inv_diag;
@@ -298,9 +299,13 @@ impl SpdSystem {
             for c in 0..K {
                 // A column solved exactly (gamma = 0) or broken down (alpha = 0) stays put.
                 let stalled = iterations > 0 && alpha[c] == 0.0;
-                let denominator = delta[c] - if iterations == 0 { 0.0 } else { beta[c] * gamma[c] / alpha[c] };
-                alpha[c] =
-                    if !stalled && denominator > 0.0 && gamma[c] > 0.0 { gamma[c] / denominator } else { 0.0 };
+                let denominator =
+                    delta[c] - if iterations == 0 { 0.0 } else { beta[c] * gamma[c] / alpha[c] };
+                alpha[c] = if !stalled && denominator > 0.0 && gamma[c] > 0.0 {
+                    gamma[c] / denominator
+                } else {
+                    0.0
+                };
             }
             iterations += 1;
             // p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = D^-1 r;
