@@ -23,7 +23,7 @@ use linear::{SolveStats, SpdSystem};
 pub enum AtLinearSolver {
     /// faer's sparse Cholesky: AMD ordering and symbolic analysis once per surface and
     /// system, a numeric factorization and triangular solves per solve: exact to machine
-    /// precision, about 2.5 times slower than the default on bunny-128.
+    /// precision, about 2.3 times the CPU time of the default on bunny-128.
     Cholesky,
     /// Jacobi-preconditioned conjugate gradients, warm-started from the previous
     /// alternation's solution, until the relative residual `|b - A x| / |b|` of every
