@@ -23,7 +23,7 @@ use linear::{SolveStats, SpdSystem};
 pub enum AtLinearSolver {
     /// faer's sparse Cholesky: AMD ordering and symbolic analysis once per surface and
     /// system, a numeric factorization and triangular solves per solve: exact to machine
-    /// precision, about 2.3 times the CPU time of the default on bunny-128.
+    /// precision, about 2.2 times the CPU time of the default on bunny-128.
     Cholesky,
     /// Jacobi-preconditioned conjugate gradients, warm-started from the previous
     /// alternation's solution, until the relative residual `|b - A x| / |b|` of every
@@ -260,7 +260,7 @@ impl AtInfo {
 /// surface, a numeric factorization per solve). On bunny-128 (55k surfels) the
 /// alternations decrease the energy monotonically but slowly and never reach the `1e-4`
 /// tolerance, so a run is 40 alternations: 80 factorizations of about 250 Mflop each
-/// (2.1M nonzeros in each factor), or about 35 CG iterations per solve, 2.3 times less
+/// (2.1M nonzeros in each factor), or about 35 CG iterations per solve, 2.2 times less
 /// CPU time. The two solvers' fields differ by at most `1e-5` in `v` and `4e-4` degrees
 /// in `u` (`1e-9` with a CG tolerance of `1e-10`).
 ///
