@@ -4,8 +4,9 @@
 //! solve/cholesky`. Input: the bundled bunny-128 volume (55k surfels, unit spacing).
 //! - `at/bunny-128/default`: the whole estimator (II input, operators, 40 alternations).
 //! - `at/bunny-128/setup`: the discrete operators and sparsity patterns only.
-//! - `at/bunny-128/solve/{cholesky,cg}`: the alternations only, from a precomputed II field,
-//!   with each linear solver (a reused `AtSolver`: the symbolic analyses are amortized).
+//! - `at/bunny-128/solve/{cholesky,cg,cg-1e-10}`: the alternations only, from a precomputed
+//!   II field, with each linear solver (`cg`: the default, relative residual `1e-6`; a reused
+//!   `AtSolver`: the symbolic analyses are amortized).
 
 #![allow(missing_docs)] // `criterion_group!` defines an undocumented function
 
@@ -33,15 +34,19 @@ fn at(c: &mut Criterion) {
 
     let input = IntegralInvariant::default().estimate(&bunny).unwrap();
     let mut solver = AtSolver::new(&bunny).unwrap();
-    let cholesky = AtParams::default();
+    let cholesky = AtParams { linear_solver: AtLinearSolver::Cholesky, ..AtParams::default() };
     g.bench_function("bunny-128/solve/cholesky", |b| {
         b.iter(|| solver.solve(black_box(&input), &cholesky).unwrap())
     });
-    let cg = AtParams {
+    let cg = AtParams::default();
+    g.bench_function("bunny-128/solve/cg", |b| b.iter(|| solver.solve(black_box(&input), &cg).unwrap()));
+    let cg_tight = AtParams {
         linear_solver: AtLinearSolver::ConjugateGradient { tolerance: 1e-10, max_iterations: 1000 },
         ..AtParams::default()
     };
-    g.bench_function("bunny-128/solve/cg", |b| b.iter(|| solver.solve(black_box(&input), &cg).unwrap()));
+    g.bench_function("bunny-128/solve/cg-1e-10", |b| {
+        b.iter(|| solver.solve(black_box(&input), &cg_tight).unwrap())
+    });
     g.finish();
 }
 

@@ -11,8 +11,8 @@ use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId, RegionMap};
 use voxreg_io::{
-    interface_name, read_mesh, read_raw, read_voxels, region_name, write_mesh, write_volume, DataType,
-    Endian, MeshBatch, Palette, QuadMesh, RawSpec, Voxels,
+    interface_name, read_mesh, read_raw, read_voxels, region_name, write_mesh, write_ply_with_vertex_scalar,
+    write_volume, DataType, Endian, MeshBatch, Palette, QuadMesh, RawSpec, Voxels,
 };
 use voxreg_normals::{
     multigrid_radius, AmbrosioTortorelli, AtParams, ConvolvedTrivial, IntegralInvariant, NormalEstimator,
@@ -148,6 +148,11 @@ struct RegularizeArgs {
     /// multigrid rule 3 h^(1/3), h the largest voxel spacing: 3 at unit spacing].
     #[arg(long, value_name = "R")]
     radius: Option<f64>,
+    /// With --normals at: also write the Ambrosio-Tortorelli feature field v (low on sharp
+    /// features, about 1 elsewhere) on the output mesh, as a binary PLY with a per-vertex
+    /// float property `feature` and a colour ramp (dark red 0, amber 0.5, light grey 1).
+    #[arg(long, value_name = "FILE.ply")]
+    features: Option<PathBuf>,
     /// Solver: auto (exact factorization for small surfaces, else cg), direct (sparse
     /// Cholesky), cg (multigrid conjugate gradient) or gd (gradient descent).
     #[arg(long, value_enum, default_value_t = SolverKind::Auto)]
@@ -256,9 +261,7 @@ impl NormalsKind {
             NormalsKind::Trivial => Box::new(Trivial),
             NormalsKind::Convolved => Box::new(ConvolvedTrivial { radius }),
             NormalsKind::Ii => Box::new(IntegralInvariant { radius }),
-            NormalsKind::At => {
-                Box::new(AmbrosioTortorelli::new(AtParams::default(), Box::new(IntegralInvariant { radius })))
-            }
+            NormalsKind::At => Box::new(at_estimator(radius)),
         }
     }
 
@@ -269,6 +272,11 @@ impl NormalsKind {
             _ => Some(radius.unwrap_or_else(|| multigrid_radius(surface.spacing()))),
         }
     }
+}
+
+/// The `at` estimator: Ambrosio-Tortorelli on integral invariants of the given radius.
+fn at_estimator(radius: Option<f64>) -> AmbrosioTortorelli {
+    AmbrosioTortorelli::new(AtParams::default(), Box::new(IntegralInvariant { radius }))
 }
 
 /// Shows a spinner for one stage of work and measures it.
@@ -593,6 +601,17 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
         }
         _ => {}
     }
+    if let Some(path) = &args.features {
+        if product != Product::Mesh {
+            bail!("--features {}: voxreg upscale writes no mesh to carry the feature field", path.display());
+        }
+        if args.normals != NormalsKind::At {
+            bail!("--features {}: only --normals at has a feature field", path.display());
+        }
+        if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
+            bail!("{}: --features writes PLY only (expected .ply)", path.display());
+        }
+    }
     let params = EnergyParams { alpha: args.alpha, beta: args.beta, gamma: args.gamma };
     params.validate()?;
     if let Some(r) = args.radius {
@@ -610,7 +629,13 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
         Some(r) => format!("normals ({}, radius {r:.3})", estimator.name()),
         None => format!("normals ({})", estimator.name()),
     };
-    let normals = stages.run("normals", &label, || Ok(estimator.estimate(&surface)?))?;
+    let (normals, features) = stages.run("normals", &label, || match &args.features {
+        Some(_) => {
+            let (u, v) = at_estimator(args.radius).estimate_with_features(&surface)?;
+            Ok((u, Some(v)))
+        }
+        None => Ok((estimator.estimate(&surface)?, None)),
+    })?;
     let positions = surface.positions();
     let weights = Weights {
         fairness: args.texture_aware.then(|| FairnessMask::texture_aware(&surface)),
@@ -637,8 +662,14 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
     // The energy of the last round (its normals and attachment targets).
     let energy = Energy::new(&surface, &out.normals, &out.targets, params)?.with_weights(&weights)?;
     let written = match product {
-        Product::Mesh => stages
-            .run("write", "write mesh", || write_output(args, &surface, regularized, palette.as_ref()))?,
+        Product::Mesh => stages.run("write", "write mesh", || {
+            let written = write_output(args, &surface, regularized, palette.as_ref())?;
+            if let (Some(path), Some(v)) = (&args.features, &features) {
+                let mesh = QuadMesh::from_surface(&surface, regularized);
+                write_ply_with_vertex_scalar(path, &mesh, "feature", v.as_slice())?;
+            }
+            Ok(written)
+        })?,
         Product::Volume { factor } => {
             let fine = stages.run("upscale", &format!("upscale x{factor}"), || {
                 upscale(&surface, regularized, &volume, &UpscaleParams { factor })

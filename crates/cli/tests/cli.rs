@@ -265,6 +265,58 @@ fn regularize_with_each_normal_estimator_records_it_in_the_report() {
     assert!(!out.status.success());
 }
 
+/// The `feature` values of a PLY written by `--features`, checking its header.
+fn ply_features(path: &Path) -> Vec<f32> {
+    let bytes = std::fs::read(path).unwrap();
+    let end = b"end_header\n";
+    let body = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+    let header = String::from_utf8(bytes[..body].to_vec()).unwrap();
+    assert!(header.contains("property float feature\nproperty uchar red\n"), "{header}");
+    let count: usize =
+        header.lines().find_map(|l| l.strip_prefix("element vertex ")).unwrap().parse().unwrap();
+    (0..count)
+        .map(|i| {
+            let o = body + 19 * i + 12;
+            f32::from_le_bytes(bytes[o..o + 4].try_into().unwrap())
+        })
+        .collect()
+}
+
+#[test]
+fn features_writes_the_at_feature_field() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("cat.obj");
+    let ply = dir.path().join("features.ply");
+    let input = data("cat10.vol");
+    let (i, o, f) = (input.to_str().unwrap(), obj.to_str().unwrap(), ply.to_str().unwrap());
+    let out = voxreg(&["regularize", i, "-o", o, "-q", "--normals", "at", "--features", f]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let (vertices, _, _) = obj_quads(&obj);
+    let v = ply_features(&ply);
+    assert_eq!(v.len(), vertices);
+    // Low along the cat's sharp features (ears, paws), about 1 on its smooth parts.
+    assert!(v.iter().all(|x| x.is_finite() && *x < 1.0 + 1e-6));
+    let low = v.iter().filter(|&&x| x < 0.5).count();
+    let high = v.iter().filter(|&&x| x > 0.8).count();
+    assert!(low > 0 && high > v.len() / 2, "{low} low, {high} high of {}", v.len());
+
+    // Only AT has a feature field, and it is written as PLY only: clear errors, no files.
+    std::fs::remove_file(&ply).unwrap();
+    for (extra, message) in [
+        (vec!["--features", f], "--features"),
+        (vec!["--normals", "ii", "--features", f], "only --normals at has a feature field"),
+        (vec!["--normals", "at", "--features", "features.obj"], "expected .ply"),
+    ] {
+        let other = dir.path().join("other.obj");
+        let mut args = vec!["regularize", i, "-o", other.to_str().unwrap(), "-q"];
+        args.extend(extra);
+        let out = voxreg(&args);
+        assert!(!out.status.success());
+        assert!(stderr(&out).contains(message), "{}", stderr(&out));
+        assert!(!ply.exists() && !other.exists());
+    }
+}
+
 /// Vertex positions of an OBJ file.
 fn obj_positions(path: &Path) -> Vec<[f64; 3]> {
     std::fs::read_to_string(path)

@@ -95,3 +95,109 @@ pub(crate) fn encode_ply(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
     }
     Ok(())
 }
+
+/// Writes `mesh` to `path` as a binary PLY file with one scalar per vertex: a `float`
+/// property named `name` holding `values[v]` (rounded to `f32`) and a colour ramp of it,
+/// for inspecting a per-vertex field (e.g. the discontinuity field of the
+/// Ambrosio-Tortorelli normal estimator, `name = "feature"`) in any PLY viewer.
+///
+/// Header (the faces are those of [`write_ply`], without material colours):
+///
+/// ```text
+/// ply
+/// format binary_little_endian 1.0
+/// comment voxreg quad mesh
+/// comment <name> colour ramp: 0 dark red, 0.5 amber, 1 light grey
+/// element vertex <number of vertices>
+/// property float x
+/// property float y
+/// property float z
+/// property float <name>
+/// property uchar red
+/// property uchar green
+/// property uchar blue
+/// element face <number of quads>
+/// property list uchar int vertex_indices
+/// property int inner_label
+/// property int outer_label
+/// end_header
+/// ```
+///
+/// The colour is [`scalar_ramp`] of the value. Refused with [`IoError::InvalidMesh`]
+/// before anything is created if `values` does not have one finite `f32` value per
+/// vertex, if `name` is not a plain identifier (ASCII letters, digits and `_`, not
+/// starting with a digit) or is taken by another vertex property, or for the reasons of
+/// [`write_ply`]. Written to a temporary file renamed onto `path` when complete.
+pub fn write_ply_with_vertex_scalar(
+    path: &Path,
+    mesh: &QuadMesh,
+    name: &str,
+    values: &[f64],
+) -> Result<(), IoError> {
+    let check = |mesh: &QuadMesh| -> Result<(), String> {
+        check_ply(mesh)?;
+        let plain = name.chars().all(|c| c.is_ascii_alphanumeric() || c == '_');
+        if name.is_empty() || !plain || name.starts_with(|c: char| c.is_ascii_digit()) {
+            return Err(format!("{name:?} is not a valid PLY property name"));
+        }
+        if ["x", "y", "z", "red", "green", "blue"].contains(&name) {
+            return Err(format!("{name:?} is already a vertex property"));
+        }
+        if values.len() != mesh.positions.len() {
+            return Err(format!("{} values for {} vertices", values.len(), mesh.positions.len()));
+        }
+        if let Some(i) = values.iter().position(|x| !(*x as f32).is_finite()) {
+            return Err(format!("vertex {i} has value {}, not a finite PLY float", values[i]));
+        }
+        Ok(())
+    };
+    write_atomically(path, mesh, check, |mesh, w| encode_ply_with_vertex_scalar(mesh, name, values, w))
+}
+
+/// The colour of `value` on the ramp of [`write_ply_with_vertex_scalar`]: clamped to
+/// `[0, 1]`, then linear from dark red `(160, 0, 0)` at 0 to amber `(255, 190, 0)` at 0.5
+/// and light grey `(230, 230, 230)` at 1.
+pub fn scalar_ramp(value: f64) -> [u8; 3] {
+    const STOPS: [[f64; 3]; 3] = [[160.0, 0.0, 0.0], [255.0, 190.0, 0.0], [230.0, 230.0, 230.0]];
+    let t = if value.is_nan() { 0.0 } else { value.clamp(0.0, 1.0) } * 2.0;
+    let (i, s) = if t < 1.0 { (0, t) } else { (1, t - 1.0) };
+    std::array::from_fn(|c| (STOPS[i][c] + s * (STOPS[i + 1][c] - STOPS[i][c])).round() as u8)
+}
+
+/// Writes the PLY of [`write_ply_with_vertex_scalar`], assumed checked, to `w`.
+fn encode_ply_with_vertex_scalar(
+    mesh: &QuadMesh,
+    name: &str,
+    values: &[f64],
+    w: &mut dyn Write,
+) -> io::Result<()> {
+    write!(
+        w,
+        "ply\nformat binary_little_endian 1.0\ncomment voxreg quad mesh\n\
+         comment {name} colour ramp: 0 dark red, 0.5 amber, 1 light grey\n\
+         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+         property float {name}\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n\
+         element face {}\nproperty list uchar int vertex_indices\n\
+         property int inner_label\nproperty int outer_label\nend_header\n",
+        mesh.positions.len(),
+        mesh.quads.len()
+    )?;
+    for (p, &value) in mesh.positions.iter().zip(values) {
+        let mut record = [0u8; 19];
+        let floats = p.as_vec3().to_array().into_iter().chain([value as f32]);
+        for (chunk, c) in record[..16].chunks_exact_mut(4).zip(floats) {
+            chunk.copy_from_slice(&c.to_le_bytes());
+        }
+        record[16..].copy_from_slice(&scalar_ramp(value));
+        w.write_all(&record)?;
+    }
+    for (quad, labels) in mesh.quads.iter().zip(&mesh.face_labels) {
+        let mut record = [0u8; 25];
+        record[0] = 4;
+        for (chunk, &v) in record[1..].chunks_exact_mut(4).zip(quad.iter().chain(labels)) {
+            chunk.copy_from_slice(&(v as i32).to_le_bytes());
+        }
+        w.write_all(&record)?;
+    }
+    Ok(())
+}

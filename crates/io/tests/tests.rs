@@ -6,7 +6,8 @@
 //!   documented dimensions and labels; `not_a.vox` and files with the wrong extension
 //!   are refused with errors naming the file.
 //! - **Snapshots** (`tests/snapshots/`): the OBJ text and a PLY dump (header, then one
-//!   hex record per line) of the surface of a single voxel.
+//!   hex record per line) of the surface of a single voxel, and the same with a
+//!   per-vertex scalar (`feature`) and its colour ramp.
 //! - **Round trips**: a real surface written as PLY and parsed back by a minimal PLY
 //!   reader; the same surface written as OBJ and counted.
 //! - **Failed writes** leave nothing behind: missing directory, a directory as target,
@@ -18,8 +19,8 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams};
 use voxreg_io::{
-    interface_name, read_volume, region_name, write_mesh, write_obj, write_ply, FaceGroup, IoError,
-    LoadedVolume, MeshBatch, QuadMesh,
+    interface_name, read_volume, region_name, scalar_ramp, write_mesh, write_obj, write_ply,
+    write_ply_with_vertex_scalar, FaceGroup, IoError, LoadedVolume, MeshBatch, QuadMesh,
 };
 
 fn data(name: &str) -> PathBuf {
@@ -131,11 +132,16 @@ fn obj_snapshot() {
 
 /// The PLY header as text, then each vertex and face record in hex, one per line.
 fn ply_dump(bytes: &[u8], vertices: usize, faces: usize) -> String {
+    ply_dump_sized(bytes, [(vertices, 12), (faces, 25)])
+}
+
+/// [`ply_dump`] with the vertex and face record sizes given.
+fn ply_dump_sized(bytes: &[u8], records: [(usize, usize); 2]) -> String {
     let end = b"end_header\n";
     let body = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
     let mut out = String::from_utf8(bytes[..body].to_vec()).unwrap();
     let mut rest = &bytes[body..];
-    for (count, size) in [(vertices, 12), (faces, 25)] {
+    for (count, size) in records {
         for _ in 0..count {
             let (record, tail) = rest.split_at(size);
             let hex: Vec<String> = record.iter().map(|b| format!("{b:02x}")).collect();
@@ -154,6 +160,49 @@ fn ply_snapshot() {
     let path = dir.path().join("cube.ply");
     write_mesh(&path, &single_voxel_mesh()).unwrap();
     insta::assert_snapshot!(ply_dump(&std::fs::read(&path).unwrap(), 8, 6));
+}
+
+#[test]
+fn ply_vertex_scalar_snapshot() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("feature.ply");
+    let mesh = single_voxel_mesh();
+    let values: Vec<f64> = (0..8).map(|i| i as f64 / 7.0).collect();
+    write_ply_with_vertex_scalar(&path, &mesh, "feature", &values).unwrap();
+    insta::assert_snapshot!(ply_dump_sized(&std::fs::read(&path).unwrap(), [(8, 19), (6, 25)]));
+}
+
+#[test]
+fn scalar_ramp_stops_and_clamping() {
+    assert_eq!(scalar_ramp(0.0), [160, 0, 0]);
+    assert_eq!(scalar_ramp(0.5), [255, 190, 0]);
+    assert_eq!(scalar_ramp(1.0), [230, 230, 230]);
+    assert_eq!(scalar_ramp(-3.0), scalar_ramp(0.0));
+    assert_eq!(scalar_ramp(7.0), scalar_ramp(1.0));
+    assert_eq!(scalar_ramp(0.25), [208, 95, 0]);
+}
+
+#[test]
+fn ply_vertex_scalar_refuses_bad_values_and_names() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("feature.ply");
+    let mesh = single_voxel_mesh();
+    let ok = vec![0.5; 8];
+    let mut nan = ok.clone();
+    nan[3] = f64::NAN;
+    for (name, values, expected) in [
+        ("feature", &ok[..7], "7 values for 8 vertices"),
+        ("feature", &nan[..], "vertex 3 has value NaN"),
+        ("two words", &ok[..], "not a valid PLY property name"),
+        ("", &ok[..], "not a valid PLY property name"),
+        ("red", &ok[..], "already a vertex property"),
+    ] {
+        let err = write_ply_with_vertex_scalar(&path, &mesh, name, values).unwrap_err();
+        assert!(matches!(err, IoError::InvalidMesh { .. }), "{err}");
+        assert!(err.to_string().contains(expected), "{err}");
+        assert!(err.to_string().contains("feature.ply"), "{err}");
+        assert!(!path.exists());
+    }
 }
 
 // ---------------------------------------------------------------- round trips

@@ -4,8 +4,12 @@
 //! - `cube_creases_stay_sharp`, `lens_crease_stays_sharp`: the crease angle between nearby
 //!   surfels on either side of a crease (within 2 voxels) is kept, `v` has a valley along
 //!   the crease and is close to 1 far from it: from exact normals with 10 degrees of noise
-//!   (cube: within 5 degrees; lens: within 8, see the test) and from the default input
+//!   (cube: within 2 degrees; lens: within 8, see the test) and from the default input
 //!   (integral invariants: AT must sharpen, not blur).
+//! - `cube_edges_from_integral_invariants`, `lens_crease_from_integral_invariants`: from
+//!   the default input, the error by distance to the crease against II's. On the cube the
+//!   row along each edge keeps II's 45-degree chamfer (a known limitation, explained on the
+//!   test); the next rows are realigned.
 //! - `sphere_error_not_worse_than_input`: on a smooth shape AT does not degrade its input.
 //! - `normals_are_unit_and_features_per_vertex`, `multi_label_volume`, `open_border_volume`:
 //!   shapes of the output on every kind of complex.
@@ -295,7 +299,7 @@ fn cube_creases_stay_sharp() {
     println!("cube, exact input with noise of up to 10 degrees:");
     let points: Vec<DVec3> = (-7..=7).map(|z| DVec3::new(half, half, z as f64)).collect();
     let c = crease_run(&surface, &noisy(exact, 10.0), exact, (&side_x, &side_y), &points, nearest_crease);
-    assert!(c.at.0 < 5.0 && c.at.1 < 10.0, "crease angle off by {:?} degrees", c.at);
+    assert!(c.at.0 < 2.0 && c.at.1 < 5.0, "crease angle off by {:?} degrees", c.at);
     assert!(c.valley < 0.3, "v along the crease {}", c.valley);
     assert!(c.far.0 > 0.95, "v far from the creases {:?}", c.far);
 
@@ -354,6 +358,123 @@ fn lens_crease_stays_sharp() {
     assert!(err_at < err_in, "AT {err_at:.2} vs input {err_in:.2}");
     assert!(c.valley < 0.3, "v along the crease {}", c.valley);
     assert!(c.far.0 > 0.85, "v far from the crease {:?}", c.far);
+}
+
+/// Mean angular error (degrees) of `normals` against `truth` over the surfels whose
+/// centre's distance to a crease, `distance(centre)`, is in `[lo, hi)`.
+fn band_error(
+    surface: &DigitalSurface,
+    normals: &NormalField,
+    truth: &[DVec3],
+    distance: impl Fn(DVec3) -> Option<f64>,
+    lo: f64,
+    hi: f64,
+) -> f64 {
+    let errors: Vec<f64> = (0..surface.num_surfels())
+        .filter(|&s| distance(surfel_centre(surface, s)).is_some_and(|d| (lo..hi).contains(&d)))
+        .map(|s| normals.as_slice()[s].angle_between(truth[s]).to_degrees())
+        .collect();
+    mean_max(&errors).0
+}
+
+/// Integral invariants (r = 3) turn the two surfel rows along each edge of a cube by
+/// about 45 and 18 degrees. AT realigns the second row with its face, but keeps the row
+/// along the edge at 45 degrees: the input has no jump at the edge itself, only one row
+/// away on either side, so `v` drops there, and the two rows along the edge stay a
+/// chamfer between two valleys (the data term makes this the cheaper configuration:
+/// aligning the chamfer costs `alpha |u - g|^2` on two rows, about 0.12 per unit length,
+/// the second valley about `lambda` = 0.025). A weaker data term (`alpha` 0.01, `lambda`
+/// 0.05) moves the valley onto the edge and the chamfer rows to within 6 degrees of their
+/// faces, but spreads the input's bias over the faces and flattens curved parts (lens:
+/// error 7 degrees away from the crease instead of 1): not a default. This test pins the
+/// current behaviour, limitation included, so that a fix shows.
+#[test]
+fn cube_edges_from_integral_invariants() {
+    let surface = DigitalSurface::from_volume(&digitize(&Cuboid { half: DVec3::splat(10.0) }, 1.0)).unwrap();
+    let exact = Trivial.estimate(&surface).unwrap();
+    let exact = exact.as_slice();
+    let half = 10.5;
+    // Distance from the nearest edge, for points at least 3 voxels from the corners.
+    let edge_distance = |p: DVec3| -> Option<f64> {
+        let mut d = [half - p.x.abs(), half - p.y.abs(), half - p.z.abs()];
+        d.sort_by(f64::total_cmp);
+        (d[2] >= 3.0).then_some(d[1])
+    };
+    let input = AmbrosioTortorelli::default().initial.estimate(&surface).unwrap();
+    let positions = surface.positions();
+    let v_mean = |v: &FeatureField, lo: f64, hi: f64| -> f64 {
+        let values: Vec<f64> = positions
+            .iter()
+            .zip(v.as_slice())
+            .filter(|(p, _)| edge_distance(**p).is_some_and(|d| (lo..hi).contains(&d)))
+            .map(|(_, &x)| x)
+            .collect();
+        mean_max(&values).0
+    };
+    let report = |name: &str, n: &NormalField| -> [f64; 3] {
+        let rows = [
+            band_error(&surface, n, exact, edge_distance, 0.0, 1.0),
+            band_error(&surface, n, exact, edge_distance, 1.0, 2.0),
+            band_error(&surface, n, exact, edge_distance, 2.0, 3.0),
+        ];
+        let far = band_error(&surface, n, exact, edge_distance, 3.0, 8.0);
+        println!(
+            "  {name}: mean error in the rows 0, 1, 2 voxels from the edges {rows:.1?}, rows 3 to 8 {far:.2}"
+        );
+        rows
+    };
+    println!("cube, integral invariant input (r = 3):");
+    let ii = report("ii", &input);
+    let (u, v, _) = AtSolver::new(&surface).unwrap().solve(&input, &AtParams::default()).unwrap();
+    let default = report("at, default parameters", &u);
+    let (on_edge, off_edge, far) = (v_mean(&v, 0.0, 0.25), v_mean(&v, 0.75, 1.25), v_mean(&v, 2.0, 8.0));
+    println!("    v on the edges {on_edge:.2}, one voxel off {off_edge:.2}, 2 to 8 voxels off {far:.2}");
+    // The second row is realigned: a third of II's error.
+    assert!(default[1] < 0.4 * ii[1], "{default:?} vs ii {ii:?}");
+    assert!(default[2] < 6.0, "{default:?}");
+    // Known limitation: the row along the edge keeps II's 45 degrees, between two valleys
+    // of v one voxel off the edge.
+    assert!(ii[0] > 35.0 && default[0] > 35.0, "{ii:?} {default:?}");
+    assert!(off_edge < 0.15 && on_edge > 0.5 && far > 0.9, "{on_edge} {off_edge} {far}");
+}
+
+/// The lens (74-degree circular crease, off the grid axes) from integral invariants:
+/// AT brings the normals closer to the truth near the crease and much closer away from
+/// it, and `v` has a valley on the crease.
+#[test]
+fn lens_crease_from_integral_invariants() {
+    let lens = Lens { radius: 20.0, offset: 12.0 };
+    let surface = DigitalSurface::from_volume(&digitize(&lens, 1.0)).unwrap();
+    let truth = true_normals(&surface, &lens);
+    let input = AmbrosioTortorelli::default().initial.estimate(&surface).unwrap();
+    let crease = |p: DVec3| Some(lens.crease_distance(p));
+    let (u, v, _) = AtSolver::new(&surface).unwrap().solve(&input, &AtParams::default()).unwrap();
+    let near = |n: &NormalField| band_error(&surface, n, &truth, crease, 0.0, 3.0);
+    let far = |n: &NormalField| band_error(&surface, n, &truth, crease, 3.0, 100.0);
+    let (ii, at) = ((near(&input), far(&input)), (near(&u), far(&u)));
+    println!(
+        "lens, integral invariant input: mean error within 3 voxels of the crease / beyond: ii {:.2} / {:.2}, \
+         at {:.2} / {:.2}",
+        ii.0, ii.1, at.0, at.1
+    );
+    let positions = surface.positions();
+    let v_near: Vec<f64> = positions
+        .iter()
+        .zip(v.as_slice())
+        .filter(|(p, _)| lens.crease_distance(**p) < 0.75)
+        .map(|(_, &x)| x)
+        .collect();
+    let v_far: Vec<f64> = positions
+        .iter()
+        .zip(v.as_slice())
+        .filter(|(p, _)| lens.crease_distance(**p) > 3.0)
+        .map(|(_, &x)| x)
+        .collect();
+    let (v_near, v_far) = (mean_max(&v_near).0, mean_max(&v_far).0);
+    println!("  v within 0.75 voxel of the crease {v_near:.3}, beyond 3 voxels {v_far:.3}");
+    assert!(at.0 < 0.85 * ii.0, "near the crease: {at:?} vs ii {ii:?}");
+    assert!(at.1 < 0.5 * ii.1, "away from the crease: {at:?} vs ii {ii:?}");
+    assert!(v_near < 0.6 && v_far > 0.85 && v_far - v_near > 0.3, "{v_near} {v_far}");
 }
 
 // ---- smooth shapes ------------------------------------------------------------------

@@ -244,8 +244,10 @@ impl SpdSystem {
         });
     }
 
-    /// Jacobi-preconditioned CG on the `K` columns in lockstep. Returns whether every
-    /// column reached `||b - A x|| <= tol ||b||`, and the iterations run.
+    /// Jacobi-preconditioned CG on the `K` columns in lockstep, in the Chronopoulos-Gear
+    /// form: one matrix-vector product and two passes over the vectors per iteration, with
+    /// all inner products of an iteration reduced together. Returns whether every column
+    /// reached `||b - A x|| <= tol ||b||`, and the iterations run.
     fn cg<const K: usize>(
         &mut self,
         b: &[[f64; K]],
@@ -255,84 +257,113 @@ impl SpdSystem {
     ) -> (bool, usize) {
         self.sync_full();
         let n = self.n;
-        let mut r = vec![[0.0; K]; n];
-        let mut p = vec![[0.0; K]; n];
-        let mut q = vec![[0.0; K]; n];
-        self.apply(x, &mut q);
+        let zero = vec![[0.0; K]; n];
+        let (mut r, mut u, mut w, mut p, mut s) =
+            (zero.clone(), zero.clone(), zero.clone(), zero.clone(), zero);
+        // r = b - A x, u = D^-1 r; sums |b|^2, |r|^2, r.u.
+        self.apply(x, &mut w);
         let inv_diag = &self.inv_diag;
-        // r = b - A x, p = D^-1 r; sums |b|^2, |r|^2, r.p per column.
-        let sums = r
+        let [b2, mut r2, mut gamma] = r
             .par_chunks_mut(ROWS_PER_TASK)
-            .zip(p.par_chunks_mut(ROWS_PER_TASK))
+            .zip(u.par_chunks_mut(ROWS_PER_TASK))
             .enumerate()
-            .map(|(t, (rc, pc))| {
+            .map(|(t, (rc, uc))| {
                 let o = t * ROWS_PER_TASK;
-                let mut s = [[0.0; K]; 3];
-                for (k, (ri, pi)) in rc.iter_mut().zip(pc.iter_mut()).enumerate() {
-                    let (bi, qi, d) = (&b[o + k], &q[o + k], inv_diag[o + k]);
+                let mut sums = [[0.0; K]; 3];
+                for (k, (ri, ui)) in rc.iter_mut().zip(uc.iter_mut()).enumerate() {
+                    let (bi, wi, d) = (&b[o + k], &w[o + k], inv_diag[o + k]);
                     for c in 0..K {
-                        ri[c] = bi[c] - qi[c];
-                        pi[c] = d * ri[c];
-                        s[0][c] += bi[c] * bi[c];
-                        s[1][c] += ri[c] * ri[c];
-                        s[2][c] += ri[c] * pi[c];
+                        ri[c] = bi[c] - wi[c];
+                        ui[c] = d * ri[c];
+                        sums[0][c] += bi[c] * bi[c];
+                        sums[1][c] += ri[c] * ri[c];
+                        sums[2][c] += ri[c] * ui[c];
                     }
                 }
-                s
+                sums
             })
             .reduce(|| [[0.0; K]; 3], add_sums);
-        let [b2, mut r2, mut rz] = sums;
         let limit: [f64; K] = std::array::from_fn(|c| tol * tol * b2[c]);
+        let mut alpha = [0.0; K];
+        let mut beta = [0.0; K];
         let mut iterations = 0;
-        while !(0..K).all(|c| r2[c] <= limit[c]) {
+        loop {
+            if (0..K).all(|c| r2[c] <= limit[c]) {
+                return (true, iterations);
+            }
             if iterations == max_iterations || !(0..K).all(|c| r2[c].is_finite()) {
                 return (false, iterations);
             }
+            // w = A u and delta = w.u.
+            let delta = self.apply_dot(&u, &mut w);
+            for c in 0..K {
+                // A column solved exactly (gamma = 0) or broken down (alpha = 0) stays put.
+                let stalled = iterations > 0 && alpha[c] == 0.0;
+                let denominator =
+                    delta[c] - if iterations == 0 { 0.0 } else { beta[c] * gamma[c] / alpha[c] };
+                alpha[c] = if !stalled && denominator > 0.0 && gamma[c] > 0.0 {
+                    gamma[c] / denominator
+                } else {
+                    0.0
+                };
+            }
             iterations += 1;
-            self.apply(&p, &mut q);
-            let pq = p
-                .par_chunks(ROWS_PER_TASK)
-                .zip(q.par_chunks(ROWS_PER_TASK))
-                .map(|(pc, qc)| {
-                    let mut s = [0.0; K];
-                    for (pi, qi) in pc.iter().zip(qc) {
-                        for c in 0..K {
-                            s[c] += pi[c] * qi[c];
-                        }
-                    }
-                    s
-                })
-                .reduce(|| [0.0; K], |a, b| std::array::from_fn(|c| a[c] + b[c]));
-            let alpha: [f64; K] = std::array::from_fn(|c| if pq[c] > 0.0 { rz[c] / pq[c] } else { 0.0 });
-            // x += alpha p, r -= alpha q; sums |r|^2 and r.D^-1 r.
-            let [s_r2, s_rz, _] = x
+            // p = u + beta p, s = w + beta s, x += alpha p, r -= alpha s, u = D^-1 r;
+            // sums |r|^2 and r.u.
+            let [new_r2, new_gamma, _] = x
                 .par_chunks_mut(ROWS_PER_TASK)
                 .zip(r.par_chunks_mut(ROWS_PER_TASK))
+                .zip(u.par_chunks_mut(ROWS_PER_TASK))
+                .zip(p.par_chunks_mut(ROWS_PER_TASK).zip(s.par_chunks_mut(ROWS_PER_TASK)))
                 .enumerate()
-                .map(|(t, (xc, rc))| {
+                .map(|(t, (((xc, rc), uc), (pc, sc)))| {
                     let o = t * ROWS_PER_TASK;
-                    let mut s = [[0.0; K]; 3];
-                    for (k, (xi, ri)) in xc.iter_mut().zip(rc.iter_mut()).enumerate() {
-                        let (pi, qi, d) = (&p[o + k], &q[o + k], inv_diag[o + k]);
+                    let mut sums = [[0.0; K]; 3];
+                    for k in 0..xc.len() {
+                        let (wi, d) = (&w[o + k], inv_diag[o + k]);
                         for c in 0..K {
-                            xi[c] += alpha[c] * pi[c];
-                            ri[c] -= alpha[c] * qi[c];
-                            s[0][c] += ri[c] * ri[c];
-                            s[1][c] += d * ri[c] * ri[c];
+                            pc[k][c] = uc[k][c] + beta[c] * pc[k][c];
+                            sc[k][c] = wi[c] + beta[c] * sc[k][c];
+                            xc[k][c] += alpha[c] * pc[k][c];
+                            rc[k][c] -= alpha[c] * sc[k][c];
+                            uc[k][c] = d * rc[k][c];
+                            sums[0][c] += rc[k][c] * rc[k][c];
+                            sums[1][c] += rc[k][c] * uc[k][c];
                         }
                     }
-                    s
+                    sums
                 })
                 .reduce(|| [[0.0; K]; 3], add_sums);
-            let beta: [f64; K] = std::array::from_fn(|c| if rz[c] > 0.0 { s_rz[c] / rz[c] } else { 0.0 });
-            (r2, rz) = (s_r2, s_rz);
-            p.par_iter_mut().zip(r.par_iter()).zip(inv_diag.par_iter()).for_each(|((pi, ri), d)| {
-                for c in 0..K {
-                    pi[c] = d * ri[c] + beta[c] * pi[c];
-                }
-            });
+            beta = std::array::from_fn(|c| if gamma[c] > 0.0 { new_gamma[c] / gamma[c] } else { 0.0 });
+            (r2, gamma) = (new_r2, new_gamma);
         }
-        (true, iterations)
+    }
+
+    /// `y = A x` and the column sums of `x * y`, rows in parallel.
+    fn apply_dot<const K: usize>(&self, x: &[[f64; K]], y: &mut [[f64; K]]) -> [f64; K] {
+        let (row_ptr, col_idx, vals) = (&self.row_ptr, &self.col_idx, &self.full_values);
+        y.par_chunks_mut(ROWS_PER_TASK)
+            .enumerate()
+            .map(|(t, chunk)| {
+                let o = t * ROWS_PER_TASK;
+                let rows = &row_ptr[o..o + chunk.len() + 1];
+                let mut dot = [0.0; K];
+                for (k, (out, w)) in chunk.iter_mut().zip(rows.windows(2)).enumerate() {
+                    let mut acc = [0.0; K];
+                    for (a, &j) in vals[w[0]..w[1]].iter().zip(&col_idx[w[0]..w[1]]) {
+                        let xj = &x[j as usize];
+                        for c in 0..K {
+                            acc[c] += a * xj[c];
+                        }
+                    }
+                    for c in 0..K {
+                        dot[c] += acc[c] * x[o + k][c];
+                    }
+                    *out = acc;
+                }
+                dot
+            })
+            .reduce(|| [0.0; K], |a, b| std::array::from_fn(|c| a[c] + b[c]))
     }
 }
 
