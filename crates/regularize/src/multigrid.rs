@@ -39,7 +39,9 @@ use crate::RegularizeError;
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct MultigridParams {
     /// Stop coarsening at a level of at most this many nodes, and factor it exactly.
-    /// Default: `800`.
+    /// Default: `150` (smaller coarsest levels cost less to factor and to solve each
+    /// cycle; in an A/B run 150 was 12%, 10% and 7% faster than 800 on spheres of 20k,
+    /// 100k and 367k quads, with the same iteration counts within one).
     pub coarsest_nodes: usize,
     /// At most this many levels, the surface included. Default: `16`.
     pub max_levels: usize,
@@ -52,7 +54,7 @@ pub struct MultigridParams {
 
 impl Default for MultigridParams {
     fn default() -> Self {
-        MultigridParams { coarsest_nodes: 800, max_levels: 16, smoothing_steps: 1, damping: 1.8 }
+        MultigridParams { coarsest_nodes: 150, max_levels: 16, smoothing_steps: 1, damping: 1.8 }
     }
 }
 

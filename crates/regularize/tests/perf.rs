@@ -2,7 +2,7 @@
 //!
 //! ```text
 //! cargo test --release -p voxreg-regularize --test perf -- --ignored --nocapture
-//! RADII=33,73 RUNS=3 NORMALS=trivial cargo test --release -p voxreg-regularize --test perf -- --ignored --nocapture
+//! RADII=33,73 RUNS=3 NORMALS=trivial COARSEST=800 cargo test --release -p voxreg-regularize --test perf -- --ignored --nocapture
 //! ```
 //!
 //! For digitized spheres (default radii 33, 73, 140, 282 voxels: about 20k, 100k, 367k and
@@ -78,7 +78,11 @@ fn solver_table() {
         let mut last = None;
         for _ in 0..runs {
             let t = Instant::now();
-            let mut cg = CgSolver::new(&s, CgParams::default()).unwrap();
+            let mut params = CgParams::default();
+            if let Some(c) = std::env::var("COARSEST").ok().and_then(|c| c.parse().ok()) {
+                params.multigrid.coarsest_nodes = c;
+            }
+            let mut cg = CgSolver::new(&s, params).unwrap();
             let levels = cg.levels();
             let (x, info) = cg.solve(&energy).unwrap();
             times.push(t.elapsed().as_secs_f64());
