@@ -8,7 +8,6 @@
 //! (timings are printed to the terminal only).
 
 use std::fmt::Write as _;
-use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -482,19 +481,7 @@ Shrouds: see voxreg-baselines (eps 0.05, damping 0.5, at most 200 sweeps).\n";
 
 /// Runs the comparison; `args`: `[--quick] [--out DIR]`.
 pub(crate) fn compare(args: &[String]) -> Result<()> {
-    let mut quick = false;
-    let mut out = crate::root().join("target/xtask/compare");
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--quick" => quick = true,
-            "--out" => out = PathBuf::from(it.next().context("--out needs a folder")?),
-            other => {
-                anyhow::bail!("unknown argument {other}; usage: cargo xtask compare [--quick] [--out DIR]")
-            }
-        }
-    }
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let (quick, out) = crate::quick_and_out("compare", args)?;
     let start = Instant::now();
     let mut all = Vec::new();
     let mut md =

@@ -196,19 +196,7 @@ fn quads(surface: &DigitalSurface) -> Vec<[u32; 4]> {
 
 /// Runs the figures; `args`: `[--quick] [--out DIR]`.
 pub(crate) fn figures(args: &[String]) -> Result<()> {
-    let mut quick = false;
-    let mut out = crate::root().join("target/xtask/figures");
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        match a.as_str() {
-            "--quick" => quick = true,
-            "--out" => out = PathBuf::from(it.next().context("--out needs a folder")?),
-            other => {
-                anyhow::bail!("unknown argument {other}; usage: cargo xtask figures [--quick] [--out DIR]")
-            }
-        }
-    }
-    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    let (quick, out) = crate::quick_and_out("figures", args)?;
     plotters::style::register_font("sans-serif", FontStyle::Normal, voxreg_render::FONT_TTF)
         .map_err(|_| anyhow!("the bundled font does not load"))?;
     let start = Instant::now();

@@ -150,3 +150,20 @@ fn timings(args: &[String]) -> Result<()> {
     );
     Ok(())
 }
+
+/// Parses `[--quick] [--out DIR]` for `command`, whose output folder defaults to
+/// `target/xtask/<command>`.
+pub(crate) fn quick_and_out(command: &str, args: &[String]) -> Result<(bool, PathBuf)> {
+    let mut quick = false;
+    let mut out = root().join("target/xtask").join(command);
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        match a.as_str() {
+            "--quick" => quick = true,
+            "--out" => out = PathBuf::from(it.next().context("--out needs a folder")?),
+            other => bail!("unknown argument {other}; usage: cargo xtask {command} [--quick] [--out DIR]"),
+        }
+    }
+    std::fs::create_dir_all(&out).with_context(|| format!("creating {}", out.display()))?;
+    Ok((quick, out))
+}

@@ -1,20 +1,10 @@
 //! End-to-end tests of the `voxreg` binary.
 
 use std::collections::HashMap;
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data").join(name)
-}
-
-fn voxreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_voxreg")).args(args).output().expect("voxreg runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+mod common;
+use common::{data, stderr, voxreg};
 
 /// Parses the quads of an OBJ file.
 fn obj_quads(path: &Path) -> (usize, Vec<[usize; 4]>, Vec<String>) {

@@ -2,26 +2,12 @@
 //! grey levels and `--threshold`, `--labels`, `--background`, `--no-background`, raw
 //! data (`--dims`, `--dtype`, `--spacing`), and errors that name the file.
 
-use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::path::Path;
 
 use glam::DVec3;
 
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data").join(name)
-}
-
-fn voxreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_voxreg")).args(args).output().expect("voxreg runs")
-}
-
-fn stdout(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stdout).into_owned()
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
+mod common;
+use common::{data, stderr, stdout, voxreg};
 
 /// Runs `voxreg info` and returns its output, which must be a success.
 fn info(args: &[&str]) -> String {

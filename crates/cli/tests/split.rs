@@ -8,13 +8,11 @@
 
 use std::collections::HashMap;
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
 
 use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, VertexId};
 
-fn voxreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_voxreg")).args(args).output().expect("voxreg runs")
-}
+mod common;
+use common::voxreg;
 
 fn run_ok(args: &[&str]) {
     let out = voxreg(args);

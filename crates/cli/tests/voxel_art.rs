@@ -3,11 +3,14 @@
 //! into a .vox that dot_vox reads back.
 
 use std::path::{Path, PathBuf};
-use std::process::{Command, Output};
+use std::process::Command;
 
 use voxreg_digisurf::{DigitalSurface, RegionMap};
 use voxreg_io::{read_mesh, read_voxels, Voxels};
 use voxreg_regularize::self_intersections;
+
+mod common;
+use common::{data, stderr, voxreg};
 
 /// The bundled .vox models (data/README.md gives their sources and licences).
 const MODELS: [&str; 6] = [
@@ -18,18 +21,6 @@ const MODELS: [&str; 6] = [
     "metal-material.vox",
     "placeholder-with-materials.vox",
 ];
-
-fn data(name: &str) -> PathBuf {
-    Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data").join(name)
-}
-
-fn voxreg(args: &[&str]) -> Output {
-    Command::new(env!("CARGO_BIN_EXE_voxreg")).args(args).output().expect("voxreg runs")
-}
-
-fn stderr(o: &Output) -> String {
-    String::from_utf8_lossy(&o.stderr).into_owned()
-}
 
 /// The digital surface the CLI builds for a .vox model by default (one solid region).
 fn surface_of(name: &str) -> DigitalSurface {

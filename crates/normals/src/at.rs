@@ -702,18 +702,23 @@ mod tests {
         }
     }
 
-    /// Conjugate gradients and Cholesky give the same fields.
-    #[test]
-    fn cg_and_cholesky_agree() {
-        let surface = ball(6.0);
-        let g = NormalField::new(
+    /// The surface's trivial normals, perturbed deterministically (unnormalized).
+    fn wiggled_normals(surface: &DigitalSurface) -> NormalField {
+        NormalField::new(
             surface
                 .surfels()
                 .iter()
                 .enumerate()
                 .map(|(i, s)| s.normal() + 0.2 * DVec3::new(wiggle(i, 0), wiggle(i, 1), wiggle(i, 2)))
                 .collect(),
-        );
+        )
+    }
+
+    /// Conjugate gradients and Cholesky give the same fields.
+    #[test]
+    fn cg_and_cholesky_agree() {
+        let surface = ball(6.0);
+        let g = wiggled_normals(&surface);
         let mut solver = AtSolver::new(&surface).unwrap();
         let direct = AtParams { linear_solver: AtLinearSolver::Cholesky, ..AtParams::default() };
         let iterative = AtParams {
@@ -734,14 +739,7 @@ mod tests {
     #[test]
     fn default_solver_is_close_to_cholesky() {
         let surface = ball(6.0);
-        let g = NormalField::new(
-            surface
-                .surfels()
-                .iter()
-                .enumerate()
-                .map(|(i, s)| s.normal() + 0.2 * DVec3::new(wiggle(i, 0), wiggle(i, 1), wiggle(i, 2)))
-                .collect(),
-        );
+        let g = wiggled_normals(&surface);
         let mut solver = AtSolver::new(&surface).unwrap();
         let exact = AtParams { linear_solver: AtLinearSolver::Cholesky, ..AtParams::default() };
         let (u1, v1, _) = solver.solve(&g, &exact).unwrap();

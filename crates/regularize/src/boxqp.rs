@@ -273,15 +273,7 @@ pub(crate) fn minimize_in_boxes(
                 if rz1 > 0.0 && zq > 0.0 {
                     let mut s = rz1 / zq;
                     for _ in 0..30 {
-                        trial
-                            .par_chunks_mut(CHUNK)
-                            .zip(u.par_chunks(CHUNK))
-                            .zip(z.par_chunks(CHUNK))
-                            .for_each(|((d, u), z)| {
-                                for i in 0..d.len() {
-                                    d[i] = (u[i] + s * z[i]).clamp(-w, w) - u[i];
-                                }
-                            });
+                        project_step(u, &z, s, w, &mut trial);
                         stencil.apply(coef, &trial, &mut tq, &mut t, true);
                         applications += 1;
                         let de = -2.0 * dot(r, &trial) + dot(&trial, &tq);
