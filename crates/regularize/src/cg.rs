@@ -166,9 +166,8 @@ impl CgSolver {
             scale_add(&mut b.p, 0.0, &b.z);
             let mut rz = dot(&b.r, &b.z);
             loop {
-                stencil.apply(coef, &b.p, &mut b.q, &mut b.t, true);
+                let pq = stencil.apply_dot(coef, &b.p, &mut b.q, &mut b.t);
                 applications += 1;
-                let pq = dot(&b.p, &b.q);
                 if !(pq > 0.0 && rz > 0.0) {
                     break 'outer; // converged to rounding
                 }

@@ -45,8 +45,12 @@ pub struct MultigridParams {
     pub coarsest_nodes: usize,
     /// At most this many levels, the surface included. Default: `16`.
     pub max_levels: usize,
-    /// Smoothing sweeps before and after each coarse correction. Default: `1`.
+    /// Smoothing sweeps before and after the coarse correction on the surface itself
+    /// (each costs one matrix-free product by `H`). Default: `1`.
     pub smoothing_steps: usize,
+    /// Smoothing sweeps before and after each coarse correction on the coarse levels,
+    /// whose products are several times cheaper than the surface's. Default: `1`.
+    pub coarse_smoothing_steps: usize,
     /// Damping of the smoother: the step along `M^-1 r`, `M >= H` a block-diagonal
     /// majorant, convergent for any damping in `(0, 2)`. Default: `1.8`.
     pub damping: f64,
@@ -54,7 +58,13 @@ pub struct MultigridParams {
 
 impl Default for MultigridParams {
     fn default() -> Self {
-        MultigridParams { coarsest_nodes: 150, max_levels: 16, smoothing_steps: 1, damping: 1.8 }
+        MultigridParams {
+            coarsest_nodes: 150,
+            max_levels: 16,
+            smoothing_steps: 1,
+            coarse_smoothing_steps: 1,
+            damping: 1.8,
+        }
     }
 }
 
@@ -199,6 +209,7 @@ impl Hierarchy {
             coarsest,
             works,
             steps: self.params.smoothing_steps.max(1),
+            coarse_steps: self.params.coarse_smoothing_steps.max(1),
             factor_seconds,
         })
     }
@@ -594,6 +605,7 @@ pub(crate) struct Vcycle {
     coarsest: Option<Coarsest>,
     works: Vec<Work>,
     steps: usize,
+    coarse_steps: usize,
     /// Seconds spent factoring the coarsest level.
     pub(crate) factor_seconds: f64,
 }
@@ -636,11 +648,11 @@ impl Vcycle {
 
     /// Bytes moved by one cycle (`product`: bytes of one fine product by `H`).
     pub(crate) fn traffic(&self, product: usize, n: usize) -> usize {
-        let s = self.steps;
+        let (s, cs) = (self.steps, self.coarse_steps);
         // Fine: products, smoothing (r, M, z), residual updates, restriction, prolongation.
         let fine = 2 * s * product + 2 * s * 120 * n + 2 * s * 72 * n + 60 * n;
         let coarse: usize =
-            self.levels.iter().map(|l| 2 * s * (l.matrix.bytes() + 3 * 24 * l.n) + 10 * 24 * l.n).sum();
+            self.levels.iter().map(|l| 2 * cs * (l.matrix.bytes() + 3 * 24 * l.n) + 10 * 24 * l.n).sum();
         let coarsest = self.coarsest.as_ref().map_or(0, |c| 2 * 8 * c.factor.len());
         fine + coarse + coarsest
     }
@@ -681,7 +693,7 @@ impl Vcycle {
             self.coarsest.as_ref().expect("factored").solve(&w.r, &mut w.x);
             return;
         }
-        let steps = self.steps;
+        let steps = self.coarse_steps;
         let (here, rest) = works.split_at_mut(1);
         let w = &mut here[0];
         let level = &self.levels[l];

@@ -43,6 +43,18 @@ fn triad_bandwidth(bytes: usize) -> f64 {
     4.0 * bytes as f64 / best * 1e-9
 }
 
+/// CPU time of all the process's threads, in seconds (from /proc/self/task/*/schedstat;
+/// 0 where unavailable): less sensitive than wall time to other processes on a shared
+/// machine.
+fn cpu_seconds() -> f64 {
+    let Ok(tasks) = std::fs::read_dir("/proc/self/task") else { return 0.0 };
+    tasks
+        .filter_map(|t| std::fs::read_to_string(t.ok()?.path().join("schedstat")).ok())
+        .filter_map(|s| s.split_whitespace().next()?.parse::<f64>().ok())
+        .sum::<f64>()
+        * 1e-9
+}
+
 fn peak_rss_mib() -> f64 {
     std::fs::read_to_string("/proc/self/status")
         .ok()
@@ -75,21 +87,35 @@ fn solver_table() {
         let input = s.positions();
         let energy = Energy::new(&s, &normals, &input, EnergyParams::default()).unwrap();
         let mut times = Vec::new();
+        let mut cpu = Vec::new();
         let mut last = None;
         for _ in 0..runs {
             let t = Instant::now();
+            let c0 = cpu_seconds();
             let mut params = CgParams::default();
             if let Some(c) = std::env::var("COARSEST").ok().and_then(|c| c.parse().ok()) {
                 params.multigrid.coarsest_nodes = c;
+            }
+            if let Some(c) = std::env::var("SMOOTH").ok().and_then(|c| c.parse().ok()) {
+                params.multigrid.smoothing_steps = c;
+            }
+            if let Some(c) = std::env::var("COARSE_SMOOTH").ok().and_then(|c| c.parse().ok()) {
+                params.multigrid.coarse_smoothing_steps = c;
+            }
+            if let Some(c) = std::env::var("DAMP").ok().and_then(|c| c.parse().ok()) {
+                params.multigrid.damping = c;
             }
             let mut cg = CgSolver::new(&s, params).unwrap();
             let levels = cg.levels();
             let (x, info) = cg.solve(&energy).unwrap();
             times.push(t.elapsed().as_secs_f64());
+            cpu.push(cpu_seconds() - c0);
             last = Some((x, info, levels));
         }
         times.sort_by(f64::total_cmp);
         let median = times[times.len() / 2];
+        cpu.sort_by(f64::total_cmp);
+        eprintln!("cpu seconds per solve (all threads): median {:.3}, min {:.3}", cpu[cpu.len() / 2], cpu[0]);
         let (x, info, levels) = last.unwrap();
         let tight = CgParams { tolerance: 1e-6, stopping: StoppingRule::Guaranteed, ..Default::default() };
         let (reference, _) = CgSolver::new(&s, tight).unwrap().solve(&energy).unwrap();
