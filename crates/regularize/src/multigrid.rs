@@ -28,7 +28,7 @@ use faer::sparse::linalg::cholesky::{
 };
 use faer::sparse::{SparseColMat, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Side};
-use glam::DVec3;
+use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 
 use crate::stencil::{Coefficients, Stencil, CHUNK};
@@ -195,8 +195,12 @@ impl Hierarchy {
         };
         let factor_seconds = t.elapsed().as_secs_f64();
         lap("coarsest factor");
-        let work =
-            |n: usize| Work { r: vec![DVec3::ZERO; n], x: vec![DVec3::ZERO; n], t: vec![DVec3::ZERO; n] };
+        let work = |n: usize| Work {
+            r: vec![DVec3::ZERO; n],
+            x: vec![DVec3::ZERO; n],
+            t: vec![DVec3::ZERO; n],
+            xf: Vec::new(),
+        };
         let mut works = vec![work(stencil.len())];
         works.extend(levels.iter().map(|l| work(l.n)));
         Ok(Vcycle {
@@ -445,13 +449,15 @@ fn l1_smoother(rows: &Rows, damping: f64) -> Vec<[f64; 6]> {
         .collect()
 }
 
-/// A 3x3-block sparse row matrix in `f32`.
+/// A 3x3-block sparse row matrix in `f32`, its products in SIMD `f32` (it only
+/// preconditions): about 3 times fewer instructions per block than in `f64` with
+/// per-block conversions.
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Bsr {
     offsets: Vec<u32>,
     cols: Vec<u32>,
-    /// Column-major 3x3 blocks.
-    blocks: Vec<[f32; 9]>,
+    /// The blocks' columns.
+    blocks: Vec<[Vec3A; 3]>,
 }
 
 impl Bsr {
@@ -467,7 +473,7 @@ impl Bsr {
                 for t in [0, 4, 8] {
                     m[t] += b[9];
                 }
-                m
+                [Vec3A::new(m[0], m[1], m[2]), Vec3A::new(m[3], m[4], m[5]), Vec3A::new(m[6], m[7], m[8])]
             })
             .collect();
         Bsr { offsets, cols, blocks }
@@ -475,25 +481,29 @@ impl Bsr {
 
     /// Bytes read by one product.
     pub(crate) fn bytes(&self) -> usize {
-        4 * self.offsets.len() + 4 * self.cols.len() + 36 * self.blocks.len()
+        4 * self.offsets.len() + 4 * self.cols.len() + 48 * self.blocks.len()
     }
 
-    /// `y = b - A x` (`with_rhs`) or `y = A x`.
-    fn residual(&self, x: &[DVec3], b: Option<&[DVec3]>, y: &mut [DVec3]) {
+    /// `y = b - A x` (with `b`) or `y = A x`; `xf` is scratch for `x` in `f32`.
+    fn residual(&self, x: &[DVec3], xf: &mut Vec<Vec3A>, b: Option<&[DVec3]>, y: &mut [DVec3]) {
+        xf.resize(x.len(), Vec3A::ZERO);
+        xf.par_chunks_mut(CHUNK).zip(x.par_chunks(CHUNK)).for_each(|(f, x)| {
+            for (f, x) in f.iter_mut().zip(x) {
+                *f = x.as_vec3a();
+            }
+        });
+        let xf = &*xf;
         y.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
             let base = k * CHUNK;
             for (o, yi) in out.iter_mut().enumerate() {
                 let i = base + o;
-                let (mut s0, mut s1, mut s2) = (0.0f64, 0.0f64, 0.0f64);
-                for k in self.offsets[i] as usize..self.offsets[i + 1] as usize {
-                    let m = &self.blocks[k];
-                    let v = x[self.cols[k] as usize];
-                    let (a, bb, c) = (v.x as f32, v.y as f32, v.z as f32);
-                    s0 += f64::from(m[0] * a + m[3] * bb + m[6] * c);
-                    s1 += f64::from(m[1] * a + m[4] * bb + m[7] * c);
-                    s2 += f64::from(m[2] * a + m[5] * bb + m[8] * c);
+                let (start, end) = (self.offsets[i] as usize, self.offsets[i + 1] as usize);
+                let mut acc = Vec3A::ZERO;
+                for (m, &c) in self.blocks[start..end].iter().zip(&self.cols[start..end]) {
+                    let v = xf[c as usize];
+                    acc += m[0] * v.x + m[1] * v.y + m[2] * v.z;
                 }
-                let ax = DVec3::new(s0, s1, s2);
+                let ax = acc.as_dvec3();
                 *yi = match b {
                     Some(b) => b[i] - ax,
                     None => ax,
@@ -594,6 +604,8 @@ struct Work {
     r: Vec<DVec3>,
     x: Vec<DVec3>,
     t: Vec<DVec3>,
+    /// `x` in `f32`, for the coarse products.
+    xf: Vec<Vec3A>,
 }
 
 /// One energy's multigrid preconditioner: `z = V(r)`.
@@ -699,7 +711,7 @@ impl Vcycle {
         let level = &self.levels[l];
         smooth(&level.smoother, &w.r, &mut w.x, false);
         for s in 0..steps {
-            level.matrix.residual(&w.x, Some(&w.r), &mut w.t);
+            level.matrix.residual(&w.x, &mut w.xf, Some(&w.r), &mut w.t);
             if s + 1 < steps {
                 smooth(&level.smoother, &w.t, &mut w.x, true);
             }
@@ -711,7 +723,7 @@ impl Vcycle {
         let w = &mut here[0];
         prolong_add(&self.aggregations[l + 1].parent, &rest[0].x, &mut w.x);
         for _ in 0..steps {
-            level.matrix.residual(&w.x, Some(&w.r), &mut w.t);
+            level.matrix.residual(&w.x, &mut w.xf, Some(&w.r), &mut w.t);
             smooth(&level.smoother, &w.t, &mut w.x, true);
         }
     }
