@@ -217,7 +217,7 @@ pub(crate) fn minimize_in_boxes(
             restart = true;
         } else {
             // Conjugate gradient on the face.
-            prepared.pre.apply(stencil, coef, &phi, &mut z);
+            prepared.pre.apply(stencil, &phi, &mut z);
             restrict_to_face(u, w, &mut z);
             let rz_new = dot(&phi, &z);
             if rz_new.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
@@ -264,7 +264,7 @@ pub(crate) fn minimize_in_boxes(
                 de_total += -2.0 * a_f * rpd + a_f * a_f * pq;
                 let c0 = step(u, r, a_f, &p, &q, w);
                 split(u, r, w, &mut phi, &mut beta);
-                prepared.pre.apply(stencil, coef, &phi, &mut z);
+                prepared.pre.apply(stencil, &phi, &mut z);
                 restrict_to_face(u, w, &mut z);
                 stencil.apply(coef, &z, &mut q, &mut t, true);
                 applications += 1;

@@ -207,7 +207,7 @@ impl DescentSolver {
             if done || iterations >= self.params.max_iterations {
                 break;
             }
-            prepared.pre.apply(stencil, coef, &rp, &mut z);
+            prepared.pre.apply(stencil, &rp, &mut z);
             if let Some(w) = half {
                 freeze(&u, &r, w, &mut z);
             }

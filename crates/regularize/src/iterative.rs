@@ -147,7 +147,7 @@ impl Setup {
     pub(crate) fn traffic_model(&self, prepared: &Prepared<'_>, products: usize, streams: usize) -> usize {
         let n = self.stencil.len();
         let product = self.stencil.bytes() + prepared.coef.slot_normals.len() * 24 + 8 * n + 5 * 24 * n;
-        products * product + streams * 24 * n + prepared.pre.traffic(product, n)
+        products * product + streams * 24 * n + prepared.pre.traffic(self.stencil.bytes(), n)
     }
 }
 
@@ -160,7 +160,7 @@ pub(crate) enum Pre {
 }
 
 impl Pre {
-    pub(crate) fn apply(&mut self, stencil: &Stencil, coef: &Coefficients<'_>, r: &[DVec3], z: &mut [DVec3]) {
+    pub(crate) fn apply(&mut self, stencil: &Stencil, r: &[DVec3], z: &mut [DVec3]) {
         match self {
             Pre::Identity => z.copy_from_slice(r),
             Pre::Jacobi(d) => {
@@ -181,7 +181,7 @@ impl Pre {
                     },
                 )
             }
-            Pre::Multigrid(v) => v.apply(stencil, coef, r, z),
+            Pre::Multigrid(v) => v.apply(stencil, r, z),
         }
     }
 
@@ -194,13 +194,14 @@ impl Pre {
         }
     }
 
-    /// Bytes moved by one application (`product`: bytes of one fine product).
-    fn traffic(&self, product: usize, n: usize) -> usize {
+    /// Bytes moved by one application (`connectivity`: bytes of the stencil's
+    /// connectivity).
+    fn traffic(&self, connectivity: usize, n: usize) -> usize {
         match self {
             Pre::Identity => 48 * n,
             Pre::Jacobi(_) => 72 * n,
             Pre::Block(_) => 96 * n,
-            Pre::Multigrid(v) => v.traffic(product, n),
+            Pre::Multigrid(v) => v.traffic(connectivity, n),
         }
     }
 }

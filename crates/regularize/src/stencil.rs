@@ -160,6 +160,17 @@ impl Stencil {
         &self.face_slots[self.face_offsets[v] as usize..self.face_offsets[v + 1] as usize]
     }
 
+    /// The range of vertex `v`'s slots in [`Stencil::face_slots`].
+    #[inline(always)]
+    pub(crate) fn face_range(&self, v: usize) -> std::ops::Range<usize> {
+        self.face_offsets[v] as usize..self.face_offsets[v + 1] as usize
+    }
+
+    /// Every vertex's face slots, vertex after vertex.
+    pub(crate) fn face_slots(&self) -> &[FaceSlot] {
+        &self.face_slots
+    }
+
     #[inline(always)]
     pub(crate) fn fair_neighbours(&self, v: usize) -> &[u32] {
         &self.fair_nbrs[self.fair_offsets[v] as usize..self.fair_offsets[v + 1] as usize]
