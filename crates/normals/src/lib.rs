@@ -51,7 +51,7 @@ mod trivial;
 pub use at::{AmbrosioTortorelli, AtInfo, AtLinearSolver, AtParams, AtSolver, FeatureField};
 pub use convolved::ConvolvedTrivial;
 pub use field::NormalField;
-pub use ii::{multigrid_radius, BallMoments, IntegralInvariant};
+pub use ii::{multigrid_radius, voxel_moments, BallMoments, IntegralInvariant};
 pub use trivial::Trivial;
 
 use voxreg_digisurf::DigitalSurface;

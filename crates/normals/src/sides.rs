@@ -11,11 +11,25 @@ use glam::DVec3;
 /// two sides disagree by more than 90 degrees, as they may at a junction: there each side
 /// reads the interface plus its own other boundary, and only the trivial normal says which
 /// part is the interface. When the sum vanishes, `a` is kept.
+///
+/// The exception: two estimates nearly opposite once aligned (more than about 154 degrees
+/// apart, [`OPPOSED`]) are nearly the *same* direction, both nearly perpendicular to the
+/// trivial normal, which then cannot tell their relative sign (aligning them with it
+/// would cancel them into noise). They are summed with `b` flipped. This happens where a
+/// surfel is one step of a staircase whose true normal is perpendicular to it (the top of
+/// a torus's tube): there the integral invariant's two sides measured a flip of 89
+/// degrees before this rule.
 pub(crate) fn combine_sides(a: DVec3, b: DVec3, trivial: DVec3) -> DVec3 {
     let align = |v: DVec3| if v.dot(trivial) < 0.0 { -v } else { v };
-    let (a, b) = (align(a), align(b));
-    (a + b).try_normalize().unwrap_or(a)
+    let (a, mut b) = (align(a), align(b));
+    if a.dot(b) < OPPOSED * a.length() * b.length() {
+        b = -b;
+    }
+    align((a + b).try_normalize().unwrap_or(a))
 }
+
+/// The cosine below which two aligned estimates count as one direction of ambiguous sign.
+const OPPOSED: f64 = -0.9;
 
 #[cfg(test)]
 mod tests {
@@ -33,5 +47,15 @@ mod tests {
         // Two sides more than 90 degrees apart, each near its own trivial orientation.
         let n = combine_sides(DVec3::new(1.0, 0.0, 2.0), DVec3::new(-1.0, 0.0, 2.0), DVec3::X);
         assert!((n - DVec3::X).length() < 1e-15, "{n}");
+    }
+
+    #[test]
+    fn estimates_perpendicular_to_the_trivial_normal_do_not_cancel() {
+        // Both sides read +z (to rounding), on a surfel whose trivial normal is x: aligned
+        // with x they would point opposite ways and cancel.
+        let a = DVec3::new(1e-4, 0.0, 1.0).normalize();
+        let b = DVec3::new(1e-4, 0.0, -1.0).normalize();
+        let n = combine_sides(a, b, DVec3::X);
+        assert!(n.z.abs() > 1.0 - 1e-6 && n.x >= 0.0, "{n}");
     }
 }

@@ -8,8 +8,8 @@
 //!   (integral invariants: AT must sharpen, not blur).
 //! - `cube_edges_from_integral_invariants`, `lens_crease_from_integral_invariants`: from
 //!   the default input, the error by distance to the crease against II's. On the cube the
-//!   row along each edge keeps II's 45-degree chamfer (a known limitation, explained on the
-//!   test); the next rows are realigned.
+//!   row along each edge keeps most of II's 33-degree chamfer (a known limitation, explained
+//!   on the test); the next rows are realigned.
 //! - `sphere_error_not_worse_than_input`: on a smooth shape AT does not degrade its input.
 //! - `normals_are_unit_and_features_per_vertex`, `multi_label_volume`, `open_border_volume`:
 //!   shapes of the output on every kind of complex.
@@ -378,14 +378,16 @@ fn band_error(
 }
 
 /// Integral invariants (r = 3) turn the two surfel rows along each edge of a cube by
-/// about 45 and 18 degrees. AT realigns the second row with its face, but keeps the row
-/// along the edge at 45 degrees: the input has no jump at the edge itself, only one row
-/// away on either side, so `v` drops there, and the two rows along the edge stay a
-/// chamfer between two valleys (the data term makes this the cheaper configuration:
-/// aligning the chamfer costs `alpha |u - g|^2` on two rows, about 0.12 per unit length,
-/// the second valley about `lambda` = 0.025). A weaker data term (`alpha` 0.01, `lambda`
-/// 0.05) moves the valley onto the edge and the chamfer rows to within 6 degrees of their
-/// faces, but spreads the input's bias over the faces and flattens curved parts (lens:
+/// about 33 and 15 degrees (with the binary digital ball, before the tent-reconstructed
+/// regions: about 45 and 18). AT realigns the second row with its face (7 degrees), but
+/// keeps the row along the edge at about 30 degrees. `v` has its valley on the edge and
+/// one voxel off it (0.09 and 0.15); with the binary-ball input the valleys were only one
+/// row away on either side and the chamfer stayed at 45 degrees between them (the data
+/// term makes the chamfer the cheaper configuration: aligning it costs `alpha |u - g|^2`
+/// on two rows, about 0.12 per unit length at 45 degrees, the second valley about
+/// `lambda` = 0.025). A weaker data term (`alpha` 0.01, `lambda` 0.05) moved the valley
+/// onto the edge and the chamfer rows to within 6 degrees of their faces with the old
+/// input, but spread the input's bias over the faces and flattened curved parts (lens:
 /// error 7 degrees away from the crease instead of 1): not a default. This test pins the
 /// current behaviour, limitation included, so that a fix shows.
 #[test]
@@ -429,13 +431,19 @@ fn cube_edges_from_integral_invariants() {
     let default = report("at, default parameters", &u);
     let (on_edge, off_edge, far) = (v_mean(&v, 0.0, 0.25), v_mean(&v, 0.75, 1.25), v_mean(&v, 2.0, 8.0));
     println!("    v on the edges {on_edge:.2}, one voxel off {off_edge:.2}, 2 to 8 voxels off {far:.2}");
-    // The second row is realigned: a third of II's error.
-    assert!(default[1] < 0.4 * ii[1], "{default:?} vs ii {ii:?}");
+    // Measured (II from tent-reconstructed regions): ii [32.8, 15.2, 3.2], at [29.8, 6.9,
+    // 4.9] degrees. (With the binary digital ball II was about [45, 18, ..] and AT kept
+    // the first row at about 45 and brought the second below 0.4 of II's.)
+    // The second row is realigned: less than half of II's error.
+    assert!(default[1] < 0.5 * ii[1], "{default:?} vs ii {ii:?}");
     assert!(default[2] < 6.0, "{default:?}");
-    // Known limitation: the row along the edge keeps II's 45 degrees, between two valleys
-    // of v one voxel off the edge.
-    assert!(ii[0] > 35.0 && default[0] > 35.0, "{ii:?} {default:?}");
-    assert!(off_edge < 0.15 && on_edge > 0.5 && far > 0.9, "{on_edge} {off_edge} {far}");
+    // Known limitation: the row along the edge keeps most of II's chamfer (about 30
+    // degrees).
+    assert!(ii[0] > 25.0 && default[0] > 25.0, "{ii:?} {default:?}");
+    // Measured: v 0.09 on the edges, 0.15 one voxel off, 0.94 beyond 2 voxels. (With the
+    // binary-ball II, v stayed above 0.5 on the edge, its valleys one voxel off.) The
+    // valley now covers the edge, yet the chamfer row stays: a feature found, not fixed.
+    assert!(on_edge < 0.2 && off_edge < 0.25 && far > 0.9, "{on_edge} {off_edge} {far}");
 }
 
 /// The lens (74-degree circular crease, off the grid axes) from integral invariants:

@@ -44,6 +44,7 @@ fn measure(shape: &dyn Shape, h: f64, params: &PipelineParams) -> (Accuracy, f64
 fn sphere_of_radius_20_voxels_meets_the_targets() {
     let (a, sj) = measure(&Sphere { radius: 10.0 }, 0.5, &PipelineParams::default());
     let msg = format!("{a:?}, min scaled Jacobian {sj}");
+    eprintln!("sphere: {msg}");
     assert!(a.distance_mean <= 0.03 && a.distance_max <= 0.2, "{msg}");
     assert!(a.bias.abs() <= 0.01, "{msg}");
     assert!(a.normal_mean_deg <= 0.8 && a.normal_max_deg <= 3.0, "{msg}");
@@ -52,22 +53,25 @@ fn sphere_of_radius_20_voxels_meets_the_targets() {
 
 #[test]
 fn goursat_at_h_0_25_meets_the_targets() {
-    let (a, _) = measure(&Goursat, 0.25, &PipelineParams::default());
+    let (a, sj) = measure(&Goursat, 0.25, &PipelineParams::default());
+    eprintln!("goursat h = 0.25: {a:?}, min scaled Jacobian {sj}");
     assert!(a.distance_mean <= 0.06 && a.normal_mean_deg <= 1.0, "{a:?}");
 }
 
 #[test]
 fn torus_keeps_its_size() {
     // Issue 8's targets are |bias| <= 0.03, mean <= 0.06, normals <= 1.5 deg. Measured:
-    // bias -0.032, mean 0.075, normals 1.39: the normal target is met, the other two are
+    // bias -0.032, mean 0.075, normals 1.35: the normal target is met, the other two are
     // not (the digital surface's own surfel centres sit 0.042 voxel inside this torus, and
     // re-centring follows them). Asserted: the best reached, with a small margin.
     let torus = Torus { major: 6.0, minor: 2.0 };
-    let (a, _) = measure(&torus, 0.25, &PipelineParams::default());
+    let (a, sj) = measure(&torus, 0.25, &PipelineParams::default());
+    eprintln!("torus h = 0.25: {a:?}, min scaled Jacobian {sj}");
     assert!(a.bias.abs() <= 0.035 && a.distance_mean <= 0.08, "{a:?}");
     assert!(a.normal_mean_deg <= 1.5, "{a:?}");
     // The papers' pipeline (alpha = 1e-3, no refinement, no re-centring) shrinks it.
     let (papers, _) = measure(&torus, 0.25, &PipelineParams::papers());
+    eprintln!("torus h = 0.25, papers' pipeline: {papers:?}");
     assert!(papers.bias < -0.1 && papers.distance_mean > 1.5 * a.distance_mean, "{papers:?}");
 }
 
