@@ -172,7 +172,7 @@ struct RegularizeArgs {
     #[arg(long, value_name = "VOXELS", default_value_t = 1e-3)]
     tolerance: f64,
     /// Normal refinement rounds: re-estimate the normals from the regularized quads
-    /// (keeping sharp edges) and solve again, K times [default: 2; 0 for .vox inputs,
+    /// (keeping sharp edges) and solve again, K times [default: 3; 0 for .vox inputs,
     /// whose blocky art is not a sampled smooth shape, and where each round is a clamped
     /// solve].
     #[arg(long, value_name = "K")]

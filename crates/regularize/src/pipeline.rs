@@ -14,14 +14,14 @@ use crate::{Energy, EnergyParams, Progress, RegularizeError, SolveInfo, Solver, 
 ///
 /// The defaults were chosen by measurement against analytic shapes (sphere, torus,
 /// goursat; see the README's accuracy table): a stronger attachment than the papers'
-/// (`alpha = 1e-2` instead of `1e-3`), two refinement rounds and re-centring.
+/// (`alpha = 1e-2` instead of `1e-3`), three refinement rounds and re-centring.
 #[derive(Copy, Clone, Debug, PartialEq)]
 pub struct PipelineParams {
     /// The energy's weights. Default: `alpha = 1e-2, beta = 1, gamma = 0.1`
     /// ([`PipelineParams::ENERGY`]).
     pub energy: EnergyParams,
     /// Refinement rounds: after each solve, the normal field is re-estimated from the
-    /// regularized quads ([`refined_normals`]) and the energy solved again. Default: `2`.
+    /// regularized quads ([`refined_normals`]) and the energy solved again. Default: `3`.
     pub refine: usize,
     /// Radius, in voxels, of the neighbourhood whose regularized quad normals are
     /// averaged into a refined normal. Default: `3`.
@@ -31,8 +31,10 @@ pub struct PipelineParams {
     /// sides of a sharp edge never mix. Default: `30`.
     pub feature_angle_deg: f64,
     /// Size preservation (re-centring): before each refinement solve, the attachment
-    /// targets move by minus the smoothed displacement of the last solve
-    /// ([`smoothed_displacements`]), which cancels the inward drift of thin curved shapes.
+    /// targets move by minus the smoothed displacement of the last solve, measured where
+    /// the digital surface is informative ([`informative_vertices`]: outside digital
+    /// plateaus) and smoothed by [`smoothed_displacements`], which cancels the inward
+    /// drift of thin curved shapes.
     /// Ignored when the solver clamps (its boxes are centred on the targets, which must
     /// stay at the input for Proposition 2 to hold). Default: `true`.
     pub preserve_size: bool,
@@ -82,7 +84,7 @@ impl Default for PipelineParams {
     fn default() -> Self {
         PipelineParams {
             energy: Self::ENERGY,
-            refine: 2,
+            refine: 3,
             refine_radius: 3.0,
             feature_angle_deg: 30.0,
             preserve_size: true,
@@ -130,15 +132,21 @@ pub fn run_pipeline(
     let mut refine_seconds = 0.0;
     let clamps = matches!(&solver, Solver::Gd(s) if s.params().clamp.is_some());
     let mut positions = Vec::new();
+    let trusted = if params.preserve_size && !clamps && params.refine > 0 {
+        informative_vertices(surface)
+    } else {
+        Vec::new()
+    };
     for round in 0..=params.refine {
         if round > 0 {
             let t = std::time::Instant::now();
             field =
                 refined_normals(surface, &positions, &field, params.refine_radius, params.feature_angle_deg);
             if params.preserve_size && !clamps {
-                let drift = smoothed_displacements(
+                let drift = trusted_drift(
                     surface,
                     &surfel_drift(surface, &positions, &input),
+                    &trusted,
                     params.recentre_sigma,
                 );
                 targets.iter_mut().zip(&drift).for_each(|(t, d)| *t -= *d);
@@ -264,6 +272,53 @@ pub fn smoothed_displacements(surface: &DigitalSurface, displacements: &[DVec3],
         std::mem::swap(&mut u, &mut next);
     }
     u
+}
+
+/// Whether each vertex's staircase position is informative about where the true surface
+/// lies: `false` inside a *digital plateau*, i.e. when the vertex's four surfels all have
+/// the same oriented normal (the digital surface is exactly flat around it), `true`
+/// otherwise (staircase steps and corners, junctions, open borders).
+///
+/// Why: where a surface faces a grid axis, the digital surface is one flat plateau whose
+/// level is a single sample for the whole plateau, not many independent ones. On a curved
+/// surface it is biased: the true surface is a dome spanning the voxel layer from its
+/// rim to its top, so the plateau sits below the dome's mean when the top just misses
+/// the next layer of voxel centres, and above it when it just reaches it (the sphere's
+/// poles and the torus's tube top at integer radii lose up to 0.17 voxel on average over
+/// the plateau). The steps at the plateau's rim are unbiased samples of the surface.
+pub fn informative_vertices(surface: &DigitalSurface) -> Vec<bool> {
+    (0..surface.num_vertices())
+        .into_par_iter()
+        .map(|v| {
+            let v = VertexId(v as u32);
+            let sf = surface.vertex_surfels(v);
+            let n0 = sf.first().map(|s| surface.surfel(*s).normal());
+            let plateau = sf.len() == 4
+                && !surface.is_boundary_vertex(v)
+                && sf.iter().all(|s| Some(surface.surfel(*s).normal()) == n0);
+            !plateau
+        })
+        .collect()
+}
+
+/// The low-passed drift of [`smoothed_displacements`], measured only at the `trusted`
+/// vertices (normalized convolution: the smoothed trusted displacements over the smoothed
+/// indicator of trust), so that a plateau's interior takes the drift of its rim. Far from
+/// any trusted vertex (deep inside a large flat face), it falls back continuously to the
+/// plain smoothed drift. An empty `trusted` trusts every vertex.
+fn trusted_drift(surface: &DigitalSurface, drift: &[DVec3], trusted: &[bool], sigma: f64) -> Vec<DVec3> {
+    if trusted.is_empty() || trusted.iter().all(|&t| t) {
+        return smoothed_displacements(surface, drift, sigma);
+    }
+    // Three channels for the masked drift, and the trust indicator in a fourth pass.
+    let masked: Vec<DVec3> =
+        drift.iter().zip(trusted).map(|(d, &t)| if t { *d } else { DVec3::ZERO }).collect();
+    let weight: Vec<DVec3> = trusted.iter().map(|&t| DVec3::splat(if t { 1.0 } else { 0.0 })).collect();
+    let plain = smoothed_displacements(surface, drift, sigma);
+    let num = smoothed_displacements(surface, &masked, sigma);
+    let den = smoothed_displacements(surface, &weight, sigma);
+    const EPS: f64 = 1e-3;
+    num.iter().zip(&den).zip(&plain).map(|((n, w), p)| (*n + EPS * *p) / (w.x + EPS)).collect()
 }
 
 /// Per vertex, the mean over its quads of the displacement of the quad's centre from

@@ -6,7 +6,9 @@ use glam::DVec3;
 use voxreg_baselines::{accuracy, quality, Accuracy, Implicit, Mesh, QualityParams};
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
 use voxreg_normals::{IntegralInvariant, NormalEstimator, NormalField, Trivial};
-use voxreg_regularize::{refined_normals, run_pipeline, PipelineParams, SolverChoice, SolverParams};
+use voxreg_regularize::{
+    informative_vertices, refined_normals, run_pipeline, PipelineParams, SolverChoice, SolverParams,
+};
 use voxreg_testkit::{angles_deg, digitize, mean_max, Cuboid, Goursat, Shape, Sphere, Torus};
 
 /// The test kit's shapes seen as the baselines' [`Implicit`].
@@ -59,20 +61,34 @@ fn goursat_at_h_0_25_meets_the_targets() {
 }
 
 #[test]
-fn torus_keeps_its_size() {
-    // Issue 8's targets are |bias| <= 0.03, mean <= 0.06, normals <= 1.5 deg. Measured:
-    // bias -0.032, mean 0.075, normals 1.35: the normal target is met, the other two are
-    // not (the digital surface's own surfel centres sit 0.042 voxel inside this torus, and
-    // re-centring follows them). Asserted: the best reached, with a small margin.
+fn torus_meets_the_targets() {
+    // Issue 8's targets: |bias| <= 0.03, mean <= 0.06 voxel, normals <= 1.5 deg. This torus
+    // is a hard case: its tube top sits exactly on a layer of voxel centres, so the digital
+    // plateaus there lie below the true dome (the digitized volume is 0.064 voxel short,
+    // the surfel centres 0.042 voxel inside); re-centring measured off the plateaus
+    // (`informative_vertices`) keeps the size anyway.
     let torus = Torus { major: 6.0, minor: 2.0 };
     let (a, sj) = measure(&torus, 0.25, &PipelineParams::default());
     eprintln!("torus h = 0.25: {a:?}, min scaled Jacobian {sj}");
-    assert!(a.bias.abs() <= 0.035 && a.distance_mean <= 0.08, "{a:?}");
+    assert!(a.bias.abs() <= 0.03 && a.distance_mean <= 0.06, "{a:?}");
     assert!(a.normal_mean_deg <= 1.5, "{a:?}");
     // The papers' pipeline (alpha = 1e-3, no refinement, no re-centring) shrinks it.
     let (papers, _) = measure(&torus, 0.25, &PipelineParams::papers());
     eprintln!("torus h = 0.25, papers' pipeline: {papers:?}");
-    assert!(papers.bias < -0.1 && papers.distance_mean > 1.5 * a.distance_mean, "{papers:?}");
+    assert!(papers.bias < -0.1 && papers.distance_mean > 2.0 * a.distance_mean, "{papers:?}");
+}
+
+#[test]
+fn plateau_interiors_are_not_informative() {
+    // A digitized cube: the vertices inside its faces are on digital plateaus, those on
+    // its edges and corners are not.
+    let cube = Cuboid { half: DVec3::splat(4.0) };
+    let surface = DigitalSurface::from_volume(&digitize(&cube, 1.0)).unwrap();
+    let informative = informative_vertices(&surface);
+    for (v, p) in surface.positions().iter().enumerate() {
+        let on_edge = p.abs().to_array().iter().filter(|c| (**c - 4.5).abs() < 1e-9).count() >= 2;
+        assert_eq!(informative[v], on_edge, "vertex at {p}");
+    }
 }
 
 #[test]
