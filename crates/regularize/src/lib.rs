@@ -88,7 +88,9 @@ pub use energy::{Energy, EnergyParams, EnergyTerms};
 pub use intersections::{self_intersections, triangles_intersect};
 pub use iterative::Preconditioner;
 pub use multigrid::MultigridParams;
-pub use pipeline::{refined_normals, run_pipeline, smoothed_displacements, PipelineOutput, PipelineParams};
+pub use pipeline::{
+    crease_weights, refined_normals, run_pipeline, smoothed_displacements, PipelineOutput, PipelineParams,
+};
 pub use solver::{estimate_factor_nnz, Solver, SolverChoice, SolverParams};
 pub use weights::{colour_discontinuities, FairnessMask, Weights};
 
