@@ -89,8 +89,8 @@ pub use intersections::{self_intersections, triangles_intersect};
 pub use iterative::Preconditioner;
 pub use multigrid::MultigridParams;
 pub use pipeline::{
-    informative_vertices, refined_normals, run_pipeline, smoothed_displacements, PipelineOutput,
-    PipelineParams,
+    crease_weights, informative_vertices, refined_normals, run_pipeline, smoothed_displacements,
+    PipelineOutput, PipelineParams,
 };
 pub use solver::{estimate_factor_nnz, Solver, SolverChoice, SolverParams};
 pub use weights::{colour_discontinuities, FairnessMask, Weights};

@@ -41,6 +41,14 @@ pub struct PipelineParams {
     /// Standard deviation, in voxels, of the smoothing of displacements used by the
     /// re-centring. Default: `3`.
     pub recentre_sigma: f64,
+    /// Alignment weight (a multiplier of `beta`) of the quads that straddle a feature in
+    /// the refinement solves: those whose refined normal is more than
+    /// `feature_angle_deg` from an edge-neighbour's on the same interface and from their
+    /// own axis ([`crease_weights`]). The alignment of such a quad pins its vertices to the planes of
+    /// both sides at once, i.e. to the crease line, which collapses the quads whose four
+    /// vertices all touch the other side into slivers; a weak alignment lets them fold
+    /// across the crease instead. `1` keeps the papers' uniform weight. Default: `0.01`.
+    pub crease_alignment: f64,
     /// The solver. Default: [`SolverParams::default`].
     pub solver: SolverParams,
 }
@@ -56,6 +64,7 @@ impl PipelineParams {
             energy: EnergyParams::default(),
             refine: 0,
             preserve_size: false,
+            crease_alignment: 1.0,
             ..Default::default()
         }
     }
@@ -68,6 +77,12 @@ impl PipelineParams {
             return Err(RegularizeError::InvalidParams(format!(
                 "the refinement radius and the re-centring sigma must be positive and finite, got {} and {}",
                 self.refine_radius, self.recentre_sigma
+            )));
+        }
+        if !(self.crease_alignment >= 0.0 && self.crease_alignment <= 1.0) {
+            return Err(RegularizeError::InvalidParams(format!(
+                "the crease alignment weight must be in [0, 1], got {}",
+                self.crease_alignment
             )));
         }
         if !(self.feature_angle_deg > 0.0 && self.feature_angle_deg <= 180.0) {
@@ -89,6 +104,7 @@ impl Default for PipelineParams {
             feature_angle_deg: 30.0,
             preserve_size: true,
             recentre_sigma: 3.0,
+            crease_alignment: 0.01,
             solver: SolverParams::default(),
         }
     }
@@ -153,8 +169,17 @@ pub fn run_pipeline(
             }
             refine_seconds += t.elapsed().as_secs_f64();
         }
+        let creased = (round > 0 && params.crease_alignment < 1.0).then(|| {
+            let crease = crease_weights(surface, &field, params.feature_angle_deg, params.crease_alignment);
+            let mut w = weights.cloned().unwrap_or_default();
+            w.beta = Some(match w.beta {
+                Some(b) => b.iter().zip(&crease).map(|(b, c)| b * c).collect(),
+                None => crease,
+            });
+            w
+        });
         let energy = Energy::new(surface, &field, &targets, params.energy)?;
-        let energy = match weights {
+        let energy = match creased.as_ref().or(weights) {
             Some(w) => energy.with_weights(w)?,
             None => energy,
         };
@@ -248,6 +273,41 @@ pub fn refined_normals(
         )
         .collect();
     NormalField::new(out)
+}
+
+/// Per-surfel alignment multipliers: `weight` for the quads whose normal in `field` is
+/// more than `feature_angle_deg` from the normal of an edge-adjacent quad of the same
+/// interface (the quads on either side of a feature) and from their own surfel's axis, `1`
+/// for the others. Quads that keep their axis (the faces of an axis-aligned box, whose
+/// edges run along the quads' edges) keep their full weight: they lie flat unsqueezed.
+pub fn crease_weights(
+    surface: &DigitalSurface,
+    field: &NormalField,
+    feature_angle_deg: f64,
+    weight: f64,
+) -> Vec<f64> {
+    let cos_max = feature_angle_deg.to_radians().cos();
+    let normals = field.as_slice();
+    (0..surface.num_surfels())
+        .into_par_iter()
+        .map(|f| {
+            let sf = surface.surfels()[f];
+            // A quad in the plane of its own surfel lies flat without being squeezed.
+            let tilted = normals[f].dot(sf.normal()) < cos_max;
+            let iface = sf.interface;
+            let straddles = tilted
+                && surface.surfel_edges(SurfelId(f as u32)).iter().any(|&e| {
+                    surface.edge_surfels(e).iter().any(|g| {
+                        surface.surfel(*g).interface == iface && normals[g.index()].dot(normals[f]) < cos_max
+                    })
+                });
+            if straddles {
+                weight
+            } else {
+                1.0
+            }
+        })
+        .collect()
 }
 
 /// Low-pass filter of per-vertex displacements: lazy diffusion over the vertex graph,
