@@ -153,6 +153,11 @@ struct RegularizeArgs {
     /// float property `feature` and a colour ramp (dark red 0, amber 0.5, light grey 1).
     #[arg(long, value_name = "FILE.ply")]
     features: Option<PathBuf>,
+    /// With --normals at: most alternations of the sharpening stage after the last epsilon
+    /// (0 turns it off: plain Ambrosio-Tortorelli, about a quarter faster). It keeps the
+    /// edges of boxes sharp down to the surfels next to them.
+    #[arg(long, value_name = "N", default_value_t = AtParams::default().sharpen_iterations)]
+    sharpen: usize,
     /// Solver: auto (exact factorization for small surfaces, else cg), direct (sparse
     /// Cholesky), cg (multigrid conjugate gradient) or gd (gradient descent).
     #[arg(long, value_enum, default_value_t = SolverKind::Auto)]
@@ -256,12 +261,12 @@ enum NormalsKind {
 
 impl NormalsKind {
     /// The estimator, with its radius (physical units; `None`: the multigrid default).
-    fn estimator(self, radius: Option<f64>) -> Box<dyn NormalEstimator + Send + Sync> {
+    fn estimator(self, radius: Option<f64>, sharpen: usize) -> Box<dyn NormalEstimator + Send + Sync> {
         match self {
             NormalsKind::Trivial => Box::new(Trivial),
             NormalsKind::Convolved => Box::new(ConvolvedTrivial { radius }),
             NormalsKind::Ii => Box::new(IntegralInvariant { radius }),
-            NormalsKind::At => Box::new(at_estimator(radius)),
+            NormalsKind::At => Box::new(at_estimator(radius, sharpen)),
         }
     }
 
@@ -275,8 +280,9 @@ impl NormalsKind {
 }
 
 /// The `at` estimator: Ambrosio-Tortorelli on integral invariants of the given radius.
-fn at_estimator(radius: Option<f64>) -> AmbrosioTortorelli {
-    AmbrosioTortorelli::new(AtParams::default(), Box::new(IntegralInvariant { radius }))
+fn at_estimator(radius: Option<f64>, sharpen: usize) -> AmbrosioTortorelli {
+    let params = AtParams { sharpen_iterations: sharpen, ..AtParams::default() };
+    AmbrosioTortorelli::new(params, Box::new(IntegralInvariant { radius }))
 }
 
 /// Shows a spinner for one stage of work and measures it.
@@ -623,7 +629,7 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
     let input = &args.input.input;
     let (volume, map, palette) = stages.run("read", "read volume", || load(&args.input))?;
     let surface = stages.run("surface", "digital surface", || surface_of(input, &volume, &map))?;
-    let estimator = args.normals.estimator(args.radius);
+    let estimator = args.normals.estimator(args.radius, args.sharpen);
     let radius = args.normals.radius(args.radius, &surface);
     let label = match radius {
         Some(r) => format!("normals ({}, radius {r:.3})", estimator.name()),
@@ -631,7 +637,7 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
     };
     let (normals, features) = stages.run("normals", &label, || match &args.features {
         Some(_) => {
-            let (u, v) = at_estimator(args.radius).estimate_with_features(&surface)?;
+            let (u, v) = at_estimator(args.radius, args.sharpen).estimate_with_features(&surface)?;
             Ok((u, Some(v)))
         }
         None => Ok((estimator.estimate(&surface)?, None)),
@@ -704,6 +710,7 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
                 "gamma": params.gamma,
                 "normals": estimator.name(),
                 "radius": radius,
+                "sharpen": (estimator.name() == "at").then_some(args.sharpen),
                 "refine": pipeline.refine,
                 "preserve_size": pipeline.preserve_size,
             },

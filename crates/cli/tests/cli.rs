@@ -246,6 +246,10 @@ fn regularize_with_each_normal_estimator_records_it_in_the_report() {
     }
     let p = run(&["--normals", "trivial"]);
     assert_eq!((p["normals"].as_str(), p["radius"].is_null()), (Some("trivial"), true));
+    // The AT sharpening stage: on by default, --sharpen 0 turns it off.
+    assert_eq!(run(&["--normals", "at"])["sharpen"].as_u64(), Some(10));
+    assert_eq!(run(&["--normals", "at", "--sharpen", "0"])["sharpen"].as_u64(), Some(0));
+    assert!(p["sharpen"].is_null());
 
     let out = voxreg(&["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--radius=0"]);
     assert!(!out.status.success());
