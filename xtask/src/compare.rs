@@ -638,18 +638,13 @@ mod tests {
 
     /// The papers' Fig. 7 claim in full: on the ball+tetrahedron at 10^3 and 20^3,
     /// regularization beats marching cubes and Shrouds on normal error and on face
-    /// quality, and stays within O(h) of the input, checked on voxreg's default pipeline.
-    /// NOT fully reproduced (see README, "Comparison with other methods"). The slivers on
-    /// the tetrahedron (mean aspect 36 at 10^3, 41 at 20^3) came from quads pinned to the
-    /// crease lines; weakening the alignment of feature-straddling tilted quads in the
-    /// refinement solves (`PipelineParams::crease_alignment`) brings the mean aspect to 3.68
-    /// at 10^3 (MC 3.26, Shrouds 7.17) and 3.05 at 20^3 (MC 3.58, Shrouds 3.20), but the
-    /// normals are now 17.28 deg at 10^3 (Shrouds 17.15) and 12.09 at 20^3 (Shrouds 11.03);
-    /// no weight tried (0.005 to 0.03) met both halves. Distance to the input: 0.19 /
-    /// 0.22 voxel. Kept as an ignored test that fails today:
-    /// `cargo test --release -p xtask -- --ignored`.
+    /// quality (mean aspect ratio), and stays within O(h) of the input, checked on voxreg's
+    /// default pipeline. It holds since the crease alignment (weak alignment of the quads
+    /// straddling a feature and of the ring around them, from the first solve on):
+    /// normals 16.52 / 10.43 degrees at 10^3 / 20^3 (MC 27.91 / 24.17, Shrouds 17.15 /
+    /// 11.03), mean aspect 3.06 / 2.82 (MC 3.26 / 3.58, Shrouds 7.17 / 3.20), 0.20 / 0.22
+    /// voxel from the input. The margins at 10^3 are thin (0.6 degree, 0.19 in aspect).
     #[test]
-    #[ignore = "the Fig. 7 claim on ball+tet is not reproduced: aspect at 10^3 and normals at 20^3 miss"]
     fn ball_tet_full_claims_of_fig_7() {
         for n in [10, 20] {
             let rows = run_case(&Case {

@@ -41,14 +41,26 @@ pub struct PipelineParams {
     /// Standard deviation, in voxels, of the smoothing of displacements used by the
     /// re-centring. Default: `3`.
     pub recentre_sigma: f64,
-    /// Alignment weight (a multiplier of `beta`) of the quads that straddle a feature in
-    /// the refinement solves: those whose refined normal is more than
-    /// `feature_angle_deg` from an edge-neighbour's on the same interface and from their
-    /// own axis ([`crease_weights`]). The alignment of such a quad pins its vertices to the planes of
-    /// both sides at once, i.e. to the crease line, which collapses the quads whose four
-    /// vertices all touch the other side into slivers; a weak alignment lets them fold
-    /// across the crease instead. `1` keeps the papers' uniform weight. Default: `0.01`.
+    /// Alignment weight (a multiplier of `beta`) of the quads near a feature: those whose
+    /// normal is more than `crease_angle_deg` from an edge-neighbour's on the same
+    /// interface and from their own axis, and the quads within `crease_dilation` vertex
+    /// rings of them ([`crease_weights`]). The alignment of a quad straddling a crease pins
+    /// its vertices to the planes of both sides at once, i.e. to the crease line, which
+    /// collapses the quads whose four vertices all touch the other side into slivers; a
+    /// weak alignment lets them fold across the crease instead. Applied in every solve
+    /// when the pipeline refines (`refine > 0`; the first solve's features come from the
+    /// input normal field, the others' from the refined one); a single solve
+    /// (`refine = 0`, the default for `.vox` input) keeps the papers' uniform weight.
+    /// `1` keeps the uniform weight everywhere. Default: `0.015`.
     pub crease_alignment: f64,
+    /// Feature rule of [`crease_weights`]: the angle (degrees) between the normals of two
+    /// edge-adjacent quads, and between a quad's normal and its axis, above which a quad
+    /// straddles a feature. Default: `20`.
+    pub crease_angle_deg: f64,
+    /// How many rings of quads (sharing a vertex) around the quads straddling a feature
+    /// also get the weak alignment: the quads next to a crease line lean on it too.
+    /// Default: `1`.
+    pub crease_dilation: usize,
     /// The solver. Default: [`SolverParams::default`].
     pub solver: SolverParams,
 }
@@ -85,11 +97,12 @@ impl PipelineParams {
                 self.crease_alignment
             )));
         }
-        if !(self.feature_angle_deg > 0.0 && self.feature_angle_deg <= 180.0) {
-            return Err(RegularizeError::InvalidParams(format!(
-                "the feature angle must be in (0, 180] degrees, got {}",
-                self.feature_angle_deg
-            )));
+        for (what, a) in [("feature", self.feature_angle_deg), ("crease", self.crease_angle_deg)] {
+            if !(a > 0.0 && a <= 180.0) {
+                return Err(RegularizeError::InvalidParams(format!(
+                    "the {what} angle must be in (0, 180] degrees, got {a}"
+                )));
+            }
         }
         Ok(())
     }
@@ -104,7 +117,9 @@ impl Default for PipelineParams {
             feature_angle_deg: 30.0,
             preserve_size: true,
             recentre_sigma: 3.0,
-            crease_alignment: 0.01,
+            crease_alignment: 0.015,
+            crease_angle_deg: 20.0,
+            crease_dilation: 1,
             solver: SolverParams::default(),
         }
     }
@@ -169,8 +184,14 @@ pub fn run_pipeline(
             }
             refine_seconds += t.elapsed().as_secs_f64();
         }
-        let creased = (round > 0 && params.crease_alignment < 1.0).then(|| {
-            let crease = crease_weights(surface, &field, params.feature_angle_deg, params.crease_alignment);
+        let creased = (params.refine > 0 && params.crease_alignment < 1.0).then(|| {
+            let crease = crease_weights(
+                surface,
+                &field,
+                params.crease_angle_deg,
+                params.crease_alignment,
+                params.crease_dilation,
+            );
             let mut w = weights.cloned().unwrap_or_default();
             w.beta = Some(match w.beta {
                 Some(b) => b.iter().zip(&crease).map(|(b, c)| b * c).collect(),
@@ -277,15 +298,32 @@ pub fn refined_normals(
 
 /// Per-surfel alignment multipliers: `weight` for the quads whose normal in `field` is
 /// more than `feature_angle_deg` from the normal of an edge-adjacent quad of the same
-/// interface (the quads on either side of a feature) and from their own surfel's axis, `1`
-/// for the others. Quads that keep their axis (the faces of an axis-aligned box, whose
-/// edges run along the quads' edges) keep their full weight: they lie flat unsqueezed.
+/// interface (the quads on either side of a feature) and from their own surfel's axis,
+/// and for the quads within `dilation` rings of them (sharing a vertex with a marked
+/// quad, ring by ring); `1` for the others. Quads that keep their axis (the faces of an
+/// axis-aligned box, whose edges run along the quads' edges) are not marked by the angle
+/// test: they lie flat unsqueezed.
 pub fn crease_weights(
     surface: &DigitalSurface,
     field: &NormalField,
     feature_angle_deg: f64,
     weight: f64,
+    dilation: usize,
 ) -> Vec<f64> {
+    let mut marked = straddling_quads(surface, field, feature_angle_deg);
+    for _ in 0..dilation {
+        let mut touched = vec![false; surface.num_vertices()];
+        for (s, _) in marked.iter().enumerate().filter(|(_, &m)| m) {
+            surface.surfels()[s].vertices.iter().for_each(|v| touched[v.index()] = true);
+        }
+        marked =
+            surface.surfels().par_iter().map(|s| s.vertices.iter().any(|v| touched[v.index()])).collect();
+    }
+    marked.into_iter().map(|m| if m { weight } else { 1.0 }).collect()
+}
+
+/// The quads of [`crease_weights`]'s angle test.
+fn straddling_quads(surface: &DigitalSurface, field: &NormalField, feature_angle_deg: f64) -> Vec<bool> {
     let cos_max = feature_angle_deg.to_radians().cos();
     let normals = field.as_slice();
     (0..surface.num_surfels())
@@ -295,17 +333,12 @@ pub fn crease_weights(
             // A quad in the plane of its own surfel lies flat without being squeezed.
             let tilted = normals[f].dot(sf.normal()) < cos_max;
             let iface = sf.interface;
-            let straddles = tilted
+            tilted
                 && surface.surfel_edges(SurfelId(f as u32)).iter().any(|&e| {
                     surface.edge_surfels(e).iter().any(|g| {
                         surface.surfel(*g).interface == iface && normals[g.index()].dot(normals[f]) < cos_max
                     })
-                });
-            if straddles {
-                weight
-            } else {
-                1.0
-            }
+                })
         })
         .collect()
 }
