@@ -403,6 +403,17 @@ struct Link {
     weight: f64,
 }
 
+/// The fields of one AT run between alternations.
+struct AtState {
+    /// The last u-solve's solution before normalization, the warm start of the next.
+    u_raw: Vec<[f64; 3]>,
+    u_rhs: Vec<[f64; 3]>,
+    /// `u_raw` normalized.
+    u: Vec<DVec3>,
+    v: Vec<[f64; 1]>,
+    v_rhs: Vec<[f64; 1]>,
+}
+
 /// A reusable Ambrosio-Tortorelli solver for one surface.
 ///
 /// [`AtSolver::new`] computes the discrete operators' weights and the two systems'
@@ -553,31 +564,20 @@ impl AtSolver {
             }
         };
         let g = input.as_slice();
-        // `u_raw`: the last u-solve's solution before normalization, the warm start of the next.
-        let mut u_raw: Vec<[f64; 3]> = g.iter().map(|n| n.to_array()).collect();
-        let mut u_rhs = vec![[0.0; 3]; ns];
-        let mut u: Vec<DVec3> = g.to_vec();
-        let mut v = vec![[1.0]; self.vertex_area.len()];
-        let mut v_rhs = vec![[0.0]; self.vertex_area.len()];
+        let mut state = AtState {
+            u_raw: g.iter().map(|n| n.to_array()).collect(),
+            u_rhs: vec![[0.0; 3]; ns],
+            u: g.to_vec(),
+            v: vec![[1.0]; self.vertex_area.len()],
+            v_rhs: vec![[0.0]; self.vertex_area.len()],
+        };
+        let cg = (cg_tolerance, cg_iterations, par);
         for &eps in &params.epsilons {
             let mut iterations = 0;
             let mut change = f64::INFINITY;
             while iterations < params.max_iterations {
                 iterations += 1;
-                let t = Instant::now();
-                self.assemble_u(g, &v, params.alpha, None, &mut u_rhs);
-                info.assemble_seconds += t.elapsed().as_secs_f64();
-                info.add(self.u_system.solve(&u_rhs, &mut u_raw, cg_tolerance, cg_iterations, par)?);
-                let t = Instant::now();
-                u.par_iter_mut().zip(&u_raw).for_each(|(n, raw)| {
-                    let raw = DVec3::from_array(*raw);
-                    *n = raw.try_normalize().unwrap_or(raw);
-                });
-                self.assemble_v(&u, params.lambda, eps, &mut v_rhs);
-                info.assemble_seconds += t.elapsed().as_secs_f64();
-                let v_old = v.clone();
-                info.add(self.v_system.solve(&v_rhs, &mut v, cg_tolerance, cg_iterations, par)?);
-                change = v.par_iter().zip(&v_old).map(|(a, b)| (a[0] - b[0]).abs()).reduce(|| 0.0, f64::max);
+                change = self.alternate(g, &mut state, params, eps, None, cg, &mut info)?;
                 if change < params.tolerance {
                     break;
                 }
@@ -587,30 +587,46 @@ impl AtSolver {
         }
         if params.sharpen_iterations > 0 {
             let eps = *params.epsilons.last().expect("validated: at least one eps");
-            let weight = self.sharpen_weights(&v, params.sharpen_threshold);
+            let weight = self.sharpen_weights(&state.v, params.sharpen_threshold);
             while info.sharpen_iterations < params.sharpen_iterations {
                 info.sharpen_iterations += 1;
-                let t = Instant::now();
-                self.assemble_u(g, &v, params.alpha, Some(&weight), &mut u_rhs);
-                info.assemble_seconds += t.elapsed().as_secs_f64();
-                info.add(self.u_system.solve(&u_rhs, &mut u_raw, cg_tolerance, cg_iterations, par)?);
-                let t = Instant::now();
-                u.par_iter_mut().zip(&u_raw).for_each(|(n, raw)| {
-                    let raw = DVec3::from_array(*raw);
-                    *n = raw.try_normalize().unwrap_or(raw);
-                });
-                self.assemble_v(&u, params.lambda, eps, &mut v_rhs);
-                info.assemble_seconds += t.elapsed().as_secs_f64();
-                let v_old = v.clone();
-                info.add(self.v_system.solve(&v_rhs, &mut v, cg_tolerance, cg_iterations, par)?);
-                let change =
-                    v.par_iter().zip(&v_old).map(|(a, b)| (a[0] - b[0]).abs()).reduce(|| 0.0, f64::max);
+                let change = self.alternate(g, &mut state, params, eps, Some(&weight), cg, &mut info)?;
                 if change < params.tolerance {
                     break;
                 }
             }
         }
+        let AtState { u, v, .. } = state;
         Ok((NormalField::new(u), FeatureField::new(v.into_iter().map(|[x]| x).collect()), info))
+    }
+
+    /// One alternation at width `eps`: the u-solve (data term weighted by `weight` if any),
+    /// normalization, then the v-solve. Returns `max |v^{k+1} - v^k|`.
+    #[allow(clippy::too_many_arguments)]
+    fn alternate(
+        &mut self,
+        g: &[DVec3],
+        state: &mut AtState,
+        params: &AtParams,
+        eps: f64,
+        weight: Option<&[f64]>,
+        (cg_tolerance, cg_iterations, par): (Option<f64>, usize, faer::Par),
+        info: &mut AtInfo,
+    ) -> Result<f64, NormalError> {
+        let t = Instant::now();
+        self.assemble_u(g, &state.v, params.alpha, weight, &mut state.u_rhs);
+        info.assemble_seconds += t.elapsed().as_secs_f64();
+        info.add(self.u_system.solve(&state.u_rhs, &mut state.u_raw, cg_tolerance, cg_iterations, par)?);
+        let t = Instant::now();
+        state.u.par_iter_mut().zip(&state.u_raw).for_each(|(n, raw)| {
+            let raw = DVec3::from_array(*raw);
+            *n = raw.try_normalize().unwrap_or(raw);
+        });
+        self.assemble_v(&state.u, params.lambda, eps, &mut state.v_rhs);
+        info.assemble_seconds += t.elapsed().as_secs_f64();
+        let v_old = state.v.clone();
+        info.add(self.v_system.solve(&state.v_rhs, &mut state.v, cg_tolerance, cg_iterations, par)?);
+        Ok(state.v.par_iter().zip(&v_old).map(|(a, b)| (a[0] - b[0]).abs()).reduce(|| 0.0, f64::max))
     }
 
     /// Fills the u-system `alpha A_2 + AD2^T diag(w (M01 v)^2) AD2` and its three
