@@ -295,13 +295,26 @@ impl AtInfo {
 /// 1.88 -> 1.97 (II 1.75). Alternatives measured: `c_f` from the mean of `v` over the
 /// corners (`tau` 0.3: cube edge row 7.2 degrees; `tau` 1, i.e. `v^2`: cube 2.3 but
 /// sphere of radius 8 at 8.5 degrees, facets); the minimum with `tau` 0.5 (cube 1.9,
-/// sphere 8 at 2.7) or 0.4 (2.4, 2.1); 0.25 (4.3, 1.97). The lens crease is only partly
-/// helped: one voxel off the crease plane its rows are realigned (3.0 degrees), but the
-/// one-voxel fin that digitizes the crease keeps its top and walls about 30 degrees off
-/// either side (symmetric, a chamfer of its own). From a sharp input (exact normals with
-/// 10 degrees of noise) the stage costs accuracy at that fin: freed from its data (`v`
-/// reaches 0 there), it pulls the surfels on either side, whose crease angle deviation
-/// grows from 6.7 to 10.1 degrees. `alpha` and `lambda` keep the defaults.
+/// sphere 8 at 2.7) or 0.4 (2.4, 2.1); 0.25 (4.3, 1.97).
+///
+/// On a curved crease (the lens of the tests: two balls of radius 20, a 74-degree
+/// circular crease) neither plain nor sharpened AT keeps the crease angle within 5
+/// degrees between the rows 1 to 2 voxels off it (mean pair deviation: from II 8.3 plain,
+/// 6.0 sharpened; from exact normals with 10 degrees of noise 6.8 plain, 10.1 sharpened).
+/// Except from II without this stage (4.0 degrees towards the crease per side: II's own
+/// bias), those rows are turned *away* from the crease (over-sharpened), 2.8 to 4.9
+/// degrees per side, decaying over about 2 voxels: the boundary bias of the u-step's smoothing where
+/// `v` cuts the coupling, each surfel averaged with neighbours on one side only, whose
+/// normals turn away from the crease by `1 / R` per voxel (zero on a cube's flat faces).
+/// The sharpening stage, by freeing the surfels next to the jump from their data, moves
+/// that free boundary inwards: more bias on an unbiased (noisy exact) input, less net
+/// error on II, whose own bias (towards the crease, 12.7 degrees on those rows) it
+/// removes (3.0 left). The one-voxel fin that digitizes the crease keeps its walls about
+/// 30 degrees off towards the crease plane from II (a chamfer of its own) and its top
+/// surfels on the bisector. A twicing target `g + (g - u)` in this stage halves the
+/// boundary bias (lens: noisy 5.5, II 3.4) but puts noise back everywhere (sphere of
+/// radius 20: 0.76 -> 1.00 degrees), so it is not used. `alpha` and `lambda` keep the
+/// issue's defaults.
 ///
 /// Both matrices keep their sparsity pattern through the run. Each system is solved by
 /// [`AtLinearSolver`]: by default Jacobi-preconditioned conjugate gradients (one fused

@@ -4,8 +4,10 @@
 //! - `cube_creases_stay_sharp`, `lens_crease_stays_sharp`: the crease angle between nearby
 //!   surfels on either side of a crease (within 2 voxels) is kept, `v` has a valley along
 //!   the crease and is close to 1 far from it: from exact normals with 10 degrees of noise
-//!   (cube: within 2 degrees; lens: within 8, see the test) and from the default input
-//!   (integral invariants: AT must sharpen, not blur).
+//!   (cube: within 2 degrees; lens: within 11, measured 10.1) and from the default input
+//!   (integral invariants: AT must sharpen, not blur; lens within 7, measured 6.0). The
+//!   lens misses the issue's 5 degrees: its rows next to the crease are turned away from
+//!   it by the smoothing's one-sided (boundary) bias on a curved surface, see the test.
 //! - `cube_edges_from_integral_invariants`, `lens_crease_from_integral_invariants`: from
 //!   the default input, the error by distance to the crease against II's. On the cube the
 //!   rows on both sides of each edge are within 5 degrees of their faces (the sharpening
@@ -243,6 +245,58 @@ fn crease_run(
     c
 }
 
+/// The lens crease by band of distance to it (`[0, 1)`, `[1, 2)`, `[2, 3)` voxels), for the
+/// surfels off the crease plane (centre `|x| > 0.25`: the fin's top surfels, at `x = 0`,
+/// belong to neither side) of each band: the crease-angle deviation against the nearest
+/// such surfel of the same band on the other side, the error against `truth`, and the
+/// signed turn of the normal in its meridian plane relative to its true normal, positive
+/// towards the crease plane (blurring the crease), negative away from it (over-sharpening
+/// it). Means, degrees.
+fn lens_bands(
+    surface: &DigitalSurface,
+    lens: &Lens,
+    normals: &NormalField,
+    truth: &[DVec3],
+) -> [[f64; 3]; 3] {
+    let n = normals.as_slice();
+    let centres: Vec<DVec3> = (0..surface.num_surfels()).map(|s| surfel_centre(surface, s)).collect();
+    let near: Vec<usize> = (0..centres.len())
+        .filter(|&s| centres[s].x.abs() > 0.25 && lens.crease_distance(centres[s]) < 3.0)
+        .collect();
+    let turn = |s: usize| -> f64 {
+        let radial = DVec3::new(0.0, centres[s].y, centres[s].z).normalize_or(DVec3::Y);
+        let side = truth[s].x.signum();
+        let angle = |m: DVec3| (side * m.x).atan2(m.dot(radial)).to_degrees();
+        angle(truth[s]) - angle(n[s])
+    };
+    let in_band = |s: usize, band: usize| lens.crease_distance(centres[s]).floor() as usize == band;
+    std::array::from_fn(|band| {
+        let rows: Vec<[f64; 3]> = near
+            .iter()
+            .filter(|&&a| in_band(a, band))
+            .map(|&a| {
+                let b = *near
+                    .iter()
+                    .filter(|&&b| in_band(b, band) && centres[b].x * centres[a].x < 0.0)
+                    .min_by(|&&x, &&y| {
+                        centres[x].distance(centres[a]).total_cmp(&centres[y].distance(centres[a]))
+                    })
+                    .unwrap();
+                let deviation =
+                    (n[a].angle_between(n[b]) - truth[a].angle_between(truth[b])).abs().to_degrees();
+                [deviation, n[a].angle_between(truth[a]).to_degrees(), turn(a)]
+            })
+            .collect();
+        std::array::from_fn(|k| rows.iter().map(|r| r[k]).sum::<f64>() / rows.len().max(1) as f64)
+    })
+}
+
+fn print_lens_bands(name: &str, bands: &[[f64; 3]; 3]) {
+    let cells: Vec<String> =
+        bands.iter().map(|[d, e, t]| format!("deviation {d:5.2}, error {e:5.2}, turn {t:+6.2}")).collect();
+    println!("    {name:26} 0-1: {} | 1-2: {} | 2-3: {}", cells[0], cells[1], cells[2]);
+}
+
 /// `normals` rotated by random angles of up to about `degrees` (deterministic): a sharp
 /// but noisy input.
 fn noisy(normals: &[DVec3], degrees: f64) -> NormalField {
@@ -313,7 +367,39 @@ fn cube_creases_stay_sharp() {
 }
 
 /// A lens (two balls of radius 20 voxels, centres 12 voxels from the crease plane): a
-/// circular crease of about 74 degrees, not aligned with the grid.
+/// circular crease of about 74 degrees, not aligned with the grid. The crease plane `x = 0`
+/// runs through a ring of voxel centres, so the digital crease is a fin one voxel wide
+/// standing about 0.8 voxel above the rings at `x = +-1`. The pairs measured (centres
+/// `|x| > 0.5`, within 2 voxels of the crease) are the tops of the rings at `x = +-1`
+/// and the walls at `x = +-1.5`: the fin itself (its top at `x = 0`, its walls at
+/// `x = +-0.5`) is not among them, only among their neighbours.
+///
+/// The issue asks for a deviation within 5 degrees; AT does not meet it here (measured,
+/// mean over the pairs: noisy true normals 10.1 (6.8 without the sharpening stage); II
+/// 6.0 (8.3 without)), and the fin is not the cause. By band of distance to the crease
+/// (`lens_bands`, printed), the rows 1 to 2 voxels off are turned *away* from the crease
+/// plane, each side by 3.3 degrees (noisy input, plain AT), 4.9 (noisy, sharpened), 2.8
+/// (II, sharpened), decaying with the distance (2.0, 2.9, 1.5 at 2 to 3 voxels, about 0.4
+/// beyond 5): the pair angle is over-sharpened, not blurred. This is the boundary bias of
+/// the u-step's smoothing at a discontinuity: where `v` cuts the coupling, a surfel near
+/// the crease is averaged with neighbours on one side only, further from the crease, whose
+/// normals (on a ball of radius 20) are turned away from it by about 2.9 degrees per voxel;
+/// over a smoothing length `sqrt(coupling / alpha)` of about 2 voxels that is 3 to 5
+/// degrees (a one-dimensional model, `L^2 u'' = u - g`, `u'(0) = 0`, `g` of slope `k`,
+/// predicts `k L exp(-d / L)`). The cube's faces are flat (`k = 0`): no bias there. The
+/// sharpening stage frees the surfels next to the jump from their data (`c_f < 1`), which
+/// moves the free boundary inwards and makes it larger on the noisy input. Note also that
+/// the noisy input itself is at 5.5 on the 1-2 band (5.9 degrees of error per surfel), so
+/// meeting 5 needs denoising without that bias.
+///
+/// Tried and not kept: `tau` 0.2 / 0.5 (noisy 9.9 / 10.3, II 4.1 / 4.9: II helped at 0.2,
+/// the noisy input not); a twicing data target in the sharpening stage, `g + (g - u)` with
+/// `u` frozen from the last `eps` (a local-linear-like correction of the boundary bias:
+/// noisy 5.5, II 3.4, but the error away from the crease grows with the noise it puts
+/// back: lens from II 0.94 -> 1.09 degrees beyond 3 voxels, failing
+/// `lens_crease_from_integral_invariants`; sphere of radius 20 0.76 -> 1.00; noisy cube
+/// 0.76 -> 1.34). The bounds below are the measurements with a margin (regression guards,
+/// not the issue's 5 degrees).
 #[test]
 fn lens_crease_stays_sharp() {
     let lens = Lens { radius: 20.0, offset: 12.0 };
@@ -338,27 +424,41 @@ fn lens_crease_stays_sharp() {
         })
         .collect();
 
+    let exact_noisy = noisy(&truth, 10.0);
+    let ii = AmbrosioTortorelli::default().initial.estimate(&surface).unwrap();
+    println!("lens ({angle:.1} degrees) by band of distance to the crease (see `lens_bands`):");
+    let mut solver = AtSolver::new(&surface).unwrap();
+    for (name, input) in [("noisy true normals", &exact_noisy), ("ii", &ii)] {
+        print_lens_bands(&format!("{name}, input"), &lens_bands(&surface, &lens, input, &truth));
+        for sharpen in [0, AtParams::default().sharpen_iterations] {
+            let params = AtParams { sharpen_iterations: sharpen, ..AtParams::default() };
+            let (u, _, _) = solver.solve(input, &params).unwrap();
+            let bands = lens_bands(&surface, &lens, &u, &truth);
+            print_lens_bands(&format!("{name}, AT sharpen {sharpen}"), &bands);
+        }
+    }
+
     println!("lens ({angle:.1} degrees), true normals with noise of up to 10 degrees:");
-    let c = crease_run(&surface, &noisy(&truth, 10.0), &truth, (&left, &right), &points, distance);
-    // Even from the exact normals AT turns each side by about 3 degrees towards the other
-    // here (a pair deviation of 6.7 degrees without the sharpening stage): the digital
-    // crease of a lens is a fin one voxel wide whose top surfels are coupled to both sides.
-    // The sharpening stage frees the fin (v <= 0 there) from this sharp input and it pulls
-    // its neighbours further: measured 10.1 (max 12.5). A regression on sharp inputs,
-    // accepted for the cube edges from II; see `AmbrosioTortorelli`, "Sharpening".
+    let c = crease_run(&surface, &exact_noisy, &truth, (&left, &right), &points, distance);
+    // Measured 10.1 (max 12.5); 6.8 without the sharpening stage: each side turned away
+    // from the other by the smoothing's boundary bias (see above). A regression of the
+    // sharpening stage on sharp inputs, accepted for the cube edges from II; see
+    // `AmbrosioTortorelli`, "Sharpening".
     assert!(c.at.0 < 11.0 && c.at.1 < 14.0, "crease angle off by {:?} degrees", c.at);
     assert!(c.valley < 0.3, "v along the crease {}", c.valley);
     // On a sphere of radius R voxels, v tends to 1 / (1 + 1 / (lambda R^2)) = 0.91 at R = 20.
     assert!(c.far.0 > 0.85, "v far from the crease {:?}", c.far);
 
     println!("lens, default input ({}):", AmbrosioTortorelli::default().initial.name());
-    let input = AmbrosioTortorelli::default().initial.estimate(&surface).unwrap();
+    let input = ii;
     let c = crease_run(&surface, &input, &truth, (&left, &right), &points, distance);
     let (u, _) = AmbrosioTortorelli::default().estimate_with_features(&surface).unwrap();
     let (err_in, _) = mean_max(&angles_deg(input.as_slice(), &truth));
     let (err_at, _) = mean_max(&angles_deg(u.as_slice(), &truth));
     println!("  mean error input {err_in:.2}, AT {err_at:.2} deg");
+    // Measured: input 27.0, AT 6.0 (max 10.5); 8.3 without the sharpening stage.
     assert!(c.at.0 < c.input.0, "AT blurs the crease: {:?} vs input {:?}", c.at, c.input);
+    assert!(c.at.0 < 7.0, "crease angle off by {:?} degrees", c.at);
     assert!(err_at < err_in, "AT {err_at:.2} vs input {err_in:.2}");
     assert!(c.valley < 0.3, "v along the crease {}", c.valley);
     assert!(c.far.0 > 0.85, "v far from the crease {:?}", c.far);
@@ -495,8 +595,14 @@ fn lens_crease_from_integral_invariants() {
     println!("  v within 0.75 voxel of the crease {v_near:.3}, beyond 3 voxels {v_far:.3}");
     // One to two voxels from the crease (off the one-voxel fin that digitizes it) the
     // normals are realigned with their side: measured ii 12.7, at 3.0 degrees (plain AT
-    // without sharpening 4.2). Within one voxel (the fin's top and walls) both stay about
-    // 30 degrees off (a known limitation, see `AmbrosioTortorelli`, "Sharpening").
+    // without sharpening 4.2), turned 2.8 degrees away from the crease (the boundary bias,
+    // see `lens_crease_stays_sharp`). Within one voxel: the fin's walls (`x = +-0.5`) end
+    // 30.2 degrees off their side, towards the crease plane (II 24.2: a chamfer of their
+    // own, see `AmbrosioTortorelli`, "Sharpening"); its top surfels (`x = 0`) 37.1, but
+    // their reference is arbitrary: the nearest surface point of a top surfel's centre is
+    // on the crease circle, where `Lens::gradient` breaks the tie towards the ball centred
+    // at `-offset`, so all 132 get the normal of the side `x > 0`; AT gives them the
+    // bisector, half the crease angle (36.9) from either side.
     let next = band_error(&surface, &u, &truth, crease, 1.0, 2.0);
     println!(
         "  mean error 1 to 2 voxels from the crease: ii {:.2}, at {next:.2}",
