@@ -313,8 +313,13 @@ impl AtInfo {
 /// 30 degrees off towards the crease plane from II (a chamfer of its own) and its top
 /// surfels on the bisector. A twicing target `g + (g - u)` in this stage halves the
 /// boundary bias (lens: noisy 5.5, II 3.4) but puts noise back everywhere (sphere of
-/// radius 20: 0.76 -> 1.00 degrees), so it is not used. `alpha` and `lambda` keep the
-/// issue's defaults.
+/// radius 20: 0.76 -> 1.00 degrees), so it is not used. Restricted to the surfels within
+/// 3 links of the discontinuity zone (sphere unchanged), with gain 1 or 2 (`g + k (g -
+/// u)`), it met 5 degrees on this lens from both inputs (gain 2: noisy 2.8, II 4.1; cube
+/// from II 4.7) but not on a lens it was not tuned on: two balls of radius 25, offset 10
+/// (a 47-degree crease), from II 4.7 plain sharpening, 10.2 with gain 1, 19.5 with gain 2
+/// (near a crease `g - u` is mostly II's own error, which the correction doubles). Not
+/// used either. `alpha` and `lambda` keep the defaults.
 ///
 /// Both matrices keep their sparsity pattern through the run. Each system is solved by
 /// [`AtLinearSolver`]: by default Jacobi-preconditioned conjugate gradients (one fused
