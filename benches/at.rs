@@ -5,7 +5,7 @@
 //! - `at/bunny-128/default`: the whole estimator (II input, operators, 40 alternations).
 //! - `at/bunny-128/setup`: the discrete operators and sparsity patterns only.
 //! - `at/bunny-128/solve/{cholesky,cg,cg-1e-10}`: the alternations only, from a precomputed
-//!   II field, with each linear solver (`cg`: the default, relative residual `1e-6`; a reused
+//!   II field, with each linear solver (`cg`: the default, relative residual `1e-5`; a reused
 //!   `AtSolver`: the symbolic analyses are amortized).
 
 #![allow(missing_docs)] // `criterion_group!` defines an undocumented function
