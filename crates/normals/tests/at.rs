@@ -405,25 +405,7 @@ fn lens_crease_stays_sharp() {
     let lens = Lens { radius: 20.0, offset: 12.0 };
     let angle = lens.crease_angle_deg();
     let surface = DigitalSurface::from_volume(&digitize(&lens, 1.0)).unwrap();
-    let band = |sign: f64| -> Vec<usize> {
-        (0..surface.num_surfels())
-            .filter(|&s| {
-                let c = surfel_centre(&surface, s);
-                lens.crease_distance(c) < 2.0 && c.x * sign > 0.5
-            })
-            .collect()
-    };
-    let (left, right) = (band(-1.0), band(1.0));
     let truth = true_normals(&surface, &lens);
-    let distance = |p: DVec3| lens.crease_distance(p);
-    let rho = lens.crease_radius();
-    let points: Vec<DVec3> = (0..64)
-        .map(|k| {
-            let t = k as f64 * std::f64::consts::TAU / 64.0;
-            DVec3::new(0.0, rho * t.cos(), rho * t.sin())
-        })
-        .collect();
-
     let exact_noisy = noisy(&truth, 10.0);
     let ii = AmbrosioTortorelli::default().initial.estimate(&surface).unwrap();
     println!("lens ({angle:.1} degrees) by band of distance to the crease (see `lens_bands`):");
@@ -439,7 +421,7 @@ fn lens_crease_stays_sharp() {
     }
 
     println!("lens ({angle:.1} degrees), true normals with noise of up to 10 degrees:");
-    let c = crease_run(&surface, &exact_noisy, &truth, (&left, &right), &points, distance);
+    let c = lens_crease_run(&lens, &surface, &exact_noisy, &truth);
     // Measured 10.1 (max 12.5); 6.8 without the sharpening stage: each side turned away
     // from the other by the smoothing's boundary bias (see above). A regression of the
     // sharpening stage on sharp inputs, accepted for the cube edges from II; see
@@ -451,7 +433,7 @@ fn lens_crease_stays_sharp() {
 
     println!("lens, default input ({}):", AmbrosioTortorelli::default().initial.name());
     let input = ii;
-    let c = crease_run(&surface, &input, &truth, (&left, &right), &points, distance);
+    let c = lens_crease_run(&lens, &surface, &input, &truth);
     let (u, _) = AmbrosioTortorelli::default().estimate_with_features(&surface).unwrap();
     let (err_in, _) = mean_max(&angles_deg(input.as_slice(), &truth));
     let (err_at, _) = mean_max(&angles_deg(u.as_slice(), &truth));
@@ -462,6 +444,55 @@ fn lens_crease_stays_sharp() {
     assert!(err_at < err_in, "AT {err_at:.2} vs input {err_in:.2}");
     assert!(c.valley < 0.3, "v along the crease {}", c.valley);
     assert!(c.far.0 > 0.85, "v far from the crease {:?}", c.far);
+}
+
+/// [`crease_run`] on a lens: pairs of surfels within 2 voxels of the crease on either side
+/// (centres more than half a voxel off the crease plane), the valley of `v` sampled at 64
+/// points of the crease circle.
+fn lens_crease_run(lens: &Lens, surface: &DigitalSurface, input: &NormalField, truth: &[DVec3]) -> Crease {
+    let band = |sign: f64| -> Vec<usize> {
+        (0..surface.num_surfels())
+            .filter(|&s| {
+                let c = surfel_centre(surface, s);
+                lens.crease_distance(c) < 2.0 && c.x * sign > 0.5
+            })
+            .collect()
+    };
+    let (left, right) = (band(-1.0), band(1.0));
+    let rho = lens.crease_radius();
+    let points: Vec<DVec3> = (0..64)
+        .map(|k| {
+            let t = k as f64 * std::f64::consts::TAU / 64.0;
+            DVec3::new(0.0, rho * t.cos(), rho * t.sin())
+        })
+        .collect();
+    crease_run(surface, input, truth, (&left, &right), &points, |p| lens.crease_distance(p))
+}
+
+/// Issue 3's criterion on an intersection of two balls, at a resolution where the crease's
+/// radius of curvature is 30 voxels: from the default input, the crease angle between the
+/// surfels on either side is kept within 5 degrees. The deviation left at radius 20 (6.0
+/// degrees, `lens_crease_stays_sharp`) is mostly the smoothing's one-sided bias next to the
+/// cut, which grows with the curvature in voxels `1/R`. Measured at R = 20, 30, 40 voxels
+/// (same 74-degree crease): from noisy exact normals 10.1, 7.0, 5.0 degrees; from II 6.0,
+/// 2.1, 3.8 (II's own error next to the crease, which AT inherits in part, varies with how
+/// the crease circle meets the grid). `v`'s valley and plateau as in the other crease tests.
+#[test]
+fn lens_crease_within_5_degrees_at_radius_30() {
+    let lens = Lens { radius: 30.0, offset: 18.0 };
+    let surface = DigitalSurface::from_volume(&digitize(&lens, 1.0)).unwrap();
+    let truth = true_normals(&surface, &lens);
+    println!("lens of radius 30 ({:.1} degrees), default input:", lens.crease_angle_deg());
+    let input = AmbrosioTortorelli::default().initial.estimate(&surface).unwrap();
+    let c = lens_crease_run(&lens, &surface, &input, &truth);
+    // Measured: input 29.1, AT 2.09 (max 6.4); v valley 0.001, far 0.945.
+    assert!(c.at.0 < 5.0, "crease angle off by {:?} degrees", c.at);
+    assert!(c.valley < 0.3, "v along the crease {}", c.valley);
+    assert!(c.far.0 > 0.9, "v far from the crease {:?}", c.far);
+    println!("lens of radius 30, true normals with noise of up to 10 degrees:");
+    let c = lens_crease_run(&lens, &surface, &noisy(&truth, 10.0), &truth);
+    // Measured 7.0 (input 4.9); a regression guard, see `lens_crease_stays_sharp`.
+    assert!(c.at.0 < 8.0, "crease angle off by {:?} degrees", c.at);
 }
 
 /// Mean angular error (degrees) of `normals` against `truth` over the surfels whose
