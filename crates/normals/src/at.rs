@@ -77,7 +77,7 @@ pub struct AtParams {
     /// \[42\]). Default `10`.
     pub sharpen_iterations: usize,
     /// The sharpening stage's threshold `tau` on `v`: a surfel keeps its full data weight
-    /// when `v >= tau` at its four corners, and `(min v / tau)^2` of it below. Default `0.3`.
+    /// when `v >= tau` at its four corners, and `(min v / tau)^2` of it below. Default `0.4`.
     pub sharpen_threshold: f64,
 }
 
@@ -91,7 +91,7 @@ impl Default for AtParams {
             tolerance: 1e-4,
             linear_solver: AtLinearSolver::default(),
             sharpen_iterations: 10,
-            sharpen_threshold: 0.3,
+            sharpen_threshold: 0.4,
         }
     }
 }
@@ -287,24 +287,32 @@ impl AtInfo {
 /// c_f = max(1e-3, min(1, min_{v in f} v / tau)^2)      from the v of the last eps, frozen
 /// ```
 ///
-/// `tau` is [`AtParams::sharpen_threshold`] (default 0.3). Where `v` is at least `tau` at
+/// `tau` is [`AtParams::sharpen_threshold`] (default 0.4). Where `v` is at least `tau` at
 /// a surfel's four corners (everywhere on smooth parts: on a sphere of radius `R` voxels
 /// `v` is about `1 / (1 + 1 / (lambda R^2))`, 0.9 at `R` = 20, 0.6 at `R` = 8) the
 /// functional is unchanged; in the discontinuity zone the biased input stops pulling and
 /// `u` follows its neighbours on its own side. Each alternation still decreases this
 /// (frozen-weight) energy. Measured with II input (h = 1, r = 3), mean error of the rows
 /// 0, 1, 2 voxels from the edges of a cube of half side 8: plain AT 30.4 / 7.2 / 5.0
-/// degrees, sharpened 3.4 / 3.0 / 2.5 (max 3.7); `v` 0.02 on the edges, 0.82 one voxel
-/// off, 0.99 beyond 3. Sphere of radius 20: 0.76 degrees both ways (II 1.91); radius 8:
-/// 1.88 -> 1.97 (II 1.75). Alternatives measured: `c_f` from the mean of `v` over the
+/// degrees, sharpened 2.4 / 2.2 / 1.8 (max 2.7); `v` 0.02 on the edges, 0.82 one voxel
+/// off, 0.99 beyond 3; the crease angle between the two sides (pairs within 2 voxels of
+/// the edge) off by 4.6 degrees on average. Spheres, mean error of II / plain AT /
+/// sharpened: radius 20: 1.91 / 0.76 / 0.76 degrees; 12: 2.00 / - / 1.53; 8: 1.75 / 1.88
+/// / 2.08; 6: 2.87 / - / 5.18 (on so small a sphere `v` is about 0.5 everywhere and
+/// dips below `tau` in places). `tau` 0.4 was chosen over 0.3 (the previous default) for
+/// the crease angle from II on cubes of half side 6, 8 and 13 (4.1, 4.6, 4.6 degrees;
+/// 5.8, 6.5, 6.5 with 0.3: over issue 3's 5) and on lenses of radius 25 and 40 (2.5, 2.2;
+/// 4.7, 3.8 with 0.3), at the cost of the lens of radius 20 (6.8; 6.0 with 0.3) and of the
+/// smallest spheres (radius 8: 1.97 with 0.3; radius 6: 3.95). Alternatives measured: `c_f` from the mean of `v` over the
 /// corners (`tau` 0.3: cube edge row 7.2 degrees; `tau` 1, i.e. `v^2`: cube 2.3 but
 /// sphere of radius 8 at 8.5 degrees, facets); the minimum with `tau` 0.5 (cube 1.9,
-/// sphere 8 at 2.7) or 0.4 (2.4, 2.1); 0.25 (4.3, 1.97).
+/// sphere 8 at 2.7) or 0.3 (3.4, 1.97); 0.25 (4.3, 1.97).
 ///
 /// On a curved crease (the lens of the tests: two balls of radius 20, a 74-degree
 /// circular crease) neither plain nor sharpened AT keeps the crease angle within 5
 /// degrees between the rows 1 to 2 voxels off it (mean pair deviation: from II 8.3 plain,
-/// 6.0 sharpened; from exact normals with 10 degrees of noise 6.8 plain, 10.1 sharpened).
+/// 6.8 sharpened; from exact normals with 10 degrees of noise 6.8 plain, 10.2 sharpened;
+/// the measurements of this paragraph were taken with `tau` 0.3, which gives 6.0 and 10.1).
 /// Except from II without this stage (4.0 degrees towards the crease per side: II's own
 /// bias), those rows are turned *away* from the crease (over-sharpened), 2.8 to 4.9
 /// degrees per side, decaying over about 2 voxels: the boundary bias of the u-step's smoothing where
@@ -878,7 +886,9 @@ mod tests {
         let (u2, v2, i2) = solver.solve(&g, &iterative).unwrap();
         assert!(i1.factorizations > 0 && i1.cg_iterations == 0);
         assert!(i2.factorizations == 0 && i2.cg_iterations > 0);
-        assert!(u1.max_angle_deg(&u2) < 1e-6, "{}", u1.max_angle_deg(&u2));
+        // The sharpening stage's data weights (down to 1e-3) condition the u-system up to
+        // about 1e4: a residual of 1e-12 leaves about 1e-6 degrees (measured 1.2e-6).
+        assert!(u1.max_angle_deg(&u2) < 1e-5, "{}", u1.max_angle_deg(&u2));
         let dv = v1.as_slice().iter().zip(v2.as_slice()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
         assert!(dv < 1e-8, "{dv}");
         assert_eq!(i1.iterations, i2.iterations);
