@@ -250,6 +250,24 @@ fn regularize_with_each_normal_estimator_records_it_in_the_report() {
     assert_eq!(run(&["--normals", "at"])["sharpen"].as_u64(), Some(10));
     assert_eq!(run(&["--normals", "at", "--sharpen", "0"])["sharpen"].as_u64(), Some(0));
     assert!(p["sharpen"].is_null());
+    // Its threshold: reported, settable, checked.
+    assert_eq!(run(&["--normals", "at"])["sharpen_threshold"].as_f64(), Some(0.4));
+    assert_eq!(
+        run(&["--normals", "at", "--sharpen-threshold", "0.3"])["sharpen_threshold"].as_f64(),
+        Some(0.3)
+    );
+    assert!(p["sharpen_threshold"].is_null());
+    let out = voxreg(&[
+        "regularize",
+        input.to_str().unwrap(),
+        "-o",
+        obj.to_str().unwrap(),
+        "--normals",
+        "at",
+        "--sharpen-threshold=-1",
+    ]);
+    assert!(!out.status.success());
+    assert!(stderr(&out).contains("--sharpen-threshold must be finite and positive"), "{}", stderr(&out));
 
     let out = voxreg(&["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--radius=0"]);
     assert!(!out.status.success());
