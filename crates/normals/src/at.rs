@@ -331,7 +331,9 @@ impl AtInfo {
 /// from II 4.7) but not on a lens it was not tuned on: two balls of radius 25, offset 10
 /// (a 47-degree crease), from II 4.7 plain sharpening, 10.2 with gain 1, 19.5 with gain 2
 /// (near a crease `g - u` is mostly II's own error, which the correction doubles). Not
-/// used either. `alpha` and `lambda` keep the defaults.
+/// used either; nor targets extrapolated linearly from plain AT's `u` two and three links
+/// out of the discontinuity zone (cube from II 5.1 to 6.1, lens of radius 30 3.0 to 3.3,
+/// noisy lens of radius 20 11.8 to 12.9: worse everywhere). `alpha` and `lambda` keep the defaults.
 ///
 /// # Solvers
 ///
