@@ -274,23 +274,23 @@ fn lens_bands(
     };
     let in_band = |s: usize, band: usize| lens.crease_distance(centres[s]).floor() as usize == band;
     std::array::from_fn(|band| {
-        let rows: Vec<[f64; 3]> = near
-            .iter()
-            .filter(|&&a| in_band(a, band))
-            .map(|&a| {
-                let b = *near
-                    .iter()
-                    .filter(|&&b| in_band(b, band) && centres[b].x * centres[a].x < 0.0)
-                    .min_by(|&&x, &&y| {
-                        centres[x].distance(centres[a]).total_cmp(&centres[y].distance(centres[a]))
-                    })
-                    .unwrap();
-                let deviation =
-                    (n[a].angle_between(n[b]) - truth[a].angle_between(truth[b])).abs().to_degrees();
-                [deviation, n[a].angle_between(truth[a]).to_degrees(), turn(a)]
-            })
-            .collect();
-        std::array::from_fn(|k| rows.iter().map(|r| r[k]).sum::<f64>() / rows.len().max(1) as f64)
+        let side = |sign: f64| -> Vec<usize> {
+            near.iter().copied().filter(|&s| in_band(s, band) && centres[s].x * sign > 0.0).collect()
+        };
+        let (left, right) = (side(-1.0), side(1.0));
+        // Every surfel of the band paired with the nearest one on the other side.
+        let (l, r) = (
+            crease_deviation(surface, normals, truth, &left, &right).0,
+            crease_deviation(surface, normals, truth, &right, &left).0,
+        );
+        let all: Vec<usize> = near.iter().copied().filter(|&s| in_band(s, band)).collect();
+        let mean =
+            |f: &dyn Fn(usize) -> f64| all.iter().map(|&s| f(s)).sum::<f64>() / all.len().max(1) as f64;
+        [
+            (l * left.len() as f64 + r * right.len() as f64) / all.len().max(1) as f64,
+            mean(&|s| n[s].angle_between(truth[s]).to_degrees()),
+            mean(&turn),
+        ]
     })
 }
 
