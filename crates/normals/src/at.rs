@@ -40,11 +40,12 @@ pub enum AtLinearSolver {
 impl Default for AtLinearSolver {
     /// Conjugate gradients to a relative residual of `1e-5`, at most 1000 iterations. On
     /// bunny-128 (default parameters) the fields differ from exact solves (CG to `1e-11`)
-    /// by `1.5e-4` degrees in `u` on average (99% of surfels within `1.5e-3`, at most
-    /// `0.26`) and `2e-6` in `v` on average (99% within `2e-5`, at most `8e-3`), against a
-    /// change of `v` of at least `4e-3` in each eps's last alternation; every accuracy
-    /// test measures the same to 0.01 degree as with `1e-6`, for 26% fewer CG iterations
-    /// (see [`AmbrosioTortorelli`], "Solvers").
+    /// by `9.2e-5` degrees in `u` on average (99% of surfels within `1.1e-3`, at most
+    /// `0.061`) and `1.1e-6` in `v` on average (99% within `1.5e-5`, at most `1.2e-3`),
+    /// against a change of `v` of at least `4e-3` in each eps's last alternation (ignored
+    /// test `bunny_cg_tolerance` in `tests/at.rs`); every accuracy test measured the same to
+    /// 0.01 degree as with `1e-6`, for 26% fewer CG iterations (see [`AmbrosioTortorelli`],
+    /// "Solvers").
     fn default() -> Self {
         AtLinearSolver::ConjugateGradient { tolerance: 1e-5, max_iterations: 1000 }
     }
@@ -323,7 +324,8 @@ impl AtInfo {
 /// error on II, whose own bias (towards the crease, 12.7 degrees on those rows) it
 /// removes (3.0 left). The one-voxel fin that digitizes the crease keeps its walls about
 /// 30 degrees off towards the crease plane from II (a chamfer of its own) and its top
-/// surfels on the bisector. A twicing target `g + (g - u)` in this stage halves the
+/// surfels on the bisector. Corrections tried in experiments whose code was not kept
+/// (threshold 0.3): a twicing target `g + (g - u)` in this stage halves the
 /// boundary bias (lens: noisy 5.5, II 3.4) but puts noise back everywhere (sphere of
 /// radius 20: 0.76 -> 1.00 degrees), so it is not used. Restricted to the surfels within
 /// 3 links of the discontinuity zone (sphere unchanged), with gain 1 or 2 (`g + k (g -
@@ -345,12 +347,13 @@ impl AtInfo {
 /// surface, a numeric factorization per solve). On bunny-128 (55k surfels) the
 /// alternations decrease the energy monotonically but slowly and never reach the `1e-4`
 /// tolerance, so a run is 40 alternations and 10 sharpening ones: 100 factorizations of
-/// about 250 Mflop each (2.1M nonzeros in each factor), or 2593 CG iterations in all
-/// (3517 to a relative residual of `1e-6`, whose fields are within `0.011` degrees and
-/// `3.5e-4` of exact solves).
+/// about 250 Mflop each (2.1M nonzeros in each factor), or 2640 CG iterations in all
+/// (3567 to a relative residual of `1e-6`, whose fields are within `0.003` degrees and
+/// `7.9e-5` of exact solves; `bunny_cg_tolerance`).
 ///
-/// Measured and not kept (no gain on this 2-core host, where each CG iteration is
-/// bound by memory traffic, about 13 vector passes): the work vectors column by column
+/// Tried in experiments whose code was not kept (no gain on this 2-core host, where each
+/// CG iteration is bound by memory traffic, about 13 vector passes; figures with the
+/// sharpening threshold 0.3): the work vectors column by column
 /// with SIMD updates (`pulp`, 11 to 25% fewer instructions, no faster), threads kept in
 /// the CG loop with spinning barriers instead of rayon's two parallel passes per
 /// iteration (at most 7%), warm starts extrapolated from the last two solutions (3511
