@@ -1,4 +1,4 @@
-//! Criterion benchmarks of every pipeline stage.
+//! Criterion benchmarks of every pipeline stage, and of whole runs through the front door.
 //!
 //! Run with `cargo bench --bench pipeline` (all) or filter, e.g.
 //! `cargo bench --bench pipeline -- surface`. Inputs: the bundled bunny-128 volume
@@ -14,6 +14,7 @@ use voxreg::digisurf::{DigitalSurface, LabelVolume};
 use voxreg::io::{read_volume, write_mesh, QuadMesh};
 use voxreg::normals::{NormalEstimator, Trivial};
 use voxreg::regularize::{DirectSolver, Energy, EnergyParams, Operator, OperatorPattern};
+use voxreg::Params;
 
 fn bunny() -> LabelVolume {
     read_volume(&Path::new(env!("CARGO_MANIFEST_DIR")).join("data/bunny-128.vol")).unwrap().volume
@@ -77,5 +78,18 @@ fn stages(c: &mut Criterion) {
     g.finish();
 }
 
-criterion_group!(benches, stages);
+/// The whole default run through the front door, as `voxreg regularize` does it.
+fn front_door(c: &mut Criterion) {
+    let mut g = c.benchmark_group("front door");
+    g.sample_size(10);
+    let volume = bunny();
+    for (name, params) in [("default", Params::default()), ("papers", Params::papers())] {
+        g.bench_function(format!("{name}/bunny-128"), |b| {
+            b.iter(|| voxreg::regularize(black_box(&volume), &params).unwrap())
+        });
+    }
+    g.finish();
+}
+
+criterion_group!(benches, stages, front_door);
 criterion_main!(benches);

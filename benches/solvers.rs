@@ -16,7 +16,7 @@ use voxreg::digisurf::DigitalSurface;
 use voxreg::normals::NormalEstimator;
 use voxreg::normals::NormalField;
 use voxreg::regularize::{
-    CgParams, CgSolver, DescentParams, DescentSolver, DirectSolver, Energy, EnergyParams, Preconditioner,
+    CgParams, CgSolver, BoundedParams, BoundedSolver, DirectSolver, Energy, EnergyParams, Preconditioner,
 };
 use voxreg_testkit::{digitize, true_normals, Sphere};
 
@@ -62,9 +62,9 @@ fn solvers(c: &mut Criterion) {
     let normals = voxreg::normals::IntegralInvariant { radius: None }.estimate(&surface).expect("normals");
     let input = surface.positions();
     let energy = Energy::new(&surface, &normals, &input, EnergyParams::default()).expect("valid energy");
-    let clamped = DescentParams { clamp: Some(0.01), ..Default::default() };
+    let clamped = BoundedParams { clamp: Some(0.01), ..Default::default() };
     g.bench_function("gd-clamped/veh_fire", |b| {
-        b.iter(|| DescentSolver::new(black_box(&surface), clamped).unwrap().solve(&energy).unwrap())
+        b.iter(|| BoundedSolver::new(black_box(&surface), clamped).unwrap().solve(&energy).unwrap())
     });
     g.finish();
 }

@@ -8,6 +8,8 @@
 //! - `multi_label_open_interfaces`: junctions and open rims survive the pipeline.
 //! - `anisotropic_spacing_scales_positions`: spacing is honoured end to end.
 //!
+//! - `front_door_presets`: the one-shot `regularize` with each preset.
+//!
 //! Per-crate tests live beside each crate (`crates/*/tests`, `mod tests`).
 
 use std::collections::HashMap;
@@ -16,8 +18,15 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use voxreg::digisurf::{DigitalSurface, LabelVolume, RegionMap};
 use voxreg::io::{read_volume, write_mesh, QuadMesh};
-use voxreg::normals::{NormalEstimator, Trivial};
-use voxreg::regularize::{regularize, EnergyParams};
+use voxreg::normals::{NormalEstimator, NormalField, Trivial};
+use voxreg::regularize::{Output, Params, Regularizer, SolverChoice};
+
+/// The papers' single solve, exact (sparse Cholesky), from `normals`.
+fn exact(surface: &DigitalSurface, normals: &NormalField) -> Output {
+    let mut params = Params::papers();
+    params.solver.choice = SolverChoice::Direct;
+    Regularizer::new(surface.clone()).run_from(&params, normals).unwrap()
+}
 
 fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("data").join(name)
@@ -59,9 +68,9 @@ fn bunny_128_round_trip() {
     let surface = DigitalSurface::from_volume(&loaded.volume).unwrap();
     assert_eq!(surface.num_surfels(), 55262);
     let normals = Trivial.estimate(&surface).unwrap();
-    let result = regularize(&surface, &normals, EnergyParams::default()).unwrap();
-    assert!(result.info.relative_gradient <= 1e-9, "{}", result.info.relative_gradient);
-    assert!(result.after.total < result.before.total);
+    let result = exact(&surface, &normals);
+    assert!(result.report.last_solve().relative_gradient() <= 1e-9, "{}", result.report.last_solve().relative_gradient());
+    assert!(result.report.energy.after.total < result.report.energy.before.total);
 
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("bunny.obj");
@@ -84,8 +93,8 @@ fn vox_model_pipeline() {
     assert!(loaded.palette.is_some());
     let surface = DigitalSurface::new(&loaded.volume, &RegionMap::single_solid()).unwrap();
     assert_eq!(surface.interfaces().len(), 1);
-    let result = regularize(&surface, &Trivial.estimate(&surface).unwrap(), EnergyParams::default()).unwrap();
-    assert!(result.info.relative_gradient <= 1e-9);
+    let result = exact(&surface, &Trivial.estimate(&surface).unwrap());
+    assert!(result.report.last_solve().relative_gradient() <= 1e-9);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("fire.ply");
     write_mesh(&path, &QuadMesh::from_surface(&surface, &result.positions)).unwrap();
@@ -110,8 +119,8 @@ fn multi_label_open_interfaces() {
     let c = surface.counts();
     assert_eq!(c.interfaces, 3);
     assert!(c.junction_edges > 0 && c.boundary_vertices > 0);
-    let result = regularize(&surface, &Trivial.estimate(&surface).unwrap(), EnergyParams::default()).unwrap();
-    assert!(result.info.relative_gradient <= 1e-9);
+    let result = exact(&surface, &Trivial.estimate(&surface).unwrap());
+    assert!(result.report.last_solve().relative_gradient() <= 1e-9);
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("ml.obj");
     let mesh = QuadMesh::from_surface(&surface, &result.positions);
@@ -135,8 +144,30 @@ fn anisotropic_spacing_scales_positions() {
     for (a, b) in s0.positions().iter().zip(s1.positions()) {
         assert!((*a * spacing - b).length() < 1e-12);
     }
-    let r = regularize(&s1, &Trivial.estimate(&s1).unwrap(), EnergyParams::default()).unwrap();
-    assert!(r.info.relative_gradient <= 1e-9);
+    let r = exact(&s1, &Trivial.estimate(&s1).unwrap());
+    assert!(r.report.last_solve().relative_gradient() <= 1e-9);
     let extent = r.positions.iter().fold(DVec3::ZERO, |m, p| m.max(p.abs()));
     assert!(extent.z > 2.0 * extent.y && extent.y > 1.5 * extent.x, "{extent}");
+}
+
+#[test]
+fn front_door_presets() {
+    let loaded = read_volume(&data("chr_army1.vox")).unwrap();
+    let art = voxreg::regularize(&loaded.volume, &voxreg::Params::voxel_art()).unwrap();
+    assert_eq!(art.surface.interfaces().len(), 1, "one solid");
+    assert_eq!(art.report.solves.len(), 1);
+    let input = art.surface.positions();
+    let half = 0.5 * (1.0 - 0.01) + 1e-12;
+    assert!(art.positions.iter().zip(&input).all(|(x, p)| (*x - *p).abs().max_element() <= half));
+
+    let loaded = read_volume(&data("cat10.vol")).unwrap();
+    let default = voxreg::regularize(&loaded.volume, &voxreg::Params::default()).unwrap();
+    assert_eq!(default.report.solves.len(), 4);
+    assert!(default.report.converged());
+    let papers = voxreg::regularize(&loaded.volume, &voxreg::Params::papers()).unwrap();
+    assert_eq!(papers.report.solves.len(), 1);
+    // The report serializes, with the solver's own fields.
+    let json = serde_json::to_value(&default.report).unwrap();
+    assert_eq!(json["counts"]["surfels"].as_u64().unwrap() as usize, default.surface.num_surfels());
+    assert!(json["solves"][0]["solver"].is_string());
 }

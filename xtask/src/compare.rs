@@ -18,8 +18,8 @@ use voxreg_baselines::{
     TaubinParams, TriangleIndex,
 };
 use voxreg_digisurf::DigitalSurface;
-use voxreg_normals::{AmbrosioTortorelli, IntegralInvariant, NormalEstimator, Trivial};
-use voxreg_regularize::{regularize, run_pipeline, self_intersections, EnergyParams, PipelineParams};
+use voxreg_quality::self_intersections;
+use voxreg_regularize::{Estimator, Params, Regularizer, SolverChoice};
 use voxreg_testkit::{digitize, Goursat, Shape, Sphere, Torus};
 
 /// The test kit's shapes seen as the baselines' [`Implicit`].
@@ -307,7 +307,7 @@ fn measure(case: &Case, method: &str, mesh: &Mesh, digital: &TriangleIndex, seco
 }
 
 /// Pairs of faces of `mesh` that intersect without sharing a vertex (touching counts),
-/// by `voxreg_regularize::self_intersections`: polygons are cut into a fan of quads (and a
+/// by `voxreg_quality::self_intersections`: polygons are cut into a fan of quads (and a
 /// last triangle, as a quad with a repeated vertex) that all share the polygon's first
 /// vertex, so pieces of one polygon are never reported against each other.
 pub(crate) fn self_intersection_count(mesh: &Mesh) -> usize {
@@ -343,22 +343,19 @@ fn run_case(case: &Case) -> Result<Vec<Row>> {
     let digital_mesh = Mesh::from_surface(&surface, &surface.positions());
     let digital = TriangleIndex::new(&digital_mesh);
     let mut rows = vec![measure(case, "digital surface (input)", &digital_mesh, &digital, 0.0)];
-    let estimators: Vec<Box<dyn NormalEstimator>> = vec![
-        Box::new(Trivial),
-        Box::new(IntegralInvariant::default()),
-        Box::new(AmbrosioTortorelli::default()),
-    ];
-    for est in &estimators {
+    for estimator in [Estimator::Trivial, Estimator::Ii, Estimator::At] {
+        // The papers' single solve, exact.
+        let mut params = Params::papers();
+        params.normals.estimator = estimator;
+        params.solver.choice = SolverChoice::Direct;
         let (mesh, s) = timed(|| {
-            let normals = est.estimate(&surface)?;
-            let r = regularize(&surface, &normals, EnergyParams::default())?;
-            Ok(Mesh::from_surface(&surface, &r.positions))
+            let out = Regularizer::new(surface.clone()).run(&params)?;
+            Ok(Mesh::from_surface(&surface, &out.positions))
         })?;
-        rows.push(measure(case, &format!("voxreg ({})", est.name()), &mesh, &digital, s));
+        rows.push(measure(case, &format!("voxreg ({})", estimator.name()), &mesh, &digital, s));
     }
     let (mesh, s) = timed(|| {
-        let normals = IntegralInvariant::default().estimate(&surface)?;
-        let out = run_pipeline(&surface, &normals, None, &PipelineParams::default(), &mut |_| {})?;
+        let out = Regularizer::new(surface.clone()).run(&Params::default())?;
         Ok(Mesh::from_surface(&surface, &out.positions))
     })?;
     rows.push(measure(case, "voxreg pipeline (ii, default)", &mesh, &digital, s));

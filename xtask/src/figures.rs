@@ -28,7 +28,8 @@ use voxreg_baselines::{
 use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
 use voxreg_io::{read_volume, QuadMesh};
 use voxreg_normals::{IntegralInvariant, NormalEstimator, NormalField};
-use voxreg_regularize::{regularize, self_intersections, DescentParams, DescentSolver, Energy, EnergyParams};
+use voxreg_quality::self_intersections;
+use voxreg_regularize::{EnergyParams, Params, Regularizer, SolveInfo, SolverChoice, SolverParams};
 use voxreg_render::{render, viridis, Camera, Image, RenderParams, Shading};
 use voxreg_testkit::digitize;
 
@@ -166,28 +167,31 @@ fn ii_normals(surface: &DigitalSurface) -> Result<NormalField> {
     Ok(IntegralInvariant::default().estimate(surface)?)
 }
 
+/// The papers' single exact solve from `normals` with the weights `params`.
 fn voxreg(surface: &DigitalSurface, normals: &NormalField, params: EnergyParams) -> Result<Vec<DVec3>> {
-    Ok(regularize(surface, normals, params)?.positions)
+    let mut p = Params { energy: params, ..Params::papers() };
+    p.solver.choice = SolverChoice::Direct;
+    Ok(Regularizer::new(surface.clone()).run_with(&p, Some(normals), &mut |_| {})?.positions)
 }
 
 /// The clamped minimizer (paper, sec. 3.4): every vertex within its box of edge
 /// `(1 - eps) h`.
 fn voxreg_clamped(surface: &DigitalSurface, normals: &NormalField, eps: f64) -> Result<Vec<DVec3>> {
-    let input = surface.positions();
-    let energy = Energy::new(surface, normals, &input, EnergyParams::default())?;
     // 0.01 voxel is invisible in a figure and takes a third of the iterations of 1e-3.
-    let params = DescentParams { clamp: Some(eps), tolerance: 1e-2, ..DescentParams::default() };
+    let p = Params { solver: SolverParams::default().with_tolerance(1e-2).clamped(Some(eps)), ..Params::papers() };
     let t = Instant::now();
-    let (x, info) = DescentSolver::new(surface, params)?.solve(&energy)?;
-    eprintln!(
-        "  clamped descent: {} quads, {} iterations, {} clamped vertices, converged {}, {:.1} s",
-        surface.num_surfels(),
-        info.iterations,
-        info.clamped_vertices.unwrap_or(0),
-        info.converged,
-        t.elapsed().as_secs_f64()
-    );
-    Ok(x)
+    let out = Regularizer::new(surface.clone()).run_with(&p, Some(normals), &mut |_| {})?;
+    if let SolveInfo::Bounded(info) = out.report.last_solve() {
+        eprintln!(
+            "  clamped solve: {} quads, {} iterations, {} clamped vertices, converged {}, {:.1} s",
+            surface.num_surfels(),
+            info.iterations,
+            info.clamped_vertices,
+            info.converged,
+            t.elapsed().as_secs_f64()
+        );
+    }
+    Ok(out.positions)
 }
 
 fn quads(surface: &DigitalSurface) -> Vec<[u32; 4]> {

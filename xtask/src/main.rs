@@ -1,8 +1,9 @@
 //! Project automation, run as `cargo xtask <command>`.
 //!
-//! - `timings [--runs N] [FILE...]`: times each pipeline stage (read, surface, normals,
-//!   assemble, solve, write) on the given volumes (default: the bundled bunny-128 and
-//!   cat10) and prints a Markdown table of medians, as used in the README.
+//! - `timings [--runs N] [FILE...]`: times each stage of the default run (read, surface,
+//!   normals, assemble, solve, refine, write; the input's preset, as the CLI runs it) on
+//!   the given volumes (default: the bundled bunny-128 and cat10) and prints a Markdown
+//!   table of medians.
 //! - `compare [--quick] [--out DIR]`: every meshing method (voxreg with each normal
 //!   estimator, marching cubes, smoothed MC, dual contouring, shrouds) against every
 //!   metric of `voxreg-baselines` on analytic shapes; Markdown and CSV tables in
@@ -24,10 +25,8 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
-use voxreg_digisurf::{DigitalSurface, RegionMap};
-use voxreg_io::{read_volume, write_mesh, QuadMesh};
-use voxreg_normals::{NormalEstimator, Trivial};
-use voxreg_regularize::{DirectSolver, Energy, EnergyParams};
+use voxreg_io::{is_voxel_art, read_volume, write_mesh, QuadMesh};
+use voxreg_regularize::{regularize, Params};
 
 fn main() -> Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
@@ -59,46 +58,29 @@ fn median(mut v: Vec<f64>) -> f64 {
 
 /// Stage timings of one run, in seconds, plus counts.
 struct Run {
-    stages: [f64; 6],
+    stages: [f64; 7],
     surfels: usize,
-    factor_mib: f64,
-    relative_gradient: f64,
+    solves: usize,
+    converged: bool,
 }
 
+/// One run of the default command line's work: read, the front door with the input's
+/// preset, write.
 fn run_once(path: &Path, out: &Path) -> Result<Run> {
     let t = Instant::now();
     let loaded = read_volume(path)?;
     let read = t.elapsed().as_secs_f64();
-    let map = if path.extension().is_some_and(|e| e == "vox") {
-        RegionMap::single_solid()
-    } else {
-        RegionMap::per_label()
-    };
+    let params = if is_voxel_art(path) { Params::voxel_art() } else { Params::default() };
+    let result = regularize(&loaded.volume, &params)?;
     let t = Instant::now();
-    let surface = DigitalSurface::new(&loaded.volume, &map)?;
-    let surf = t.elapsed().as_secs_f64();
-    let t = Instant::now();
-    let normals = Trivial.estimate(&surface)?;
-    let norm = t.elapsed().as_secs_f64();
-    let input = surface.positions();
-    let energy = Energy::new(&surface, &normals, &input, EnergyParams::default())?;
-    let mut solver = DirectSolver::new(&surface)?;
-    let (x, info) = solver.solve(&energy)?;
-    let t = Instant::now();
-    write_mesh(out, &QuadMesh::from_surface(&surface, &x))?;
+    write_mesh(out, &QuadMesh::from_surface(&result.surface, &result.positions))?;
     let write = t.elapsed().as_secs_f64();
+    let s = result.report.stages;
     Ok(Run {
-        stages: [
-            read,
-            surf,
-            norm,
-            info.pattern_seconds + info.assemble_seconds,
-            info.symbolic_seconds + info.factor_seconds + info.solve_seconds,
-            write,
-        ],
-        surfels: surface.num_surfels(),
-        factor_mib: info.factor_nnz.unwrap_or(0) as f64 * 8.0 / (1024.0 * 1024.0),
-        relative_gradient: info.relative_gradient,
+        stages: [read, s.surface, s.normals, s.assemble, s.solve, s.refine, write],
+        surfels: result.surface.num_surfels(),
+        solves: result.report.solves.len(),
+        converged: result.report.converged(),
     })
 }
 
@@ -118,34 +100,24 @@ fn timings(args: &[String]) -> Result<()> {
     }
     let dir = std::env::temp_dir().join(format!("voxreg-xtask-{}", std::process::id()));
     std::fs::create_dir_all(&dir)?;
-    println!(
-        "| input | surfels | read | surface | normals (trivial) | assemble | solve (direct) | write (OBJ) | total | factor | rel. gradient |"
-    );
+    println!("| input | surfels | solves | read | surface | normals | assemble | solve | refine | write (OBJ) | total |");
     println!("|---|---|---|---|---|---|---|---|---|---|---|");
     for file in &files {
         let out = dir.join("out.obj");
         let all: Vec<Run> = (0..runs).map(|_| run_once(file, &out)).collect::<Result<_>>()?;
-        let med: Vec<f64> = (0..6).map(|k| median(all.iter().map(|r| r.stages[k]).collect())).collect();
+        if let Some(r) = all.iter().find(|r| !r.converged) {
+            bail!("{}: a solve did not converge ({} solves)", file.display(), r.solves);
+        }
+        let med: Vec<f64> = (0..7).map(|k| median(all.iter().map(|r| r.stages[k]).collect())).collect();
         let total = median(all.iter().map(|r| r.stages.iter().sum()).collect());
         let name = file.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let fmt = |s: f64| if s < 0.1 { format!("{:.1} ms", s * 1e3) } else { format!("{s:.2} s") };
-        println!(
-            "| {name} | {} | {} | {} | {} | {} | {} | {} | {} | {:.0} MiB | {:.0e} |",
-            all[0].surfels,
-            fmt(med[0]),
-            fmt(med[1]),
-            fmt(med[2]),
-            fmt(med[3]),
-            fmt(med[4]),
-            fmt(med[5]),
-            fmt(total),
-            all[0].factor_mib,
-            all.iter().map(|r| r.relative_gradient).fold(0.0, f64::max)
-        );
+        let cells: Vec<String> = med.iter().map(|&s| fmt(s)).collect();
+        println!("| {name} | {} | {} | {} | {} |", all[0].surfels, all[0].solves, cells.join(" | "), fmt(total));
     }
     std::fs::remove_dir_all(&dir).ok();
     println!(
-        "\nmedians of {runs} runs; `cargo xtask timings` on {} cores",
+        "\nmedians of {runs} runs of the default pipeline (the input's preset); `cargo xtask timings` on {} cores",
         std::thread::available_parallelism()?
     );
     Ok(())

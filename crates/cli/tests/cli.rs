@@ -81,20 +81,25 @@ fn regularize_writes_a_closed_quad_mesh_and_a_report() {
         }
     }
     assert!(directed.values().all(|&c| c == 0));
-    for key in ["read", "surface", "normals", "assemble", "solve", "write"] {
+    for key in ["surface", "normals", "assemble", "solve", "refine"] {
         assert!(r["stages"][key].as_f64().unwrap() >= 0.0, "stage {key}");
     }
+    for key in ["read", "write"] {
+        assert!(r["io"][key].as_f64().unwrap() >= 0.0, "stage {key}");
+    }
+    assert_eq!(r["solves"].as_array().unwrap().len(), 4, "the default preset refines three times");
     for term in ["attachment", "alignment", "fairness", "total"] {
         assert!(r["energy"]["before"][term].is_number() && r["energy"]["after"][term].is_number());
     }
     assert!(r["energy"]["after"]["total"].as_f64() < r["energy"]["before"]["total"].as_f64());
     // The automatic choice: exact factorization for small surfaces, else CG to 1e-3 voxel.
-    match r["solver"]["kind"].as_str().unwrap() {
-        "direct" => assert!(r["solver"]["relative_gradient"].as_f64().unwrap() <= 1e-9),
+    let solve = last_solve(&r);
+    match solve["solver"].as_str().unwrap() {
+        "direct" => assert!(solve["relative_gradient"].as_f64().unwrap() <= 1e-9),
         kind => {
             assert_eq!(kind, "cg");
-            assert_eq!(r["solver"]["converged"], true);
-            assert!(r["solver"]["error_estimate"].as_f64().unwrap() <= 1e-3);
+            assert_eq!(solve["converged"], true);
+            assert!(solve["error_estimate"].as_f64().unwrap() <= 1e-3);
         }
     }
     assert!(r["counts"]["edges"].as_u64().unwrap() > 0 && r["counts"]["interfaces"] == 1);
@@ -227,11 +232,11 @@ fn regularize_with_each_normal_estimator_records_it_in_the_report() {
         let out = voxreg(&args);
         assert!(out.status.success(), "{extra:?}: {}", stderr(&out));
         let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-        r["params"].clone()
+        r["normals"].clone()
     };
     // The default: integral invariant normals at the multigrid radius (3 at unit spacing).
     let p = run(&[]);
-    assert_eq!((p["normals"].as_str(), p["radius"].as_f64()), (Some("ii"), Some(3.0)));
+    assert_eq!((p["estimator"].as_str(), p["radius"].as_f64()), (Some("ii"), Some(3.0)));
     for (kind, radius) in
         [("ii", Some(4.5)), ("convolved", Some(2.0)), ("convolved", None), ("at", Some(3.5))]
     {
@@ -241,22 +246,16 @@ fn regularize_with_each_normal_estimator_records_it_in_the_report() {
             extra.extend(["--radius", r.as_str()]);
         }
         let p = run(&extra);
-        assert_eq!(p["normals"], kind);
+        assert_eq!(p["estimator"], kind);
         assert_eq!(p["radius"].as_f64(), Some(radius.unwrap_or(3.0)), "{kind}");
     }
     let p = run(&["--normals", "trivial"]);
-    assert_eq!((p["normals"].as_str(), p["radius"].is_null()), (Some("trivial"), true));
-    // The AT sharpening stage: on by default, --sharpen 0 turns it off.
-    assert_eq!(run(&["--normals", "at"])["sharpen"].as_u64(), Some(10));
-    assert_eq!(run(&["--normals", "at", "--sharpen", "0"])["sharpen"].as_u64(), Some(0));
-    assert!(p["sharpen"].is_null());
-    // Its threshold: reported, settable, checked.
-    assert_eq!(run(&["--normals", "at"])["sharpen_threshold"].as_f64(), Some(0.4));
-    assert_eq!(
-        run(&["--normals", "at", "--sharpen-threshold", "0.3"])["sharpen_threshold"].as_f64(),
-        Some(0.3)
-    );
-    assert!(p["sharpen_threshold"].is_null());
+    assert_eq!((p["estimator"].as_str(), p["radius"].is_null()), (Some("trivial"), true));
+    assert!(p["at"].is_null());
+    // The AT sharpening stage: on by default, --sharpen 0 turns it off (its report counts
+    // the stage's alternations).
+    assert!(run(&["--normals", "at"])["at"]["sharpen_iterations"].as_u64().unwrap() > 0);
+    assert_eq!(run(&["--normals", "at", "--sharpen", "0"])["at"]["sharpen_iterations"].as_u64(), Some(0));
     let out = voxreg(&[
         "regularize",
         input.to_str().unwrap(),
@@ -368,14 +367,15 @@ fn every_solver_reaches_the_same_surface_and_reports_itself() {
         (obj_positions(&obj), r)
     };
     let (exact, r) = run("direct", &[]);
-    assert_eq!(r["solver"]["kind"], "direct");
-    for (solver, kind) in [("cg", "cg"), ("gd", "gd")] {
+    assert_eq!(last_solve(&r)["solver"], "direct");
+    for (solver, kind) in [("cg", "cg"), ("bounded", "bounded"), ("gd", "bounded")] {
         let (x, r) = run(solver, &["--tolerance", "1e-4"]);
-        assert_eq!(r["solver"]["kind"], kind);
-        assert_eq!(r["solver"]["converged"], true);
-        assert_eq!(r["solver"]["preconditioner"], "multigrid");
-        assert!(r["solver"]["iterations"].as_u64().unwrap() > 0);
-        assert!(r["solver"]["error_estimate"].as_f64().unwrap() <= 1e-4);
+        let r = last_solve(&r);
+        assert_eq!(r["solver"], kind);
+        assert_eq!(r["converged"], true);
+        assert_eq!(r["preconditioner"], "multigrid");
+        assert!(r["iterations"].as_u64().unwrap() > 0);
+        assert!(r["error_estimate"].as_f64().unwrap() <= 1e-4);
         let err = x
             .iter()
             .zip(&exact)
@@ -406,9 +406,10 @@ fn clamped_output_stays_in_cubes_and_passes_the_check() {
     ]);
     assert!(out.status.success(), "{}", stderr(&out));
     let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-    assert_eq!(r["solver"]["kind"], "gd");
-    assert_eq!(r["solver"]["clamp"], 0.01);
-    assert!(r["solver"]["clamped_vertices"].as_u64().is_some());
+    let r = last_solve(&r);
+    assert_eq!(r["solver"], "bounded");
+    assert_eq!(r["clamp"], 0.01);
+    assert!(r["clamped_vertices"].as_u64().is_some());
     // Against the staircase (the regularization with an overwhelming attachment).
     let out = voxreg(&[
         "regularize",
@@ -439,7 +440,24 @@ fn clamped_output_stays_in_cubes_and_passes_the_check() {
         "cg",
     ]);
     assert!(!out.status.success());
-    assert!(stderr(&out).contains("--clamp needs the gd solver"), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--clamp needs the bounded solver"), "{}", stderr(&out));
+}
+
+#[test]
+fn check_reports_folds_and_fails() {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("folded.obj");
+    // Two unit squares sharing the edge x = 1, the second folded back over the first.
+    std::fs::write(
+        &path,
+        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.2 0 0.05\nv 0.2 1 0.05\nf 1 2 3 4\nf 2 5 6 3\n",
+    )
+    .unwrap();
+    let out = voxreg(&["check", path.to_str().unwrap()]);
+    assert!(!out.status.success());
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(text.contains("0 self-intersecting face pairs, 0 folded quads, 1 folded adjacent pairs"), "{text}");
+    assert!(stderr(&out).contains("1 folded adjacent pairs"), "{}", stderr(&out));
 }
 
 #[test]
@@ -458,4 +476,9 @@ fn check_reports_self_intersections_and_fails() {
     assert!(stderr(&out).contains("1 self-intersections (first: faces 0 and 1)"), "{}", stderr(&out));
     let out = voxreg(&["check", dir.path().join("missing.obj").to_str().unwrap()]);
     assert!(!out.status.success());
+}
+
+/// The report of the last solve in a `--report` JSON.
+fn last_solve(r: &serde_json::Value) -> &serde_json::Value {
+    r["solves"].as_array().unwrap().last().unwrap()
 }

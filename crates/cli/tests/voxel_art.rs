@@ -7,7 +7,7 @@ use std::process::Command;
 
 use voxreg_digisurf::{DigitalSurface, RegionMap};
 use voxreg_io::{read_mesh, read_voxels, Voxels};
-use voxreg_regularize::self_intersections;
+use voxreg_quality::self_intersections;
 
 mod common;
 use common::{data, stderr, voxreg};

@@ -7,7 +7,7 @@ use crate::{LabelVolume, RegionId, SurfaceError};
 /// By default every label is its own region. A caller may group labels (e.g. all
 /// colours of a MagicaVoxel model into one solid, or several tissue labels into one
 /// organ); labels not named in any group stay regions of their own.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct RegionMap {
     groups: Vec<Vec<u32>>,
     all_in_one: bool,

@@ -93,7 +93,7 @@ pub struct Interface {
 }
 
 /// Counts describing a digital surface, as reported by `voxreg info`.
-#[derive(Clone, Debug, Default, PartialEq, Eq)]
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
 pub struct SurfaceCounts {
     /// Number of surfels (quads).
     pub surfels: usize,

@@ -103,7 +103,7 @@ pub use raw::{read_raw, read_raw_bytes, RawSpec};
 pub use read_mesh::read_mesh;
 pub use samples::{DataType, Endian};
 pub use vol::{read_vol, read_vol_bytes};
-pub use volume::{read_volume, read_voxels, LoadedVolume, LoadedVoxels, MAX_VOXELS};
+pub use volume::{is_voxel_art, read_volume, read_voxels, LoadedVolume, LoadedVoxels, MAX_VOXELS};
 pub use vox::{read_vox, read_vox_bytes};
 pub use vti::{read_vti, read_vti_bytes};
 pub use write_volume::{write_vol, write_volume, write_vox, VOX_MAX_MODEL};

@@ -94,6 +94,13 @@ pub fn read_voxels(path: &Path) -> Result<LoadedVoxels, IoError> {
     }
 }
 
+/// Whether `path` names a format of voxel art (MagicaVoxel `.vox`): coloured voxels of
+/// one object rather than a sampled shape, which voxreg regularizes with its voxel-art
+/// preset (one solid region, clamped solve).
+pub fn is_voxel_art(path: &Path) -> bool {
+    lowercase_extension(path).as_deref() == Some("vox")
+}
+
 /// The extension of `path`, lower-cased, if it has one.
 pub(crate) fn lowercase_extension(path: &Path) -> Option<String> {
     path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase)

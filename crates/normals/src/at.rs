@@ -19,7 +19,7 @@ mod linear;
 use linear::{SolveStats, SpdSystem};
 
 /// How the two sparse SPD systems of each alternation are solved.
-#[derive(Copy, Clone, Debug, PartialEq)]
+#[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]
 pub enum AtLinearSolver {
     /// faer's sparse Cholesky: AMD ordering and symbolic analysis once per surface and
     /// system, a numeric factorization and triangular solves per solve: exact to machine
@@ -55,7 +55,7 @@ impl Default for AtLinearSolver {
 ///
 /// Lengths (`epsilons`) are in units of the grid step `h`, the cube root of the voxel
 /// volume; `alpha` and `lambda` are DGtal's `at-alpha` and `at-lambda` in those units.
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, PartialEq, serde::Serialize)]
 pub struct AtParams {
     /// Weight of the data term `|u - g|^2`: the smaller, the smoother `u`. Default `0.1`.
     pub alpha: f64,
@@ -98,7 +98,8 @@ impl Default for AtParams {
 }
 
 impl AtParams {
-    fn validate(&self) -> Result<(), NormalError> {
+    /// Checks every field's range.
+    pub fn validate(&self) -> Result<(), NormalError> {
         let positive = |x: f64| x.is_finite() && x > 0.0;
         let invalid = |what: String| Err(NormalError::InvalidParameter(what));
         if !positive(self.alpha) {
@@ -179,7 +180,7 @@ impl FeatureField {
 }
 
 /// What an Ambrosio-Tortorelli run did.
-#[derive(Clone, Debug, Default, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct AtInfo {
     /// Alternations run for each `eps`, in the order of [`AtParams::epsilons`].
     pub iterations: Vec<usize>,

@@ -44,6 +44,7 @@ mod convolved;
 mod eigen;
 mod field;
 mod ii;
+mod refined;
 mod runs;
 mod sides;
 mod trivial;
@@ -52,6 +53,7 @@ pub use at::{AmbrosioTortorelli, AtInfo, AtLinearSolver, AtParams, AtSolver, Fea
 pub use convolved::ConvolvedTrivial;
 pub use field::NormalField;
 pub use ii::{multigrid_radius, voxel_moments, BallMoments, IntegralInvariant};
+pub use refined::Refined;
 pub use trivial::Trivial;
 
 use voxreg_digisurf::DigitalSurface;

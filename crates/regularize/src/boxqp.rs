@@ -152,7 +152,7 @@ pub(crate) struct BoxStats {
 
 /// Minimizes `E(input + u)` over `|u_a| <= w_a`, from `u` (feasible), where
 /// `r = rhs - H u` on entry; `tol` is the stopping tolerance in physical units (see
-/// [`crate::DescentParams::tolerance`]).
+/// [`crate::BoundedParams::tolerance`]).
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn minimize_in_boxes(
     stencil: &Stencil,

@@ -10,10 +10,12 @@ use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
 use crate::vecops::{cg_update, dot, norm, scale_add, tail_estimate};
-use crate::{Energy, Progress, RegularizeError, SolveInfo};
+use crate::info::{SolveTimings, CgInfo};
+use crate::{Energy, Progress, RegularizeError};
 
 /// When an iterative solver stops.
-#[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum StoppingRule {
     /// Stop when the *estimated* largest distance of a vertex to the exact minimizer is at
     /// most the tolerance: the largest vertex correction of the last iteration,
@@ -35,7 +37,7 @@ pub enum StoppingRule {
 }
 
 /// Parameters of [`CgSolver`].
-#[derive(Copy, Clone, Debug, PartialEq)]
+#[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]
 pub struct CgParams {
     /// Tolerance of the [`StoppingRule`], in voxels (physical tolerance `tolerance * h`,
     /// `h` the smallest voxel spacing). Default: `1e-3`.
@@ -43,7 +45,7 @@ pub struct CgParams {
     /// How the tolerance is read. Default: [`StoppingRule::Estimate`].
     pub stopping: StoppingRule,
     /// Give up after this many iterations (the result is then returned, with its bound,
-    /// and [`SolveInfo::converged`] false). Default: `5000`.
+    /// and [`CgInfo::converged`](crate::CgInfo::converged) false). Default: `5000`.
     pub max_iterations: usize,
     /// The preconditioner. Default: [`Preconditioner::Multigrid`].
     pub preconditioner: Preconditioner,
@@ -71,7 +73,7 @@ impl Default for CgParams {
 /// preconditioner, the aggregation hierarchy; each [`CgSolver::solve`] only computes the
 /// coefficients (and coarse operators) of its energy, then iterates from the input
 /// positions, solving for the displacement like [`crate::DirectSolver`]. Memory: about
-/// 0.6 KiB per vertex with multigrid (see [`SolveInfo::memory_bytes`]).
+/// 0.6 KiB per vertex with multigrid (see [`CgInfo::memory_bytes`](crate::CgInfo::memory_bytes)).
 #[derive(Debug)]
 pub struct CgSolver {
     params: CgParams,
@@ -116,7 +118,7 @@ impl CgSolver {
     }
 
     /// Minimizes `energy` from its input positions; returns the positions and a report.
-    pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+    pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
         self.run(energy, None)
     }
 
@@ -126,7 +128,7 @@ impl CgSolver {
         &mut self,
         energy: &Energy<'_>,
         progress: &mut dyn FnMut(&Progress),
-    ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+    ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
         self.run(energy, Some(progress))
     }
 
@@ -134,7 +136,7 @@ impl CgSolver {
         &mut self,
         energy: &Energy<'_>,
         mut progress: Option<&mut dyn FnMut(&Progress)>,
-    ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+    ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
         let mut prepared = self.setup.prepare(energy)?;
         let stencil = &self.setup.stencil;
         let coef = &prepared.coef;
@@ -227,24 +229,23 @@ impl CgSolver {
         let memory = self.setup.memory_bytes(&prepared) + 7 * 24 * n;
         Ok((
             x,
-            SolveInfo {
-                solver: "cg",
+            CgInfo {
                 iterations,
-                relative_gradient: relative,
-                factor_nnz: None,
-                pattern_seconds: self.setup.structure_seconds,
-                symbolic_seconds: 0.0,
-                assemble_seconds: prepared.assemble_seconds,
-                factor_seconds: prepared.factor_seconds,
-                solve_seconds,
-                error_bound: Some(bound),
-                error_estimate: Some(estimate),
-                converged,
-                preconditioner: Some(self.params.preconditioner.name()),
                 operator_applications: applications,
-                clamped_vertices: None,
+                relative_gradient: relative,
+                error_bound: bound,
+                error_estimate: estimate,
+                converged,
+                preconditioner: self.params.preconditioner,
                 memory_bytes: memory,
-                bytes_per_iteration: Some(traffic),
+                bytes_per_iteration: traffic,
+                seconds: SolveTimings {
+                    structure: self.setup.structure_seconds,
+                    symbolic: 0.0,
+                    assemble: prepared.assemble_seconds,
+                    factor: prepared.factor_seconds,
+                    solve: solve_seconds,
+                },
             },
         ))
     }

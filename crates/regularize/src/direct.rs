@@ -11,7 +11,8 @@ use faer::sparse::linalg::cholesky::{
 use faer::{Conj, MatMut, Side};
 use glam::DVec3;
 
-use crate::{Energy, Operator, OperatorPattern, RegularizeError, SolveInfo};
+use crate::info::{SolveTimings, DirectInfo};
+use crate::{Energy, Operator, OperatorPattern, RegularizeError};
 
 /// A direct solver for the energy's linear system, reusable across solves on the same
 /// surface.
@@ -71,7 +72,7 @@ impl DirectSolver {
     /// (translation-invariant and small, so rounding stays relative to the voxel size),
     /// then refines with the matrix-free gradient until the relative gradient norm
     /// `|grad E(p*)| / |grad E(p)|` is below `1e-12` (at most 3 refinement steps).
-    pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+    pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, DirectInfo), RegularizeError> {
         let input = energy.input();
         if input.len() * 3 != self.pattern.dim() {
             return Err(RegularizeError::SizeMismatch("the energy is not on this solver's surface".into()));
@@ -136,24 +137,18 @@ impl DirectSolver {
         tracing::debug!(relative, refinements, "direct solve done");
         Ok((
             x,
-            SolveInfo {
-                solver: "direct",
-                iterations: refinements + 1,
+            DirectInfo {
+                refinement_steps: refinements,
                 relative_gradient: relative,
-                factor_nnz: Some(self.factor_nnz()),
-                pattern_seconds: self.pattern_seconds,
-                symbolic_seconds: self.symbolic_seconds,
-                assemble_seconds,
-                factor_seconds,
-                solve_seconds,
-                error_bound: None,
-                error_estimate: None,
-                converged: true,
-                preconditioner: None,
-                operator_applications: 0,
-                clamped_vertices: None,
+                factor_nnz: self.factor_nnz(),
                 memory_bytes: 8 * self.factor.len() + 16 * self.pattern.nnz() / 9,
-                bytes_per_iteration: None,
+                seconds: SolveTimings {
+                    structure: self.pattern_seconds,
+                    symbolic: self.symbolic_seconds,
+                    assemble: assemble_seconds,
+                    factor: factor_seconds,
+                    solve: solve_seconds,
+                },
             },
         ))
     }

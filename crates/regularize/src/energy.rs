@@ -8,7 +8,7 @@ use voxreg_normals::NormalField;
 use crate::{RegularizeError, Weights};
 
 /// Weights of the three terms of the energy (eq. 2 of the paper).
-#[derive(Copy, Clone, Debug, PartialEq)]
+#[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]
 pub struct EnergyParams {
     /// Attachment weight: keeps vertices near their input positions. Must be positive.
     /// Default: `1e-3`.
@@ -46,7 +46,7 @@ impl EnergyParams {
 }
 
 /// The value of each term of the energy, weights included.
-#[derive(Copy, Clone, Debug, Default, PartialEq)]
+#[derive(Copy, Clone, Debug, Default, PartialEq, serde::Serialize)]
 pub struct EnergyTerms {
     /// `alpha * sum_i |p_i - p^_i|^2`.
     pub attachment: f64,

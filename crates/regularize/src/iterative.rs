@@ -13,8 +13,9 @@ use crate::vecops::{sym_inverse, sym_mul};
 use crate::{Energy, FairnessMask, RegularizeError};
 
 /// The preconditioner of the iterative solvers ([`crate::CgSolver`],
-/// [`crate::DescentSolver`]).
-#[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
+/// [`crate::BoundedSolver`]).
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Default, serde::Serialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Preconditioner {
     /// None: plain conjugate gradient or steepest descent.
     Identity,

@@ -1,8 +1,10 @@
-//! The quadratic regularization energy of digital surfaces, and its solvers.
+//! The quadratic regularization energy of digital surfaces, its solvers, and voxreg's
+//! front door.
 //!
-//! Given a [`DigitalSurface`] (quads with input positions `p`) and a
-//! [`NormalField`] (one direction `n_f` per quad), the regularized positions minimize
-//! the convex quadratic [`Energy`] of the papers:
+//! Given a [`DigitalSurface`](voxreg_digisurf::DigitalSurface) (quads with input positions
+//! `p`) and a normal field (one direction `n_f` per quad), the regularized positions
+//! minimize the convex quadratic [`Energy`] of the papers (eq. 2 of
+//! `multilabel-interfaces-tvcg`):
 //!
 //! ```text
 //! E(P^) = alpha * sum_i |p_i - p^_i|^2                  (attachment)
@@ -10,54 +12,47 @@
 //!       + gamma * sum_i |p^_i - b^_i|^2                  (fairness)
 //! ```
 //!
-//! with defaults `alpha = 1e-3, beta = 1, gamma = 0.1` ([`EnergyParams`]). Entry points:
+//! # The front door
 //!
-//! - [`regularize`]: the one-shot form (exact solve).
-//! - [`Solver`] ([`SolverParams`], [`SolverChoice`]): picks one of the solvers below;
-//!   `Auto` factors small surfaces exactly and iterates on the others.
-//! - [`DirectSolver`]: exact sparse Cholesky (faer) that keeps its symbolic analysis
-//!   for repeated solves on the same surface. Fast to a few thousand vertices; its factor
-//!   grows like `n^1.27` (1.6 GB at 120k vertices).
-//! - [`CgSolver`] ([`CgParams`]): matrix-free conjugate gradient with a multigrid
-//!   preconditioner over the voxel hierarchy ([`MultigridParams`], [`Preconditioner`]),
-//!   stopping at a tolerance in voxels ([`StoppingRule`]): memory linear in the surface,
-//!   about 20 iterations on smooth normal fields (2 s for 367k quads on 2 cores).
-//! - [`DescentSolver`] ([`DescentParams`]): gradient descent with the exact gradient and
-//!   optimal steps, optionally *clamped* so that every vertex stays in a cube around its
-//!   input position (paper, sec. 3.4), which rules out self-intersections
-//!   ([`self_intersections`] checks meshes).
+//! - [`regularize`]: a labelled volume in, regularized positions and a [`Report`] out
+//!   ([`Output`]).
+//! - [`Regularizer`]: the same, reusable: it keeps the surface, the solver's analysis and
+//!   the initial normals across runs (parameter sweeps, interactive use).
+//! - [`Params`], with three presets: [`Params::default`] (the fidelity pipeline: solve,
+//!   then refine the normals from the result and solve again, re-centring the targets),
+//!   [`Params::papers`] (the papers' single solve) and [`Params::voxel_art`] (one solve
+//!   clamped to the voxels' boxes: never self-intersecting).
+//!
+//! # The layers below
+//!
 //! - [`Energy`]: value per term and exact gradient, matrix-free, with optional
-//!   per-element [`Weights`] and texture-aware fairness ([`FairnessMask`]); [`Operator`]
-//!   and [`OperatorPattern`]: the same quadratic form as a sparse matrix (eq. 28).
-//!
-//! Iterative solvers report each iteration ([`Progress`]: energy, gradient norm, error
-//! estimate) for progress bars, and every solver returns a [`SolveInfo`] certificate: the
-//! gradient norm at the result relative to the input's, and for the iterative ones a
-//! guaranteed and an estimated distance to the exact minimizer.
+//!   per-element [`Weights`] (texture-aware fairness: [`FairnessMask`]); [`Operator`] and
+//!   [`OperatorPattern`]: the same quadratic form as a sparse matrix (eq. 28), its
+//!   symbolic pattern built once per surface.
+//! - Solvers, each with its `Params` and `Info`, chosen by [`Solver`] ([`SolverParams`]):
+//!   [`DirectSolver`] (sparse Cholesky, exact), [`CgSolver`] (matrix-free conjugate
+//!   gradient with a multigrid preconditioner over the voxel hierarchy, stopping at a
+//!   tolerance in voxels) and [`BoundedSolver`] (the same CG inside per-vertex boxes, the
+//!   clamping of the paper's sec. 3.4, which rules out self-intersections).
 //!
 //! # Example
 //!
 //! ```
-//! use voxreg_digisurf::{DigitalSurface, LabelVolume};
-//! use voxreg_normals::{NormalEstimator, Trivial};
-//! use voxreg_regularize::{regularize, CgParams, CgSolver, Energy, EnergyParams};
+//! use voxreg_digisurf::LabelVolume;
+//! use voxreg_regularize::{regularize, Params};
 //!
 //! // A digital ball of radius 4.
 //! let volume = LabelVolume::from_fn([11, 11, 11], |[x, y, z]| {
 //!     let d = |c: usize| c as f64 - 5.0;
 //!     u32::from(d(x).powi(2) + d(y).powi(2) + d(z).powi(2) <= 16.0)
 //! });
-//! let surface = DigitalSurface::from_volume(&volume)?;
-//! let normals = Trivial.estimate(&surface)?;
-//! let result = regularize(&surface, &normals, EnergyParams::default())?;
-//! assert!(result.after.total < result.before.total);
-//! assert!(result.info.relative_gradient <= 1e-9);
-//!
-//! // The same minimizer by multigrid CG, to 1e-3 voxel.
-//! let input = surface.positions();
-//! let energy = Energy::new(&surface, &normals, &input, EnergyParams::default())?;
-//! let (x, info) = CgSolver::new(&surface, CgParams::default())?.solve(&energy)?;
-//! assert!(info.converged && x.iter().zip(&result.positions).all(|(a, b)| a.distance(*b) < 1e-3));
+//! let out = regularize(&volume, &Params::default())?;
+//! assert_eq!(out.positions.len(), out.surface.num_vertices()); // one quad per voxel face
+//! assert!(out.report.energy.after.total < out.report.energy.before.total);
+//! assert!(out.report.converged());
+//! // Every vertex stays within a voxel of the staircase.
+//! let input = out.surface.positions();
+//! assert!(out.positions.iter().zip(&input).all(|(x, p)| x.distance(*p) < 1.0));
 //! # Ok::<(), Box<dyn std::error::Error>>(())
 //! ```
 //!
@@ -67,41 +62,48 @@
 
 mod assemble;
 mod boxqp;
+mod bounded;
 mod cg;
-mod descent;
 mod direct;
 mod energy;
-mod intersections;
+mod info;
 mod iterative;
 mod multigrid;
+mod params;
 mod pipeline;
+mod regularizer;
+mod report;
 mod solver;
 mod stencil;
 mod vecops;
 mod weights;
 
 pub use assemble::{Operator, OperatorPattern};
+pub use bounded::{BoundedParams, BoundedSolver};
 pub use cg::{CgParams, CgSolver, StoppingRule};
-pub use descent::{DescentParams, DescentSolver};
 pub use direct::DirectSolver;
 pub use energy::{Energy, EnergyParams, EnergyTerms};
-pub use intersections::{self_intersections, triangles_intersect};
+pub use info::{BoundedInfo, CgInfo, DirectInfo, SolveInfo, SolveTimings};
 pub use iterative::Preconditioner;
 pub use multigrid::MultigridParams;
-pub use pipeline::{
-    crease_weights, informative_vertices, refined_normals, run_pipeline, smoothed_displacements,
-    PipelineOutput, PipelineParams,
-};
+pub use params::{EstimatedNormals, Estimator, NormalsParams, Params};
+pub use regularizer::{regularize, Event, Output, Regularizer, Stage};
+pub use report::{EnergyReport, NormalsReport, Report, StageTimes};
 pub use solver::{estimate_factor_nnz, Solver, SolverChoice, SolverParams};
 pub use weights::{colour_discontinuities, FairnessMask, Weights};
 
-use glam::DVec3;
-use voxreg_digisurf::DigitalSurface;
-use voxreg_normals::NormalField;
+use voxreg_digisurf::SurfaceError;
+use voxreg_normals::NormalError;
 
 /// What can go wrong when regularizing.
-#[derive(Debug, thiserror::Error, Clone, PartialEq, Eq)]
+#[derive(Debug, thiserror::Error, Clone, PartialEq)]
 pub enum RegularizeError {
+    /// The volume has no surface to regularize, or its regions are invalid.
+    #[error(transparent)]
+    Surface(#[from] SurfaceError),
+    /// The normal estimator failed or was given invalid parameters.
+    #[error(transparent)]
+    Normals(#[from] NormalError),
     /// A weight is out of range.
     #[error("invalid parameters: {0}")]
     InvalidParams(String),
@@ -114,55 +116,6 @@ pub enum RegularizeError {
     /// Not enough memory for a solver's data.
     #[error("out of memory: {0}")]
     OutOfMemory(String),
-}
-
-/// What a solver reports about its solve.
-#[derive(Clone, Debug, PartialEq)]
-pub struct SolveInfo {
-    /// The solver: `"direct"`, `"cg"` or `"gd"`.
-    pub solver: &'static str,
-    /// Iterations (for the direct solver: 1 + refinement steps).
-    pub iterations: usize,
-    /// Certificate: `|grad E(p*)| / |grad E(p)|`, the gradient norm at the result
-    /// relative to the one at the input positions (0 when the input is optimal). For the
-    /// clamped descent, the norm of the projected gradient (see [`DescentSolver`]).
-    pub relative_gradient: f64,
-    /// Entries of the Cholesky factor, for the direct solver.
-    pub factor_nnz: Option<usize>,
-    /// Seconds spent building the operator's sparsity pattern or connectivity (once per
-    /// surface).
-    pub pattern_seconds: f64,
-    /// Seconds of symbolic analysis: fill-reducing ordering and symbolic factorization
-    /// (once per surface).
-    pub symbolic_seconds: f64,
-    /// Seconds of numeric assembly (for CG: coefficients and coarse operators).
-    pub assemble_seconds: f64,
-    /// Seconds of numeric factorization (for CG: of the coarsest multigrid level).
-    pub factor_seconds: f64,
-    /// Seconds of triangular solves and refinement, or of the iterations.
-    pub solve_seconds: f64,
-    /// For the iterative solvers: a guaranteed bound, in voxels, on the distance of every
-    /// vertex to the exact minimizer, `|grad E|_2 / (2 alpha_min h)` (see
-    /// [`CgParams::tolerance`]); `None` for the direct solver (exact up to rounding) and
-    /// the clamped descent (whose minimizer is another one).
-    pub error_bound: Option<f64>,
-    /// For the iterative solvers: the estimated distance, in voxels, of the farthest vertex
-    /// to the exact minimizer (see [`StoppingRule::Estimate`]).
-    pub error_estimate: Option<f64>,
-    /// Whether the stopping rule was met (always true for the direct solver).
-    pub converged: bool,
-    /// The preconditioner of CG (`"jacobi"`, `"block-jacobi"`, `"multigrid"`).
-    pub preconditioner: Option<&'static str>,
-    /// Products by the operator `H` (matrix-free), for the iterative solvers.
-    pub operator_applications: usize,
-    /// For the clamped descent: vertices held on the boundary of their cube at the end.
-    pub clamped_vertices: Option<usize>,
-    /// Bytes of the solver's data (factor, or connectivity, coarse levels and vectors).
-    pub memory_bytes: usize,
-    /// For the iterative solvers: a model of the bytes one iteration moves between memory
-    /// and the cores (every array read or written once per pass), to compare the time
-    /// per iteration with the memory bandwidth.
-    pub bytes_per_iteration: Option<usize>,
 }
 
 /// What an iterative solver reports after each iteration (for progress bars).
@@ -182,31 +135,4 @@ pub struct Progress {
     pub error_bound: f64,
     /// The current estimate of that distance in voxels (see [`StoppingRule::Estimate`]).
     pub error_estimate: f64,
-}
-
-/// The result of [`regularize`].
-#[derive(Clone, Debug)]
-pub struct Regularization {
-    /// Optimal positions, one per vertex.
-    pub positions: Vec<DVec3>,
-    /// Energy terms at the input positions.
-    pub before: EnergyTerms,
-    /// Energy terms at the optimal positions.
-    pub after: EnergyTerms,
-    /// Solver report.
-    pub info: SolveInfo,
-}
-
-/// Regularizes `surface` with `normals` by an exact direct solve, starting from the
-/// surface's own vertex positions.
-pub fn regularize(
-    surface: &DigitalSurface,
-    normals: &NormalField,
-    params: EnergyParams,
-) -> Result<Regularization, RegularizeError> {
-    let input = surface.positions();
-    let energy = Energy::new(surface, normals, &input, params)?;
-    let mut solver = DirectSolver::new(surface)?;
-    let (positions, info) = solver.solve(&energy)?;
-    Ok(Regularization { before: energy.terms(&input), after: energy.terms(&positions), positions, info })
 }

@@ -39,7 +39,7 @@ use crate::vecops::sym_inverse;
 use crate::RegularizeError;
 
 /// Settings of the multigrid preconditioner.
-#[derive(Copy, Clone, Debug, PartialEq)]
+#[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]
 pub struct MultigridParams {
     /// Stop coarsening at a level of at most this many nodes, and factor it exactly.
     /// Default: `150` (smaller coarsest levels cost less to factor and to solve each

@@ -1,15 +1,19 @@
-//! Choosing a solver: exact factorization, conjugate gradient, or (clamped) descent.
+//! Choosing a solver: exact factorization, conjugate gradient, or the bound-constrained
+//! solver.
 
 use glam::DVec3;
 use voxreg_digisurf::DigitalSurface;
 
+use serde::Serialize;
+
 use crate::{
-    CgParams, CgSolver, DescentParams, DescentSolver, DirectSolver, Energy, Progress, RegularizeError,
+    BoundedParams, BoundedSolver, CgParams, CgSolver, DirectSolver, Energy, Progress, RegularizeError,
     SolveInfo,
 };
 
 /// Which solver [`Solver::new`] builds.
-#[derive(Copy, Clone, Debug, PartialEq, Eq, Default)]
+#[derive(Copy, Clone, Debug, PartialEq, Eq, Default, Serialize)]
+#[serde(rename_all = "snake_case")]
 pub enum SolverChoice {
     /// [`SolverChoice::Direct`] when its Cholesky factor fits
     /// [`SolverParams::direct_budget`], else [`SolverChoice::Cg`].
@@ -19,25 +23,26 @@ pub enum SolverChoice {
     Direct,
     /// Multigrid-preconditioned conjugate gradient ([`CgSolver`]).
     Cg,
-    /// Gradient descent ([`DescentSolver`]), the only one that can clamp.
-    Gd,
+    /// Bound-constrained conjugate gradient ([`BoundedSolver`]), the only one that can
+    /// clamp.
+    Bounded,
 }
 
 impl SolverChoice {
-    /// Parses `auto`, `direct`, `cg` or `gd`.
+    /// Parses `auto`, `direct`, `cg` or `bounded` (also `gd`, its former name).
     pub fn parse(s: &str) -> Option<Self> {
         match s {
             "auto" => Some(SolverChoice::Auto),
             "direct" => Some(SolverChoice::Direct),
             "cg" => Some(SolverChoice::Cg),
-            "gd" => Some(SolverChoice::Gd),
+            "bounded" | "gd" => Some(SolverChoice::Bounded),
             _ => None,
         }
     }
 }
 
 /// Parameters of [`Solver::new`].
-#[derive(Copy, Clone, Debug, PartialEq)]
+#[derive(Copy, Clone, Debug, PartialEq, Serialize)]
 pub struct SolverParams {
     /// The solver. Default: [`SolverChoice::Auto`].
     pub choice: SolverChoice,
@@ -52,8 +57,41 @@ pub struct SolverParams {
     pub direct_budget: usize,
     /// Settings of the conjugate gradient. Default: [`CgParams::default`].
     pub cg: CgParams,
-    /// Settings of the descent. Default: [`DescentParams::default`].
-    pub descent: DescentParams,
+    /// Settings of the bound-constrained solver (its boxes included). Default:
+    /// [`BoundedParams::default`].
+    pub bounded: BoundedParams,
+}
+
+impl SolverParams {
+    /// The iterative solvers' tolerance in voxels: [`CgParams::tolerance`] and
+    /// [`BoundedParams::tolerance`], set together.
+    pub fn with_tolerance(mut self, tolerance: f64) -> Self {
+        self.cg.tolerance = tolerance;
+        self.bounded.tolerance = tolerance;
+        self
+    }
+
+    /// The same settings with every vertex clamped to its box of margin `eps` voxel
+    /// ([`BoundedParams::clamp`]), which needs the bounded solver: `Auto` becomes
+    /// [`SolverChoice::Bounded`].
+    pub fn clamped(mut self, eps: Option<f64>) -> Self {
+        self.bounded.clamp = eps;
+        if eps.is_some() && self.choice == SolverChoice::Auto {
+            self.choice = SolverChoice::Bounded;
+        }
+        self
+    }
+
+    /// Checks the combination: boxes need [`SolverChoice::Bounded`].
+    pub fn validate(&self) -> Result<(), RegularizeError> {
+        if self.bounded.clamp.is_some() && !matches!(self.choice, SolverChoice::Bounded) {
+            return Err(RegularizeError::InvalidParams(format!(
+                "clamping needs the bounded solver, not {:?}",
+                self.choice
+            )));
+        }
+        Ok(())
+    }
 }
 
 impl Default for SolverParams {
@@ -62,7 +100,7 @@ impl Default for SolverParams {
             choice: SolverChoice::Auto,
             direct_budget: 16 << 20,
             cg: CgParams::default(),
-            descent: DescentParams::default(),
+            bounded: BoundedParams::default(),
         }
     }
 }
@@ -75,8 +113,8 @@ pub enum Solver {
     Direct(DirectSolver),
     /// Preconditioned conjugate gradient.
     Cg(CgSolver),
-    /// Gradient descent, possibly clamped.
-    Gd(DescentSolver),
+    /// Bound-constrained conjugate gradient, possibly clamped.
+    Bounded(BoundedSolver),
 }
 
 /// A quick estimate of the Cholesky factor's entries for a surface of `n` vertices
@@ -96,10 +134,11 @@ impl Solver {
     /// [`DirectSolver::factor_nnz`] fits [`SolverParams::direct_budget`]; otherwise it
     /// builds the conjugate gradient.
     pub fn new(surface: &DigitalSurface, params: &SolverParams) -> Result<Self, RegularizeError> {
+        params.validate()?;
         Ok(match params.choice {
             SolverChoice::Direct => Solver::Direct(DirectSolver::new(surface)?),
             SolverChoice::Cg => Solver::Cg(CgSolver::new(surface, params.cg)?),
-            SolverChoice::Gd => Solver::Gd(DescentSolver::new(surface, params.descent)?),
+            SolverChoice::Bounded => Solver::Bounded(BoundedSolver::new(surface, params.bounded)?),
             SolverChoice::Auto => {
                 let budget = params.direct_budget as f64 / 8.0;
                 if estimate_factor_nnz(surface.num_vertices()) <= 2.0 * budget {
@@ -113,12 +152,20 @@ impl Solver {
         })
     }
 
-    /// `"direct"`, `"cg"` or `"gd"`.
+    /// `"direct"`, `"cg"` or `"bounded"`.
     pub fn kind(&self) -> &'static str {
         match self {
             Solver::Direct(_) => "direct",
             Solver::Cg(_) => "cg",
-            Solver::Gd(_) => "gd",
+            Solver::Bounded(_) => "bounded",
+        }
+    }
+
+    /// The box margin when the solver clamps.
+    pub fn clamp(&self) -> Option<f64> {
+        match self {
+            Solver::Bounded(s) => s.params().clamp,
+            _ => None,
         }
     }
 
@@ -135,9 +182,9 @@ impl Solver {
         progress: &mut dyn FnMut(&Progress),
     ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
         match self {
-            Solver::Direct(s) => s.solve(energy),
-            Solver::Cg(s) => s.solve_with(energy, progress),
-            Solver::Gd(s) => s.solve_with(energy, progress),
+            Solver::Direct(s) => s.solve(energy).map(|(x, i)| (x, SolveInfo::Direct(i))),
+            Solver::Cg(s) => s.solve_with(energy, progress).map(|(x, i)| (x, SolveInfo::Cg(i))),
+            Solver::Bounded(s) => s.solve_with(energy, progress).map(|(x, i)| (x, SolveInfo::Bounded(i))),
         }
     }
 }
@@ -164,8 +211,11 @@ mod tests {
         assert_eq!(Solver::new(&small, &tight).unwrap().kind(), "cg");
         let large = ball(30.0);
         assert_eq!(Solver::new(&large, &SolverParams::default()).unwrap().kind(), "cg");
-        let gd = SolverParams { choice: SolverChoice::Gd, ..Default::default() };
-        assert_eq!(Solver::new(&small, &gd).unwrap().kind(), "gd");
+        let bounded = SolverParams { choice: SolverChoice::Bounded, ..Default::default() };
+        assert_eq!(Solver::new(&small, &bounded).unwrap().kind(), "bounded");
+        assert_eq!(SolverParams::default().clamped(Some(0.01)).choice, SolverChoice::Bounded);
+        let direct = SolverParams { choice: SolverChoice::Direct, ..Default::default() }.clamped(Some(0.01));
+        assert!(direct.validate().is_err());
         assert_eq!(SolverChoice::parse("cg"), Some(SolverChoice::Cg));
         assert_eq!(SolverChoice::parse("lu"), None);
     }

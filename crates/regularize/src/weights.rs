@@ -15,7 +15,7 @@ use crate::RegularizeError;
 ///
 /// and an optional [`FairnessMask`] choosing which neighbours enter each barycenter
 /// `b^_i`. Every solver ([`crate::DirectSolver`], [`crate::CgSolver`],
-/// [`crate::DescentSolver`]) and [`crate::Energy`] use them consistently. Attach them with
+/// [`crate::BoundedSolver`]) and [`crate::Energy`] use them consistently. Attach them with
 /// [`crate::Energy::with_weights`].
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Weights {

@@ -1,14 +1,12 @@
-//! Accuracy of the default pipeline ([`run_pipeline`]) against analytic shapes: the
-//! targets of issue 8, measured with the comparison harness's metrics (distances in
-//! voxels, area-weighted face-normal errors in degrees, quad scaled Jacobian).
+//! Accuracy of the front door's presets against analytic shapes, measured with the
+//! comparison harness's metrics (distances in voxels, area-weighted face-normal errors in
+//! degrees, quad scaled Jacobian).
 
 use glam::DVec3;
 use voxreg_baselines::{accuracy, quality, Accuracy, Implicit, Mesh, QualityParams};
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
-use voxreg_normals::{IntegralInvariant, NormalEstimator, NormalField, Trivial};
-use voxreg_regularize::{
-    informative_vertices, refined_normals, run_pipeline, PipelineParams, SolverChoice, SolverParams,
-};
+use voxreg_normals::{IntegralInvariant, NormalEstimator, NormalField, Refined, Trivial};
+use voxreg_regularize::{Params, Regularizer, SolverParams};
 use voxreg_testkit::{angles_deg, digitize, mean_max, Cuboid, Goursat, Shape, Sphere, Torus};
 
 /// The test kit's shapes seen as the baselines' [`Implicit`].
@@ -28,12 +26,11 @@ impl Implicit for AsImplicit<'_> {
 
 /// Digitizes `shape` at step `h`, runs the pipeline from default integral-invariant
 /// normals, and measures the result: accuracy in voxels, and the minimum scaled Jacobian.
-fn measure(shape: &dyn Shape, h: f64, params: &PipelineParams) -> (Accuracy, f64) {
+fn measure(shape: &dyn Shape, h: f64, params: &Params) -> (Accuracy, f64) {
     let surface = DigitalSurface::from_volume(&digitize(shape, h)).unwrap();
-    let normals = IntegralInvariant::default().estimate(&surface).unwrap();
-    let out = run_pipeline(&surface, &normals, None, params, &mut |_| {}).unwrap();
-    assert_eq!(out.solves.len(), params.refine + 1);
-    assert!(out.solves.iter().all(|s| s.converged));
+    let out = Regularizer::new(surface.clone()).run(params).unwrap();
+    assert_eq!(out.report.solves.len(), params.refine + 1);
+    assert!(out.report.converged());
     let mesh = Mesh::from_surface(&surface, &out.positions);
     let mut acc = accuracy(&mesh, &AsImplicit(shape));
     acc.distance_mean /= h;
@@ -44,7 +41,7 @@ fn measure(shape: &dyn Shape, h: f64, params: &PipelineParams) -> (Accuracy, f64
 
 #[test]
 fn sphere_of_radius_20_voxels_meets_the_targets() {
-    let (a, sj) = measure(&Sphere { radius: 10.0 }, 0.5, &PipelineParams::default());
+    let (a, sj) = measure(&Sphere { radius: 10.0 }, 0.5, &Params::default());
     let msg = format!("{a:?}, min scaled Jacobian {sj}");
     eprintln!("sphere: {msg}");
     assert!(a.distance_mean <= 0.03 && a.distance_max <= 0.2, "{msg}");
@@ -55,7 +52,7 @@ fn sphere_of_radius_20_voxels_meets_the_targets() {
 
 #[test]
 fn goursat_at_h_0_25_meets_the_targets() {
-    let (a, sj) = measure(&Goursat, 0.25, &PipelineParams::default());
+    let (a, sj) = measure(&Goursat, 0.25, &Params::default());
     eprintln!("goursat h = 0.25: {a:?}, min scaled Jacobian {sj}");
     assert!(a.distance_mean <= 0.06 && a.normal_mean_deg <= 1.0, "{a:?}");
 }
@@ -68,27 +65,14 @@ fn torus_meets_the_targets() {
     // the surfel centres 0.042 voxel inside); re-centring measured off the plateaus
     // (`informative_vertices`) keeps the size anyway.
     let torus = Torus { major: 6.0, minor: 2.0 };
-    let (a, sj) = measure(&torus, 0.25, &PipelineParams::default());
+    let (a, sj) = measure(&torus, 0.25, &Params::default());
     eprintln!("torus h = 0.25: {a:?}, min scaled Jacobian {sj}");
     assert!(a.bias.abs() <= 0.03 && a.distance_mean <= 0.06, "{a:?}");
     assert!(a.normal_mean_deg <= 1.5, "{a:?}");
     // The papers' pipeline (alpha = 1e-3, no refinement, no re-centring) shrinks it.
-    let (papers, _) = measure(&torus, 0.25, &PipelineParams::papers());
+    let (papers, _) = measure(&torus, 0.25, &Params::papers());
     eprintln!("torus h = 0.25, papers' pipeline: {papers:?}");
     assert!(papers.bias < -0.1 && papers.distance_mean > 2.0 * a.distance_mean, "{papers:?}");
-}
-
-#[test]
-fn plateau_interiors_are_not_informative() {
-    // A digitized cube: the vertices inside its faces are on digital plateaus, those on
-    // its edges and corners are not.
-    let cube = Cuboid { half: DVec3::splat(4.0) };
-    let surface = DigitalSurface::from_volume(&digitize(&cube, 1.0)).unwrap();
-    let informative = informative_vertices(&surface);
-    for (v, p) in surface.positions().iter().enumerate() {
-        let on_edge = p.abs().to_array().iter().filter(|c| (**c - 4.5).abs() < 1e-9).count() >= 2;
-        assert_eq!(informative[v], on_edge, "vertex at {p}");
-    }
 }
 
 #[test]
@@ -100,15 +84,16 @@ fn refinement_keeps_the_edges_of_a_cube_sharp() {
     let surface = DigitalSurface::from_volume(&digitize(&cube, 1.0)).unwrap();
     let normals = Trivial.estimate(&surface).unwrap();
     let truth = normals.as_slice();
-    let worst = |params: &PipelineParams| {
-        let out = run_pipeline(&surface, &normals, None, params, &mut |_| {}).unwrap();
+    let mut regularizer = Regularizer::new(surface.clone());
+    let mut worst = |params: &Params| {
+        let out = regularizer.run_from(params, &normals).unwrap();
         let mesh = Mesh::from_surface(&surface, &out.positions);
         let faces: Vec<DVec3> = (0..mesh.num_faces()).map(|f| mesh.vector_area(f)).collect();
         mean_max(&angles_deg(&faces, truth)).1
     };
-    let params = PipelineParams { refine: 3, ..Default::default() };
+    let params = Params { refine: 3, ..Default::default() };
     assert!(worst(&params) <= 5.0, "{}", worst(&params));
-    let blind = PipelineParams { feature_angle_deg: 180.0, ..params };
+    let blind = Params { feature_angle_deg: 180.0, ..params.clone() };
     assert!(worst(&blind) > 10.0, "{}", worst(&blind));
 }
 
@@ -118,7 +103,9 @@ fn refined_normals_of_an_exact_sphere_are_radial() {
     let surface = DigitalSurface::from_volume(&digitize(&sphere, 1.0)).unwrap();
     let on_sphere: Vec<DVec3> = surface.positions().iter().map(|p| sphere.project(*p)).collect();
     let start = Trivial.estimate(&surface).unwrap();
-    let refined = refined_normals(&surface, &on_sphere, &start, 3.0, 90.0);
+    let refined = Refined { positions: &on_sphere, previous: &start, radius: 3.0, feature_angle_deg: 90.0 }
+        .estimate(&surface)
+        .unwrap();
     let centres: Vec<DVec3> = surface
         .surfels()
         .iter()
@@ -155,7 +142,7 @@ fn two_balls() -> DigitalSurface {
 fn multi_label_surfaces_are_refined_per_interface() {
     let surface = two_balls();
     let normals = IntegralInvariant { radius: Some(3.0) }.estimate(&surface).unwrap();
-    let out = run_pipeline(&surface, &normals, None, &PipelineParams::default(), &mut |_| {}).unwrap();
+    let out = Regularizer::new(surface.clone()).run_from(&Params::default(), &normals).unwrap();
     assert!(out.positions.iter().all(|p| p.is_finite()));
     assert!(out.normals.as_slice().iter().all(|n| (n.length() - 1.0).abs() < 1e-9));
     // Re-centring moved targets by less than a voxel, and the result stays near the input.
@@ -168,10 +155,8 @@ fn multi_label_surfaces_are_refined_per_interface() {
 fn clamping_keeps_every_vertex_in_its_box() {
     let surface = two_balls();
     let normals: NormalField = IntegralInvariant { radius: Some(3.0) }.estimate(&surface).unwrap();
-    let mut solver = SolverParams { choice: SolverChoice::Gd, ..Default::default() };
-    solver.descent.clamp = Some(0.01);
-    let params = PipelineParams { solver, ..Default::default() };
-    let out = run_pipeline(&surface, &normals, None, &params, &mut |_| {}).unwrap();
+    let params = Params { solver: SolverParams::default().clamped(Some(0.01)), ..Default::default() };
+    let out = Regularizer::new(surface.clone()).run_from(&params, &normals).unwrap();
     let input = surface.positions();
     assert_eq!(out.targets, input, "clamping keeps the targets (the boxes' centres) at the input");
     let half = 0.5 * (1.0 - 0.01) + 1e-12;

@@ -121,15 +121,15 @@ fn solver_table() {
         let (reference, _) = CgSolver::new(&s, tight).unwrap().solve(&energy).unwrap();
         let err =
             x.iter().zip(&reference).map(|(a, b): (&DVec3, &DVec3)| (*a - *b).length()).fold(0.0, f64::max);
-        let setup = info.pattern_seconds + info.assemble_seconds + info.factor_seconds;
-        let per_iter = info.solve_seconds / info.iterations.max(1) as f64 * 1e3;
-        let bytes = info.bytes_per_iteration.unwrap_or(0) as f64;
+        let setup = info.seconds.structure + info.seconds.assemble + info.seconds.factor;
+        let per_iter = info.seconds.solve / info.iterations.max(1) as f64 * 1e3;
+        let bytes = info.bytes_per_iteration as f64;
         eprintln!(
             "| {} | {} | {levels} | {} | {median:.3} | {setup:.3} / {:.3} | {per_iter:.1} | {:.0} MB | {:.1} | {:.0} | {:.0} | {err:.1e} |",
             s.num_surfels(),
             s.num_vertices(),
             info.iterations,
-            info.solve_seconds,
+            info.seconds.solve,
             bytes * 1e-6,
             bytes / (dram * 1e9) * 1e3,
             info.memory_bytes as f64 / (1 << 20) as f64,

@@ -2,7 +2,7 @@
 
 use voxreg_digisurf::DigitalSurface;
 use voxreg_normals::NormalField;
-use voxreg_regularize::{regularize, EnergyParams};
+use voxreg_regularize::{Params, Regularizer, SolverChoice};
 use voxreg_testkit::{digitize, surfel_centre, Shape, Sphere};
 use voxreg_upscale::{upscale, UpscaleParams};
 
@@ -13,7 +13,9 @@ fn upscaled_ball_is_closer_to_the_sphere_than_blocks() {
     let s = DigitalSurface::from_volume(&coarse).unwrap();
     let normals =
         NormalField::new((0..s.num_surfels()).map(|i| sphere.normal_near(surfel_centre(&s, i))).collect());
-    let r = regularize(&s, &normals, EnergyParams::default()).unwrap();
+    let mut params = Params::papers();
+    params.solver.choice = SolverChoice::Direct;
+    let r = Regularizer::new(s.clone()).run_from(&params, &normals).unwrap();
     let k = 4;
     let smooth = upscale(&s, &r.positions, &coarse, &UpscaleParams { factor: k }).unwrap();
     let blocky = upscale(&s, &s.positions(), &coarse, &UpscaleParams { factor: k }).unwrap();

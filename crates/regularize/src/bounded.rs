@@ -1,4 +1,5 @@
-//! Gradient descent with the exact gradient, optionally clamped (paper, sec. 3.4).
+//! The bound-constrained solver: preconditioned CG inside per-vertex boxes (MPRGP), the
+//! clamping of the paper's sec. 3.4.
 
 use std::time::Instant;
 
@@ -11,11 +12,12 @@ use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
 use crate::vecops::{dot, norm, tail_estimate};
-use crate::{Energy, Progress, RegularizeError, SolveInfo};
+use crate::info::{BoundedInfo, SolveTimings};
+use crate::{Energy, Progress, RegularizeError};
 
-/// Parameters of [`DescentSolver`].
-#[derive(Copy, Clone, Debug, PartialEq)]
-pub struct DescentParams {
+/// Parameters of [`BoundedSolver`].
+#[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]
+pub struct BoundedParams {
     /// Stop when the estimated remaining movement of the farthest vertex, in voxels, is at
     /// most this: its last correction extrapolated with the recent reduction rate of the
     /// (projected) gradient, times 2 (as [`StoppingRule::Estimate`](crate::StoppingRule)).
@@ -41,15 +43,15 @@ pub struct DescentParams {
     /// of times fewer iterations than the projected descent, with the same guarantees
     /// (feasible iterates, monotone energy). It starts from the unconstrained minimizer
     /// (found by the same iteration without bounds, i.e. preconditioned CG) projected into
-    /// the boxes when that lowers the energy, else from the input; [`SolveInfo::iterations`]
-    /// counts the bounded iterations only, [`SolveInfo::operator_applications`] all.
+    /// the boxes when that lowers the energy, else from the input; [`BoundedInfo::iterations`](crate::BoundedInfo::iterations)
+    /// counts the bounded iterations only, [`BoundedInfo::operator_applications`](crate::BoundedInfo::operator_applications) all.
     /// `false`: plain projected descent. Default: `true`.
     pub conjugate: bool,
 }
 
-impl Default for DescentParams {
+impl Default for BoundedParams {
     fn default() -> Self {
-        DescentParams {
+        BoundedParams {
             tolerance: 1e-3,
             max_iterations: 10_000,
             clamp: None,
@@ -60,26 +62,26 @@ impl Default for DescentParams {
     }
 }
 
-/// Gradient descent on the energy with the exact (matrix-free) gradient and the optimal
-/// step of the quadratic along each direction, `t = (g . d) / (2 d^T H d)`, reusable
-/// across solves on one surface.
+/// Minimizes the energy with every vertex kept in a closed box around its input position
+/// (when [`BoundedParams::clamp`] is set), reusable across solves on one surface.
 ///
-/// Each iteration moves along `d = -M^-1 g` (`M` the preconditioner; `M = I` is the
-/// papers' descent), then, when clamping, projects each coordinate back into its box and
-/// halves the step until the energy does not increase: the energy decreases
-/// monotonically, and coordinates held on their box with the gradient pushing outwards
-/// are frozen for that iteration (projected gradient). Unclamped, it converges to the
-/// same minimizer as [`crate::DirectSolver`] and [`crate::CgSolver`] (more slowly than
-/// the latter); clamped, to the minimizer of the energy over the boxes.
+/// The method is MPRGP (modified proportioning with reduced gradient projections):
+/// preconditioned conjugate gradient on the coordinates strictly inside their boxes,
+/// projected gradient steps (with the exact step `t = (g . d) / (2 d^T H d)` of the
+/// quadratic, halved until the energy does not increase) to add bounds, and proportioning
+/// steps to release them. Iterates stay feasible and the energy decreases monotonically.
+/// With [`BoundedParams::conjugate`] off it is the plain projected descent of the paper.
+/// Without boxes it converges to the same minimizer as [`crate::DirectSolver`] and
+/// [`crate::CgSolver`].
 #[derive(Debug)]
-pub struct DescentSolver {
-    params: DescentParams,
+pub struct BoundedSolver {
+    params: BoundedParams,
     setup: Setup,
 }
 
-impl DescentSolver {
+impl BoundedSolver {
     /// Prepares a descent for energies on `surface`.
-    pub fn new(surface: &DigitalSurface, params: DescentParams) -> Result<Self, RegularizeError> {
+    pub fn new(surface: &DigitalSurface, params: BoundedParams) -> Result<Self, RegularizeError> {
         check_tolerance(params.tolerance)?;
         if let Some(eps) = params.clamp {
             if !(eps > 0.0 && eps < 1.0) {
@@ -88,25 +90,25 @@ impl DescentSolver {
                 )));
             }
         }
-        Ok(DescentSolver { params, setup: Setup::new(surface, params.preconditioner, params.multigrid)? })
+        Ok(BoundedSolver { params, setup: Setup::new(surface, params.preconditioner, params.multigrid)? })
     }
 
     /// The parameters.
-    pub fn params(&self) -> &DescentParams {
+    pub fn params(&self) -> &BoundedParams {
         &self.params
     }
 
     /// Minimizes `energy` from its input positions.
-    pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+    pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
         self.solve_with(energy, &mut |_| {})
     }
 
-    /// [`DescentSolver::solve`], calling `progress` after each iteration.
+    /// [`BoundedSolver::solve`], calling `progress` after each iteration.
     pub fn solve_with(
         &mut self,
         energy: &Energy<'_>,
         progress: &mut dyn FnMut(&Progress),
-    ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+    ) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
         let mut prepared = self.setup.prepare(energy)?;
         let stencil = &self.setup.stencil;
         let coef = &prepared.coef;
@@ -295,24 +297,25 @@ impl DescentSolver {
         let memory = self.setup.memory_bytes(&prepared) + 9 * 24 * n;
         Ok((
             x,
-            SolveInfo {
-                solver: "gd",
+            BoundedInfo {
                 iterations,
-                relative_gradient: if r0 > 0.0 { rp_norm_true / r0 } else { 0.0 },
-                factor_nnz: None,
-                pattern_seconds: self.setup.structure_seconds,
-                symbolic_seconds: 0.0,
-                assemble_seconds: prepared.assemble_seconds,
-                factor_seconds: prepared.factor_seconds,
-                solve_seconds,
-                error_bound: bound,
-                error_estimate: Some(estimate),
-                converged,
-                preconditioner: Some(self.params.preconditioner.name()),
                 operator_applications: applications,
-                clamped_vertices: clamped,
+                relative_gradient: if r0 > 0.0 { rp_norm_true / r0 } else { 0.0 },
+                error_bound: bound,
+                error_estimate: estimate,
+                converged,
+                clamp: self.params.clamp,
+                clamped_vertices: clamped.unwrap_or(0),
+                preconditioner: self.params.preconditioner,
                 memory_bytes: memory,
-                bytes_per_iteration: Some(traffic),
+                bytes_per_iteration: traffic,
+                seconds: SolveTimings {
+                    structure: self.setup.structure_seconds,
+                    symbolic: 0.0,
+                    assemble: prepared.assemble_seconds,
+                    factor: prepared.factor_seconds,
+                    solve: solve_seconds,
+                },
             },
         ))
     }

@@ -1,23 +1,47 @@
 //! Self-intersections of quad meshes: a uniform grid of face boxes, then exact-style
 //! triangle-triangle tests (each quad split into two triangles).
 
+use std::collections::HashMap;
+
 use glam::DVec3;
 use rayon::prelude::*;
+
+/// A face whose box spans more grid cells than this is tested against every face instead
+/// of being entered in the grid, so one huge face cannot blow the grid up.
+const MAX_CELLS_PER_FACE: u64 = 64;
+
+/// Each vertex's smallest-index twin at the same position (bit for bit), so that
+/// duplicated vertices (a split pinch, a seam) count as shared.
+fn welded(positions: &[DVec3]) -> Vec<u32> {
+    let mut first: HashMap<[u64; 3], u32> = HashMap::with_capacity(positions.len());
+    positions
+        .iter()
+        .enumerate()
+        .map(|(i, p)| *first.entry(p.to_array().map(f64::to_bits)).or_insert(i as u32))
+        .collect()
+}
 
 /// The pairs `(a, b)`, `a < b`, of quads of the mesh that intersect, sorted.
 ///
 /// Each quad `[v0, v1, v2, v3]` is embedded as the triangles `(v0, v1, v2)` and
 /// `(v0, v2, v3)` (so inside the convex hull of its vertices, rule (i) of the paper's
 /// Proposition 2). Quads that share a vertex (adjacent across an edge or at a corner)
-/// are never reported, whatever their geometry; two quads touching at a point or along
-/// a segment without sharing a vertex are. Quads with an index out of range are ignored.
+/// are never reported, whatever their geometry; vertices at the same position (bit for
+/// bit) count as one, so duplicated pinch vertices are shared too. Two quads touching at
+/// a point or along a segment without sharing a vertex are reported. Quads with an index
+/// out of range or a non-finite position are ignored.
 ///
 /// Cost: a grid of cells about the mean edge length; each quad is tested against the
 /// quads whose boxes overlap its own, in parallel. Linear in the number of quads on
-/// meshes with bounded local density (digital surfaces and their regularizations).
+/// meshes with bounded local density (digital surfaces and their regularizations); a
+/// quad whose box spans more than a few dozen cells is tested against every quad
+/// instead, so memory stays linear whatever the geometry.
 pub fn self_intersections(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
     let n = positions.len();
-    let valid = |q: &[u32; 4]| q.iter().all(|&v| (v as usize) < n);
+    let valid = |q: &[u32; 4]| q.iter().all(|&v| (v as usize) < n && positions[v as usize].is_finite());
+    let weld = welded(positions);
+    let canonical: Vec<[u32; 4]> =
+        quads.iter().map(|q| if valid(q) { q.map(|v| weld[v as usize]) } else { *q }).collect();
     let boxes: Vec<Option<(DVec3, DVec3)>> = quads
         .par_iter()
         .map(|q| {
@@ -42,8 +66,17 @@ pub fn self_intersections(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize
     let cell = (2.0 * size / count as f64).max(extent / (1 << 20) as f64).max(f64::MIN_POSITIVE);
     let cell_of = |p: DVec3| ((p - lo) / cell).floor().as_uvec3().min(glam::UVec3::splat((1 << 21) - 1));
     let key = |c: glam::UVec3| (u64::from(c.z) << 42) | (u64::from(c.y) << 21) | u64::from(c.x);
-    let ranges: Vec<Option<(glam::UVec3, glam::UVec3)>> =
+    let cells = |(a, b): (glam::UVec3, glam::UVec3)| {
+        let d = (b - a).as_u64vec3() + glam::U64Vec3::ONE;
+        d.x.saturating_mul(d.y).saturating_mul(d.z)
+    };
+    let all_ranges: Vec<Option<(glam::UVec3, glam::UVec3)>> =
         boxes.par_iter().map(|b| b.map(|(a, b)| (cell_of(a), cell_of(b)))).collect();
+    // Faces too large for the grid: tested against every face below.
+    let big: Vec<usize> =
+        (0..quads.len()).filter(|&f| all_ranges[f].is_some_and(|r| cells(r) > MAX_CELLS_PER_FACE)).collect();
+    let ranges: Vec<Option<(glam::UVec3, glam::UVec3)>> =
+        all_ranges.iter().map(|r| r.filter(|r| cells(*r) <= MAX_CELLS_PER_FACE)).collect();
     let mut entries: Vec<(u64, u32)> = ranges
         .par_iter()
         .enumerate()
@@ -92,7 +125,7 @@ pub fn self_intersections(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize
                                 continue;
                             }
                             let qb = quads[b];
-                            if qa.iter().any(|v| qb.contains(v)) {
+                            if canonical[a].iter().any(|v| canonical[b].contains(v)) {
                                 continue;
                             }
                             if quads_intersect(positions, qa, qb) {
@@ -105,7 +138,29 @@ pub fn self_intersections(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize
             out
         })
         .collect();
+    // The large faces, against every other face with an overlapping box.
+    let mut extra: Vec<(usize, usize)> = big
+        .par_iter()
+        .flat_map_iter(|&a| {
+            let (lo_a, hi_a) = boxes[a].expect("a big face has a box");
+            let (canonical, boxes, ranges) = (&canonical, &boxes, &ranges);
+            (0..quads.len()).filter_map(move |b| {
+                let (lo_b, hi_b) = boxes[b]?;
+                let other_big = ranges[b].is_none();
+                // A pair of two big faces is tested once, from the smaller index.
+                if b == a || (other_big && b < a) || lo_a.cmpgt(hi_b).any() || lo_b.cmpgt(hi_a).any() {
+                    return None;
+                }
+                if canonical[a].iter().any(|v| canonical[b].contains(v)) {
+                    return None;
+                }
+                quads_intersect(positions, quads[a], quads[b]).then_some((a.min(b), a.max(b)))
+            })
+        })
+        .collect();
+    pairs.append(&mut extra);
     pairs.sort_unstable();
+    pairs.dedup();
     pairs
 }
 

@@ -1,0 +1,422 @@
+//! The command line: clap definitions, and their translation into the library's
+//! parameters.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::{Args, Parser, Subcommand};
+use voxreg_digisurf::RegionMap;
+use voxreg_io::{DataType, Endian};
+use voxreg_regularize::{Estimator, Params, SolverChoice};
+
+/// Regularize voxel data (digital surfaces, multi-label interfaces) into smooth,
+/// faithful quad meshes that keep one quad per voxel face.
+#[derive(Parser, Debug)]
+#[command(name = "voxreg", version, about, long_about = None)]
+pub(crate) struct Cli {
+    #[command(subcommand)]
+    pub(crate) command: Command,
+}
+
+#[derive(Subcommand, Debug)]
+pub(crate) enum Command {
+    /// Extract the digital surface of INPUT, regularize it and write it as a mesh.
+    Regularize(RegularizeArgs),
+    /// Describe INPUT: dimensions, labels, and its digital surface's cells.
+    Info(InputArgs),
+    /// Regularize INPUT's surface, then voxelize it at K times the resolution (papers,
+    /// Fig. 13): a finer voxel model whose staircase follows the smooth surface.
+    Upscale(UpscaleArgs),
+    /// Count the self-intersections of MESH (.obj or .ply, quads split into two triangles;
+    /// faces sharing a vertex do not count); exits with an error if there are any.
+    Check(CheckArgs),
+}
+
+#[derive(Args, Debug)]
+#[command(mut_arg("output", |a| a.help(
+    "Output volume: .vox (MagicaVoxel; split into models of at most 256 voxels per axis, \
+     placed by a scene graph) or .vol (DGtal)"
+)))]
+pub(crate) struct UpscaleArgs {
+    #[command(flatten)]
+    pub(crate) regularize: RegularizeArgs,
+    /// Refinement factor per axis (2, 4 or 8 are typical; 1 to 16).
+    #[arg(short = 'k', long, value_name = "K", default_value_t = 2)]
+    pub(crate) factor: usize,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct CheckArgs {
+    /// The mesh: .obj or .ply (as written by voxreg regularize).
+    pub(crate) mesh: PathBuf,
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct InputArgs {
+    /// Input volume: .vol, .longvol, .pgm3d (DGtal), .vox (MagicaVoxel), .nii, .nii.gz
+    /// (NIfTI-1), .vti (VTK image data), .npy (NumPy, shape (X, Y, Z)), or raw data with
+    /// --dims.
+    pub(crate) input: PathBuf,
+    /// Make a binary volume: voxels whose value (label or grey level) is > T are inside.
+    /// Needed for grey-level data (fractional, negative or scaled values).
+    #[arg(long, value_name = "T", allow_negative_numbers = true, conflicts_with = "labels")]
+    pub(crate) threshold: Option<f64>,
+    /// Keep only these labels; every other label becomes the background.
+    #[arg(long, value_name = "L,L,...", value_delimiter = ',', conflicts_with = "no_background")]
+    pub(crate) labels: Option<Vec<u32>>,
+    /// The background label: empty space, which also fills the outside of the volume
+    /// (default 0).
+    #[arg(long, value_name = "L", conflicts_with = "no_background")]
+    pub(crate) background: Option<u32>,
+    /// No background: every label is a material, and interfaces that reach the border
+    /// of the volume end there as open surfaces.
+    #[arg(long)]
+    pub(crate) no_background: bool,
+    /// Read INPUT as raw data (no header, x fastest) of these dimensions.
+    #[arg(long, value_name = "X,Y,Z", value_parser = parse_dims)]
+    pub(crate) dims: Option<[u64; 3]>,
+    /// Raw data: the type of a value, u8 (default), u16, u32, f32 (or i8, i16, i32, u64,
+    /// i64, f64).
+    #[arg(long, value_name = "TYPE", requires = "dims")]
+    pub(crate) dtype: Option<DataType>,
+    /// Raw data: the byte order, little (default) or big.
+    #[arg(long, value_name = "ORDER", requires = "dims")]
+    pub(crate) endian: Option<Endian>,
+    /// The size of a voxel, for raw data, or overriding the file's.
+    #[arg(long, value_name = "SX,SY,SZ", value_parser = parse_spacing)]
+    pub(crate) spacing: Option<glam::DVec3>,
+    /// How labels form regions: "label" (each label its own region), "solid" (all
+    /// non-background labels one region), or groups such as "1,2,3;7" [default: the
+    /// preset's: solid for voxel art, label otherwise].
+    #[arg(long, value_name = "SPEC")]
+    pub(crate) regions: Option<String>,
+}
+
+impl InputArgs {
+    /// The region map of `--regions`, or `None` for the preset's.
+    pub(crate) fn region_map(&self) -> Result<Option<RegionMap>> {
+        Ok(match self.regions.as_deref() {
+            None => None,
+            Some("label") => Some(RegionMap::per_label()),
+            Some("solid") => Some(RegionMap::single_solid()),
+            Some(spec) => Some(RegionMap::parse(spec).with_context(|| format!("--regions '{spec}'"))?),
+        })
+    }
+}
+
+/// The presets of `--preset`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum Preset {
+    /// The fidelity pipeline: ii normals, alpha 1e-2, 3 refinement rounds, re-centring.
+    Default,
+    /// The papers' single solve (alpha 1e-3, no refinement).
+    Papers,
+    /// One solve clamped to the voxels' boxes (never self-intersecting), all colours one
+    /// solid.
+    VoxelArt,
+}
+
+impl Preset {
+    pub(crate) fn params(self) -> Params {
+        match self {
+            Preset::Default => Params::default(),
+            Preset::Papers => Params::papers(),
+            Preset::VoxelArt => Params::voxel_art(),
+        }
+    }
+}
+
+#[derive(Args, Debug)]
+pub(crate) struct RegularizeArgs {
+    #[command(flatten)]
+    pub(crate) input: InputArgs,
+    /// Output mesh: .obj (quads, one group per interface, with an .mtl for coloured
+    /// inputs), .ply (binary quads, face labels and colours), .glb or .gltf (glTF 2.0,
+    /// triangulated, one material per colour).
+    /// With --split interfaces or regions, a directory (created if missing).
+    #[arg(short, long, value_name = "OUTPUT")]
+    pub(crate) output: PathBuf,
+    /// One file (none), one file per interface between two regions, named
+    /// interface_A_B.EXT after their smallest labels (interfaces), or one closed,
+    /// outward-oriented surface per region, region_A.EXT (regions; open along the volume
+    /// border with --no-background). Vertices shared by several files have identical
+    /// coordinates in each.
+    #[arg(long, value_enum, default_value_t = Split::None)]
+    pub(crate) split: Split,
+    /// The format of the files --split writes.
+    #[arg(long, value_enum, value_name = "EXT", default_value_t = SplitFormat::Ply)]
+    pub(crate) split_format: SplitFormat,
+    /// With --split: duplicate pinched edges and vertices (two voxels of a region touching
+    /// only along an edge or at a corner) so each file is a 2-manifold mesh.
+    #[arg(long)]
+    pub(crate) manifold: bool,
+    /// The parameters every other option starts from [default: voxel-art for .vox input,
+    /// default otherwise].
+    #[arg(long, value_enum)]
+    pub(crate) preset: Option<Preset>,
+    /// Attachment weight (must be > 0; the papers use 1e-3, which lets thin curved shapes
+    /// shrink) [default: the preset's, 1e-2].
+    #[arg(long, value_parser = positive)]
+    pub(crate) alpha: Option<f64>,
+    /// Alignment weight [default: 1].
+    #[arg(long, value_parser = non_negative)]
+    pub(crate) beta: Option<f64>,
+    /// Fairness weight [default: 0.1].
+    #[arg(long, value_parser = non_negative)]
+    pub(crate) gamma: Option<f64>,
+    /// Normal estimator driving the alignment term [default: ii].
+    #[arg(long, value_enum)]
+    pub(crate) normals: Option<NormalsKind>,
+    /// Radius of the ii, convolved and at estimators, in physical units [default: the
+    /// multigrid rule 3 h^(1/3), h the largest voxel spacing: 3 at unit spacing].
+    #[arg(long, value_name = "R", value_parser = positive_named("--radius"))]
+    pub(crate) radius: Option<f64>,
+    /// With --normals at: also write the Ambrosio-Tortorelli feature field v (low on sharp
+    /// features, about 1 elsewhere) on the output mesh, as a binary PLY with a per-vertex
+    /// float property `feature` and a colour ramp (dark red 0, amber 0.5, light grey 1).
+    #[arg(long, value_name = "FILE.ply")]
+    pub(crate) features: Option<PathBuf>,
+    /// With --normals at: most alternations of the sharpening stage after the last epsilon
+    /// (0 turns it off: plain Ambrosio-Tortorelli, about a quarter faster). It keeps the
+    /// edges of boxes sharp down to the surfels next to them [default: 10].
+    #[arg(long, value_name = "N")]
+    pub(crate) sharpen: Option<usize>,
+    /// With --normals at: the sharpening stage's threshold on the feature field v; surfels
+    /// with a corner below it trust their input normal less. Higher keeps box edges
+    /// sharper, lower smooths small, very curved parts better [default: 0.4].
+    #[arg(long, value_name = "TAU", value_parser = positive_named("--sharpen-threshold"))]
+    pub(crate) sharpen_threshold: Option<f64>,
+    /// Solver: auto (exact factorization for small surfaces, else cg), direct (sparse
+    /// Cholesky), cg (multigrid conjugate gradient) or bounded (conjugate gradient inside
+    /// per-vertex boxes; `gd` is its former name) [default: the preset's].
+    #[arg(long, value_enum)]
+    pub(crate) solver: Option<SolverKind>,
+    /// Keep every vertex in the cube of edge (1 - EPS) voxel around its input position,
+    /// which rules out self-intersections (paper, Proposition 2); EPS in voxels, 0.01 when
+    /// omitted. Implies --solver bounded. On in the voxel-art preset (the default for .vox
+    /// inputs) unless --no-clamp or --solver direct|cg.
+    #[arg(long, value_name = "EPS", num_args = 0..=1, default_missing_value = "0.01")]
+    pub(crate) clamp: Option<f64>,
+    /// Do not clamp, even for .vox inputs (faster; the result may self-intersect where
+    /// thin parts collapse: check it with `voxreg check`).
+    #[arg(long, conflicts_with = "clamp")]
+    pub(crate) no_clamp: bool,
+    /// Iterative solvers: stop when every vertex is estimated within this many voxels of
+    /// the exact minimizer [default: 1e-3].
+    #[arg(long, value_name = "VOXELS", value_parser = positive_named("--tolerance"))]
+    pub(crate) tolerance: Option<f64>,
+    /// Normal refinement rounds: re-estimate the normals from the regularized quads
+    /// (keeping sharp edges) and solve again, K times [default: the preset's: 3, or 0 for
+    /// voxel art, whose blocky art is not a sampled smooth shape].
+    #[arg(long, value_name = "K")]
+    pub(crate) refine: Option<usize>,
+    /// Do not re-centre the attachment targets between refinement rounds (the papers'
+    /// behaviour: thin curved shapes shrink).
+    #[arg(long)]
+    pub(crate) no_preserve_size: bool,
+    /// Texture-aware fairness (paper, sec. 4.5): barycenters leave out the neighbours
+    /// across a colour (label) boundary, so quad edges follow colour boundaries.
+    #[arg(long)]
+    pub(crate) texture_aware: bool,
+    /// Write a machine-readable JSON report of the run (timings, counts, energies, solver).
+    #[arg(long, value_name = "FILE.json")]
+    pub(crate) report: Option<PathBuf>,
+    /// Print nothing but errors.
+    #[arg(short, long)]
+    pub(crate) quiet: bool,
+}
+
+impl RegularizeArgs {
+    /// The library's parameters: the preset (`--preset`, else the one the input calls
+    /// for), with every option given on the command line applied over it.
+    pub(crate) fn params(&self, voxel_art: bool) -> Result<Params> {
+        let preset = self.preset.unwrap_or(if voxel_art { Preset::VoxelArt } else { Preset::Default });
+        let mut p = preset.params();
+        if let Some(map) = self.input.region_map()? {
+            p.regions = map;
+        }
+        if let Some(a) = self.alpha {
+            p.energy.alpha = a;
+        }
+        if let Some(b) = self.beta {
+            p.energy.beta = b;
+        }
+        if let Some(g) = self.gamma {
+            p.energy.gamma = g;
+        }
+        if let Some(n) = self.normals {
+            p.normals.estimator = n.estimator();
+        }
+        p.normals.radius = self.radius.or(p.normals.radius);
+        if let Some(k) = self.sharpen {
+            p.normals.at.sharpen_iterations = k;
+        }
+        if let Some(t) = self.sharpen_threshold {
+            p.normals.at.sharpen_threshold = t;
+        }
+        if let Some(k) = self.refine {
+            p.refine = k;
+        }
+        if self.no_preserve_size {
+            p.preserve_size = false;
+        }
+        p.texture_aware |= self.texture_aware;
+        if let Some(t) = self.tolerance {
+            p.solver = p.solver.with_tolerance(t);
+        }
+        // Solver and boxes: an explicit --clamp needs the bounded solver; --solver direct
+        // or cg, and --no-clamp, drop the preset's boxes.
+        let mut clamp = p.solver.bounded.clamp;
+        if self.no_clamp || matches!(self.solver, Some(SolverKind::Direct | SolverKind::Cg)) {
+            clamp = None;
+        }
+        if let Some(eps) = self.clamp {
+            if matches!(self.solver, Some(SolverKind::Direct | SolverKind::Cg)) {
+                anyhow::bail!("--clamp needs the bounded solver (--solver bounded or auto)");
+            }
+            clamp = Some(eps);
+        }
+        p.solver.choice = match self.solver {
+            Some(s) => s.choice(),
+            None if clamp.is_some() => SolverChoice::Bounded,
+            None if p.solver.choice == SolverChoice::Bounded && self.no_clamp => SolverChoice::Auto,
+            None => p.solver.choice,
+        };
+        p.solver = p.solver.clamped(clamp);
+        if let Some(eps) = clamp {
+            if !(eps > 0.0 && eps < 1.0) {
+                anyhow::bail!("--clamp: EPS must be in (0, 1) voxel, got {eps}");
+            }
+        }
+        Ok(p)
+    }
+}
+
+/// The solvers `--solver` can pick.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum SolverKind {
+    /// Exact factorization when its factor is small (a few thousand vertices), else cg.
+    Auto,
+    /// Sparse Cholesky: exact to rounding; memory grows fast with the surface.
+    Direct,
+    /// Multigrid-preconditioned conjugate gradient: fast, memory linear in the surface.
+    Cg,
+    /// Conjugate gradient inside per-vertex boxes: the only one that can --clamp.
+    #[value(alias = "gd")]
+    Bounded,
+}
+
+impl SolverKind {
+    fn choice(self) -> SolverChoice {
+        match self {
+            SolverKind::Auto => SolverChoice::Auto,
+            SolverKind::Direct => SolverChoice::Direct,
+            SolverKind::Cg => SolverChoice::Cg,
+            SolverKind::Bounded => SolverChoice::Bounded,
+        }
+    }
+}
+
+/// How `--split` divides the output.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum Split {
+    /// One mesh file.
+    None,
+    /// One file per interface (pair of regions).
+    Interfaces,
+    /// One outward-oriented surface per region (the background excepted).
+    Regions,
+}
+
+/// The file formats of `--split-format`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum SplitFormat {
+    /// Binary PLY with face labels.
+    Ply,
+    /// Wavefront OBJ with one group per interface.
+    Obj,
+    /// Binary glTF.
+    Glb,
+    /// glTF JSON with an embedded buffer.
+    Gltf,
+}
+
+impl SplitFormat {
+    pub(crate) fn extension(self) -> &'static str {
+        match self {
+            SplitFormat::Ply => "ply",
+            SplitFormat::Obj => "obj",
+            SplitFormat::Glb => "glb",
+            SplitFormat::Gltf => "gltf",
+        }
+    }
+}
+
+/// The normal estimators `--normals` can pick.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum NormalsKind {
+    /// Each face's own axis (no smoothing).
+    Trivial,
+    /// Trivial normals averaged over the surface within the radius.
+    Convolved,
+    /// Integral invariant: covariance of a ball intersected with the solid.
+    Ii,
+    /// Ambrosio-Tortorelli regularization of the ii normals: smooth, but keeps sharp features.
+    At,
+}
+
+impl NormalsKind {
+    fn estimator(self) -> Estimator {
+        match self {
+            NormalsKind::Trivial => Estimator::Trivial,
+            NormalsKind::Convolved => Estimator::Convolved,
+            NormalsKind::Ii => Estimator::Ii,
+            NormalsKind::At => Estimator::At,
+        }
+    }
+}
+
+/// Parses three comma-separated values.
+fn parse_three<T: std::str::FromStr>(s: &str, what: &str) -> std::result::Result<[T; 3], String> {
+    let parts: Vec<T> = s
+        .split(',')
+        .map(|p| p.trim().parse::<T>())
+        .collect::<std::result::Result<_, _>>()
+        .map_err(|_| format!("'{s}' is not three {what} separated by commas"))?;
+    parts.try_into().map_err(|_| format!("'{s}' is not three {what} separated by commas"))
+}
+
+fn parse_dims(s: &str) -> std::result::Result<[u64; 3], String> {
+    parse_three(s, "dimensions")
+}
+
+fn parse_spacing(s: &str) -> std::result::Result<glam::DVec3, String> {
+    let [x, y, z] = parse_three::<f64>(s, "voxel sizes")?;
+    let spacing = glam::DVec3::new(x, y, z);
+    if !(spacing.is_finite() && spacing.min_element() > 0.0) {
+        return Err(format!("'{s}': voxel sizes must be finite and positive"));
+    }
+    Ok(spacing)
+}
+
+fn positive(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(format!("'{s}' is not a finite positive number")),
+    }
+}
+
+fn non_negative(s: &str) -> std::result::Result<f64, String> {
+    match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
+        _ => Err(format!("'{s}' is not a finite non-negative number")),
+    }
+}
+
+/// A parser of finite positive numbers whose message names the option.
+fn positive_named(option: &'static str) -> impl Fn(&str) -> std::result::Result<f64, String> + Clone {
+    move |s: &str| match s.parse::<f64>() {
+        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
+        _ => Err(format!("{option} must be finite and positive, got '{s}'")),
+    }
+}

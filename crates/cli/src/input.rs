@@ -1,0 +1,122 @@
+//! Reading the input volume as the options say, and `voxreg info`.
+
+use std::fmt::Write as _;
+
+use anyhow::{bail, Context, Result};
+use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
+use voxreg_io::{is_voxel_art, read_raw, read_voxels, DataType, Palette, RawSpec, Voxels};
+
+use crate::args::{InputArgs, Preset};
+use crate::print_stdout;
+
+/// Reads INPUT (raw with `--dims`, else by extension), applies `--spacing`, then
+/// `--threshold` (or checks that grey levels are labels), `--labels` and the background.
+pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palette>)> {
+    let path = &args.input;
+    let is_raw = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("raw"));
+    let (voxels, palette) = match args.dims {
+        Some(dims) => {
+            let spec = RawSpec {
+                dims,
+                dtype: args.dtype.unwrap_or(DataType::U8),
+                endian: args.endian.unwrap_or_default(),
+                spacing: args.spacing.unwrap_or(glam::DVec3::ONE),
+            };
+            (read_raw(path, &spec)?, None)
+        }
+        None if is_raw => bail!("{}: raw data have no header: give --dims X,Y,Z and --dtype", path.display()),
+        None => {
+            let loaded = read_voxels(path)?;
+            (loaded.voxels, loaded.palette)
+        }
+    };
+    let voxels = match args.spacing {
+        Some(s) => voxels.with_spacing(s).with_context(|| format!("{}: --spacing", path.display()))?,
+        None => voxels,
+    };
+    let mut volume = match (args.threshold, voxels) {
+        (Some(t), _) if t.is_nan() => bail!("--threshold: NaN is not a threshold"),
+        (Some(t), voxels) => voxels.threshold(t),
+        (None, Voxels::Labels(volume)) => volume,
+        (None, Voxels::Grey(grey)) => match grey.to_labels() {
+            Ok(volume) => volume,
+            Err(e) => {
+                let (lo, hi) = grey.range().unwrap_or_default();
+                bail!(
+                    "{}: grey-level data needs --threshold T (values range from {lo} to {hi}; {e})",
+                    path.display()
+                )
+            }
+        },
+    };
+    if let Some(keep) = &args.labels {
+        let background = args.background.or(volume.background()).unwrap_or(0);
+        volume.labels_mut().mapv_inplace(|l| if keep.contains(&l) { l } else { background });
+    }
+    if args.no_background {
+        volume = volume.with_background(None);
+    } else if let Some(b) = args.background {
+        volume = volume.with_background(Some(b));
+    }
+    Ok((volume, palette))
+}
+
+/// Whether INPUT is voxel art (the voxel-art preset's input).
+pub(crate) fn voxel_art(args: &InputArgs) -> bool {
+    args.dims.is_none() && is_voxel_art(&args.input)
+}
+
+/// The digital surface of `volume`, or an error naming the file.
+pub(crate) fn surface_of(args: &InputArgs, volume: &LabelVolume, map: &RegionMap) -> Result<DigitalSurface> {
+    DigitalSurface::new(volume, map).with_context(|| format!("{}: no surface to regularize", args.input.display()))
+}
+
+/// `voxreg info`: the volume's dimensions and labels, and its digital surface's cells.
+pub(crate) fn info(args: &InputArgs) -> Result<()> {
+    let mut out = String::new();
+    let (volume, _) = read_input(args)?;
+    let preset = if voxel_art(args) { Preset::VoxelArt } else { Preset::Default };
+    let map = args.region_map()?.unwrap_or_else(|| preset.params().regions);
+    let [x, y, z] = volume.dims();
+    let s = volume.spacing();
+    writeln!(out, "file: {}", args.input.display()).ok();
+    writeln!(out, "dimensions: {x} x {y} x {z} ({} voxels)", volume.len()).ok();
+    writeln!(out, "spacing: {} {} {}", s.x, s.y, s.z).ok();
+    match volume.background() {
+        Some(b) => writeln!(out, "background: {b}").ok(),
+        None => writeln!(out, "background: none").ok(),
+    };
+    writeln!(out, "labels:").ok();
+    for (label, count) in volume.label_counts() {
+        writeln!(out, "  {label}: {count} voxels").ok();
+    }
+    let surface = surface_of(args, &volume, &map)?;
+    let c = surface.counts();
+    writeln!(out, "regions: {}", surface.regions().len()).ok();
+    writeln!(out, "surfels: {}", c.surfels).ok();
+    writeln!(out, "vertices: {}", c.vertices).ok();
+    writeln!(out, "edges: {}", c.edges).ok();
+    writeln!(out, "euler characteristic: {}", surface.euler_characteristic()).ok();
+    writeln!(
+        out,
+        "components: {} ({} closed)",
+        c.components,
+        surface.components_closed().iter().filter(|&&b| b).count()
+    )
+    .ok();
+    writeln!(out, "interfaces: {}", c.interfaces).ok();
+    for iface in surface.interfaces() {
+        let name = |r| {
+            let labels = surface.regions().labels(r);
+            labels.iter().map(u32::to_string).collect::<Vec<_>>().join("+")
+        };
+        writeln!(out, "  {} | {}: {} surfels", name(iface.regions[0]), name(iface.regions[1]), iface.surfels.len())
+            .ok();
+    }
+    writeln!(out, "boundary vertices: {}", c.boundary_vertices).ok();
+    writeln!(out, "boundary edges: {}", c.boundary_edges).ok();
+    writeln!(out, "junction edges: {}", c.junction_edges).ok();
+    writeln!(out, "pinched edges: {}", c.pinched_edges).ok();
+    writeln!(out, "pinched vertices: {}", c.pinched_vertices).ok();
+    print_stdout(&out)
+}

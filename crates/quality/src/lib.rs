@@ -1,0 +1,229 @@
+//! Mesh quality checks for quad meshes, shared by `voxreg check`, the tests and xtask.
+//!
+//! A quad `[v0, v1, v2, v3]` is embedded as the triangles `(v0, v1, v2)` and
+//! `(v0, v2, v3)`, as voxreg's writers triangulate it. Three defects are counted
+//! ([`check`], [`MeshReport`]):
+//!
+//! - [`self_intersections`]: pairs of quads that share no vertex and intersect (the
+//!   papers' Proposition 2 rules them out for clamped results);
+//! - [`folded_quads`]: quads bent over their diagonal, their two triangles' normals more
+//!   than 90 degrees apart;
+//! - [`folded_pairs`]: edge-adjacent quads folded onto each other, their normals more
+//!   than 120 degrees apart (across edges that exactly two quads share; at junction and
+//!   pinched edges the pairing is ambiguous and left out).
+//!
+//! # Example
+//!
+//! ```
+//! use glam::DVec3;
+//! use voxreg_quality::check;
+//!
+//! // Two unit squares sharing an edge, the second folded back onto the first.
+//! let p = [[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.], [0.1, 0.1, 0.01], [0.1, 0.9, 0.01]];
+//! let positions: Vec<DVec3> = p.iter().map(|&a| DVec3::from_array(a)).collect();
+//! let quads = [[0, 1, 2, 3], [1, 4, 5, 2]];
+//! let report = check(&positions, &quads);
+//! assert_eq!(report.folded_pairs, 1);
+//! assert_eq!(report.folded_quads, 0);
+//! assert!(!report.is_clean());
+//! ```
+//!
+//! # Features
+//!
+//! None.
+
+mod intersections;
+
+use std::collections::HashMap;
+
+use glam::DVec3;
+use rayon::prelude::*;
+
+pub use intersections::{self_intersections, triangles_intersect};
+
+/// What [`check`] counts.
+#[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
+pub struct MeshReport {
+    /// Quads.
+    pub faces: usize,
+    /// Pairs of quads without a shared vertex that intersect.
+    pub intersecting_pairs: usize,
+    /// Quads whose two triangles are more than 90 degrees apart.
+    pub folded_quads: usize,
+    /// Pairs of edge-adjacent quads more than 120 degrees apart.
+    pub folded_pairs: usize,
+    /// The first intersecting pair, for messages.
+    pub first_intersection: Option<(usize, usize)>,
+}
+
+impl MeshReport {
+    /// No intersection and no fold.
+    pub fn is_clean(&self) -> bool {
+        self.intersecting_pairs == 0 && self.folded_quads == 0 && self.folded_pairs == 0
+    }
+}
+
+/// Every check of this crate on one mesh.
+pub fn check(positions: &[DVec3], quads: &[[u32; 4]]) -> MeshReport {
+    let pairs = self_intersections(positions, quads);
+    MeshReport {
+        faces: quads.len(),
+        intersecting_pairs: pairs.len(),
+        folded_quads: folded_quads(positions, quads).len(),
+        folded_pairs: folded_pairs(positions, quads).len(),
+        first_intersection: pairs.first().copied(),
+    }
+}
+
+/// The normals (unnormalized) of a quad's two triangles `(v0, v1, v2)` and `(v0, v2, v3)`.
+fn triangle_normals(p: [DVec3; 4]) -> [DVec3; 2] {
+    [(p[1] - p[0]).cross(p[2] - p[0]), (p[2] - p[0]).cross(p[3] - p[0])]
+}
+
+fn corners(positions: &[DVec3], q: &[u32; 4]) -> Option<[DVec3; 4]> {
+    let n = positions.len();
+    q.iter().all(|&v| (v as usize) < n).then(|| q.map(|v| positions[v as usize]))
+}
+
+/// The quads bent over their diagonal `v0 v2`: the normals of their two triangles more
+/// than 90 degrees apart (a negative dot product). Degenerate triangles do not count.
+pub fn folded_quads(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<usize> {
+    quads
+        .par_iter()
+        .enumerate()
+        .filter_map(|(f, q)| {
+            let [a, b] = triangle_normals(corners(positions, q)?);
+            (a.dot(b) < 0.0).then_some(f)
+        })
+        .collect()
+}
+
+/// The vector area of a quad (half the cross product of its diagonals).
+fn vector_area(p: [DVec3; 4]) -> DVec3 {
+    0.5 * (p[2] - p[0]).cross(p[3] - p[1])
+}
+
+/// The pairs `(a, b)`, `a < b`, of quads sharing an edge that no other quad shares, whose
+/// vector areas are more than 120 degrees apart once orientations agree (a pair that
+/// runs the shared edge in the same direction is oriented oppositely: one normal is
+/// flipped first). Sorted.
+pub fn folded_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
+    // Undirected edge -> (quad, runs low to high), for up to two quads; more marks the
+    // edge as shared by more than two.
+    let mut edges: HashMap<(u32, u32), Vec<(usize, bool)>> = HashMap::with_capacity(2 * quads.len());
+    for (f, q) in quads.iter().enumerate() {
+        if corners(positions, q).is_none() {
+            continue;
+        }
+        for i in 0..4 {
+            let (a, b) = (q[i], q[(i + 1) % 4]);
+            if a != b {
+                edges.entry((a.min(b), a.max(b))).or_default().push((f, a < b));
+            }
+        }
+    }
+    let cos_max = (120f64).to_radians().cos();
+    let mut out: Vec<(usize, usize)> = edges
+        .values()
+        .filter(|e| e.len() == 2 && e[0].0 != e[1].0)
+        .filter_map(|e| {
+            let [(f, df), (g, dg)] = [e[0], e[1]];
+            let nf = vector_area(corners(positions, &quads[f])?);
+            let mut ng = vector_area(corners(positions, &quads[g])?);
+            if df == dg {
+                ng = -ng;
+            }
+            let (lf, lg) = (nf.length(), ng.length());
+            (lf > 0.0 && lg > 0.0 && nf.dot(ng) < cos_max * lf * lg).then_some((f.min(g), f.max(g)))
+        })
+        .collect();
+    out.sort_unstable();
+    out.dedup();
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn grid(n: u32) -> (Vec<DVec3>, Vec<[u32; 4]>) {
+        let mut p = Vec::new();
+        for y in 0..=n {
+            for x in 0..=n {
+                p.push(DVec3::new(f64::from(x), f64::from(y), 0.0));
+            }
+        }
+        let id = |x: u32, y: u32| y * (n + 1) + x;
+        let mut q = Vec::new();
+        for y in 0..n {
+            for x in 0..n {
+                q.push([id(x, y), id(x + 1, y), id(x + 1, y + 1), id(x, y + 1)]);
+            }
+        }
+        (p, q)
+    }
+
+    #[test]
+    fn a_flat_grid_is_clean() {
+        let (p, q) = grid(4);
+        assert!(check(&p, &q).is_clean());
+    }
+
+    #[test]
+    fn a_quad_folded_over_its_diagonal_is_found() {
+        let (mut p, q) = grid(3);
+        // Pull one corner of the middle quad across its diagonal v0 v2.
+        let [v0, _, _, v3] = q[4];
+        p[v3 as usize] = p[v0 as usize] + DVec3::new(0.8, 0.2, 0.0);
+        let folded = folded_quads(&p, &q);
+        assert!(folded.contains(&4), "{folded:?}");
+    }
+
+    #[test]
+    fn adjacent_quads_folded_onto_each_other_are_found() {
+        let (mut p, q) = grid(2);
+        // Fold the right column back over the left one, hinged on x = 1.
+        for v in p.iter_mut() {
+            if v.x > 1.5 {
+                *v = DVec3::new(0.2, v.y, 0.05);
+            }
+        }
+        let pairs = folded_pairs(&p, &q);
+        assert_eq!(pairs, vec![(0, 1), (2, 3)]);
+        // A right-angle crease is not a fold.
+        let (mut p, q) = grid(2);
+        for v in p.iter_mut() {
+            if v.x > 1.5 {
+                *v = DVec3::new(1.0, v.y, 1.0);
+            }
+        }
+        assert!(folded_pairs(&p, &q).is_empty());
+    }
+
+    #[test]
+    fn duplicated_vertices_at_one_position_count_as_shared() {
+        // Two quads meeting at one corner, the corner duplicated: no intersection.
+        let p: Vec<DVec3> = [[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.], [1., 1., 0.], [2., 1., 0.], [2., 2., 0.], [1., 2., 0.]]
+            .iter()
+            .map(|&a| DVec3::from_array(a))
+            .collect();
+        let q = [[0, 1, 2, 3], [4, 5, 6, 7]];
+        assert!(self_intersections(&p, &q).is_empty());
+    }
+
+    #[test]
+    fn one_huge_face_does_not_blow_up_the_grid() {
+        let (mut p, mut q) = grid(40);
+        let base = p.len() as u32;
+        for c in [[-1e6, -1e6, 0.5], [1e6, -1e6, 0.5], [1e6, 1e6, 0.5], [-1e6, 1e6, 0.5]] {
+            p.push(DVec3::from_array(c));
+        }
+        q.push([base, base + 1, base + 2, base + 3]);
+        assert!(self_intersections(&p, &q).is_empty());
+        // Lowered onto the grid, it crosses every quad.
+        for v in &mut p[base as usize..] {
+            v.z = 0.0;
+        }
+        assert_eq!(self_intersections(&p, &q).len(), 40 * 40);
+    }
+}

@@ -1,0 +1,184 @@
+//! What each solver reports about a solve.
+
+use serde::Serialize;
+
+use crate::Preconditioner;
+
+/// Seconds spent in each step of a solve.
+///
+/// `structure` and `symbolic` are spent once per surface (the first solve of a reused
+/// solver pays them; later solves report `0`).
+#[derive(Copy, Clone, Debug, Default, PartialEq, Serialize)]
+pub struct SolveTimings {
+    /// The operator's sparsity pattern or connectivity, and the multigrid hierarchy.
+    pub structure: f64,
+    /// Fill-reducing ordering and symbolic factorization (direct solver only).
+    pub symbolic: f64,
+    /// Numeric assembly: coefficients, coarse operators.
+    pub assemble: f64,
+    /// Numeric factorization: the whole operator (direct) or the coarsest multigrid level.
+    pub factor: f64,
+    /// Triangular solves and refinement, or the iterations.
+    pub solve: f64,
+}
+
+impl SolveTimings {
+    /// The sum of every step.
+    pub fn total(&self) -> f64 {
+        self.structure + self.symbolic + self.assemble + self.factor + self.solve
+    }
+}
+
+/// What [`crate::DirectSolver`] reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct DirectInfo {
+    /// Iterative refinement steps after the first triangular solve.
+    pub refinement_steps: usize,
+    /// Certificate: `|grad E(p*)| / |grad E(p)|` at the result relative to the input.
+    pub relative_gradient: f64,
+    /// Entries of the Cholesky factor.
+    pub factor_nnz: usize,
+    /// Bytes of the factor and the pattern.
+    pub memory_bytes: usize,
+    /// Seconds per step.
+    pub seconds: SolveTimings,
+}
+
+/// What [`crate::CgSolver`] reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct CgInfo {
+    /// Iterations.
+    pub iterations: usize,
+    /// Products by the operator `H` (matrix-free).
+    pub operator_applications: usize,
+    /// Certificate: `|grad E(p*)| / |grad E(p)|` at the result relative to the input.
+    pub relative_gradient: f64,
+    /// A guaranteed bound, in voxels, on the distance of every vertex to the exact
+    /// minimizer: `|grad E|_2 / (2 alpha_min h)` (see [`crate::CgParams::tolerance`]).
+    pub error_bound: f64,
+    /// The estimated distance, in voxels, of the farthest vertex to the exact minimizer
+    /// (see [`crate::StoppingRule::Estimate`]).
+    pub error_estimate: f64,
+    /// Whether the stopping rule was met.
+    pub converged: bool,
+    /// The preconditioner.
+    pub preconditioner: Preconditioner,
+    /// Bytes of the solver's data (connectivity, coarse levels, vectors).
+    pub memory_bytes: usize,
+    /// A model of the bytes one iteration moves between memory and the cores (every array
+    /// read or written once per pass), to compare the time per iteration with the memory
+    /// bandwidth.
+    pub bytes_per_iteration: usize,
+    /// Seconds per step.
+    pub seconds: SolveTimings,
+}
+
+/// What [`crate::BoundedSolver`] reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct BoundedInfo {
+    /// Iterations with the bounds active (the unconstrained start excluded).
+    pub iterations: usize,
+    /// Products by the operator `H`, every phase included.
+    pub operator_applications: usize,
+    /// Certificate: the norm of the projected gradient at the result relative to the
+    /// gradient at the input.
+    pub relative_gradient: f64,
+    /// Without boxes, the guaranteed bound of [`CgInfo::error_bound`]; `None` with boxes
+    /// (the minimizer over the boxes is another one).
+    pub error_bound: Option<f64>,
+    /// The estimated remaining movement of the farthest vertex, in voxels.
+    pub error_estimate: f64,
+    /// Whether the stopping rule was met.
+    pub converged: bool,
+    /// The box margin in voxels, when clamping.
+    pub clamp: Option<f64>,
+    /// Vertices held on the boundary of their box at the end (`0` without boxes).
+    pub clamped_vertices: usize,
+    /// The preconditioner.
+    pub preconditioner: Preconditioner,
+    /// Bytes of the solver's data.
+    pub memory_bytes: usize,
+    /// The memory-traffic model of [`CgInfo::bytes_per_iteration`].
+    pub bytes_per_iteration: usize,
+    /// Seconds per step.
+    pub seconds: SolveTimings,
+}
+
+/// What a solver reports about its solve: the report of the solver that ran.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+#[serde(tag = "solver", rename_all = "snake_case")]
+pub enum SolveInfo {
+    /// Sparse Cholesky.
+    Direct(DirectInfo),
+    /// Preconditioned conjugate gradient.
+    Cg(CgInfo),
+    /// Bound-constrained preconditioned conjugate gradient.
+    Bounded(BoundedInfo),
+}
+
+impl SolveInfo {
+    /// `"direct"`, `"cg"` or `"bounded"`.
+    pub fn name(&self) -> &'static str {
+        match self {
+            SolveInfo::Direct(_) => "direct",
+            SolveInfo::Cg(_) => "cg",
+            SolveInfo::Bounded(_) => "bounded",
+        }
+    }
+
+    /// The certificate `|grad E(p*)| / |grad E(p)|` (projected for the bounded solver).
+    pub fn relative_gradient(&self) -> f64 {
+        match self {
+            SolveInfo::Direct(i) => i.relative_gradient,
+            SolveInfo::Cg(i) => i.relative_gradient,
+            SolveInfo::Bounded(i) => i.relative_gradient,
+        }
+    }
+
+    /// Whether the solve met its stopping rule (always for the direct solver).
+    pub fn converged(&self) -> bool {
+        match self {
+            SolveInfo::Direct(_) => true,
+            SolveInfo::Cg(i) => i.converged,
+            SolveInfo::Bounded(i) => i.converged,
+        }
+    }
+
+    /// Iterations of the iterative solvers; for the direct solver, `1` plus its
+    /// refinement steps.
+    pub fn iterations(&self) -> usize {
+        match self {
+            SolveInfo::Direct(i) => 1 + i.refinement_steps,
+            SolveInfo::Cg(i) => i.iterations,
+            SolveInfo::Bounded(i) => i.iterations,
+        }
+    }
+
+    /// The estimated distance to the minimizer in voxels (`None` for the direct solver,
+    /// exact up to rounding).
+    pub fn error_estimate(&self) -> Option<f64> {
+        match self {
+            SolveInfo::Direct(_) => None,
+            SolveInfo::Cg(i) => Some(i.error_estimate),
+            SolveInfo::Bounded(i) => Some(i.error_estimate),
+        }
+    }
+
+    /// Seconds per step.
+    pub fn seconds(&self) -> &SolveTimings {
+        match self {
+            SolveInfo::Direct(i) => &i.seconds,
+            SolveInfo::Cg(i) => &i.seconds,
+            SolveInfo::Bounded(i) => &i.seconds,
+        }
+    }
+
+    /// Bytes of the solver's data.
+    pub fn memory_bytes(&self) -> usize {
+        match self {
+            SolveInfo::Direct(i) => i.memory_bytes,
+            SolveInfo::Cg(i) => i.memory_bytes,
+            SolveInfo::Bounded(i) => i.memory_bytes,
+        }
+    }
+}

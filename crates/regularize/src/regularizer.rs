@@ -1,0 +1,265 @@
+//! The front door: [`regularize`] (one shot) and [`Regularizer`] (reusable).
+
+use std::sync::Arc;
+use std::time::Instant;
+
+use glam::DVec3;
+use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
+use voxreg_normals::{FeatureField, NormalEstimator, NormalField, Refined};
+
+use crate::pipeline::{crease_weights, informative_vertices, surfel_drift, trusted_drift};
+use crate::report::{EnergyReport, NormalsReport, Report, StageTimes};
+use crate::{Energy, FairnessMask, Params, Progress, RegularizeError, Solver, SolverParams, Weights};
+
+/// A stage of the front door's work, for progress displays.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, serde::Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Stage {
+    /// Estimating the initial normal field.
+    Normals,
+    /// Solve number `round` (0 is the first; `1..=refine` follow refinements).
+    Solve {
+        /// The round.
+        round: usize,
+    },
+    /// Refining the normals and re-centring the targets before solve `round`.
+    Refine {
+        /// The round of the solve that follows.
+        round: usize,
+    },
+}
+
+impl Stage {
+    /// A short label: `"normals"`, `"solve 2/4"`, `"refine 1/3"`.
+    pub fn label(&self, params: &Params) -> String {
+        match self {
+            Stage::Normals => "normals".into(),
+            Stage::Solve { round } => format!("solve {}/{}", round + 1, params.refine + 1),
+            Stage::Refine { round } => format!("refine {round}/{}", params.refine),
+        }
+    }
+}
+
+/// What a progress callback receives.
+#[derive(Copy, Clone, Debug)]
+pub struct Event<'a> {
+    /// The stage under way.
+    pub stage: Stage,
+    /// An estimate of the fraction of the whole run done, in `[0, 1]` (stages are
+    /// weighted equally; iterations advance it within a solve).
+    pub fraction: f64,
+    /// The latest iteration of an iterative solver, within [`Stage::Solve`].
+    pub iteration: Option<&'a Progress>,
+}
+
+/// The regularized positions and what produced them.
+#[derive(Clone, Debug)]
+pub struct Output {
+    /// The digital surface: the output's combinatorics (one quad per surfel).
+    pub surface: Arc<DigitalSurface>,
+    /// The regularized positions, one per vertex.
+    pub positions: Vec<DVec3>,
+    /// The normal field of the last solve (the initial field without refinement).
+    pub normals: NormalField,
+    /// The attachment targets of the last solve (the input positions unless re-centred).
+    pub targets: Vec<DVec3>,
+    /// The Ambrosio-Tortorelli feature field (per vertex) with [`crate::Estimator::At`].
+    pub features: Option<FeatureField>,
+    /// What was done: parameters, counts, timings, energies, every solve's report.
+    pub report: Report,
+}
+
+/// Regularizes the digital surface of `volume` with `params`: the one-shot form of
+/// [`Regularizer`].
+pub fn regularize(volume: &LabelVolume, params: &Params) -> Result<Output, RegularizeError> {
+    Regularizer::from_volume(volume, &params.regions)?.run(params)
+}
+
+/// The front door's reusable form: keeps the digital surface, its solver (symbolic
+/// analysis, multigrid hierarchy) and the initial normal field across runs, for
+/// parameter sweeps and interactive use. A run whose solver settings or initial-normal
+/// settings differ from the last run's rebuilds only those.
+#[derive(Debug)]
+pub struct Regularizer {
+    surface: Arc<DigitalSurface>,
+    surface_seconds: f64,
+    solver: Option<(SolverParams, Solver)>,
+    normals: Option<(crate::NormalsParams, crate::params::EstimatedNormals)>,
+    trusted: Option<Vec<bool>>,
+}
+
+impl Regularizer {
+    /// A regularizer of `surface`.
+    pub fn new(surface: impl Into<Arc<DigitalSurface>>) -> Self {
+        Regularizer { surface: surface.into(), surface_seconds: 0.0, solver: None, normals: None, trusted: None }
+    }
+
+    /// A regularizer of `volume`'s digital surface, its labels grouped by `regions`.
+    pub fn from_volume(volume: &LabelVolume, regions: &RegionMap) -> Result<Self, RegularizeError> {
+        let t = Instant::now();
+        let surface = DigitalSurface::new(volume, regions)?;
+        let mut r = Regularizer::new(surface);
+        r.surface_seconds = t.elapsed().as_secs_f64();
+        Ok(r)
+    }
+
+    /// The digital surface.
+    pub fn surface(&self) -> &Arc<DigitalSurface> {
+        &self.surface
+    }
+
+    /// Runs `params` from the initial normals `params.normals` describes.
+    pub fn run(&mut self, params: &Params) -> Result<Output, RegularizeError> {
+        self.run_with(params, None, &mut |_| {})
+    }
+
+    /// Runs `params` from the given initial normal field (instead of estimating
+    /// `params.normals`).
+    pub fn run_from(&mut self, params: &Params, initial: &NormalField) -> Result<Output, RegularizeError> {
+        self.run_with(params, Some(initial), &mut |_| {})
+    }
+
+    /// Runs `params`, starting from the normal field `initial` when given (instead of
+    /// estimating `params.normals`), reporting progress to `progress`.
+    ///
+    /// The pipeline: one solve of the energy, then `params.refine` rounds of (refine the
+    /// normals from the regularized quads, re-centre the attachment targets, solve).
+    pub fn run_with(
+        &mut self,
+        params: &Params,
+        initial: Option<&NormalField>,
+        progress: &mut dyn FnMut(&Event),
+    ) -> Result<Output, RegularizeError> {
+        params.validate()?;
+        let surface = Arc::clone(&self.surface);
+        let stages_total = 1.0 + (params.refine as f64) * 2.0 + 1.0;
+        let mut times = StageTimes { surface: self.surface_seconds, ..Default::default() };
+
+        // Initial normals.
+        let t = Instant::now();
+        progress(&Event { stage: Stage::Normals, fraction: 0.0, iteration: None });
+        let (start, features, at_info, estimator) = match initial {
+            Some(field) => {
+                if field.len() != surface.num_surfels() {
+                    return Err(RegularizeError::SizeMismatch(format!(
+                        "{} normals for {} surfels",
+                        field.len(),
+                        surface.num_surfels()
+                    )));
+                }
+                (field.clone(), None, None, "given")
+            }
+            None => {
+                let cached = self.normals.as_ref().filter(|(p, _)| *p == params.normals);
+                if cached.is_none() {
+                    let estimated = params.normals.estimate(&surface)?;
+                    self.normals = Some((params.normals.clone(), estimated));
+                }
+                let (_, n) = self.normals.as_ref().expect("estimated above");
+                (n.field.clone(), n.features.clone(), n.at_info.clone(), params.normals.estimator.name())
+            }
+        };
+        times.normals = t.elapsed().as_secs_f64();
+
+        // The solver, kept while its settings do not change.
+        if self.solver.as_ref().is_none_or(|(p, _)| *p != params.solver) {
+            self.solver = Some((params.solver, Solver::new(&surface, &params.solver)?));
+        }
+        let solver = &mut self.solver.as_mut().expect("built above").1;
+        let clamps = solver.clamp().is_some();
+        let recentre = params.preserve_size && !clamps && params.refine > 0;
+        if recentre && self.trusted.is_none() {
+            self.trusted = Some(informative_vertices(&surface));
+        }
+        let trusted = if recentre { self.trusted.as_deref().unwrap_or(&[]) } else { &[] };
+        let weights = Weights {
+            fairness: params.texture_aware.then(|| FairnessMask::texture_aware(&surface)),
+            ..Default::default()
+        };
+        let weights = (weights != Weights::default()).then_some(weights);
+
+        let input = surface.positions();
+        let mut targets = input.clone();
+        let mut field = start;
+        let mut positions = Vec::new();
+        let mut solves = Vec::with_capacity(params.refine + 1);
+        let mut done = 1.0;
+        for round in 0..=params.refine {
+            if round > 0 {
+                let t = Instant::now();
+                progress(&Event { stage: Stage::Refine { round }, fraction: done / stages_total, iteration: None });
+                field = Refined {
+                    positions: &positions,
+                    previous: &field,
+                    radius: params.refine_radius,
+                    feature_angle_deg: params.feature_angle_deg,
+                }
+                .estimate(&surface)?;
+                if recentre {
+                    let drift =
+                        trusted_drift(&surface, &surfel_drift(&surface, &positions, &input), trusted, params.recentre_sigma);
+                    targets.iter_mut().zip(&drift).for_each(|(t, d)| *t -= *d);
+                }
+                times.refine += t.elapsed().as_secs_f64();
+                done += 1.0;
+            }
+            let creased = (params.refine > 0 && params.crease_alignment < 1.0).then(|| {
+                let crease = crease_weights(
+                    &surface,
+                    &field,
+                    params.crease_angle_deg,
+                    params.crease_alignment,
+                    params.crease_dilation,
+                );
+                let mut w = weights.clone().unwrap_or_default();
+                w.beta = Some(match w.beta {
+                    Some(b) => b.iter().zip(&crease).map(|(b, c)| b * c).collect(),
+                    None => crease,
+                });
+                w
+            });
+            let energy = Energy::new(&surface, &field, &targets, params.energy)?;
+            let energy = match creased.as_ref().or(weights.as_ref()) {
+                Some(w) => energy.with_weights(w)?,
+                None => energy,
+            };
+            let stage = Stage::Solve { round };
+            let base = done / stages_total;
+            progress(&Event { stage, fraction: base, iteration: None });
+            let mut report = |p: &Progress| {
+                // Iterations close the gap to the tolerance geometrically: show the
+                // fraction of the way (in log scale) from the first error estimate.
+                let within = (1.0 - 1.0 / (1.0 + p.iteration as f64 / 20.0)).clamp(0.0, 1.0);
+                progress(&Event { stage, fraction: base + within / stages_total, iteration: Some(p) });
+            };
+            let (x, info) = solver.solve_with(&energy, &mut report)?;
+            let s = info.seconds();
+            times.assemble += s.structure + s.assemble;
+            times.solve += s.symbolic + s.factor + s.solve;
+            positions = x;
+            solves.push(info);
+            done += 1.0;
+        }
+
+        // The energy of the last round (its normals and targets, without crease weights),
+        // before and after.
+        let energy = Energy::new(&surface, &field, &targets, params.energy)?;
+        let energy = match weights.as_ref() {
+            Some(w) => energy.with_weights(w)?,
+            None => energy,
+        };
+        let report = Report {
+            params: params.clone(),
+            counts: surface.counts(),
+            normals: NormalsReport {
+                estimator,
+                radius: if initial.is_some() { None } else { params.normals.radius_on(&surface) },
+                at: at_info,
+            },
+            stages: times,
+            energy: EnergyReport { before: energy.terms(&input), after: energy.terms(&positions) },
+            solves,
+        };
+        Ok(Output { surface, positions, normals: field, targets, features, report })
+    }
+}
