@@ -171,6 +171,7 @@ fn energy(x: &[DVec3], setup: &Setup, len: &[[[f64; 2]; 3]]) -> f64 {
 /// energy's lengths move with the vertex, a step is halved until the true local energy
 /// does not increase: the energy decreases monotonically. It stops after
 /// `max_iterations` sweeps or when no `t` moves by more than `tolerance`.
+/// (Why this energy: see docs/design/shrouds-energy.md.)
 ///
 /// **Closed surfaces only**, as in the paper: a volume with background and two regions.
 /// Edges must have two surfels, or four at an edge pinch, where the two diagonal voxels

@@ -23,7 +23,7 @@ use linear::{SolveStats, SpdSystem};
 pub enum AtLinearSolver {
     /// faer's sparse Cholesky: AMD ordering and symbolic analysis once per surface and
     /// system, a numeric factorization and triangular solves per solve: exact to machine
-    /// precision, about 3 times the CPU time of the default on bunny-128.
+    /// precision, and several times slower than the default on large surfaces.
     Cholesky,
     /// Jacobi-preconditioned conjugate gradients, warm-started from the previous
     /// alternation's solution, until the relative residual `|b - A x| / |b|` of every
@@ -38,14 +38,9 @@ pub enum AtLinearSolver {
 }
 
 impl Default for AtLinearSolver {
-    /// Conjugate gradients to a relative residual of `1e-5`, at most 1000 iterations. On
-    /// bunny-128 (default parameters) the fields differ from exact solves (CG to `1e-11`)
-    /// by `9.2e-5` degrees in `u` on average (99% of surfels within `1.1e-3`, at most
-    /// `0.061`) and `1.1e-6` in `v` on average (99% within `1.5e-5`, at most `1.2e-3`),
-    /// against a change of `v` of at least `4e-3` in each eps's last alternation (ignored
-    /// test `bunny_cg_tolerance` in `tests/at.rs`); every accuracy test measured the same to
-    /// 0.01 degree as with `1e-6`, for 26% fewer CG iterations (see [`AmbrosioTortorelli`],
-    /// "Solvers").
+    /// Conjugate gradients to a relative residual of `1e-5`, at most 1000 iterations: far
+    /// below the change of `v` between alternations, so the fields read as with exact
+    /// solves (see docs/design/at-linear-solver.md).
     fn default() -> Self {
         AtLinearSolver::ConjugateGradient { tolerance: 1e-5, max_iterations: 1000 }
     }
@@ -274,13 +269,9 @@ impl AtInfo {
 ///
 /// # Sharpening (after the last `eps`)
 ///
-/// With the integral-invariant input, plain AT keeps a one-surfel chamfer along the edges
-/// of a digitized cube: II turns the two rows along each edge by about 33 and 15 degrees,
-/// and the alternations settle with `v` low on two vertex rows (0.09 on the edge, 0.15 one
-/// voxel off), which leaves the edge row coupled to neither face (coupling `~0.15^2`)
-/// and held by its data term at about 30 degrees: a local minimum of the alternation, not
-/// the sharp configuration (which the same functional also admits: `v` about 0.02 on the
-/// edge and 0.8 one row off). So, once the `eps` sequence is done, the data term is
+/// From integral-invariant input, plain AT settles in a local minimum that keeps a
+/// one-surfel chamfer along a digitized cube's edges (`v` low on two vertex rows, the edge
+/// row coupled to neither face). So, once the `eps` sequence is done, the data term is
 /// re-weighted by how much AT trusts the input there, and the alternations continue at
 /// the last `eps` (at most [`AtParams::sharpen_iterations`], same tolerance), minimizing
 ///
@@ -289,54 +280,14 @@ impl AtInfo {
 /// c_f = max(1e-3, min(1, min_{v in f} v / tau)^2)      from the v of the last eps, frozen
 /// ```
 ///
-/// `tau` is [`AtParams::sharpen_threshold`] (default 0.4). Where `v` is at least `tau` at
-/// a surfel's four corners (everywhere on smooth parts: on a sphere of radius `R` voxels
-/// `v` is about `1 / (1 + 1 / (lambda R^2))`, 0.9 at `R` = 20, 0.6 at `R` = 8) the
-/// functional is unchanged; in the discontinuity zone the biased input stops pulling and
-/// `u` follows its neighbours on its own side. Each alternation still decreases this
-/// (frozen-weight) energy. Measured with II input (h = 1, r = 3), mean error of the rows
-/// 0, 1, 2 voxels from the edges of a cube of half side 8: plain AT 30.4 / 7.2 / 5.0
-/// degrees, sharpened 2.4 / 2.2 / 1.8 (max 2.7); `v` 0.02 on the edges, 0.82 one voxel
-/// off, 0.99 beyond 3; the crease angle between the two sides (pairs within 2 voxels of
-/// the edge) off by 4.6 degrees on average. Spheres, mean error of II / plain AT /
-/// sharpened: radius 20: 1.91 / 0.76 / 0.76 degrees; 12: 2.00 / - / 1.53; 8: 1.75 / 1.88
-/// / 2.08; 6: 2.87 / - / 5.18 (on so small a sphere `v` is about 0.5 everywhere and
-/// dips below `tau` in places). `tau` 0.4 was chosen over 0.3 (the previous default) for
-/// the crease angle from II on cubes of half side 6, 8 and 13 (4.1, 4.6, 4.6 degrees;
-/// 5.8, 6.5, 6.5 with 0.3: over issue 3's 5) and on lenses of radius 25 and 40 (2.5, 2.2;
-/// 4.7, 3.8 with 0.3), at the cost of the lens of radius 20 (6.8; 6.0 with 0.3) and of the
-/// smallest spheres (radius 8: 1.97 with 0.3; radius 6: 3.95). Alternatives measured: `c_f` from the mean of `v` over the
-/// corners (`tau` 0.3: cube edge row 7.2 degrees; `tau` 1, i.e. `v^2`: cube 2.3 but
-/// sphere of radius 8 at 8.5 degrees, facets); the minimum with `tau` 0.5 (cube 1.9,
-/// sphere 8 at 2.7) or 0.3 (3.4, 1.97); 0.25 (4.3, 1.97).
-///
-/// On a curved crease (the lens of the tests: two balls of radius 20, a 74-degree
-/// circular crease) neither plain nor sharpened AT keeps the crease angle within 5
-/// degrees between the rows 1 to 2 voxels off it (mean pair deviation: from II 8.3 plain,
-/// 6.8 sharpened; from exact normals with 10 degrees of noise 6.8 plain, 10.2 sharpened;
-/// the measurements of this paragraph were taken with `tau` 0.3, which gives 6.0 and 10.1).
-/// Except from II without this stage (4.0 degrees towards the crease per side: II's own
-/// bias), those rows are turned *away* from the crease (over-sharpened), 2.8 to 4.9
-/// degrees per side, decaying over about 2 voxels: the boundary bias of the u-step's smoothing where
-/// `v` cuts the coupling, each surfel averaged with neighbours on one side only, whose
-/// normals turn away from the crease by `1 / R` per voxel (zero on a cube's flat faces).
-/// The sharpening stage, by freeing the surfels next to the jump from their data, moves
-/// that free boundary inwards: more bias on an unbiased (noisy exact) input, less net
-/// error on II, whose own bias (towards the crease, 12.7 degrees on those rows) it
-/// removes (3.0 left). The one-voxel fin that digitizes the crease keeps its walls about
-/// 30 degrees off towards the crease plane from II (a chamfer of its own) and its top
-/// surfels on the bisector. Corrections tried in experiments whose code was not kept
-/// (threshold 0.3): a twicing target `g + (g - u)` in this stage halves the
-/// boundary bias (lens: noisy 5.5, II 3.4) but puts noise back everywhere (sphere of
-/// radius 20: 0.76 -> 1.00 degrees), so it is not used. Restricted to the surfels within
-/// 3 links of the discontinuity zone (sphere unchanged), with gain 1 or 2 (`g + k (g -
-/// u)`), it met 5 degrees on this lens from both inputs (gain 2: noisy 2.8, II 4.1; cube
-/// from II 4.7) but not on a lens it was not tuned on: two balls of radius 25, offset 10
-/// (a 47-degree crease), from II 4.7 plain sharpening, 10.2 with gain 1, 19.5 with gain 2
-/// (near a crease `g - u` is mostly II's own error, which the correction doubles). Not
-/// used either; nor targets extrapolated linearly from plain AT's `u` two and three links
-/// out of the discontinuity zone (cube from II 5.1 to 6.1, lens of radius 30 3.0 to 3.3,
-/// noisy lens of radius 20 11.8 to 12.9: worse everywhere). `alpha` and `lambda` keep the issue's defaults.
+/// `tau` is [`AtParams::sharpen_threshold`] (default 0.4). Where `v >= tau` at a surfel's
+/// four corners (everywhere on smooth parts: on a sphere of radius `R` voxels `v` is about
+/// `1 / (1 + 1 / (lambda R^2))`) the functional is unchanged; in the discontinuity zone the
+/// biased input stops pulling and `u` follows its neighbours on its own side. Each
+/// alternation still decreases this (frozen-weight) energy. On curved creases the rows
+/// next to the crease keep a bias away from it (one-sided smoothing where `v` cuts the
+/// coupling). The choice of `tau` and the corrections tried are in
+/// docs/design/at-sharpening.md.
 ///
 /// # Solvers
 ///
@@ -345,22 +296,10 @@ impl AtInfo {
 /// pass per iteration, Chronopoulos-Gear form), warm-started from the previous
 /// alternation's solution, to a relative residual of `1e-5`, falling back to Cholesky if
 /// CG stalls; or faer's sparse Cholesky (AMD ordering and symbolic analysis once per
-/// surface, a numeric factorization per solve). On bunny-128 (55k surfels) the
-/// alternations decrease the energy monotonically but slowly and never reach the `1e-4`
-/// tolerance, so a run is 40 alternations and 10 sharpening ones: 100 factorizations of
-/// about 250 Mflop each (2.1M nonzeros in each factor), or 2640 CG iterations in all
-/// (3567 to a relative residual of `1e-6`, whose fields are within `0.003` degrees and
-/// `7.9e-5` of exact solves; `bunny_cg_tolerance`).
-///
-/// Tried in experiments whose code was not kept (no gain on this 2-core host, where each
-/// CG iteration is bound by memory traffic, about 13 vector passes; figures with the
-/// sharpening threshold 0.3): the work vectors column by column
-/// with SIMD updates (`pulp`, 11 to 25% fewer instructions, no faster), threads kept in
-/// the CG loop with spinning barriers instead of rayon's two parallel passes per
-/// iteration (at most 7%), warm starts extrapolated from the last two solutions (3511
-/// iterations instead of 3517), a higher floor of the sharpening weights (`1e-2` to
-/// `1e-1`: 3544 to 3406 iterations). A multigrid preconditioner (as for the
-/// regularizer's system) is the next step for fewer iterations.
+/// surface, a numeric factorization per solve). On large surfaces the alternations
+/// decrease the energy monotonically but slowly and may not reach the tolerance on `v`
+/// before [`AtParams::max_iterations`]. Why CG, and the speed-ups tried: see
+/// docs/design/at-linear-solver.md.
 ///
 /// # Example
 ///
@@ -781,165 +720,4 @@ impl AtSolver {
 }
 
 #[cfg(test)]
-mod tests {
-    use super::*;
-    use voxreg_digisurf::LabelVolume;
-
-    fn ball(radius: f64) -> DigitalSurface {
-        let n = (2.0 * radius).ceil() as usize + 3;
-        let c = (n as f64 - 1.0) / 2.0;
-        let volume = LabelVolume::from_fn([n, n, n], |p| {
-            u32::from(p.iter().map(|&x| (x as f64 - c).powi(2)).sum::<f64>() <= radius * radius)
-        });
-        DigitalSurface::from_volume(&volume).unwrap()
-    }
-
-    /// A deterministic pseudo-random sequence in `[-1, 1]`.
-    fn wiggle(i: usize, k: usize) -> f64 {
-        ((i * 7919 + k * 104_729) as f64 * 0.618_033_988_75).fract() * 2.0 - 1.0
-    }
-
-    /// The assembled systems are the exact Hessians of [`AtSolver::energy`]: each half-step's
-    /// solution is a critical point (central differences vanish) and a minimum.
-    #[test]
-    fn each_half_step_minimizes_the_energy() {
-        let surface = ball(4.0);
-        let mut solver = AtSolver::new(&surface).unwrap();
-        let params = AtParams::default();
-        let eps = 0.5;
-        let ns = surface.num_surfels();
-        let nv = surface.num_vertices();
-        let g = NormalField::new(
-            surface
-                .surfels()
-                .iter()
-                .enumerate()
-                .map(|(i, s)| s.normal() + 0.3 * DVec3::new(wiggle(i, 0), wiggle(i, 1), wiggle(i, 2)))
-                .collect(),
-        );
-        let v: Vec<[f64; 1]> = (0..nv).map(|i| [0.6 + 0.4 * wiggle(i, 3)]).collect();
-        let v_flat: Vec<f64> = v.iter().map(|x| x[0]).collect();
-
-        // u-step.
-        let mut rhs = vec![[0.0; 3]; ns];
-        solver.assemble_u(g.as_slice(), &v, params.alpha, None, &mut rhs);
-        let mut u_raw = vec![[0.0; 3]; ns];
-        solver.u_system.solve(&rhs, &mut u_raw, None, 0, faer::Par::Seq).unwrap();
-        let u: Vec<DVec3> = u_raw.iter().map(|x| DVec3::from_array(*x)).collect();
-        let e0 = solver.energy(&g, &u, &v_flat, &params, eps);
-        let h = 1e-4;
-        for k in 0..4 {
-            let d: Vec<DVec3> =
-                (0..ns).map(|i| DVec3::new(wiggle(i, 4 + k), wiggle(i, 8 + k), wiggle(i, 12 + k))).collect();
-            let shifted = |t: f64| -> Vec<DVec3> { u.iter().zip(&d).map(|(a, b)| *a + t * *b).collect() };
-            let plus = solver.energy(&g, &shifted(h), &v_flat, &params, eps);
-            let minus = solver.energy(&g, &shifted(-h), &v_flat, &params, eps);
-            assert!(
-                ((plus - minus) / (2.0 * h)).abs() < 1e-6 * e0.max(1.0),
-                "u gradient {}",
-                (plus - minus) / (2.0 * h)
-            );
-            assert!(plus >= e0 && minus >= e0);
-        }
-
-        // v-step (on the normalized u, as in the solver).
-        let u_unit: Vec<DVec3> = u.iter().map(|x| x.normalize()).collect();
-        let mut rhs = vec![[0.0; 1]; nv];
-        solver.assemble_v(&u_unit, params.lambda, eps, &mut rhs);
-        let mut v_star = vec![[0.0; 1]; nv];
-        solver.v_system.solve(&rhs, &mut v_star, None, 0, faer::Par::Seq).unwrap();
-        let v_star: Vec<f64> = v_star.iter().map(|x| x[0]).collect();
-        let e0 = solver.energy(&g, &u_unit, &v_star, &params, eps);
-        for k in 0..4 {
-            let shifted = |t: f64| -> Vec<f64> {
-                v_star.iter().enumerate().map(|(i, x)| x + t * wiggle(i, 20 + k)).collect()
-            };
-            let plus = solver.energy(&g, &u_unit, &shifted(h), &params, eps);
-            let minus = solver.energy(&g, &u_unit, &shifted(-h), &params, eps);
-            assert!(
-                ((plus - minus) / (2.0 * h)).abs() < 1e-6 * e0.max(1.0),
-                "v gradient {}",
-                (plus - minus) / (2.0 * h)
-            );
-            assert!(plus >= e0 && minus >= e0);
-        }
-    }
-
-    /// The surface's trivial normals, perturbed deterministically (unnormalized).
-    fn wiggled_normals(surface: &DigitalSurface) -> NormalField {
-        NormalField::new(
-            surface
-                .surfels()
-                .iter()
-                .enumerate()
-                .map(|(i, s)| s.normal() + 0.2 * DVec3::new(wiggle(i, 0), wiggle(i, 1), wiggle(i, 2)))
-                .collect(),
-        )
-    }
-
-    /// Conjugate gradients and Cholesky give the same fields.
-    #[test]
-    fn cg_and_cholesky_agree() {
-        let surface = ball(6.0);
-        let g = wiggled_normals(&surface);
-        let mut solver = AtSolver::new(&surface).unwrap();
-        let direct = AtParams { linear_solver: AtLinearSolver::Cholesky, ..AtParams::default() };
-        let iterative = AtParams {
-            linear_solver: AtLinearSolver::ConjugateGradient { tolerance: 1e-12, max_iterations: 10_000 },
-            ..AtParams::default()
-        };
-        let (u1, v1, i1) = solver.solve(&g, &direct).unwrap();
-        let (u2, v2, i2) = solver.solve(&g, &iterative).unwrap();
-        assert!(i1.factorizations > 0 && i1.cg_iterations == 0);
-        assert!(i2.factorizations == 0 && i2.cg_iterations > 0);
-        // The sharpening stage's data weights (down to 1e-3) condition the u-system up to
-        // about 1e4: a residual of 1e-12 leaves about 1e-6 degrees (measured 1.2e-6).
-        assert!(u1.max_angle_deg(&u2) < 1e-5, "{}", u1.max_angle_deg(&u2));
-        let dv = v1.as_slice().iter().zip(v2.as_slice()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        assert!(dv < 1e-8, "{dv}");
-        assert_eq!(i1.iterations, i2.iterations);
-    }
-
-    /// The default (CG to a relative residual of `1e-5`) stays close to exact solves.
-    #[test]
-    fn default_solver_is_close_to_cholesky() {
-        let surface = ball(6.0);
-        let g = wiggled_normals(&surface);
-        let mut solver = AtSolver::new(&surface).unwrap();
-        let exact = AtParams { linear_solver: AtLinearSolver::Cholesky, ..AtParams::default() };
-        let (u1, v1, _) = solver.solve(&g, &exact).unwrap();
-        let (u2, v2, info) = solver.solve(&g, &AtParams::default()).unwrap();
-        assert_eq!(info.factorizations, 0);
-        assert!(u1.max_angle_deg(&u2) < 1e-2, "{}", u1.max_angle_deg(&u2));
-        let dv = v1.as_slice().iter().zip(v2.as_slice()).map(|(a, b)| (a - b).abs()).fold(0.0, f64::max);
-        assert!(dv < 1e-4, "{dv}");
-    }
-
-    /// Junction and pinch edges couple only perpendicular surfels of one interface.
-    #[test]
-    fn links_follow_interfaces() {
-        // Two labels side by side in background: junction edges where they meet the outside.
-        let volume = LabelVolume::from_fn([6, 4, 4], |[x, y, z]| {
-            if (1..3).contains(&y) && (1..3).contains(&z) && (1..5).contains(&x) {
-                1 + u32::from(x >= 3)
-            } else {
-                0
-            }
-        });
-        let surface = DigitalSurface::from_volume(&volume).unwrap();
-        let solver = AtSolver::new(&surface).unwrap();
-        for l in &solver.links {
-            let [a, b] = l.surfels.map(|s| surface.surfel(SurfelId(s)));
-            assert_eq!(a.interface, b.interface);
-        }
-        // Every surfel is coupled to at least one neighbour, and only across its own edges.
-        let mut coupled = vec![0; surface.num_surfels()];
-        for l in &solver.links {
-            for s in l.surfels {
-                assert!(surface.surfel_edges(SurfelId(s)).iter().any(|e| e.0 == l.edge));
-                coupled[s as usize] += 1;
-            }
-        }
-        assert!(coupled.iter().all(|&c| (1..=4).contains(&c)), "{coupled:?}");
-    }
-}
+mod tests;

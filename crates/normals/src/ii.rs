@@ -12,7 +12,8 @@ use crate::{NormalError, NormalEstimator, NormalField};
 /// The default radius of the ball and convolution estimators, in physical units: the
 /// multigrid rule `r = 3 h^{1/3}`, `h` the largest component of `spacing` (3 voxels at
 /// unit spacing, about 10 voxels at `h = 0.156`). With it, the integral invariant
-/// estimator's error falls as `O(h^{2/3})` on shapes of unit-order size (ref. \[53\]).
+/// estimator's error falls as `O(h^{2/3})` on shapes of unit-order size (ref. \[53\]); no
+/// fixed radius in voxels did better on every test shape (see docs/design/ii-radius.md).
 pub fn multigrid_radius(spacing: DVec3) -> f64 {
     3.0 * spacing.max_element().cbrt()
 }
@@ -38,19 +39,10 @@ pub fn multigrid_radius(spacing: DVec3) -> f64 {
 /// (exactly along x, Gauss-Legendre in `(y, z)`: the kernel's total moments match the
 /// ball's to `1e-4` relative or better), once, when the kernel is built.
 ///
-/// Why not the voxel centres in the ball (the reference's digital II)? At the default
-/// radius of 3 voxels that binary kernel aliases: which centres fall inside jumps as the
-/// ball moves, and on a sphere of radius 20 voxels (`h = 1`) the mean / max error was
-/// 3.38 / 9.2 degrees. Exact partial volumes of the voxel cubes (the union of cubes
-/// intersected with the exact ball) gave 2.04 / 7.9; the trilinear reconstruction, 1.91 /
-/// 7.7 (1.47 at r = 3.5, 0.86 at r = 5). A smooth radial weight `(1 - |u|^2/r^2)^k` on
-/// the cubes was worse (2.49 for `k = 1`, 3.10 for `k = 2`): it shrinks the effective
-/// radius. The multigrid convergence is unchanged (sphere of radius 5, `h = 1 .. 0.125`:
-/// 1.88, 0.74, 0.36, 0.16 degrees; binary kernel 3.40, 1.02, 0.59, 0.26). The remaining
-/// error at `r = 3` is the staircase itself (largest where the true normal is near an
-/// axis and the digital surface is flat over more than the ball). The tents reach one
-/// voxel past the ball, so about `pi (r/h + 1)^2` chords are visited per surfel instead of
-/// `pi (r/h)^2`.
+/// The trilinear reconstruction rather than the voxel centres in the ball (the reference's
+/// digital II) because that binary kernel aliases at small radii; the tents reach one voxel
+/// past the ball, so about `pi (r/h + 1)^2` chords are visited per surfel instead of
+/// `pi (r/h)^2` (see docs/design/ii-tent-reconstruction.md).
 ///
 /// Where `∂X` is smooth, `B_r ∩ X` is nearly a half ball, thinnest across the surface: the
 /// normal is the eigenvector of the smallest eigenvalue of `V_r`, oriented here like the

@@ -17,8 +17,7 @@ use glam::DVec3;
 /// trivial normal, which then cannot tell their relative sign (aligning them with it
 /// would cancel them into noise). They are summed with `b` flipped. This happens where a
 /// surfel is one step of a staircase whose true normal is perpendicular to it (the top of
-/// a torus's tube): there the integral invariant's two sides measured a flip of 89
-/// degrees before this rule.
+/// a torus's tube; see docs/design/two-sided-estimates.md).
 pub(crate) fn combine_sides(a: DVec3, b: DVec3, trivial: DVec3) -> DVec3 {
     let align = |v: DVec3| if v.dot(trivial) < 0.0 { -v } else { v };
     let (a, mut b) = (align(a), align(b));

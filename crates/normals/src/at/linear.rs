@@ -176,7 +176,7 @@ impl SpdSystem {
         }
         let symbolic = self.symbolic.as_ref().expect("analysed above");
         // Sequential solves: they are memory-bound, and faer's parallel supernodal solve was
-        // measured several times slower on 2 cores.
+        // slower (see docs/design/at-linear-solver.md).
         let mut mem = MemBuffer::try_new(StackReq::any_of(&[
             symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()),
             symbolic.solve_in_place_scratch::<f64>(K, faer::Par::Seq),
