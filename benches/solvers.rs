@@ -16,7 +16,7 @@ use voxreg::digisurf::DigitalSurface;
 use voxreg::normals::NormalEstimator;
 use voxreg::normals::NormalField;
 use voxreg::regularize::{
-    CgParams, CgSolver, BoundedParams, BoundedSolver, DirectSolver, Energy, EnergyParams, Preconditioner,
+    BoundedParams, BoundedSolver, CgParams, CgSolver, DirectSolver, Energy, EnergyParams, Preconditioner,
 };
 use voxreg_testkit::{digitize, true_normals, Sphere};
 

@@ -69,7 +69,11 @@ fn bunny_128_round_trip() {
     assert_eq!(surface.num_surfels(), 55262);
     let normals = Trivial.estimate(&surface).unwrap();
     let result = exact(&surface, &normals);
-    assert!(result.report.last_solve().relative_gradient() <= 1e-9, "{}", result.report.last_solve().relative_gradient());
+    assert!(
+        result.report.last_solve().relative_gradient() <= 1e-9,
+        "{}",
+        result.report.last_solve().relative_gradient()
+    );
     assert!(result.report.energy.after.total < result.report.energy.before.total);
 
     let dir = tempfile::tempdir().unwrap();

@@ -14,28 +14,13 @@ use anyhow::{Context, Result};
 use glam::{DQuat, DVec3};
 use voxreg_baselines::{
     accuracy, distance_to, dual_contour, laplacian_smooth, marching_cubes_volume, quality, quantize, shrouds,
-    taubin_smooth, DcParams, Implicit, LaplacianParams, Mesh, QualityParams, ScalarGrid, ShroudsParams,
-    TaubinParams, TriangleIndex,
+    taubin_smooth, DcParams, LaplacianParams, Mesh, QualityParams, ScalarGrid, ShroudsParams, TaubinParams,
+    TriangleIndex,
 };
 use voxreg_digisurf::DigitalSurface;
 use voxreg_quality::self_intersections;
 use voxreg_regularize::{Estimator, Params, Regularizer, SolverChoice};
 use voxreg_testkit::{digitize, Goursat, Shape, Sphere, Torus};
-
-/// The test kit's shapes seen as the baselines' [`Implicit`].
-pub(crate) struct AsImplicit<'a>(pub(crate) &'a dyn Shape);
-
-impl Implicit for AsImplicit<'_> {
-    fn value(&self, p: DVec3) -> f64 {
-        self.0.value(p)
-    }
-    fn gradient(&self, p: DVec3) -> DVec3 {
-        self.0.gradient(p)
-    }
-    fn project(&self, p: DVec3) -> DVec3 {
-        self.0.project(p)
-    }
-}
 
 /// The shape of the paper's Fig. 7: a ball united with a regular tetrahedron that sticks
 /// out of it, in `[-10, 10]^3`. Its surface has smooth parts, a crease circle where the
@@ -272,7 +257,7 @@ const COLUMNS: [&str; 20] = [
 
 fn measure(case: &Case, method: &str, mesh: &Mesh, digital: &TriangleIndex, seconds: f64) -> Row {
     let h = case.h;
-    let acc = accuracy(mesh, &AsImplicit(case.shape.as_ref()));
+    let acc = accuracy(mesh, &case.shape);
     let q = quality(mesh, &QualityParams::default());
     let d = distance_to(mesh, digital).scaled(1.0 / h);
     Row {
@@ -389,7 +374,7 @@ fn run_quantized(case: &Case) -> Result<Vec<Row>> {
     let volume = digitize(case.shape.as_ref(), case.h);
     let surface = DigitalSurface::from_volume(&volume)?;
     let digital = TriangleIndex::new(&Mesh::from_surface(&surface, &surface.positions()));
-    let exact = ScalarGrid::sample(&AsImplicit(case.shape.as_ref()), &volume);
+    let exact = ScalarGrid::sample(&case.shape, &volume);
     let mut rows = Vec::new();
     for bits in [1, 2, 4, 6, 8] {
         let (mesh, s) =
@@ -525,11 +510,8 @@ mod tests {
     #[test]
     fn ball_tet_projection_is_on_the_surface_and_nearest() {
         let s = BallTet::new();
-        let mut seed = 7u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 * 20.0 - 10.0
-        };
+        let mut rng = voxreg_testkit::Lcg::new(7);
+        let mut rnd = || rng.range(-10.0, 10.0);
         let on_surface = |q: DVec3| {
             let ball = q.distance(s.centre) - s.radius;
             let tet = s.tet_value(q);

@@ -33,7 +33,7 @@ use voxreg_regularize::{EnergyParams, Params, Regularizer, SolveInfo, SolverChoi
 use voxreg_render::{render, viridis, Camera, Image, RenderParams, Shading};
 use voxreg_testkit::digitize;
 
-use crate::compare::{AsImplicit, BallTet};
+use crate::compare::BallTet;
 
 /// Panel size in pixels (square).
 const PANEL: u32 = 280;
@@ -178,7 +178,10 @@ fn voxreg(surface: &DigitalSurface, normals: &NormalField, params: EnergyParams)
 /// `(1 - eps) h`.
 fn voxreg_clamped(surface: &DigitalSurface, normals: &NormalField, eps: f64) -> Result<Vec<DVec3>> {
     // 0.01 voxel is invisible in a figure and takes a third of the iterations of 1e-3.
-    let p = Params { solver: SolverParams::default().with_tolerance(1e-2).clamped(Some(eps)), ..Params::papers() };
+    let p = Params {
+        solver: SolverParams::default().with_tolerance(1e-2).clamped(Some(eps)),
+        ..Params::papers()
+    };
     let t = Instant::now();
     let out = Regularizer::new(surface.clone()).run_with(&p, Some(normals), &mut |_| {})?;
     if let SolveInfo::Bounded(info) = out.report.last_solve() {
@@ -273,7 +276,7 @@ fn fig7(index: &mut Index, quick: bool) -> Result<()> {
         for (method, shot, why) in &shots {
             match shot {
                 Some(shot) => {
-                    let acc = accuracy(&shot.mesh, &AsImplicit(&shape));
+                    let acc = accuracy(&shot.mesh, &(&shape as &dyn Shape));
                     let q = quality(&shot.mesh, &QualityParams::default());
                     points.push(Point {
                         method,

@@ -113,7 +113,13 @@ fn timings(args: &[String]) -> Result<()> {
         let name = file.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
         let fmt = |s: f64| if s < 0.1 { format!("{:.1} ms", s * 1e3) } else { format!("{s:.2} s") };
         let cells: Vec<String> = med.iter().map(|&s| fmt(s)).collect();
-        println!("| {name} | {} | {} | {} | {} |", all[0].surfels, all[0].solves, cells.join(" | "), fmt(total));
+        println!(
+            "| {name} | {} | {} | {} | {} |",
+            all[0].surfels,
+            all[0].solves,
+            cells.join(" | "),
+            fmt(total)
+        );
     }
     std::fs::remove_dir_all(&dir).ok();
     println!(

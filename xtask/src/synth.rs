@@ -1,6 +1,6 @@
 //! `cargo xtask synth-labels`: a deterministic multi-label volume the size of a tissue
-//! segmentation, for end-to-end runs of `voxreg regularize` (README, "Large label
-//! volumes").
+//! segmentation, for end-to-end runs of `voxreg regularize` (`docs/performance.md`, large
+//! label volumes).
 //!
 //! The volume (500 x 470 x 136 voxels by default, `u8` labels, written as NumPy `.npy`
 //! of shape `(X, Y, Z)`): background `0` (air) around an ellipsoidal body filling the

@@ -193,6 +193,7 @@ pub(crate) fn closest_on_triangle(p: DVec3, t: &[DVec3; 3]) -> DVec3 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use voxreg_testkit::Lcg;
 
     #[test]
     fn closest_points_on_a_triangle() {
@@ -225,13 +226,9 @@ mod tests {
         let index = TriangleIndex::new(&mesh);
         let tris: Vec<[DVec3; 3]> =
             mesh.fan_triangles().map(|(t, _)| t.map(|v| mesh.positions[v as usize])).collect();
-        let mut seed = 12345u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64
-        };
+        let mut rng = Lcg::new(12345);
         for _ in 0..300 {
-            let p = DVec3::new(rnd() * 16.0 - 2.0, rnd() * 16.0 - 2.0, rnd() * 10.0 - 5.0);
+            let p = DVec3::new(rng.range(-2.0, 14.0), rng.range(-2.0, 14.0), rng.range(-5.0, 5.0));
             let brute =
                 tris.iter().map(|t| p.distance(closest_on_triangle(p, t))).fold(f64::INFINITY, f64::min);
             assert!((index.distance(p) - brute).abs() < 1e-12, "{p}");

@@ -6,8 +6,7 @@ use glam::DVec3;
 /// gradient and the nearest point of its surface.
 ///
 /// This is the least the metrics and the implicit-function baselines need; the dev-only
-/// test kit's shapes are adapted to it by a one-line wrapper (see the crate example), so
-/// this crate does not depend on the test kit.
+/// test kit implements it for its shapes, so this crate does not depend on the test kit.
 pub trait Implicit: Sync {
     /// The implicit function (a signed distance where possible).
     fn value(&self, p: DVec3) -> f64;

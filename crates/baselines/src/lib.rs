@@ -31,7 +31,7 @@
 //!
 //! **Shapes.** Metrics take the small [`Implicit`] trait (value, gradient, projection),
 //! not the dev-only test kit's `Shape`: this crate depends on `voxreg-digisurf` only, and
-//! callers adapt their shapes with a three-method wrapper (as `xtask` and the tests do).
+//! the test kit implements [`Implicit`] for its shapes.
 //!
 //! # Example
 //!

@@ -12,26 +12,11 @@
 use glam::DVec3;
 use voxreg_baselines::{
     accuracy, distance_to, dual_contour, laplacian_smooth, marching_cubes, marching_cubes_volume, quality,
-    quantize, shrouds, taubin_smooth, BaselineError, DcParams, Implicit, LaplacianParams, Mesh,
-    QualityParams, ScalarGrid, ShroudsParams, TaubinParams, TriangleIndex,
+    quantize, shrouds, taubin_smooth, BaselineError, DcParams, LaplacianParams, Mesh, QualityParams,
+    ScalarGrid, ShroudsParams, TaubinParams, TriangleIndex,
 };
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
 use voxreg_testkit::{digitize, Shape, Sphere, Torus};
-
-/// The test kit's shapes seen as [`Implicit`].
-struct Tk<'a>(&'a dyn Shape);
-
-impl Implicit for Tk<'_> {
-    fn value(&self, p: DVec3) -> f64 {
-        self.0.value(p)
-    }
-    fn gradient(&self, p: DVec3) -> DVec3 {
-        self.0.gradient(p)
-    }
-    fn project(&self, p: DVec3) -> DVec3 {
-        self.0.project(p)
-    }
-}
 
 fn check_closed_oriented(mesh: &Mesh, what: &str) {
     assert!(mesh.num_faces() > 0, "{what}: empty");
@@ -64,11 +49,11 @@ fn marching_cubes_of_a_digitized_sphere_and_torus() {
         let mesh = marching_cubes_volume(&volume, |l| l == 1);
         check_closed_oriented(&mesh, shape.name());
         assert_eq!(mesh.euler_characteristic(), surface.euler_characteristic(), "{}", shape.name());
-        let acc = accuracy(&mesh, &Tk(shape));
+        let acc = accuracy(&mesh, &shape);
         assert!(acc.distance_mean < 0.3 * h && acc.distance_max < 0.8 * h, "{}: {acc:?}", shape.name());
         assert!(acc.normal_mean_deg < 25.0, "{}: {acc:?}", shape.name());
         let digital = Mesh::from_surface(&surface, &surface.positions());
-        let staircase = accuracy(&digital, &Tk(shape));
+        let staircase = accuracy(&digital, &shape);
         assert!(acc.normal_mean_deg < staircase.normal_mean_deg, "{acc:?} vs {staircase:?}");
         // Every MC vertex of a binary volume is the midpoint of two voxel centres across
         // the surface: a surfel centre, on the digital surface.
@@ -82,9 +67,9 @@ fn marching_cubes_of_the_exact_function_is_more_accurate() {
     let sphere = Sphere { radius: 8.0 };
     let volume = digitize(&sphere, 1.0);
     let binary = marching_cubes_volume(&volume, |l| l == 1);
-    let exact = marching_cubes(&ScalarGrid::sample(&Tk(&sphere), &volume), 0.0);
+    let exact = marching_cubes(&ScalarGrid::sample(&sphere, &volume), 0.0);
     check_closed_oriented(&exact, "sphere, exact values");
-    let (b, e) = (accuracy(&binary, &Tk(&sphere)), accuracy(&exact, &Tk(&sphere)));
+    let (b, e) = (accuracy(&binary, &sphere), accuracy(&exact, &sphere));
     assert!(e.distance_max < 0.05 && e.distance_mean < 0.2 * b.distance_mean, "{e:?} vs {b:?}");
 }
 
@@ -95,7 +80,7 @@ fn taubin_shrinks_less_than_laplacian() {
     let mc = marching_cubes_volume(&volume, |l| l == 1);
     let lap = laplacian_smooth(&mc, &LaplacianParams { iterations: 20, lambda: 0.5 });
     let tau = taubin_smooth(&mc, &TaubinParams { iterations: 20, ..Default::default() });
-    let (m, l, t) = (accuracy(&mc, &Tk(&sphere)), accuracy(&lap, &Tk(&sphere)), accuracy(&tau, &Tk(&sphere)));
+    let (m, l, t) = (accuracy(&mc, &sphere), accuracy(&lap, &sphere), accuracy(&tau, &sphere));
     assert!(l.bias < -0.1, "laplacian should shrink: {l:?}");
     assert!(t.bias.abs() < 0.5 * l.bias.abs(), "taubin {t:?} vs laplacian {l:?}");
     assert!(
@@ -115,16 +100,16 @@ fn dual_contouring_from_binary_and_quantized_data() {
     check_closed_oriented(&binary, "dc binary");
     // One quad per surfel: each crossed grid edge is a surfel's dual edge.
     assert_eq!(binary.num_faces(), surface.num_surfels());
-    let exact = ScalarGrid::sample(&Tk(&sphere), &volume);
+    let exact = ScalarGrid::sample(&sphere, &volume);
     let errors: Vec<f64> = [1, 2, 4, 8]
         .iter()
         .map(|&bits| {
             let mesh = dual_contour(&quantize(&exact, bits, 2.0), 0.0, &DcParams::default());
             check_closed_oriented(&mesh, &format!("dc {bits} bits"));
-            accuracy(&mesh, &Tk(&sphere)).distance_mean
+            accuracy(&mesh, &sphere).distance_mean
         })
         .collect();
-    let b = accuracy(&binary, &Tk(&sphere)).distance_mean;
+    let b = accuracy(&binary, &sphere).distance_mean;
     assert!((errors[0] - b).abs() < 1e-9, "1 bit is the binary map: {errors:?} vs {b}");
     assert!(errors[3] < 0.05 && errors[3] < errors[1] && errors[1] < errors[0], "{errors:?}");
 }
@@ -159,12 +144,12 @@ fn shrouds_of_a_digitized_sphere() {
         info.energy_after,
         info.iterations
     );
-    let staircase = accuracy(&Mesh::from_surface(&surface, &surface.positions()), &Tk(&sphere));
+    let staircase = accuracy(&Mesh::from_surface(&surface, &surface.positions()), &sphere);
     let start = {
         let (m, _) = shrouds(&surface, &ShroudsParams { max_iterations: 0, ..params }).unwrap();
-        accuracy(&m, &Tk(&sphere))
+        accuracy(&m, &sphere)
     };
-    let acc = accuracy(&mesh, &Tk(&sphere));
+    let acc = accuracy(&mesh, &sphere);
     assert!(
         acc.distance_mean < start.distance_mean && acc.distance_mean < staircase.distance_mean,
         "{acc:?} {start:?}"
@@ -207,7 +192,7 @@ fn metrics_of_the_digital_surface() {
     assert!((q.aspect_max - 1.0).abs() < 1e-12 && (q.jacobian_min - 1.0).abs() < 1e-12 && q.area_cv < 1e-12);
     assert!((q.area_mean - 0.25).abs() < 1e-12);
     // The staircase lies within sqrt(3)/2 h of the sphere (Gauss digitization).
-    let acc = accuracy(&digital, &Tk(&sphere));
+    let acc = accuracy(&digital, &sphere);
     assert!(acc.distance_max <= 3f64.sqrt() / 2.0 * 0.5 + 1e-9, "{acc:?}");
 }
 

@@ -83,7 +83,7 @@ pub(crate) struct InputArgs {
     #[arg(long, value_name = "ORDER", requires = "dims")]
     pub(crate) endian: Option<Endian>,
     /// The size of a voxel, for raw data, or overriding the file's.
-    #[arg(long, value_name = "SX,SY,SZ", value_parser = parse_spacing)]
+    #[arg(long, value_name = "SX,SY,SZ", value_parser = parse_spacing, allow_hyphen_values = true)]
     pub(crate) spacing: Option<glam::DVec3>,
     /// How labels form regions: "label" (each label its own region), "solid" (all
     /// non-background labels one region), or groups such as "1,2,3;7" [default: the

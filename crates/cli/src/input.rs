@@ -68,7 +68,8 @@ pub(crate) fn voxel_art(args: &InputArgs) -> bool {
 
 /// The digital surface of `volume`, or an error naming the file.
 pub(crate) fn surface_of(args: &InputArgs, volume: &LabelVolume, map: &RegionMap) -> Result<DigitalSurface> {
-    DigitalSurface::new(volume, map).with_context(|| format!("{}: no surface to regularize", args.input.display()))
+    DigitalSurface::new(volume, map)
+        .with_context(|| format!("{}: no surface to regularize", args.input.display()))
 }
 
 /// `voxreg info`: the volume's dimensions and labels, and its digital surface's cells.
@@ -110,8 +111,14 @@ pub(crate) fn info(args: &InputArgs) -> Result<()> {
             let labels = surface.regions().labels(r);
             labels.iter().map(u32::to_string).collect::<Vec<_>>().join("+")
         };
-        writeln!(out, "  {} | {}: {} surfels", name(iface.regions[0]), name(iface.regions[1]), iface.surfels.len())
-            .ok();
+        writeln!(
+            out,
+            "  {} | {}: {} surfels",
+            name(iface.regions[0]),
+            name(iface.regions[1]),
+            iface.surfels.len()
+        )
+        .ok();
     }
     writeln!(out, "boundary vertices: {}", c.boundary_vertices).ok();
     writeln!(out, "boundary edges: {}", c.boundary_edges).ok();

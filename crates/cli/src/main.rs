@@ -10,7 +10,7 @@ mod progress;
 mod report;
 
 use anyhow::{bail, Context, Result};
-use clap::Parser;
+use clap::Parser as _;
 use voxreg_io::{read_mesh, write_ply_with_vertex_scalar, write_volume, QuadMesh};
 use voxreg_regularize::Regularizer;
 use voxreg_upscale::{upscale, UpscaleParams};
@@ -21,7 +21,10 @@ use crate::progress::Stages;
 use crate::report::{CliReport, IoTimes};
 
 fn main() -> std::process::ExitCode {
-    let cli = Cli::parse();
+    let cli = match Cli::try_parse() {
+        Ok(cli) => cli,
+        Err(e) => return usage_error(&e),
+    };
     let result = match cli.command {
         Command::Info(args) => input::info(&args),
         Command::Regularize(args) => regularize(&args, Product::Mesh),
@@ -40,6 +43,32 @@ fn main() -> std::process::ExitCode {
                 }
             }
             eprintln!("error: {line}");
+            std::process::ExitCode::FAILURE
+        }
+    }
+}
+
+/// Help and version go to standard output (exit 0); any other argument error is one line
+/// on standard error naming the option, exit 1, like every other error.
+fn usage_error(e: &clap::Error) -> std::process::ExitCode {
+    use clap::error::ErrorKind;
+    match e.kind() {
+        ErrorKind::DisplayHelp | ErrorKind::DisplayVersion => {
+            let _ = e.print();
+            std::process::ExitCode::SUCCESS
+        }
+        _ => {
+            // clap's message up to its usage block, folded into one line.
+            let text = e.render().to_string();
+            let parts: Vec<&str> = text
+                .lines()
+                .map(str::trim)
+                .take_while(|l| !l.starts_with("Usage:") && !l.starts_with("For more information"))
+                .filter(|l| !l.is_empty())
+                .collect();
+            let line = parts.join(" ");
+            let line = line.strip_prefix("error: ").unwrap_or(&line);
+            eprintln!("error: {line} (see voxreg --help)");
             std::process::ExitCode::FAILURE
         }
     }
@@ -121,10 +150,19 @@ fn check(args: &CheckArgs) -> Result<()> {
         r.folded_pairs,
     ))?;
     if let Some((a, b)) = r.first_intersection {
-        bail!("{}: {} self-intersections (first: faces {a} and {b})", args.mesh.display(), r.intersecting_pairs);
+        bail!(
+            "{}: {} self-intersections (first: faces {a} and {b})",
+            args.mesh.display(),
+            r.intersecting_pairs
+        );
     }
     if !r.is_clean() {
-        bail!("{}: {} folded quads, {} folded adjacent pairs", args.mesh.display(), r.folded_quads, r.folded_pairs);
+        bail!(
+            "{}: {} folded quads, {} folded adjacent pairs",
+            args.mesh.display(),
+            r.folded_quads,
+            r.folded_pairs
+        );
     }
     Ok(())
 }

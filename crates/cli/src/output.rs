@@ -72,7 +72,11 @@ fn check_extension(path: &Path, product: Product) -> Result<()> {
 
 /// The meshes of `--split interfaces|regions` as `(file name, mesh)`, in interface or
 /// region order; each vertex copies its position from `positions` bit for bit.
-fn split_meshes(args: &RegularizeArgs, surface: &DigitalSurface, positions: &[glam::DVec3]) -> Vec<(String, QuadMesh)> {
+fn split_meshes(
+    args: &RegularizeArgs,
+    surface: &DigitalSurface,
+    positions: &[glam::DVec3],
+) -> Vec<(String, QuadMesh)> {
     let params = PatchParams { manifold: args.manifold };
     let ext = args.split_format.extension();
     match args.split {
@@ -89,7 +93,10 @@ fn split_meshes(args: &RegularizeArgs, surface: &DigitalSurface, positions: &[gl
             .filter(|&r| Some(r) != surface.regions().background())
             .map(|r| {
                 let patch = surface.region_patch(r, &params);
-                (format!("{}.{ext}", region_name(surface, r)), QuadMesh::from_patch(surface, &patch, positions))
+                (
+                    format!("{}.{ext}", region_name(surface, r)),
+                    QuadMesh::from_patch(surface, &patch, positions),
+                )
             })
             .filter(|(_, mesh)| mesh.num_faces() > 0)
             .collect(),

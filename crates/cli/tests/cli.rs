@@ -456,7 +456,10 @@ fn check_reports_folds_and_fails() {
     let out = voxreg(&["check", path.to_str().unwrap()]);
     assert!(!out.status.success());
     let text = String::from_utf8_lossy(&out.stdout);
-    assert!(text.contains("0 self-intersecting face pairs, 0 folded quads, 1 folded adjacent pairs"), "{text}");
+    assert!(
+        text.contains("0 self-intersecting face pairs, 0 folded quads, 1 folded adjacent pairs"),
+        "{text}"
+    );
     assert!(stderr(&out).contains("1 folded adjacent pairs"), "{}", stderr(&out));
 }
 

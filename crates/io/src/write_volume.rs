@@ -153,16 +153,16 @@ pub fn write_vol(path: &Path, volume: &LabelVolume) -> Result<(), IoError> {
 mod tests {
     use super::*;
     use crate::{read_vol, read_vox};
+    use voxreg_testkit::Lcg;
 
     fn random_volume(dims: [usize; 3]) -> LabelVolume {
-        let mut state = 7u64;
+        let mut rng = Lcg::new(7);
         LabelVolume::from_fn(dims, |_| {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            let r = (state >> 33) % 5;
+            let r = rng.below(5);
             if r < 3 {
                 0
             } else {
-                (r * 50) as u32
+                r * 50
             }
         })
     }

@@ -12,6 +12,11 @@
 //!   reader; the same surface written as OBJ and counted.
 //! - **Failed writes** leave nothing behind: missing directory, a directory as target,
 //!   unknown extension, an invalid mesh (and an existing file is kept unchanged).
+//! - [`fuzz_readers`]: mutated files never make a reader panic; replayed regressions.
+//! - [`materials`]: colours and materials from .vox palettes to glTF, OBJ/MTL and PLY.
+
+mod fuzz_readers;
+mod materials;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};

@@ -95,14 +95,12 @@ pub(crate) fn smallest_eigenvector(m: DMat3) -> Option<DVec3> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use voxreg_testkit::Lcg;
 
     #[test]
     fn closed_form_agrees_with_jacobi() {
-        let mut seed = 99u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rng = Lcg::new(99);
+        let mut rnd = || rng.range(-0.5, 0.5);
         let mut closed = 0;
         for k in 0..2000 {
             let b = DMat3::from_cols_array(&[(); 9].map(|_| rnd()));
@@ -125,11 +123,8 @@ mod tests {
 
     #[test]
     fn decomposes_random_symmetric_matrices() {
-        let mut seed = 12345u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (seed >> 11) as f64 / (1u64 << 53) as f64 - 0.5
-        };
+        let mut rng = Lcg::new(12345);
+        let mut rnd = || rng.range(-0.5, 0.5);
         for _ in 0..1000 {
             let b = DMat3::from_cols_array(&[(); 9].map(|_| rnd()));
             let m = b + b.transpose();

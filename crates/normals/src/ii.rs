@@ -33,7 +33,7 @@ pub fn multigrid_radius(spacing: DVec3) -> f64 {
 /// ```
 ///
 /// Each is an exact sum over the voxels of `X` of a fixed weight: the moments of `T_p`
-/// over the ball ([`voxel_moments`]), tabulated once per radius. A tent inside the ball
+/// over the ball (`voxel_moments`), tabulated once per radius. A tent inside the ball
 /// has the closed-form moments of a point mass at its centre (times the voxel volume)
 /// plus `diag(h^2) / 6` in `M2`; only tents the sphere cuts are integrated numerically
 /// (exactly along x, Gauss-Legendre in `(y, z)`: the kernel's total moments match the
@@ -99,13 +99,13 @@ pub struct IntegralInvariant {
 /// moments within the ball (see [`IntegralInvariant`] and [`voxel_moments`]).
 /// The default is the moments of the empty set (all zero).
 #[derive(Copy, Clone, Debug, PartialEq)]
-pub struct BallMoments {
+pub(crate) struct BallMoments {
     /// Volume, `m0` (in physical units: voxel volume times an effective voxel count).
-    pub count: f64,
+    pub(crate) count: f64,
     /// First moment `m1 = int f (u - x) du`.
-    pub first: DVec3,
+    pub(crate) first: DVec3,
     /// Second moment `M2 = int f (u - x)(u - x)^T du` (symmetric).
-    pub second: DMat3,
+    pub(crate) second: DMat3,
 }
 
 impl Default for BallMoments {
@@ -117,7 +117,7 @@ impl Default for BallMoments {
 
 impl BallMoments {
     /// The covariance matrix `M2 - m1 m1^T / m0` (zero for an empty intersection).
-    pub fn covariance(&self) -> DMat3 {
+    pub(crate) fn covariance(&self) -> DMat3 {
         if self.count == 0.0 {
             return DMat3::ZERO;
         }
@@ -129,7 +129,7 @@ impl BallMoments {
     /// `hint` (`hint` itself where the covariance cannot tell a direction: an empty or
     /// one-voxel intersection). Where the two smallest eigenvalues tie, the direction of
     /// `hint` within their eigenplane.
-    pub fn normal(&self, hint: DVec3) -> DVec3 {
+    pub(crate) fn normal(&self, hint: DVec3) -> DVec3 {
         let cov = self.covariance();
         if let Some(n) = smallest_eigenvector(cov) {
             return if n.dot(hint) < 0.0 { -n } else { n };
@@ -182,7 +182,8 @@ fn to_moments(s: &Sums) -> BallMoments {
 /// [`IntegralInvariant`]'s moments are sums of these over the voxels of a region. Exact
 /// along x, by Gauss-Legendre quadrature in `(y, z)` where the sphere cuts the tent (see
 /// [`IntegralInvariant`]).
-pub fn voxel_moments(radius: f64, spacing: DVec3, centre: DVec3) -> BallMoments {
+#[cfg(test)]
+pub(crate) fn voxel_moments(radius: f64, spacing: DVec3, centre: DVec3) -> BallMoments {
     to_moments(&tent_sums(centre, spacing, radius * radius))
 }
 
@@ -549,7 +550,8 @@ impl IntegralInvariant {
 
     /// For each surfel, the [`BallMoments`] of the ball around its centre intersected with
     /// its `[inner, outer]` regions (exact sums over voxels, see the type's doc).
-    pub fn moments(&self, surface: &DigitalSurface) -> Result<Vec<[BallMoments; 2]>, NormalError> {
+    #[cfg(test)]
+    pub(crate) fn moments(&self, surface: &DigitalSurface) -> Result<Vec<[BallMoments; 2]>, NormalError> {
         let ctx = Context::new(surface, self.radius_for(surface))?;
         Ok(surface.surfels().par_iter().map(|s| ctx.moments(s)).collect())
     }
@@ -571,6 +573,7 @@ mod tests {
     use super::*;
     use std::f64::consts::PI;
     use voxreg_digisurf::LabelVolume;
+    use voxreg_testkit::{surfel_centre, Lcg};
 
     /// The exact moments of the ball of radius `r`: volume, zero first moment, isotropic
     /// second moment `4 pi r^5 / 15`.
@@ -700,6 +703,96 @@ mod tests {
         let normals = IntegralInvariant { radius: Some(0.6) }.estimate(&surface).unwrap();
         for (s, n) in surface.surfels().iter().zip(normals.as_slice()) {
             assert!((*n - s.normal()).length() < 1e-12, "{n} vs {}", s.normal());
+        }
+    }
+
+    /// The moments of the ball of radius `r` around each surfel centre intersected with the
+    /// surfel's `[inner, outer]` regions, by visiting every voxel near the domain and adding
+    /// its tent's moments within the ball ([`voxel_moments`]).
+    fn brute_force_moments(volume: &LabelVolume, surface: &DigitalSurface, r: f64) -> Vec<[BallMoments; 2]> {
+        let dims = volume.dims().map(|d| d as i64);
+        let spacing = volume.spacing();
+        let reach = (r / spacing.min_element()).ceil() as i64 + 2;
+        // Voxel weights depend on the offset from the surfel centre only: cache them.
+        let mut cache = std::collections::HashMap::new();
+        (0..surface.num_surfels())
+            .map(|s| {
+                let c = surfel_centre(surface, s);
+                let regions = surface.surfels()[s].regions;
+                let mut m = [BallMoments::default(); 2];
+                for z in -reach..dims[2] + reach {
+                    for y in -reach..dims[1] + reach {
+                        for x in -reach..dims[0] + reach {
+                            let Some(label) = volume.label([x, y, z]) else { continue };
+                            let region = surface.regions().region_of(label).unwrap();
+                            let Some(side) = regions.iter().position(|&q| q == region) else { continue };
+                            let u = volume.voxel_centre([x, y, z]) - c;
+                            if (u.abs() - spacing).max(DVec3::ZERO).length_squared() >= r * r {
+                                continue;
+                            }
+                            let key = (u / spacing * 2.0).round().as_ivec3().to_array();
+                            let w = *cache.entry(key).or_insert_with(|| voxel_moments(r, spacing, u));
+                            let m = &mut m[side];
+                            m.count += w.count;
+                            m.first += w.first;
+                            m.second += w.second;
+                        }
+                    }
+                }
+                m
+            })
+            .collect()
+    }
+
+    fn assert_moments_agree(fast: &[[BallMoments; 2]], slow: &[[BallMoments; 2]]) {
+        assert_eq!(fast.len(), slow.len());
+        for (s, (f, b)) in fast.iter().zip(slow).enumerate() {
+            for side in 0..2 {
+                let (f, b) = (f[side], b[side]);
+                let close = (f.count - b.count).abs() <= 1e-9
+                    && (f.first - b.first).abs().max_element() <= 1e-9
+                    && (f.second - b.second).abs_diff_eq(glam::DMat3::ZERO, 1e-8);
+                assert!(close, "surfel {s} side {side}: fast {f:?} vs brute force {b:?}");
+            }
+        }
+    }
+
+    /// A random multi-label volume: clumps of labels 1..=3 in background 0.
+    fn random_volume(rng: &mut Lcg, dims: [usize; 3]) -> LabelVolume {
+        let centres: Vec<([f64; 3], u32)> = (0..6)
+            .map(|_| {
+                let c = [0, 1, 2].map(|k| rng.below(dims[k] as u32) as f64);
+                (c, 1 + rng.below(3))
+            })
+            .collect();
+        LabelVolume::from_fn(dims, |p| {
+            let noise = rng.below(5) == 0;
+            let near =
+                centres.iter().find(|(c, _)| (0..3).map(|k| (p[k] as f64 - c[k]).powi(2)).sum::<f64>() < 7.0);
+            match (near, noise) {
+                (Some(&(_, l)), false) => l,
+                (_, true) => 1 + rng.below(3),
+                (None, false) => 0,
+            }
+        })
+    }
+
+    #[test]
+    fn ii_moments_are_exact_sums_over_voxels() {
+        let mut rng = Lcg::new(2024);
+        for (spacing, r) in
+            [(DVec3::ONE, 2.6), (DVec3::new(1.0, 1.3, 0.8), 2.71), (DVec3::new(0.5, 0.7, 0.6), 1.93)]
+        {
+            let volume = random_volume(&mut rng, [11, 9, 8])
+                .with_spacing(spacing)
+                .unwrap()
+                .with_origin(DVec3::new(2.0, -1.0, 0.5))
+                .unwrap();
+            for v in [volume.clone(), volume.with_background(None)] {
+                let surface = DigitalSurface::from_volume(&v).unwrap();
+                let fast = IntegralInvariant { radius: Some(r) }.moments(&surface).unwrap();
+                assert_moments_agree(&fast, &brute_force_moments(&v, &surface, r));
+            }
         }
     }
 }

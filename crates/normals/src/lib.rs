@@ -11,8 +11,7 @@
 //! - [`IntegralInvariant`]: the eigenvector of the smallest eigenvalue of the covariance of
 //!   a ball intersected with the surfel's region (digital integral invariants, ref. \[53\]);
 //!   multigrid convergent, error `O(h^{2/3})` with the default radius
-//!   [`multigrid_radius`] `= 3 h^{1/3}`. Exact digital moments, [`BallMoments`], in
-//!   `O(r^2)` per surfel.
+//!   [`multigrid_radius`] `= 3 h^{1/3}`. Exact digital moments in `O(r^2)` per surfel.
 //! - [`ConvolvedTrivial`]: trivial normals averaged over a geodesic disc of the surface.
 //!
 //! On multi-label volumes the ball-based and convolution estimators follow the paper's
@@ -52,7 +51,7 @@ mod trivial;
 pub use at::{AmbrosioTortorelli, AtInfo, AtLinearSolver, AtParams, AtSolver, FeatureField};
 pub use convolved::ConvolvedTrivial;
 pub use field::NormalField;
-pub use ii::{multigrid_radius, voxel_moments, BallMoments, IntegralInvariant};
+pub use ii::{multigrid_radius, IntegralInvariant};
 pub use refined::Refined;
 pub use trivial::Trivial;
 

@@ -133,4 +133,3 @@ fn refined(
         .collect();
     NormalField::new(out)
 }
-

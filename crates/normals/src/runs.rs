@@ -215,6 +215,7 @@ impl RegionRuns {
 mod tests {
     use super::*;
     use voxreg_digisurf::{LabelVolume, RegionMap};
+    use voxreg_testkit::Lcg;
 
     fn check(volume: &LabelVolume, map: &RegionMap) {
         let surface = DigitalSurface::new(volume, map).unwrap();
@@ -245,31 +246,16 @@ mod tests {
         }
     }
 
-    /// A small deterministic pseudo-random generator (no dev-dependency needed).
-    fn lcg(seed: &mut u64) -> u32 {
-        *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        (*seed >> 33) as u32
-    }
-
     #[test]
     fn recovers_random_multi_label_volumes() {
-        let mut seed = 7;
+        let mut rng = Lcg::new(7);
         for round in 0..40 {
-            let dims = [
-                1 + lcg(&mut seed) as usize % 7,
-                1 + lcg(&mut seed) as usize % 6,
-                1 + lcg(&mut seed) as usize % 5,
-            ];
+            let dims = [1 + rng.below(7) as usize, 1 + rng.below(6) as usize, 1 + rng.below(5) as usize];
             let labels = 2 + round as u32 % 3;
             // Sparse labels leave lines no surfel touches.
             let density = [2u32, 5, 20][round % 3];
-            let volume = LabelVolume::from_fn(dims, |_| {
-                if lcg(&mut seed) % density == 0 {
-                    1 + lcg(&mut seed) % labels
-                } else {
-                    0
-                }
-            });
+            let mut label = || if rng.below(density) == 0 { 1 + rng.below(labels) } else { 0 };
+            let volume = LabelVolume::from_fn(dims, |_| label());
             if DigitalSurface::from_volume(&volume).is_ok() {
                 check(&volume, &RegionMap::per_label());
             }

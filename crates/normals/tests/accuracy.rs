@@ -1,19 +1,16 @@
 //! Accuracy of the normal estimators against exact answers: analytic shapes with known
-//! normals (`voxreg-testkit`), errors that shrink as the grid refines, exact digital
-//! moments checked against brute-force sums, and multi-label configurations whose answer
-//! is known by symmetry.
+//! normals (`voxreg-testkit`), errors that shrink as the grid refines, and multi-label
+//! configurations whose answer is known by symmetry. (The exact digital moments are
+//! checked against brute-force sums beside the code, in `src/ii.rs`.)
 //!
-//! Run in release mode: `cargo test --release -p voxreg-normals --test accuracy`.
+//! Run in release mode: `cargo test --release -p voxreg-normals --test tests accuracy::`.
 
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, EdgeKind, LabelVolume};
 use voxreg_normals::{
-    multigrid_radius, voxel_moments, BallMoments, ConvolvedTrivial, IntegralInvariant, NormalEstimator,
-    NormalField, Trivial,
+    multigrid_radius, ConvolvedTrivial, IntegralInvariant, NormalEstimator, NormalField, Trivial,
 };
-use voxreg_testkit::{
-    angles_deg, digitize, mean_max, surfel_centre, true_normals, Goursat, Shape, Sphere, Torus,
-};
+use voxreg_testkit::{angles_deg, digitize, mean_max, true_normals, Goursat, Shape, Sphere, Torus};
 
 /// Mean and max angular error (degrees) of `estimator` on `shape` digitized at step `h`.
 fn errors(shape: &dyn Shape, h: f64, estimator: &dyn NormalEstimator) -> (f64, f64) {
@@ -21,102 +18,6 @@ fn errors(shape: &dyn Shape, h: f64, estimator: &dyn NormalEstimator) -> (f64, f
     let surface = DigitalSurface::from_volume(&volume).unwrap();
     let normals = estimator.estimate(&surface).unwrap();
     mean_max(&angles_deg(normals.as_slice(), &true_normals(&surface, shape)))
-}
-
-/// A small deterministic pseudo-random generator.
-fn lcg(seed: &mut u64) -> u32 {
-    *seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-    (*seed >> 33) as u32
-}
-
-/// The moments of the ball of radius `r` around each surfel centre intersected with the
-/// surfel's `[inner, outer]` regions, by visiting every voxel near the domain and adding
-/// its tent's moments within the ball ([`voxel_moments`]).
-fn brute_force_moments(volume: &LabelVolume, surface: &DigitalSurface, r: f64) -> Vec<[BallMoments; 2]> {
-    let dims = volume.dims().map(|d| d as i64);
-    let spacing = volume.spacing();
-    let reach = (r / spacing.min_element()).ceil() as i64 + 2;
-    // Voxel weights depend on the offset from the surfel centre only: cache them.
-    let mut cache = std::collections::HashMap::new();
-    (0..surface.num_surfels())
-        .map(|s| {
-            let c = surfel_centre(surface, s);
-            let regions = surface.surfels()[s].regions;
-            let mut m = [BallMoments::default(); 2];
-            for z in -reach..dims[2] + reach {
-                for y in -reach..dims[1] + reach {
-                    for x in -reach..dims[0] + reach {
-                        let Some(label) = volume.label([x, y, z]) else { continue };
-                        let region = surface.regions().region_of(label).unwrap();
-                        let Some(side) = regions.iter().position(|&q| q == region) else { continue };
-                        let u = volume.voxel_centre([x, y, z]) - c;
-                        if (u.abs() - spacing).max(DVec3::ZERO).length_squared() >= r * r {
-                            continue;
-                        }
-                        let key = (u / spacing * 2.0).round().as_ivec3().to_array();
-                        let w = *cache.entry(key).or_insert_with(|| voxel_moments(r, spacing, u));
-                        let m = &mut m[side];
-                        m.count += w.count;
-                        m.first += w.first;
-                        m.second += w.second;
-                    }
-                }
-            }
-            m
-        })
-        .collect()
-}
-
-fn assert_moments_agree(fast: &[[BallMoments; 2]], slow: &[[BallMoments; 2]]) {
-    assert_eq!(fast.len(), slow.len());
-    for (s, (f, b)) in fast.iter().zip(slow).enumerate() {
-        for side in 0..2 {
-            let (f, b) = (f[side], b[side]);
-            let close = (f.count - b.count).abs() <= 1e-9
-                && (f.first - b.first).abs().max_element() <= 1e-9
-                && (f.second - b.second).abs_diff_eq(glam::DMat3::ZERO, 1e-8);
-            assert!(close, "surfel {s} side {side}: fast {f:?} vs brute force {b:?}");
-        }
-    }
-}
-
-/// A random multi-label volume: clumps of labels 1..=3 in background 0.
-fn random_volume(seed: &mut u64, dims: [usize; 3]) -> LabelVolume {
-    let centres: Vec<([f64; 3], u32)> = (0..6)
-        .map(|_| {
-            let c = [0, 1, 2].map(|k| (lcg(seed) % dims[k] as u32) as f64);
-            (c, 1 + lcg(seed) % 3)
-        })
-        .collect();
-    LabelVolume::from_fn(dims, |p| {
-        let noise = lcg(seed) % 5 == 0;
-        let near =
-            centres.iter().find(|(c, _)| (0..3).map(|k| (p[k] as f64 - c[k]).powi(2)).sum::<f64>() < 7.0);
-        match (near, noise) {
-            (Some(&(_, l)), false) => l,
-            (_, true) => 1 + lcg(seed) % 3,
-            (None, false) => 0,
-        }
-    })
-}
-
-#[test]
-fn ii_moments_are_exact_sums_over_voxels() {
-    let mut seed = 2024;
-    for (spacing, r) in
-        [(DVec3::ONE, 2.6), (DVec3::new(1.0, 1.3, 0.8), 2.71), (DVec3::new(0.5, 0.7, 0.6), 1.93)]
-    {
-        let volume = random_volume(&mut seed, [11, 9, 8])
-            .with_spacing(spacing)
-            .unwrap()
-            .with_origin(DVec3::new(2.0, -1.0, 0.5))
-            .unwrap();
-        for v in [volume.clone(), volume.with_background(None)] {
-            let surface = DigitalSurface::from_volume(&v).unwrap();
-            let fast = IntegralInvariant { radius: Some(r) }.moments(&surface).unwrap();
-            assert_moments_agree(&fast, &brute_force_moments(&v, &surface, r));
-        }
-    }
 }
 
 #[test]

@@ -26,7 +26,7 @@
 //! Unit tests beside the code (`src/at.rs`) check that the assembled systems are the exact
 //! Hessians of the discrete energy and that CG and Cholesky agree.
 //!
-//! Run in release mode: `cargo test --release -p voxreg-normals --test at -- --nocapture`
+//! Run in release mode: `cargo test --release -p voxreg-normals --test tests at:: -- --nocapture`
 //! prints the measurements.
 
 use std::collections::HashMap;
@@ -856,7 +856,7 @@ fn invalid_parameters_are_rejected() {
 /// the pairs, degrees) on cubes and lenses from the default input (II) and from exact
 /// normals with 10 degrees of noise, with the sharpening thresholds 0.3 and 0.4; then the
 /// mean error on spheres (II, plain AT, sharpened with either threshold). About a minute:
-/// `cargo test --release -p voxreg-normals --test at -- --ignored --nocapture crease_criterion_table`
+/// `cargo test --release -p voxreg-normals --test tests -- --ignored --nocapture crease_criterion_table`
 #[test]
 #[ignore]
 fn crease_criterion_table() {
@@ -921,7 +921,7 @@ fn crease_criterion_table() {
 /// The README's figures for AT's CG tolerance on bunny-128: CG iterations, and how far the
 /// fields lie from exact solves (CG to `1e-11`), at the default `1e-5` and at `1e-6`; the
 /// iterations without the sharpening stage.
-/// `cargo test --release -p voxreg-normals --test at -- --ignored --nocapture bunny_cg_tolerance`
+/// `cargo test --release -p voxreg-normals --test tests -- --ignored --nocapture bunny_cg_tolerance`
 #[test]
 #[ignore]
 fn bunny_cg_tolerance() {

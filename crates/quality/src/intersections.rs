@@ -271,11 +271,16 @@ mod tests {
         ];
         let quads = vec![[0, 1, 2, 3], [1, 0, 3, 2]];
         assert!(self_intersections(&p, &quads).is_empty());
-        // The same squares without shared vertex ids do intersect.
+        // Duplicated vertices at the same positions count as shared too.
         let mut p2 = p.clone();
         p2.push(DVec3::new(1.0, 1.0, 0.0));
         p2.push(DVec3::new(0.0, 1.0, 0.0));
-        assert_eq!(self_intersections(&p2, &[[0, 1, 2, 3], [5, 4, 7, 6]]), vec![(0, 1)]);
+        assert!(self_intersections(&p2, &[[0, 1, 2, 3], [5, 4, 7, 6]]).is_empty());
+        // Overlapping squares that share no position do intersect.
+        let shifted: Vec<DVec3> = p2[4..].iter().map(|v| *v + DVec3::new(0.5, 0.0, 0.0)).collect();
+        let mut p3 = p2[..4].to_vec();
+        p3.extend(shifted);
+        assert_eq!(self_intersections(&p3, &[[0, 1, 2, 3], [5, 4, 7, 6]]), vec![(0, 1)]);
     }
 
     #[test]

@@ -203,10 +203,19 @@ mod tests {
     #[test]
     fn duplicated_vertices_at_one_position_count_as_shared() {
         // Two quads meeting at one corner, the corner duplicated: no intersection.
-        let p: Vec<DVec3> = [[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.], [1., 1., 0.], [2., 1., 0.], [2., 2., 0.], [1., 2., 0.]]
-            .iter()
-            .map(|&a| DVec3::from_array(a))
-            .collect();
+        let p: Vec<DVec3> = [
+            [0., 0., 0.],
+            [1., 0., 0.],
+            [1., 1., 0.],
+            [0., 1., 0.],
+            [1., 1., 0.],
+            [2., 1., 0.],
+            [2., 2., 0.],
+            [1., 2., 0.],
+        ]
+        .iter()
+        .map(|&a| DVec3::from_array(a))
+        .collect();
         let q = [[0, 1, 2, 3], [4, 5, 6, 7]];
         assert!(self_intersections(&p, &q).is_empty());
     }

@@ -8,11 +8,11 @@ use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
 use crate::cg::check_tolerance;
+use crate::info::{BoundedInfo, SolveTimings};
 use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
 use crate::vecops::{dot, norm, tail_estimate};
-use crate::info::{BoundedInfo, SolveTimings};
 use crate::{Energy, Progress, RegularizeError};
 
 /// Parameters of [`BoundedSolver`].

@@ -78,7 +78,9 @@ fn split(u: &[DVec3], r: &[DVec3], w: DVec3, phi: &mut [DVec3], beta: &mut [DVec
             }
             (f, b)
         })
-        .reduce(|| (0.0, 0.0), |x, y| (x.0 + y.0, x.1 + y.1))
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold((0.0, 0.0), |x, y| (x.0 + y.0, x.1 + y.1))
 }
 
 /// Zeroes the coordinates of `z` that are not on the face of `u`.

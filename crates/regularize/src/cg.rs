@@ -6,11 +6,11 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
+use crate::info::{CgInfo, SolveTimings};
 use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
 use crate::vecops::{cg_update, dot, norm, scale_add, tail_estimate};
-use crate::info::{SolveTimings, CgInfo};
 use crate::{Energy, Progress, RegularizeError};
 
 /// When an iterative solver stops.

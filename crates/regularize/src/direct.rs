@@ -11,7 +11,7 @@ use faer::sparse::linalg::cholesky::{
 use faer::{Conj, MatMut, Side};
 use glam::DVec3;
 
-use crate::info::{SolveTimings, DirectInfo};
+use crate::info::{DirectInfo, SolveTimings};
 use crate::{Energy, Operator, OperatorPattern, RegularizeError};
 
 /// A direct solver for the energy's linear system, reusable across solves on the same

@@ -5,6 +5,7 @@ use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, VertexId};
 use voxreg_normals::NormalField;
 
+use crate::vecops::ordered_sum;
 use crate::{RegularizeError, Weights};
 
 /// Weights of the three terms of the energy (eq. 2 of the paper).
@@ -231,32 +232,21 @@ impl<'a> Energy<'a> {
 
     /// The value of each term at positions `p`.
     pub fn terms(&self, p: &[DVec3]) -> EnergyTerms {
-        let attachment = p
-            .par_iter()
-            .zip(self.input)
-            .enumerate()
-            .map(|(i, (a, b))| self.alpha_at(i) * (*a - *b).length_squared())
-            .sum::<f64>();
-        let alignment = self
-            .surface
-            .surfels()
-            .par_iter()
-            .zip(self.normals)
-            .enumerate()
-            .map(|(f, (s, n))| {
-                self.beta_at(f)
-                    * (0..4)
-                        .map(|i| {
-                            let e = p[s.vertices[i].index()] - p[s.vertices[(i + 1) % 4].index()];
-                            e.dot(*n).powi(2)
-                        })
-                        .sum::<f64>()
-            })
-            .sum::<f64>();
-        let fairness = (0..p.len())
-            .into_par_iter()
-            .map(|v| self.gamma_at(v) * self.barycenter_residual(p, v).length_squared())
-            .sum::<f64>();
+        let attachment = ordered_sum(p.len(), |i| self.alpha_at(i) * (p[i] - self.input[i]).length_squared());
+        let surfels = self.surface.surfels();
+        let alignment = ordered_sum(surfels.len(), |f| {
+            let s = &surfels[f];
+            let n = self.normals[f];
+            self.beta_at(f)
+                * (0..4)
+                    .map(|i| {
+                        let e = p[s.vertices[i].index()] - p[s.vertices[(i + 1) % 4].index()];
+                        e.dot(n).powi(2)
+                    })
+                    .sum::<f64>()
+        });
+        let fairness =
+            ordered_sum(p.len(), |v| self.gamma_at(v) * self.barycenter_residual(p, v).length_squared());
         EnergyTerms { attachment, alignment, fairness, total: attachment + alignment + fairness }
     }
 

@@ -61,8 +61,8 @@
 //! None.
 
 mod assemble;
-mod boxqp;
 mod bounded;
+mod boxqp;
 mod cg;
 mod direct;
 mod energy;

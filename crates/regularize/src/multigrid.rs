@@ -7,20 +7,14 @@
 //! translations only pay the small attachment term). Coarse operators are 3x3-block
 //! sparse rows, stored in `f32`, and the whole cycle runs in `f32` SIMD vectors, the
 //! surface's own residuals included (it only preconditions: the answer's accuracy is set
-//! by CG's `f64` products and residuals). With `f32` the cycle costs 27% fewer
-//! instructions per solve than in `f64` (cachegrind, sphere of 20k quads), with the same
-//! iteration counts. The coarsest level (at most `coarsest_nodes` nodes; the
+//! by CG's `f64` products and residuals; see `docs/design/solver-choice.md`). The
+//! coarsest level (at most `coarsest_nodes` nodes; the
 //! surface itself when it is that small) is factored by sparse Cholesky. The cycle is a
 //! symmetric V-cycle whose smoother steps along `M^-1 r` for a block-diagonal majorant
 //! `M >= H` (a block l1-Jacobi that leaves tangential directions undamped), convergent
 //! for any damping in `(0, 2)` without eigenvalue estimates: a fixed symmetric positive
-//! definite preconditioner.
-//!
-//! Measured (spheres, exact normals): about 20 CG iterations to 1e-3 voxel whatever the
-//! size, against 200-640 with block Jacobi; about 55 with the trivial (axis) normals,
-//! whose alignment couplings are strongly anisotropic, which piecewise-constant
-//! aggregation captures poorly (a two-level cycle with exact coarse solve and 8 smoothing
-//! steps still needs 22).
+//! definite preconditioner. Its iteration counts on smooth fields are nearly independent
+//! of the surface's size (`docs/performance.md`).
 
 use std::time::Instant;
 
@@ -528,8 +522,7 @@ fn l1_smoother(rows: &Rows, damping: f64) -> Vec<Block> {
 }
 
 /// A 3x3-block sparse row matrix in `f32`, its products in SIMD `f32` (it only
-/// preconditions): about 3 times fewer instructions per block than in `f64` with
-/// per-block conversions.
+/// preconditions).
 #[derive(Clone, Debug, Default)]
 pub(crate) struct Bsr {
     offsets: Vec<u32>,

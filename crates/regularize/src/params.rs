@@ -3,8 +3,8 @@
 use serde::Serialize;
 use voxreg_digisurf::{DigitalSurface, RegionMap};
 use voxreg_normals::{
-    multigrid_radius, AmbrosioTortorelli, AtInfo, AtParams, ConvolvedTrivial, FeatureField, IntegralInvariant,
-    NormalEstimator, NormalField, Trivial,
+    multigrid_radius, AmbrosioTortorelli, AtInfo, AtParams, ConvolvedTrivial, FeatureField,
+    IntegralInvariant, NormalEstimator, NormalField, Trivial,
 };
 
 use crate::{EnergyParams, RegularizeError, SolverChoice, SolverParams};
@@ -115,7 +115,9 @@ impl NormalsParams {
                 let (field, features, info) = self.at_estimator().estimate_with_info(surface)?;
                 EstimatedNormals { field, features: Some(features), at_info: Some(info) }
             }
-            _ => EstimatedNormals { field: self.estimator().estimate(surface)?, features: None, at_info: None },
+            _ => {
+                EstimatedNormals { field: self.estimator().estimate(surface)?, features: None, at_info: None }
+            }
         })
     }
 }

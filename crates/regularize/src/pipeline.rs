@@ -58,7 +58,11 @@ fn straddling_quads(surface: &DigitalSurface, field: &NormalField, feature_angle
 /// which is a Gaussian of standard deviation `sigma` voxels on a flat grid (each step
 /// adds a variance of 1/4 voxel^2 per axis). Diffusion follows the surface, so the
 /// two sheets of a thin shape never mix; at junctions it runs across interfaces.
-pub(crate) fn smoothed_displacements(surface: &DigitalSurface, displacements: &[DVec3], sigma: f64) -> Vec<DVec3> {
+pub(crate) fn smoothed_displacements(
+    surface: &DigitalSurface,
+    displacements: &[DVec3],
+    sigma: f64,
+) -> Vec<DVec3> {
     let steps = (4.0 * sigma * sigma).round() as usize;
     let mut u = displacements.to_vec();
     let mut next = vec![DVec3::ZERO; u.len()];
@@ -109,7 +113,12 @@ pub(crate) fn informative_vertices(surface: &DigitalSurface) -> Vec<bool> {
 /// indicator of trust), so that a plateau's interior takes the drift of its rim. Far from
 /// any trusted vertex (deep inside a large flat face), it falls back continuously to the
 /// plain smoothed drift. An empty `trusted` trusts every vertex.
-pub(crate) fn trusted_drift(surface: &DigitalSurface, drift: &[DVec3], trusted: &[bool], sigma: f64) -> Vec<DVec3> {
+pub(crate) fn trusted_drift(
+    surface: &DigitalSurface,
+    drift: &[DVec3],
+    trusted: &[bool],
+    sigma: f64,
+) -> Vec<DVec3> {
     if trusted.is_empty() || trusted.iter().all(|&t| t) {
         return smoothed_displacements(surface, drift, sigma);
     }

@@ -91,7 +91,13 @@ pub struct Regularizer {
 impl Regularizer {
     /// A regularizer of `surface`.
     pub fn new(surface: impl Into<Arc<DigitalSurface>>) -> Self {
-        Regularizer { surface: surface.into(), surface_seconds: 0.0, solver: None, normals: None, trusted: None }
+        Regularizer {
+            surface: surface.into(),
+            surface_seconds: 0.0,
+            solver: None,
+            normals: None,
+            trusted: None,
+        }
     }
 
     /// A regularizer of `volume`'s digital surface, its labels grouped by `regions`.
@@ -187,7 +193,11 @@ impl Regularizer {
         for round in 0..=params.refine {
             if round > 0 {
                 let t = Instant::now();
-                progress(&Event { stage: Stage::Refine { round }, fraction: done / stages_total, iteration: None });
+                progress(&Event {
+                    stage: Stage::Refine { round },
+                    fraction: done / stages_total,
+                    iteration: None,
+                });
                 field = Refined {
                     positions: &positions,
                     previous: &field,
@@ -196,8 +206,12 @@ impl Regularizer {
                 }
                 .estimate(&surface)?;
                 if recentre {
-                    let drift =
-                        trusted_drift(&surface, &surfel_drift(&surface, &positions, &input), trusted, params.recentre_sigma);
+                    let drift = trusted_drift(
+                        &surface,
+                        &surfel_drift(&surface, &positions, &input),
+                        trusted,
+                        params.recentre_sigma,
+                    );
                     targets.iter_mut().zip(&drift).for_each(|(t, d)| *t -= *d);
                 }
                 times.refine += t.elapsed().as_secs_f64();

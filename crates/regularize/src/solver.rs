@@ -47,13 +47,11 @@ pub struct SolverParams {
     /// The solver. Default: [`SolverChoice::Auto`].
     pub choice: SolverChoice,
     /// Bytes the automatic choice lets the direct solver's Cholesky factor take
-    /// (`8 * factor_nnz`); above, it iterates. The factor grows like `n^1.27` (measured on
-    /// spheres: 100 entries per unknown at 176 vertices, 540 at 120k) and its numeric
-    /// factorization is slower than the multigrid CG at every size measured (2.6k
-    /// vertices: 85 ms vs 36 ms; 24k: 1.6 s vs 0.12 s), so the default only takes the exact
-    /// route where it is cheap: surfaces of up to about 3,000 vertices. Raise it (or
-    /// choose [`SolverChoice::Direct`]) to trade time for an answer exact to rounding.
-    /// Default: `16 MiB`.
+    /// (`8 * factor_nnz`); above, it iterates. The factor grows faster than the surface
+    /// and its factorization is slower than the multigrid CG, so the default only takes
+    /// the exact route where it is cheap: surfaces of up to about 3,000 vertices
+    /// (`docs/design/solver-choice.md`). Raise it (or choose [`SolverChoice::Direct`]) to
+    /// trade time for an answer exact to rounding. Default: `16 MiB`.
     pub direct_budget: usize,
     /// Settings of the conjugate gradient. Default: [`CgParams::default`].
     pub cg: CgParams,

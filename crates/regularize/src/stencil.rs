@@ -282,35 +282,32 @@ impl Stencil {
         // Pass 2: attachment, alignment, and (I - B)^T of the fairness residuals.
         // Returns `x . y`, summed per chunk (free: `y_i` is in registers).
         let t = &*t;
-        y.par_chunks_mut(CHUNK)
-            .enumerate()
-            .map(|(k, out)| {
-                let base = k * CHUNK;
-                let mut xy = 0.0;
-                for (o, yi) in out.iter_mut().enumerate() {
-                    let i = base + o;
-                    let xi = x[i];
-                    let mut acc = if with_alpha { c.alpha.get(i) * xi } else { DVec3::ZERO };
-                    let (start, end) = (self.face_offsets[i] as usize, self.face_offsets[i + 1] as usize);
-                    for (s, m) in self.face_slots[start..end].iter().zip(&c.slot_normals[start..end]) {
-                        let d = (2.0 * xi - x[s.prev as usize] - x[s.next as usize]).dot(*m);
-                        acc += d * *m;
-                    }
-                    let nb = self.fair_neighbours(i);
-                    let mut sum = DVec3::ZERO;
-                    for &j in nb {
-                        sum += t[j as usize];
-                    }
-                    let hx = acc + (nb.len() as f64) * t[i] - sum;
-                    *yi = match b {
-                        Some(b) => b[i] - hx,
-                        None => hx,
-                    };
-                    xy += xi.dot(*yi);
+        crate::vecops::ordered(y.par_chunks_mut(CHUNK).enumerate().map(|(k, out)| {
+            let base = k * CHUNK;
+            let mut xy = 0.0;
+            for (o, yi) in out.iter_mut().enumerate() {
+                let i = base + o;
+                let xi = x[i];
+                let mut acc = if with_alpha { c.alpha.get(i) * xi } else { DVec3::ZERO };
+                let (start, end) = (self.face_offsets[i] as usize, self.face_offsets[i + 1] as usize);
+                for (s, m) in self.face_slots[start..end].iter().zip(&c.slot_normals[start..end]) {
+                    let d = (2.0 * xi - x[s.prev as usize] - x[s.next as usize]).dot(*m);
+                    acc += d * *m;
                 }
-                xy
-            })
-            .sum()
+                let nb = self.fair_neighbours(i);
+                let mut sum = DVec3::ZERO;
+                for &j in nb {
+                    sum += t[j as usize];
+                }
+                let hx = acc + (nb.len() as f64) * t[i] - sum;
+                *yi = match b {
+                    Some(b) => b[i] - hx,
+                    None => hx,
+                };
+                xy += xi.dot(*yi);
+            }
+            xy
+        }))
     }
 
     /// The 3x3 diagonal blocks of `H`, as symmetric `[xx, yy, zz, xy, xz, yz]`.
@@ -370,11 +367,8 @@ mod tests {
         })
         .with_background(None);
         let s = DigitalSurface::from_volume(&volume).unwrap();
-        let mut seed = 7u64;
-        let mut rnd = || {
-            seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            ((seed >> 11) as f64) / ((1u64 << 53) as f64)
-        };
+        let mut rng = voxreg_testkit::Lcg::new(7);
+        let mut rnd = || rng.next_f64();
         let normals = NormalField::new(
             s.surfels()
                 .iter()

@@ -6,11 +6,30 @@ use rayon::prelude::*;
 use crate::stencil::CHUNK;
 
 /// `sum_i a_i . b_i`.
+///
+/// Every parallel sum of the solvers adds per-chunk partial sums in chunk order
+/// ([`ordered`]), so results do not depend on the number of threads.
 pub(crate) fn dot(a: &[DVec3], b: &[DVec3]) -> f64 {
-    a.par_chunks(CHUNK)
-        .zip(b.par_chunks(CHUNK))
-        .map(|(a, b)| a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum::<f64>())
-        .sum()
+    ordered(
+        a.par_chunks(CHUNK)
+            .zip(b.par_chunks(CHUNK))
+            .map(|(a, b)| a.iter().zip(b).map(|(x, y)| x.dot(*y)).sum::<f64>()),
+    )
+}
+
+/// The sum of a parallel iterator's items in their order (partials collected, then added
+/// sequentially): the same bits at every thread count.
+pub(crate) fn ordered(parts: impl IndexedParallelIterator<Item = f64>) -> f64 {
+    parts.collect::<Vec<f64>>().iter().sum()
+}
+
+/// `sum_{i < n} f(i)`, in parallel over chunks of [`CHUNK`] indices, in a fixed order.
+pub(crate) fn ordered_sum(n: usize, f: impl Fn(usize) -> f64 + Sync + Send) -> f64 {
+    ordered(
+        (0..n.div_ceil(CHUNK))
+            .into_par_iter()
+            .map(|c| (c * CHUNK..((c + 1) * CHUNK).min(n)).map(&f).sum::<f64>()),
+    )
 }
 
 /// `sqrt(sum_i |a_i|^2)`.
@@ -42,7 +61,9 @@ pub(crate) fn cg_update(u: &mut [DVec3], r: &mut [DVec3], a: f64, p: &[DVec3], q
             }
             (s, m)
         })
-        .reduce(|| (0.0, 0.0), |x, y| (x.0 + y.0, x.1.max(y.1)))
+        .collect::<Vec<_>>()
+        .into_iter()
+        .fold((0.0, 0.0), |x, y| (x.0 + y.0, x.1.max(y.1)))
 }
 
 /// Geometric-series estimate of the remaining error from the last step's largest vertex

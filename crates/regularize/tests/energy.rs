@@ -4,20 +4,12 @@ use glam::DVec3;
 use proptest::prelude::*;
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
 use voxreg_normals::{NormalEstimator, NormalField, Trivial};
-use voxreg_regularize::{DirectSolver, Energy, EnergyParams, Operator, OperatorPattern, Params, Regularizer, SolverChoice};
+use voxreg_regularize::{
+    DirectSolver, Energy, EnergyParams, Operator, OperatorPattern, Params, Regularizer, SolverChoice,
+};
+use voxreg_testkit::Lcg;
 
 /// A tiny deterministic generator (tests must not depend on a seed source).
-struct Lcg(u64);
-impl Lcg {
-    fn next(&mut self) -> f64 {
-        self.0 = self.0.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        ((self.0 >> 11) as f64) / ((1u64 << 53) as f64) - 0.5
-    }
-    fn vec(&mut self) -> DVec3 {
-        DVec3::new(self.next(), self.next(), self.next())
-    }
-}
-
 fn ball(r: f64) -> LabelVolume {
     let n = (2.0 * r) as usize + 3;
     let c = (n as f64 - 1.0) / 2.0;
@@ -43,7 +35,7 @@ fn three_labels_open() -> LabelVolume {
 
 /// Random unit normals (not the trivial ones), to exercise all couplings.
 fn random_normals(s: &DigitalSurface, rng: &mut Lcg) -> NormalField {
-    NormalField::new(s.surfels().iter().map(|sf| sf.normal() + 0.7 * rng.vec()).collect())
+    NormalField::new(s.surfels().iter().map(|sf| sf.normal() + 0.7 * rng.vec3(-0.5, 0.5)).collect())
 }
 
 fn cases() -> Vec<(&'static str, DigitalSurface)> {
@@ -62,13 +54,13 @@ fn cases() -> Vec<(&'static str, DigitalSurface)> {
 
 #[test]
 fn gradient_matches_finite_differences() {
-    let mut rng = Lcg(1);
+    let mut rng = Lcg::new(1);
     for (name, s) in cases() {
         let normals = random_normals(&s, &mut rng);
         let input = s.positions();
         let energy =
             Energy::new(&s, &normals, &input, EnergyParams { alpha: 0.3, beta: 1.1, gamma: 0.7 }).unwrap();
-        let p: Vec<DVec3> = input.iter().map(|q| *q + 0.3 * rng.vec()).collect();
+        let p: Vec<DVec3> = input.iter().map(|q| *q + 0.3 * rng.vec3(-0.5, 0.5)).collect();
         let g = energy.gradient(&p);
         let h = 1e-5;
         for v in (0..p.len()).step_by(3) {
@@ -90,14 +82,14 @@ fn gradient_matches_finite_differences() {
 
 #[test]
 fn operator_matches_gradient_and_energy() {
-    let mut rng = Lcg(2);
+    let mut rng = Lcg::new(2);
     for (name, s) in cases() {
         let normals = random_normals(&s, &mut rng);
         let input = s.positions();
         let params = EnergyParams { alpha: 0.01, beta: 1.0, gamma: 0.25 };
         let energy = Energy::new(&s, &normals, &input, params).unwrap();
         let op = Operator::assemble(&OperatorPattern::new(&s).unwrap(), &energy);
-        let p: Vec<DVec3> = input.iter().map(|q| *q + rng.vec()).collect();
+        let p: Vec<DVec3> = input.iter().map(|q| *q + rng.vec3(-0.5, 0.5)).collect();
         let flat: Vec<f64> = p.iter().flat_map(|v| v.to_array()).collect();
         let hp = op.apply(&flat);
         let g = energy.gradient(&p);
@@ -132,7 +124,7 @@ fn exact_solve(s: &DigitalSurface, normals: &NormalField) -> voxreg_regularize::
 
 #[test]
 fn direct_solution_is_optimal() {
-    let mut rng = Lcg(3);
+    let mut rng = Lcg::new(3);
     for (name, s) in cases() {
         for normals in [Trivial.estimate(&s).unwrap(), random_normals(&s, &mut rng)] {
             let input = s.positions();
@@ -144,7 +136,7 @@ fn direct_solution_is_optimal() {
             let ex = energy.terms(&x).total;
             assert!(ex <= energy.terms(&input).total + 1e-12, "{name}");
             for _ in 0..20 {
-                let y: Vec<DVec3> = x.iter().map(|v| *v + 1e-3 * rng.vec()).collect();
+                let y: Vec<DVec3> = x.iter().map(|v| *v + 1e-3 * rng.vec3(-0.5, 0.5)).collect();
                 assert!(energy.terms(&y).total > ex, "{name}: a perturbation has lower energy");
             }
         }
@@ -227,8 +219,8 @@ proptest! {
         seed in any::<u64>(),
         open in any::<bool>(),
     ) {
-        let mut rng = Lcg(seed);
-        let vol = LabelVolume::from_fn([dims.0, dims.1, dims.2], |_| ((rng.next() + 0.5) * 3.0) as u32);
+        let mut rng = Lcg::new(seed);
+        let vol = LabelVolume::from_fn([dims.0, dims.1, dims.2], |_| ((rng.range(-0.5, 0.5) + 0.5) * 3.0) as u32);
         let vol = if open { vol.with_background(None) } else { vol };
         let Ok(s) = DigitalSurface::from_volume(&vol) else { return Ok(()) };
         let normals = random_normals(&s, &mut rng);
@@ -244,20 +236,20 @@ proptest! {
 #[test]
 fn weighted_and_masked_energy_is_consistent() {
     use voxreg_regularize::{FairnessMask, Weights};
-    let mut rng = Lcg(21);
+    let mut rng = Lcg::new(21);
     for (name, s) in cases() {
         let normals = random_normals(&s, &mut rng);
         let input = s.positions();
-        let cut: Vec<bool> = (0..s.num_edges()).map(|_| rng.next() > 0.2).collect();
+        let cut: Vec<bool> = (0..s.num_edges()).map(|_| rng.range(-0.5, 0.5) > 0.2).collect();
         let weights = Weights {
-            alpha: Some((0..s.num_vertices()).map(|_| 0.6 + rng.next()).collect()),
-            beta: Some((0..s.num_surfels()).map(|_| 0.6 + rng.next()).collect()),
-            gamma: Some((0..s.num_vertices()).map(|_| 0.6 + rng.next()).collect()),
+            alpha: Some((0..s.num_vertices()).map(|_| 0.6 + rng.range(-0.5, 0.5)).collect()),
+            beta: Some((0..s.num_surfels()).map(|_| 0.6 + rng.range(-0.5, 0.5)).collect()),
+            gamma: Some((0..s.num_vertices()).map(|_| 0.6 + rng.range(-0.5, 0.5)).collect()),
             fairness: Some(FairnessMask::from_cut_edges(&s, &cut).unwrap()),
         };
         let params = EnergyParams { alpha: 0.3, beta: 1.1, gamma: 0.7 };
         let energy = Energy::new(&s, &normals, &input, params).unwrap().with_weights(&weights).unwrap();
-        let p: Vec<DVec3> = input.iter().map(|q| *q + 0.3 * rng.vec()).collect();
+        let p: Vec<DVec3> = input.iter().map(|q| *q + 0.3 * rng.vec3(-0.5, 0.5)).collect();
         let g = energy.gradient(&p);
         let h = 1e-5;
         for v in 0..p.len() {

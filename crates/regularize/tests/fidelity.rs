@@ -3,26 +3,11 @@
 //! degrees, quad scaled Jacobian).
 
 use glam::DVec3;
-use voxreg_baselines::{accuracy, quality, Accuracy, Implicit, Mesh, QualityParams};
+use voxreg_baselines::{accuracy, quality, Accuracy, Mesh, QualityParams};
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
 use voxreg_normals::{IntegralInvariant, NormalEstimator, NormalField, Refined, Trivial};
 use voxreg_regularize::{Params, Regularizer, SolverParams};
 use voxreg_testkit::{angles_deg, digitize, mean_max, Cuboid, Goursat, Shape, Sphere, Torus};
-
-/// The test kit's shapes seen as the baselines' [`Implicit`].
-struct AsImplicit<'a>(&'a dyn Shape);
-
-impl Implicit for AsImplicit<'_> {
-    fn value(&self, p: DVec3) -> f64 {
-        self.0.value(p)
-    }
-    fn gradient(&self, p: DVec3) -> DVec3 {
-        self.0.gradient(p)
-    }
-    fn project(&self, p: DVec3) -> DVec3 {
-        self.0.project(p)
-    }
-}
 
 /// Digitizes `shape` at step `h`, runs the pipeline from default integral-invariant
 /// normals, and measures the result: accuracy in voxels, and the minimum scaled Jacobian.
@@ -32,7 +17,7 @@ fn measure(shape: &dyn Shape, h: f64, params: &Params) -> (Accuracy, f64) {
     assert_eq!(out.report.solves.len(), params.refine + 1);
     assert!(out.report.converged());
     let mesh = Mesh::from_surface(&surface, &out.positions);
-    let mut acc = accuracy(&mesh, &AsImplicit(shape));
+    let mut acc = accuracy(&mesh, &shape);
     acc.distance_mean /= h;
     acc.distance_max /= h;
     acc.bias /= h;

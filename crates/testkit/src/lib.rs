@@ -1,10 +1,13 @@
 //! Dev-only test kit: analytic shapes with known surfaces and normals, their Gauss
-//! digitizations, and error metrics. Shared by tests, benches and xtask.
+//! digitizations, error metrics, and a deterministic random generator ([`Lcg`]). Shared by
+//! tests, benches and xtask.
 //!
 //! A shape is an implicit function `f` (inside where `f <= 0`). [`digitize`] makes the
 //! volume whose voxel `p` (integer coordinates) is inside iff `f(h p) <= 0`, with spacing
 //! `h` and an origin such that voxel centres sit at `h p`: physical coordinates of the
-//! surface are then directly comparable with the shape's.
+//! surface are then directly comparable with the shape's. Every shape here is also a
+//! `voxreg_baselines::Implicit`, so it goes straight into the baselines' metrics, as do
+//! `&dyn Shape` and `Box<dyn Shape>`.
 //!
 //! # Example
 //!
@@ -19,8 +22,13 @@
 //! assert_eq!(normals.len(), surface.num_surfels());
 //! ```
 
+mod rng;
+
+pub use rng::Lcg;
+
 use glam::DVec3;
 use rayon::prelude::*;
+use voxreg_baselines::Implicit;
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
 
 /// An implicit shape: inside where [`Shape::value`] `<= 0`.
@@ -184,13 +192,49 @@ impl Shape for Cuboid {
         "cuboid"
     }
     fn project(&self, p: DVec3) -> DVec3 {
-        let g = self.gradient(p);
+        let g = Shape::gradient(self, p);
         let k = (0..3).find(|&k| g[k] != 0.0).unwrap_or(0);
         let mut q = p.clamp(-self.half, self.half);
         q[k] = self.half[k] * p[k].signum();
         q
     }
 }
+
+/// Implements the baselines' [`Implicit`] by [`Shape`]'s methods, for shapes and (`deref`)
+/// for pointers to shapes.
+macro_rules! implicit_from_shape {
+    ($($t:ty),*) => {$(
+        impl Implicit for $t {
+            fn value(&self, p: DVec3) -> f64 {
+                Shape::value(self, p)
+            }
+            fn gradient(&self, p: DVec3) -> DVec3 {
+                Shape::gradient(self, p)
+            }
+            fn project(&self, p: DVec3) -> DVec3 {
+                Shape::project(self, p)
+            }
+        }
+    )*};
+    (deref $($t:ty),*) => {$(
+        impl Implicit for $t {
+            fn value(&self, p: DVec3) -> f64 {
+                (**self).value(p)
+            }
+            fn gradient(&self, p: DVec3) -> DVec3 {
+                (**self).gradient(p)
+            }
+            fn project(&self, p: DVec3) -> DVec3 {
+                (**self).project(p)
+            }
+        }
+    )*};
+}
+
+// A blanket `impl<S: Shape> Implicit for S` is not allowed here (the trait is foreign): each
+// shape, and the trait objects, one by one.
+implicit_from_shape!(Sphere, Torus, Goursat, Cuboid);
+implicit_from_shape!(deref &dyn Shape, Box<dyn Shape>);
 
 /// Gauss digitization of `shape` at grid step `h`: voxel `p` is inside (label 1) iff
 /// `f(h p) <= 0`; background 0 with a margin of one voxel; spacing `h`, voxel centres at `h p`.
@@ -257,6 +301,24 @@ mod tests {
             for p in [DVec3::new(1.0, 2.0, 3.5), DVec3::new(-4.0, 5.5, 1.0), DVec3::new(7.0, 0.3, -0.2)] {
                 let q = s.project(p);
                 assert!(s.value(q).abs() < 1e-9, "{}: f({q}) = {}", s.name(), s.value(q));
+            }
+        }
+    }
+
+    #[test]
+    fn shapes_and_pointers_to_them_are_implicit() {
+        let sphere = Sphere { radius: 3.0 };
+        let dyn_sphere: &dyn Shape = &sphere;
+        let boxed: Box<dyn Shape> = Box::new(Torus { major: 6.0, minor: 2.0 });
+        let cases: [(&dyn Implicit, &dyn Shape); 3] =
+            [(&sphere, &sphere), (&dyn_sphere, &sphere), (&boxed, boxed.as_ref())];
+        for (implicit, shape) in cases {
+            for p in [DVec3::new(1.0, 2.0, 3.5), DVec3::new(-4.0, 5.5, 1.0)] {
+                assert_eq!(implicit.value(p), shape.value(p));
+                assert_eq!(implicit.gradient(p), shape.gradient(p));
+                assert_eq!(implicit.project(p), shape.project(p));
+                assert_eq!(implicit.signed_distance(p), shape.signed_distance(p));
+                assert_eq!(implicit.normal_near(p), shape.normal_near(p));
             }
         }
     }

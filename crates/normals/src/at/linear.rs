@@ -282,7 +282,9 @@ impl SpdSystem {
                 }
                 sums
             })
-            .reduce(|| [[0.0; K]; 3], add_sums);
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold([[0.0; K]; 3], add_sums);
         let limit: [f64; K] = std::array::from_fn(|c| tol * tol * b2[c]);
         let mut alpha = [0.0; K];
         let mut beta = [0.0; K];
@@ -333,7 +335,9 @@ impl SpdSystem {
                     }
                     sums
                 })
-                .reduce(|| [[0.0; K]; 3], add_sums);
+                .collect::<Vec<_>>()
+                .into_iter()
+                .fold([[0.0; K]; 3], add_sums);
             beta = std::array::from_fn(|c| if gamma[c] > 0.0 { new_gamma[c] / gamma[c] } else { 0.0 });
             (r2, gamma) = (new_r2, new_gamma);
         }
@@ -363,7 +367,9 @@ impl SpdSystem {
                 }
                 dot
             })
-            .reduce(|| [0.0; K], |a, b| std::array::from_fn(|c| a[c] + b[c]))
+            .collect::<Vec<_>>()
+            .into_iter()
+            .fold([0.0; K], |a, b| std::array::from_fn(|c| a[c] + b[c]))
     }
 }
 
