@@ -61,9 +61,9 @@ fn stages(c: &mut Criterion) {
         b.iter(|| Operator::assemble(&pattern, black_box(&energy)))
     });
     g.bench_function("solve/symbolic/bunny-128", |b| {
-        b.iter(|| DirectSolver::new(black_box(&surface)).unwrap())
+        b.iter(|| DirectSolver::for_surface(black_box(&surface)).unwrap())
     });
-    let mut solver = DirectSolver::new(&surface).unwrap();
+    let mut solver = DirectSolver::for_surface(&surface).unwrap();
     g.bench_function("solve/numeric/bunny-128", |b| b.iter(|| solver.solve(black_box(&energy)).unwrap()));
 
     let (x, _) = solver.solve(&energy).unwrap();

@@ -36,20 +36,23 @@ fn solvers(c: &mut Criterion) {
         let energy = Energy::new(&surface, &normals, &input, EnergyParams::default()).expect("valid energy");
         g.bench_function(format!("cg/{name}"), |b| {
             b.iter(|| {
-                CgSolver::new(black_box(&surface), CgParams::default()).unwrap().solve(&energy).unwrap()
+                CgSolver::for_surface(black_box(&surface), CgParams::default())
+                    .unwrap()
+                    .solve(&energy)
+                    .unwrap()
             })
         });
-        let mut reused = CgSolver::new(&surface, CgParams::default()).unwrap();
+        let mut reused = CgSolver::for_surface(&surface, CgParams::default()).unwrap();
         g.bench_function(format!("cg-reused/{name}"), |b| {
             b.iter(|| reused.solve(black_box(&energy)).unwrap())
         });
         if radius < 50.0 {
             let block = CgParams { preconditioner: Preconditioner::BlockJacobi, ..Default::default() };
             g.bench_function(format!("cg-block-jacobi/{name}"), |b| {
-                b.iter(|| CgSolver::new(black_box(&surface), block).unwrap().solve(&energy).unwrap())
+                b.iter(|| CgSolver::for_surface(black_box(&surface), block).unwrap().solve(&energy).unwrap())
             });
             g.bench_function(format!("direct/{name}"), |b| {
-                b.iter(|| DirectSolver::new(black_box(&surface)).unwrap().solve(&energy).unwrap())
+                b.iter(|| DirectSolver::for_surface(black_box(&surface)).unwrap().solve(&energy).unwrap())
             });
         }
     }
@@ -64,7 +67,7 @@ fn solvers(c: &mut Criterion) {
     let energy = Energy::new(&surface, &normals, &input, EnergyParams::default()).expect("valid energy");
     let clamped = BoundedParams { clamp: Some(0.01), ..Default::default() };
     g.bench_function("gd-clamped/veh_fire", |b| {
-        b.iter(|| BoundedSolver::new(black_box(&surface), clamped).unwrap().solve(&energy).unwrap())
+        b.iter(|| BoundedSolver::for_surface(black_box(&surface), clamped).unwrap().solve(&energy).unwrap())
     });
     g.finish();
 }

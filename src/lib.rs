@@ -33,3 +33,8 @@ pub use voxreg_io as io;
 pub use voxreg_normals as normals;
 pub use voxreg_regularize as regularize;
 pub use voxreg_regularize::{regularize, Output, Params, Regularizer, Report};
+
+/// The README's library example, compiled and run as a doctest.
+#[cfg(doctest)]
+#[doc = include_str!("../README.md")]
+mod readme {}

@@ -31,7 +31,7 @@ use voxreg_normals::{IntegralInvariant, NormalEstimator, NormalField};
 use voxreg_quality::self_intersections;
 use voxreg_regularize::{EnergyParams, Params, Regularizer, SolveInfo, SolverChoice, SolverParams};
 use voxreg_render::{render, viridis, Camera, Image, RenderParams, Shading};
-use voxreg_testkit::digitize;
+use voxreg_testkit::{digitize, Shape};
 
 use crate::compare::BallTet;
 
@@ -171,7 +171,7 @@ fn ii_normals(surface: &DigitalSurface) -> Result<NormalField> {
 fn voxreg(surface: &DigitalSurface, normals: &NormalField, params: EnergyParams) -> Result<Vec<DVec3>> {
     let mut p = Params { energy: params, ..Params::papers() };
     p.solver.choice = SolverChoice::Direct;
-    Ok(Regularizer::new(surface.clone()).run_with(&p, Some(normals), &mut |_| {})?.positions)
+    Ok(Regularizer::new(surface.clone()).run_with(&p, Some(normals), &mut |_| {})?.positions.into_vec())
 }
 
 /// The clamped minimizer (paper, sec. 3.4): every vertex within its box of edge
@@ -194,7 +194,7 @@ fn voxreg_clamped(surface: &DigitalSurface, normals: &NormalField, eps: f64) -> 
             t.elapsed().as_secs_f64()
         );
     }
-    Ok(out.positions)
+    Ok(out.positions.into_vec())
 }
 
 fn quads(surface: &DigitalSurface) -> Vec<[u32; 4]> {

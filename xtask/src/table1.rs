@@ -36,13 +36,13 @@ fn run_once(surface: &DigitalSurface) -> Result<Run> {
     let input = surface.positions();
     let energy = Energy::new(surface, &normals, &input, EnergyParams::default())?;
     let t = Instant::now();
-    let mut direct = DirectSolver::new(surface)?;
+    let mut direct = DirectSolver::for_surface(surface)?;
     let direct_pre = t.elapsed().as_secs_f64();
     let t = Instant::now();
     direct.solve(&energy)?;
     let direct_solve = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let mut cg = CgSolver::new(surface, CgParams::default())?;
+    let mut cg = CgSolver::for_surface(surface, CgParams::default())?;
     let cg_pre = t.elapsed().as_secs_f64();
     let t = Instant::now();
     let (_, info) = cg.solve(&energy)?;

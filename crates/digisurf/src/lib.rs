@@ -50,6 +50,7 @@
 //! the current slab plus the complex, proportional to the number of surfels.
 
 mod csr;
+mod data;
 mod error;
 mod ids;
 mod patch;
@@ -58,6 +59,7 @@ mod surface;
 mod volume;
 
 pub use csr::Lists;
+pub use data::{EdgeData, Id, IdVec, SurfelData, VertexData};
 pub use error::SurfaceError;
 pub use ids::{EdgeId, InterfaceId, RegionId, SurfelId, VertexId};
 pub use patch::{Patch, PatchParams};

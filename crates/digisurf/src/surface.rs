@@ -6,6 +6,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 use crate::csr::Lists;
+use crate::data::VertexData;
 use crate::{
     EdgeId, InterfaceId, LabelVolume, RegionId, RegionMap, Regions, SurfaceError, SurfelId, VertexId, Voxel,
 };
@@ -677,8 +678,8 @@ impl DigitalSurface {
     }
 
     /// Physical positions of all vertices, indexed by [`VertexId`].
-    pub fn positions(&self) -> Vec<DVec3> {
-        (0..self.num_vertices()).map(|v| self.vertex_position(VertexId(v as u32))).collect()
+    pub fn positions(&self) -> VertexData<DVec3> {
+        VertexData::from_fn(self.num_vertices(), |v| self.vertex_position(v))
     }
 
     /// The edge-neighbours of vertex `v`, sorted by id. Across interfaces too.

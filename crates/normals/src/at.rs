@@ -10,7 +10,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use voxreg_digisurf::{DigitalSurface, EdgeId, SurfelId};
+use voxreg_digisurf::{DigitalSurface, EdgeId, SurfelId, VertexData};
 
 use crate::{IntegralInvariant, NormalError, NormalEstimator, NormalField};
 
@@ -131,13 +131,13 @@ impl AtParams {
 /// low (towards 0) along sharp features, in a band about `eps` wide.
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct FeatureField {
-    values: Vec<f64>,
+    values: VertexData<f64>,
 }
 
 impl FeatureField {
     /// Wraps one value per vertex.
     pub fn new(values: Vec<f64>) -> Self {
-        FeatureField { values }
+        FeatureField { values: values.into() }
     }
 
     /// Number of values (vertices).
@@ -160,7 +160,7 @@ impl FeatureField {
         surface
             .edges()
             .iter()
-            .map(|e| 0.5 * (self.values[e.vertices[0].index()] + self.values[e.vertices[1].index()]))
+            .map(|e| 0.5 * (self.values[e.vertices[0]] + self.values[e.vertices[1]]))
             .collect()
     }
 
@@ -169,7 +169,7 @@ impl FeatureField {
         surface
             .surfels()
             .iter()
-            .map(|s| s.vertices.iter().map(|v| self.values[v.index()]).sum::<f64>() / 4.0)
+            .map(|s| s.vertices.iter().map(|&v| self.values[v]).sum::<f64>() / 4.0)
             .collect()
     }
 }
@@ -542,7 +542,9 @@ impl AtSolver {
             )));
         }
         let mut info = AtInfo { setup_seconds: self.setup_seconds, ..AtInfo::default() };
-        let par = faer::get_global_parallelism();
+        // A fixed split of the work, whatever the thread count: the same bits at every
+        // thread count.
+        let par = faer::Par::rayon(4);
         let (cg_tolerance, cg_iterations) = match params.linear_solver {
             AtLinearSolver::Cholesky => (None, 0),
             AtLinearSolver::ConjugateGradient { tolerance, max_iterations } => {

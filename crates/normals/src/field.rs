@@ -1,11 +1,12 @@
 //! Per-surfel normal fields.
 
 use glam::DVec3;
+use voxreg_digisurf::{SurfelData, SurfelId};
 
-/// One unit normal per surfel, indexed by [`SurfelId`](voxreg_digisurf::SurfelId).
+/// One unit normal per surfel, indexed by [`SurfelId`].
 #[derive(Clone, Debug, PartialEq, Default)]
 pub struct NormalField {
-    normals: Vec<DVec3>,
+    normals: SurfelData<DVec3>,
 }
 
 impl NormalField {
@@ -15,7 +16,12 @@ impl NormalField {
         for n in &mut normals {
             *n = n.try_normalize().unwrap_or(DVec3::ZERO);
         }
-        NormalField { normals }
+        NormalField { normals: normals.into() }
+    }
+
+    /// The normal of surfel `s`.
+    pub fn get(&self, s: SurfelId) -> DVec3 {
+        self.normals[s]
     }
 
     /// Number of normals (surfels).
@@ -33,6 +39,11 @@ impl NormalField {
         &self.normals
     }
 
+    /// The normals as per-surfel data.
+    pub fn as_data(&self) -> &SurfelData<DVec3> {
+        &self.normals
+    }
+
     /// Largest angle, in degrees, between the directions of `self` and `other`,
     /// orientation ignored (for tests and reports).
     pub fn max_angle_deg(&self, other: &NormalField) -> f64 {
@@ -41,5 +52,12 @@ impl NormalField {
             .zip(&other.normals)
             .map(|(a, b)| a.dot(*b).abs().clamp(0.0, 1.0).acos().to_degrees())
             .fold(0.0, f64::max)
+    }
+}
+
+impl std::ops::Index<SurfelId> for NormalField {
+    type Output = DVec3;
+    fn index(&self, s: SurfelId) -> &DVec3 {
+        &self.normals[s]
     }
 }

@@ -13,7 +13,7 @@ use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
 use crate::vecops::{dot, norm, tail_estimate};
-use crate::{Energy, Progress, RegularizeError};
+use crate::{Energy, MatrixFreeOperator, Progress, RegularizeError};
 
 /// Parameters of [`BoundedSolver`].
 #[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]
@@ -80,8 +80,15 @@ pub struct BoundedSolver {
 }
 
 impl BoundedSolver {
-    /// Prepares a descent for energies on `surface`.
-    pub fn new(surface: &DigitalSurface, params: BoundedParams) -> Result<Self, RegularizeError> {
+    /// The solver of energies on `surface`: its operator ([`MatrixFreeOperator::new`]),
+    /// then [`BoundedSolver::new`].
+    pub fn for_surface(surface: &DigitalSurface, params: BoundedParams) -> Result<Self, RegularizeError> {
+        Self::new(MatrixFreeOperator::new(surface)?, params)
+    }
+
+    /// The solver of energies with the matrix-free `operator`, inside the boxes of
+    /// `params.clamp` (scaled by the operator's voxel spacing).
+    pub fn new(operator: MatrixFreeOperator, params: BoundedParams) -> Result<Self, RegularizeError> {
         check_tolerance(params.tolerance)?;
         if let Some(eps) = params.clamp {
             if !(eps > 0.0 && eps < 1.0) {
@@ -90,7 +97,7 @@ impl BoundedSolver {
                 )));
             }
         }
-        Ok(BoundedSolver { params, setup: Setup::new(surface, params.preconditioner, params.multigrid)? })
+        Ok(BoundedSolver { params, setup: Setup::new(operator, params.preconditioner, params.multigrid)? })
     }
 
     /// The parameters.
@@ -115,7 +122,7 @@ impl BoundedSolver {
         let n = stencil.len();
         let input = energy.input();
         let h = self.setup.spacing;
-        let half = self.params.clamp.map(|eps| (1.0 - eps) * 0.5 * energy.surface().spacing());
+        let half = self.params.clamp.map(|eps| (1.0 - eps) * 0.5 * self.setup.voxel);
 
         let t0 = Instant::now();
         let zero = || vec![DVec3::ZERO; n];

@@ -11,7 +11,7 @@ use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
 use crate::vecops::{cg_update, dot, norm, scale_add, tail_estimate};
-use crate::{Energy, Progress, RegularizeError};
+use crate::{Energy, MatrixFreeOperator, Progress, RegularizeError};
 
 /// When an iterative solver stops.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default, serde::Serialize)]
@@ -101,10 +101,16 @@ pub(crate) fn check_tolerance(tolerance: f64) -> Result<(), RegularizeError> {
 }
 
 impl CgSolver {
-    /// Prepares a solver for energies on `surface`.
-    pub fn new(surface: &DigitalSurface, params: CgParams) -> Result<Self, RegularizeError> {
+    /// The solver of energies on `surface`: its operator ([`MatrixFreeOperator::new`]),
+    /// then [`CgSolver::new`].
+    pub fn for_surface(surface: &DigitalSurface, params: CgParams) -> Result<Self, RegularizeError> {
+        Self::new(MatrixFreeOperator::new(surface)?, params)
+    }
+
+    /// The solver of energies with the matrix-free `operator`.
+    pub fn new(operator: MatrixFreeOperator, params: CgParams) -> Result<Self, RegularizeError> {
         check_tolerance(params.tolerance)?;
-        Ok(CgSolver { params, setup: Setup::new(surface, params.preconditioner, params.multigrid)? })
+        Ok(CgSolver { params, setup: Setup::new(operator, params.preconditioner, params.multigrid)? })
     }
 
     /// The parameters.

@@ -31,11 +31,20 @@ pub struct DirectSolver {
 }
 
 impl DirectSolver {
-    /// Analyses the operator pattern of `surface`'s energy: no numeric work yet.
-    pub fn new(surface: &voxreg_digisurf::DigitalSurface) -> Result<Self, RegularizeError> {
+    /// The solver of energies on `surface`: builds its operator pattern
+    /// ([`OperatorPattern::new`]) and analyses it ([`DirectSolver::new`]).
+    pub fn for_surface(surface: &voxreg_digisurf::DigitalSurface) -> Result<Self, RegularizeError> {
         let t = Instant::now();
         let pattern = OperatorPattern::new(surface)?;
-        let pattern_seconds = t.elapsed().as_secs_f64();
+        let mut solver = Self::new(pattern)?;
+        solver.pattern_seconds = t.elapsed().as_secs_f64() - solver.symbolic_seconds;
+        Ok(solver)
+    }
+
+    /// Analyses the operator's sparsity `pattern` (fill-reducing ordering, symbolic
+    /// Cholesky): no numeric work yet.
+    pub fn new(pattern: OperatorPattern) -> Result<Self, RegularizeError> {
+        let pattern_seconds = 0.0;
         let t = Instant::now();
         let (fwd, inv) = pattern.block_amd_ordering()?;
         let perm = PermRef::new_checked(&fwd, &inv, pattern.dim());
@@ -87,7 +96,9 @@ impl DirectSolver {
             RegularizeError::OutOfMemory(format!("Cholesky factor of {} entries", self.factor_nnz()))
         })?;
         self.factor.resize(self.symbolic.len_val(), 0.0);
-        let par = faer::get_global_parallelism();
+        // A fixed split of the work, whatever the thread count, so that the factor has the
+        // same bits at every thread count.
+        let par = faer::Par::rayon(4);
         let mut mem =
             MemBuffer::try_new(self.symbolic.factorize_numeric_llt_scratch::<f64>(par, Default::default()))
                 .map_err(|_| RegularizeError::OutOfMemory("Cholesky workspace".into()))?;

@@ -5,10 +5,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use voxreg_digisurf::DigitalSurface;
 
 use crate::multigrid::{Hierarchy, MultigridParams, Vcycle};
-use crate::stencil::{Coefficients, Stencil, CHUNK};
+use crate::stencil::{Coefficients, MatrixFreeOperator, Stencil, CHUNK};
 use crate::vecops::{sym_inverse, sym_mul};
 use crate::{Energy, FairnessMask, RegularizeError};
 
@@ -51,6 +50,8 @@ pub(crate) struct Setup {
     multigrid: MultigridParams,
     /// The smallest voxel spacing: the unit of tolerances.
     pub(crate) spacing: f64,
+    /// The voxel spacing per axis: the unit of boxes.
+    pub(crate) voxel: DVec3,
     /// Seconds spent on structure (connectivity, hierarchy) so far.
     pub(crate) structure_seconds: f64,
 }
@@ -65,12 +66,12 @@ pub(crate) struct Prepared<'a> {
 
 impl Setup {
     pub(crate) fn new(
-        surface: &DigitalSurface,
+        operator: MatrixFreeOperator,
         preconditioner: Preconditioner,
         multigrid: MultigridParams,
     ) -> Result<Self, RegularizeError> {
         let t = Instant::now();
-        let stencil = Stencil::new(surface, None)?;
+        let MatrixFreeOperator { stencil, spacing, build_seconds } = operator;
         let hierarchy = match preconditioner {
             Preconditioner::Multigrid => Some(Hierarchy::new(&stencil, &multigrid)),
             _ => None,
@@ -81,8 +82,9 @@ impl Setup {
             hierarchy,
             preconditioner,
             multigrid,
-            spacing: surface.spacing().min_element(),
-            structure_seconds: t.elapsed().as_secs_f64(),
+            spacing: spacing.min_element(),
+            voxel: spacing,
+            structure_seconds: build_seconds + t.elapsed().as_secs_f64(),
         })
     }
 

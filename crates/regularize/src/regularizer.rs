@@ -4,7 +4,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::DVec3;
-use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
+use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap, VertexData};
 use voxreg_normals::{FeatureField, NormalEstimator, NormalField, Refined};
 
 use crate::pipeline::{crease_weights, informative_vertices, surfel_drift, trusted_drift};
@@ -58,11 +58,11 @@ pub struct Output {
     /// The digital surface: the output's combinatorics (one quad per surfel).
     pub surface: Arc<DigitalSurface>,
     /// The regularized positions, one per vertex.
-    pub positions: Vec<DVec3>,
+    pub positions: VertexData<DVec3>,
     /// The normal field of the last solve (the initial field without refinement).
     pub normals: NormalField,
     /// The attachment targets of the last solve (the input positions unless re-centred).
-    pub targets: Vec<DVec3>,
+    pub targets: VertexData<DVec3>,
     /// The Ambrosio-Tortorelli feature field (per vertex) with [`crate::Estimator::At`].
     pub features: Option<FeatureField>,
     /// What was done: parameters, counts, timings, energies, every solve's report.
@@ -187,7 +187,7 @@ impl Regularizer {
         let input = surface.positions();
         let mut targets = input.clone();
         let mut field = start;
-        let mut positions = Vec::new();
+        let mut positions = VertexData::default();
         let mut solves = Vec::with_capacity(params.refine + 1);
         let mut done = 1.0;
         for round in 0..=params.refine {
@@ -228,7 +228,7 @@ impl Regularizer {
                 let mut w = weights.clone().unwrap_or_default();
                 w.beta = Some(match w.beta {
                     Some(b) => b.iter().zip(&crease).map(|(b, c)| b * c).collect(),
-                    None => crease,
+                    None => crease.into(),
                 });
                 w
             });
@@ -250,7 +250,7 @@ impl Regularizer {
             let s = info.seconds();
             times.assemble += s.structure + s.assemble;
             times.solve += s.symbolic + s.factor + s.solve;
-            positions = x;
+            positions = x.into();
             solves.push(info);
             done += 1.0;
         }

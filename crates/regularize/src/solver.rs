@@ -134,18 +134,18 @@ impl Solver {
     pub fn new(surface: &DigitalSurface, params: &SolverParams) -> Result<Self, RegularizeError> {
         params.validate()?;
         Ok(match params.choice {
-            SolverChoice::Direct => Solver::Direct(DirectSolver::new(surface)?),
-            SolverChoice::Cg => Solver::Cg(CgSolver::new(surface, params.cg)?),
-            SolverChoice::Bounded => Solver::Bounded(BoundedSolver::new(surface, params.bounded)?),
+            SolverChoice::Direct => Solver::Direct(DirectSolver::for_surface(surface)?),
+            SolverChoice::Cg => Solver::Cg(CgSolver::for_surface(surface, params.cg)?),
+            SolverChoice::Bounded => Solver::Bounded(BoundedSolver::for_surface(surface, params.bounded)?),
             SolverChoice::Auto => {
                 let budget = params.direct_budget as f64 / 8.0;
                 if estimate_factor_nnz(surface.num_vertices()) <= 2.0 * budget {
-                    let direct = DirectSolver::new(surface)?;
+                    let direct = DirectSolver::for_surface(surface)?;
                     if direct.factor_nnz() as f64 <= budget {
                         return Ok(Solver::Direct(direct));
                     }
                 }
-                Solver::Cg(CgSolver::new(surface, params.cg)?)
+                Solver::Cg(CgSolver::for_surface(surface, params.cg)?)
             }
         })
     }
@@ -227,7 +227,7 @@ mod tests {
                 u32::from(DVec3::new(x as f64 - c, y as f64 - c, z as f64 - c).length() <= r)
             });
             let s = DigitalSurface::from_volume(&v).unwrap();
-            let exact = DirectSolver::new(&s).unwrap().factor_nnz() as f64;
+            let exact = DirectSolver::for_surface(&s).unwrap().factor_nnz() as f64;
             let est = estimate_factor_nnz(s.num_vertices());
             assert!((est / exact - 1.0).abs() < 0.35, "r = {r}: estimate {est} vs {exact}");
         }

@@ -36,6 +36,36 @@ pub(crate) struct Stencil {
     pub(crate) corners: Vec<[u32; 3]>,
 }
 
+/// The energy's operator `H` as the iterative solvers apply it, matrix-free: the
+/// connectivity it reads (the faces around each vertex, the barycentre neighbours), the
+/// vertices' lattice corners (for the multigrid hierarchy) and the voxel spacing (the unit
+/// of tolerances and boxes). Built once per surface; each solve takes its numbers
+/// (weights, normals, targets) from an [`Energy`] on the same surface.
+#[derive(Clone, Debug)]
+pub struct MatrixFreeOperator {
+    pub(crate) stencil: Stencil,
+    pub(crate) spacing: glam::DVec3,
+    pub(crate) build_seconds: f64,
+}
+
+impl MatrixFreeOperator {
+    /// The operator of energies on `surface`.
+    pub fn new(surface: &DigitalSurface) -> Result<Self, RegularizeError> {
+        let t = std::time::Instant::now();
+        let stencil = Stencil::new(surface, None)?;
+        Ok(MatrixFreeOperator {
+            stencil,
+            spacing: surface.spacing(),
+            build_seconds: t.elapsed().as_secs_f64(),
+        })
+    }
+
+    /// Number of vertices (unknowns are three per vertex).
+    pub fn num_vertices(&self) -> usize {
+        self.stencil.len()
+    }
+}
+
 /// Per-solve numbers: the weights and the normals of one energy, laid out for the
 /// operator.
 #[derive(Clone, Debug)]

@@ -1,6 +1,6 @@
 //! Per-element weights of the energy, and texture-aware fairness (paper, sec. 4.5).
 
-use voxreg_digisurf::{DigitalSurface, EdgeId, VertexId};
+use voxreg_digisurf::{DigitalSurface, EdgeId, SurfelData, VertexData, VertexId};
 
 use crate::RegularizeError;
 
@@ -20,11 +20,11 @@ use crate::RegularizeError;
 #[derive(Clone, Debug, Default, PartialEq)]
 pub struct Weights {
     /// Per vertex: multiplies `alpha`. Positive and finite. Default: `None` (all 1).
-    pub alpha: Option<Vec<f64>>,
+    pub alpha: Option<VertexData<f64>>,
     /// Per surfel: multiplies `beta`. Non-negative and finite. Default: `None` (all 1).
-    pub beta: Option<Vec<f64>>,
+    pub beta: Option<SurfelData<f64>>,
     /// Per vertex: multiplies `gamma`. Non-negative and finite. Default: `None` (all 1).
-    pub gamma: Option<Vec<f64>>,
+    pub gamma: Option<VertexData<f64>>,
     /// Which edge-neighbours each barycenter uses. Default: `None` (all of them).
     pub fairness: Option<FairnessMask>,
 }
@@ -32,7 +32,7 @@ pub struct Weights {
 impl Weights {
     /// Checks lengths against `surface` and ranges (see the fields).
     pub fn validate(&self, surface: &DigitalSurface) -> Result<(), RegularizeError> {
-        let check = |name: &str, w: &Option<Vec<f64>>, len: usize, positive: bool| {
+        let check = |name: &str, w: Option<&[f64]>, len: usize, positive: bool| {
             let Some(w) = w else { return Ok(()) };
             if w.len() != len {
                 return Err(RegularizeError::SizeMismatch(format!(
@@ -50,9 +50,9 @@ impl Weights {
             }
             Ok(())
         };
-        check("alpha", &self.alpha, surface.num_vertices(), true)?;
-        check("beta", &self.beta, surface.num_surfels(), false)?;
-        check("gamma", &self.gamma, surface.num_vertices(), false)?;
+        check("alpha", self.alpha.as_deref(), surface.num_vertices(), true)?;
+        check("beta", self.beta.as_deref(), surface.num_surfels(), false)?;
+        check("gamma", self.gamma.as_deref(), surface.num_vertices(), false)?;
         if let Some(m) = &self.fairness {
             if m.offsets.len() != surface.num_vertices() + 1
                 || *m.offsets.last().unwrap_or(&0) != m.keep.len()

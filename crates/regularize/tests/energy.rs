@@ -130,7 +130,7 @@ fn direct_solution_is_optimal() {
             let input = s.positions();
             let params = EnergyParams::default();
             let energy = Energy::new(&s, &normals, &input, params).unwrap();
-            let mut solver = DirectSolver::new(&s).unwrap();
+            let mut solver = DirectSolver::for_surface(&s).unwrap();
             let (x, info) = solver.solve(&energy).unwrap();
             assert!(info.relative_gradient <= 1e-9, "{name}: {}", info.relative_gradient);
             let ex = energy.terms(&x).total;
@@ -148,7 +148,7 @@ fn solver_reuses_its_analysis_across_weights() {
     let s = DigitalSurface::from_volume(&ball(4.0)).unwrap();
     let normals = Trivial.estimate(&s).unwrap();
     let input = s.positions();
-    let mut solver = DirectSolver::new(&s).unwrap();
+    let mut solver = DirectSolver::for_surface(&s).unwrap();
     let mut previous: Option<Vec<DVec3>> = None;
     for gamma in [0.0, 0.1, 1.0] {
         let energy = Energy::new(&s, &normals, &input, EnergyParams { gamma, ..Default::default() }).unwrap();
@@ -205,7 +205,7 @@ fn bad_parameters_are_errors() {
     let input = s.positions();
     assert!(Energy::new(&s, &n, &input, EnergyParams { alpha: 0.0, ..Default::default() }).is_err());
     assert!(Energy::new(&s, &n, &input, EnergyParams { beta: f64::NAN, ..Default::default() }).is_err());
-    assert!(Energy::new(&s, &n, &input[1..], EnergyParams::default()).is_err());
+    assert!(Energy::new(&s, &n, &input.as_slice()[1..], EnergyParams::default()).is_err());
 }
 
 proptest! {
@@ -277,9 +277,9 @@ fn weighted_and_masked_energy_is_consistent() {
             }
         }
         // Bad weights are refused.
-        let bad = Weights { alpha: Some(vec![0.0; s.num_vertices()]), ..Default::default() };
+        let bad = Weights { alpha: Some(vec![0.0; s.num_vertices()].into()), ..Default::default() };
         assert!(Energy::new(&s, &normals, &input, params).unwrap().with_weights(&bad).is_err());
-        let short = Weights { beta: Some(vec![1.0; 1]), ..Default::default() };
+        let short = Weights { beta: Some(vec![1.0; 1].into()), ..Default::default() };
         assert!(Energy::new(&s, &normals, &input, params).unwrap().with_weights(&short).is_err());
     }
 }

@@ -105,7 +105,7 @@ fn solver_table() {
             if let Some(c) = std::env::var("DAMP").ok().and_then(|c| c.parse().ok()) {
                 params.multigrid.damping = c;
             }
-            let mut cg = CgSolver::new(&s, params).unwrap();
+            let mut cg = CgSolver::for_surface(&s, params).unwrap();
             let levels = cg.levels();
             let (x, info) = cg.solve(&energy).unwrap();
             times.push(t.elapsed().as_secs_f64());
@@ -118,7 +118,7 @@ fn solver_table() {
         eprintln!("cpu seconds per solve (all threads): median {:.3}, min {:.3}", cpu[cpu.len() / 2], cpu[0]);
         let (x, info, levels) = last.unwrap();
         let tight = CgParams { tolerance: 1e-6, stopping: StoppingRule::Guaranteed, ..Default::default() };
-        let (reference, _) = CgSolver::new(&s, tight).unwrap().solve(&energy).unwrap();
+        let (reference, _) = CgSolver::for_surface(&s, tight).unwrap().solve(&energy).unwrap();
         let err =
             x.iter().zip(&reference).map(|(a, b): (&DVec3, &DVec3)| (*a - *b).length()).fold(0.0, f64::max);
         let setup = info.seconds.structure + info.seconds.assemble + info.seconds.factor;

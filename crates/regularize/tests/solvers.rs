@@ -35,7 +35,7 @@ fn quads(s: &DigitalSurface) -> Vec<[u32; 4]> {
 }
 
 fn exact(energy: &Energy<'_>) -> Vec<DVec3> {
-    DirectSolver::new(energy.surface()).unwrap().solve(energy).unwrap().0
+    DirectSolver::for_surface(energy.surface()).unwrap().solve(energy).unwrap().0
 }
 
 /// Three labels meeting along junction lines, no background: open interfaces.
@@ -94,7 +94,7 @@ fn cg_and_descent_match_the_direct_solve() {
                     StoppingRule::Guaranteed
                 };
                 let params = CgParams { preconditioner: pre, stopping, ..Default::default() };
-                let (y, info) = CgSolver::new(&s, params).unwrap().solve(&energy).unwrap();
+                let (y, info) = CgSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
                 let err = max_distance(&x, &y);
                 assert!(info.converged, "{name} {pre:?}: {info:?}");
                 assert!(err < 1e-3, "{name} {pre:?} weighted {weighted}: cg error {err}");
@@ -107,7 +107,8 @@ fn cg_and_descent_match_the_direct_solve() {
                     info.relative_gradient
                 );
             }
-            let (y, info) = BoundedSolver::new(&s, BoundedParams::default()).unwrap().solve(&energy).unwrap();
+            let (y, info) =
+                BoundedSolver::for_surface(&s, BoundedParams::default()).unwrap().solve(&energy).unwrap();
             let err = max_distance(&x, &y);
             assert!(info.converged, "{name}: {info:?}");
             assert!(err < 1e-3, "{name} weighted {weighted}: descent error {err}");
@@ -126,7 +127,7 @@ fn guaranteed_stopping_rule_bounds_the_error() {
         let x = exact(&energy);
         for tolerance in [1e-2, 1e-5] {
             let params = CgParams { tolerance, stopping: StoppingRule::Guaranteed, ..Default::default() };
-            let (y, info) = CgSolver::new(&s, params).unwrap().solve(&energy).unwrap();
+            let (y, info) = CgSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
             let bound = info.error_bound;
             assert!(bound <= tolerance, "{name}: bound {bound}");
             // The gradient at the result is below the stated threshold.
@@ -152,7 +153,7 @@ fn estimate_rule_meets_the_tolerance_on_larger_shapes() {
             let x = exact(&energy);
             for tolerance in [1e-2, 1e-3, 1e-4] {
                 let params = CgParams { tolerance, ..Default::default() };
-                let (y, info) = CgSolver::new(&s, params).unwrap().solve(&energy).unwrap();
+                let (y, info) = CgSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
                 let err = max_distance(&x, &y);
                 assert!(
                     err < tolerance,
@@ -180,7 +181,7 @@ fn descent_energy_decreases_monotonically() {
             let params =
                 BoundedParams { preconditioner: pre, clamp, max_iterations: 300, ..Default::default() };
             let mut energies = vec![energy.terms(&input).total];
-            let (x, info) = BoundedSolver::new(&s, params)
+            let (x, info) = BoundedSolver::for_surface(&s, params)
                 .unwrap()
                 .solve_with(&energy, &mut |p| energies.push(p.energy))
                 .unwrap();
@@ -261,7 +262,7 @@ fn clamped_descent_keeps_vertices_in_their_cubes_without_self_intersections() {
                     .unwrap();
             let eps = 0.01;
             let params = BoundedParams { clamp: Some(eps), max_iterations: 2000, ..Default::default() };
-            let (x, info) = BoundedSolver::new(&s, params).unwrap().solve(&energy).unwrap();
+            let (x, info) = BoundedSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
             let half = (1.0 - eps) * 0.5;
             for (v, (p, q)) in x.iter().zip(&input).enumerate() {
                 assert!(
@@ -301,7 +302,7 @@ fn the_checker_finds_the_intersections_of_unclamped_thin_structures() {
     let free = self_intersections(&x, &quads(&s));
     assert!(!free.is_empty(), "expected the unclamped result to intersect itself");
     let params = BoundedParams { clamp: Some(0.01), max_iterations: 3000, ..Default::default() };
-    let (y, _) = BoundedSolver::new(&s, params).unwrap().solve(&energy).unwrap();
+    let (y, _) = BoundedSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
     assert!(self_intersections(&y, &quads(&s)).is_empty());
 }
 
@@ -316,7 +317,7 @@ fn clamping_with_a_loose_box_matches_the_free_minimizer() {
     let x = exact(&energy);
     assert!(max_distance(&x, &input) < 0.45, "{}", max_distance(&x, &input));
     let params = BoundedParams { clamp: Some(0.05), ..Default::default() };
-    let (y, info) = BoundedSolver::new(&s, params).unwrap().solve(&energy).unwrap();
+    let (y, info) = BoundedSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
     assert_eq!(info.clamped_vertices, 0);
     assert!(max_distance(&x, &y) < 1e-3);
 }
@@ -375,7 +376,7 @@ fn texture_aware_fairness_moves_only_vertices_near_colour_boundaries() {
     assert!(off < 0.5 * on, "changes far from the boundary ({off}) rival those on it ({on})");
     // The boundary vertices that are not boundary-adjacent in the plain energy: unchanged
     // vertex set sizes, and the iterative solvers agree on the masked energy too.
-    let (y, _) = CgSolver::new(&s, CgParams::default()).unwrap().solve(&textured).unwrap();
+    let (y, _) = CgSolver::for_surface(&s, CgParams::default()).unwrap().solve(&textured).unwrap();
     assert!(max_distance(&xb, &y) < 1e-3);
     let _ = VertexId(0);
 }
@@ -387,10 +388,10 @@ fn solvers_reject_an_energy_on_another_surface() {
     let normals = Trivial.estimate(&b).unwrap();
     let input = b.positions();
     let energy = Energy::new(&b, &normals, &input, EnergyParams::default()).unwrap();
-    assert!(CgSolver::new(&a, CgParams::default()).unwrap().solve(&energy).is_err());
-    assert!(BoundedSolver::new(&a, BoundedParams::default()).unwrap().solve(&energy).is_err());
-    assert!(BoundedSolver::new(&a, BoundedParams { clamp: Some(1.5), ..Default::default() }).is_err());
-    assert!(CgSolver::new(&a, CgParams { tolerance: 0.0, ..Default::default() }).is_err());
+    assert!(CgSolver::for_surface(&a, CgParams::default()).unwrap().solve(&energy).is_err());
+    assert!(BoundedSolver::for_surface(&a, BoundedParams::default()).unwrap().solve(&energy).is_err());
+    assert!(BoundedSolver::for_surface(&a, BoundedParams { clamp: Some(1.5), ..Default::default() }).is_err());
+    assert!(CgSolver::for_surface(&a, CgParams { tolerance: 0.0, ..Default::default() }).is_err());
 }
 
 proptest! {
@@ -417,9 +418,9 @@ proptest! {
             energy = energy.with_weights(&weights).unwrap();
         }
         let x = exact(&energy);
-        let (y, info) = CgSolver::new(&s, CgParams::default()).unwrap().solve(&energy).unwrap();
+        let (y, info) = CgSolver::for_surface(&s, CgParams::default()).unwrap().solve(&energy).unwrap();
         prop_assert!(max_distance(&x, &y) < 1e-3, "cg {} ({info:?})", max_distance(&x, &y));
-        let (z, info) = BoundedSolver::new(&s, BoundedParams::default()).unwrap().solve(&energy).unwrap();
+        let (z, info) = BoundedSolver::for_surface(&s, BoundedParams::default()).unwrap().solve(&energy).unwrap();
         prop_assert!(max_distance(&x, &z) < 1e-3, "descent {} ({info:?})", max_distance(&x, &z));
     }
 }
@@ -436,7 +437,7 @@ fn regression_small_surface_plateau() {
     let input = s.positions();
     let energy = Energy::new(&s, &normals, &input, EnergyParams::default()).unwrap();
     let x = exact(&energy);
-    let (y, info) = CgSolver::new(&s, CgParams::default()).unwrap().solve(&energy).unwrap();
+    let (y, info) = CgSolver::for_surface(&s, CgParams::default()).unwrap().solve(&energy).unwrap();
     assert!(max_distance(&x, &y) < 1e-4, "{info:?}");
     assert!(info.iterations <= 3, "{info:?}");
 }
@@ -458,7 +459,7 @@ fn clamped_minimizer_satisfies_the_optimality_conditions() {
         let half = (1.0 - eps) * 0.5;
         let tight =
             BoundedParams { clamp: Some(eps), tolerance: 1e-7, max_iterations: 20_000, ..Default::default() };
-        let (x, info) = BoundedSolver::new(&s, tight).unwrap().solve(&energy).unwrap();
+        let (x, info) = BoundedSolver::for_surface(&s, tight).unwrap().solve(&energy).unwrap();
         assert!(info.converged, "{name}: {info:?}");
         let g = energy.gradient(&x);
         let scale = energy.gradient(&input).iter().map(|v| v.abs().max_element()).fold(0.0, f64::max);
@@ -480,7 +481,7 @@ fn clamped_minimizer_satisfies_the_optimality_conditions() {
         }
         assert!(held > 0, "{name}: the boxes should bind somewhere");
         let plain = BoundedParams { conjugate: false, ..tight };
-        let (y, _) = BoundedSolver::new(&s, plain).unwrap().solve(&energy).unwrap();
+        let (y, _) = BoundedSolver::for_surface(&s, plain).unwrap().solve(&energy).unwrap();
         let (ex, ey) = (energy.terms(&x).total, energy.terms(&y).total);
         assert!(ex <= ey * (1.0 + 1e-6), "{name}: conjugate {ex} vs projected descent {ey}");
     }
