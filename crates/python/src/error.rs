@@ -65,7 +65,10 @@ impl From<Error> for PyErr {
             Kind::Io => "IoError",
         };
         Python::attach(|py| {
-            let class = py.import("voxreg._errors").and_then(|m| m.getattr(name)).and_then(|c| Ok(c.cast_into::<PyType>()?));
+            let class = py
+                .import("voxreg._errors")
+                .and_then(|m| m.getattr(name))
+                .and_then(|c| Ok(c.cast_into::<PyType>()?));
             match class {
                 Ok(class) => PyErr::from_type(class, e.message),
                 // The package is broken; still say what went wrong.
@@ -77,7 +80,8 @@ impl From<Error> for PyErr {
 
 /// Runs `f`, turning a panic into a `VoxregError` (no panic may cross into Python).
 pub(crate) fn no_panic<T>(f: impl FnOnce() -> Result<T>) -> Result<T> {
-    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f)).unwrap_or_else(|payload| Err(panic_error(payload)))
+    std::panic::catch_unwind(std::panic::AssertUnwindSafe(f))
+        .unwrap_or_else(|payload| Err(panic_error(payload)))
 }
 
 /// The `VoxregError` of a caught panic.

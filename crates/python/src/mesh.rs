@@ -43,7 +43,11 @@ impl Arrays {
             quads: mesh.quads.iter().flat_map(|q| q.map(i64::from)).collect(),
             labels: mesh.face_labels.iter().flatten().copied().collect(),
             colors,
-            groups: mesh.groups.iter().map(|g| (g.name.clone(), g.faces.iter().map(|&f| i64::from(f)).collect())).collect(),
+            groups: mesh
+                .groups
+                .iter()
+                .map(|g| (g.name.clone(), g.faces.iter().map(|&f| i64::from(f)).collect()))
+                .collect(),
         }
     }
 
@@ -69,6 +73,9 @@ impl Arrays {
     }
 }
 
+/// An interface as Python sees it: its file name, its regions' smallest labels, its regions.
+type InterfaceEntry = (String, (u32, u32), (u32, u32));
+
 /// A regularized surface: the digital surface, its regularized positions and the input's
 /// palette. Opaque to Python users; `voxreg.Mesh` keeps one to build sub-meshes and to
 /// write files exactly as the CLI does.
@@ -85,7 +92,9 @@ impl Surface {
             None => Part::All,
             Some((k, i)) if k == "interface" => Part::Interface(i),
             Some((k, i)) if k == "region" => Part::Region(i),
-            Some((k, _)) => return Err(Error::parameter(format!("unknown part '{k}' (interface or region)"))),
+            Some((k, _)) => {
+                return Err(Error::parameter(format!("unknown part '{k}' (interface or region)")))
+            }
         })
     }
 
@@ -95,8 +104,12 @@ impl Surface {
         let params = PatchParams { manifold: false };
         let mut mesh = match part {
             Part::All => QuadMesh::from_surface(s, &self.positions),
-            Part::Interface(i) => QuadMesh::from_patch(s, &s.interface_patch(InterfaceId(i), &params), &self.positions),
-            Part::Region(r) => QuadMesh::from_patch(s, &s.region_patch(RegionId(r), &params), &self.positions),
+            Part::Interface(i) => {
+                QuadMesh::from_patch(s, &s.interface_patch(InterfaceId(i), &params), &self.positions)
+            }
+            Part::Region(r) => {
+                QuadMesh::from_patch(s, &s.region_patch(RegionId(r), &params), &self.positions)
+            }
         };
         if let Some(palette) = &self.palette {
             // Colour transfer: each quad takes the colour and material of its solid voxel.
@@ -151,7 +164,7 @@ impl Surface {
 
     /// Per interface, in order: `(name, (a, b), (region_a, region_b))`, `a` and `b` the
     /// smallest labels of its lower and higher regions.
-    fn interfaces(&self) -> Vec<(String, (u32, u32), (u32, u32))> {
+    fn interfaces(&self) -> Vec<InterfaceEntry> {
         let s = &self.surface;
         s.interfaces()
             .iter()
@@ -211,10 +224,9 @@ fn quads_of(quads: &PyReadonlyArray2<'_, i64>, n: usize) -> Result<Vec<[u32; 4]>
         .map(|(f, r)| {
             let mut out = [0u32; 4];
             for (o, &i) in out.iter_mut().zip(r.iter()) {
-                *o = u32::try_from(i)
-                    .ok()
-                    .filter(|&i| (i as usize) < n)
-                    .ok_or_else(|| Error::input(format!("quad {f} names vertex {i}, beyond the {n} vertices")))?;
+                *o = u32::try_from(i).ok().filter(|&i| (i as usize) < n).ok_or_else(|| {
+                    Error::input(format!("quad {f} names vertex {i}, beyond the {n} vertices"))
+                })?;
             }
             Ok(out)
         })
@@ -258,21 +270,32 @@ pub(crate) fn write_arrays(
     let quads = quads_of(&quads, positions.len())?;
     let labels = labels.as_array();
     if labels.dim() != (quads.len(), 2) {
-        return Err(Error::input(format!("labels must be an ({}, 2) array, got {:?}", quads.len(), labels.shape())).into());
+        return Err(Error::input(format!(
+            "labels must be an ({}, 2) array, got {:?}",
+            quads.len(),
+            labels.shape()
+        ))
+        .into());
     }
     let face_labels = labels.rows().into_iter().map(|r| [r[0], r[1]]).collect();
     let mut mesh = QuadMesh { positions, quads, face_labels, ..Default::default() };
     if let Some(colors) = colors {
         let c = colors.as_array();
         if c.nrows() != mesh.quads.len() || !(c.ncols() == 3 || c.ncols() == 4) {
-            return Err(Error::input(format!("colors must be an ({}, 3 or 4) array, got {:?}", mesh.quads.len(), c.shape())).into());
+            return Err(Error::input(format!(
+                "colors must be an ({}, 3 or 4) array, got {:?}",
+                mesh.quads.len(),
+                c.shape()
+            ))
+            .into());
         }
         let rgba: Vec<[u8; 4]> =
             c.rows().into_iter().map(|r| [r[0], r[1], r[2], if r.len() == 4 { r[3] } else { 255 }]).collect();
         let mut distinct = rgba.clone();
         distinct.sort_unstable();
         distinct.dedup();
-        mesh.materials = distinct.iter().enumerate().map(|(i, &c)| Material::diffuse(format!("color_{i}"), c)).collect();
+        mesh.materials =
+            distinct.iter().enumerate().map(|(i, &c)| Material::diffuse(format!("color_{i}"), c)).collect();
         mesh.face_materials = rgba.iter().map(|c| distinct.binary_search(c).unwrap_or(0) as u32).collect();
     }
     py.detach(|| no_panic(|| write_mesh(&path, &mesh).map_err(|e| Error::io(&e))))?;

@@ -75,9 +75,9 @@ impl Options {
             None => None,
             Some(Regions::Label) => Some(RegionMap::per_label()),
             Some(Regions::Solid) => Some(RegionMap::single_solid()),
-            Some(Regions::Spec(spec)) => Some(
-                RegionMap::parse(spec).map_err(|e| Error::parameter(format!("regions '{spec}': {e}")))?,
-            ),
+            Some(Regions::Spec(spec)) => {
+                Some(RegionMap::parse(spec).map_err(|e| Error::parameter(format!("regions '{spec}': {e}")))?)
+            }
             Some(Regions::Groups(groups)) => Some(
                 RegionMap::from_groups(groups.clone())
                     .map_err(|e| Error::parameter(format!("regions {groups:?}: {e}")))?,
@@ -90,7 +90,11 @@ impl Options {
         let mut p = one_of(
             "preset",
             &self.preset,
-            &[("default", Params::default as fn() -> Params), ("papers", Params::papers), ("voxel_art", Params::voxel_art)],
+            &[
+                ("default", Params::default as fn() -> Params),
+                ("papers", Params::papers),
+                ("voxel_art", Params::voxel_art),
+            ],
         )?();
         if let Some(map) = self.region_map()? {
             p.regions = map;

@@ -52,7 +52,9 @@ fn load(
         }
     };
     let voxels = match spacing {
-        Some(s) => voxels.with_spacing(s).map_err(|e| Error::parameter(format!("{}: spacing: {e}", path.display())))?,
+        Some(s) => voxels
+            .with_spacing(s)
+            .map_err(|e| Error::parameter(format!("{}: spacing: {e}", path.display())))?,
         None => voxels,
     };
     let mut volume = match (threshold, voxels) {
@@ -122,11 +124,20 @@ pub(crate) fn read<'py>(
     if threshold.is_some() && keep_labels.is_some() {
         return Err(Error::parameter("threshold and keep_labels exclude each other").into());
     }
-    let dtype = dtype.map(|d| d.parse::<DataType>()).transpose().map_err(|e| Error::parameter(format!("dtype: {e}")))?;
-    let endian = endian.map(|d| d.parse::<Endian>()).transpose().map_err(|e| Error::parameter(format!("endian: {e}")))?;
+    let dtype = dtype
+        .map(|d| d.parse::<DataType>())
+        .transpose()
+        .map_err(|e| Error::parameter(format!("dtype: {e}")))?;
+    let endian = endian
+        .map(|d| d.parse::<Endian>())
+        .transpose()
+        .map_err(|e| Error::parameter(format!("endian: {e}")))?;
     let spacing = match spacing.map(DVec3::from_array) {
         Some(s) if !(s.is_finite() && s.min_element() > 0.0) => {
-            return Err(Error::parameter(format!("spacing: voxel sizes must be finite and positive, got {s}")).into())
+            return Err(Error::parameter(format!(
+                "spacing: voxel sizes must be finite and positive, got {s}"
+            ))
+            .into())
         }
         s => s,
     };

@@ -38,7 +38,9 @@ fn regions_arg(regions: Option<&Bound<'_, PyAny>>) -> Result<Option<Regions>> {
         }));
     }
     let groups: Vec<Vec<u32>> = r.extract().map_err(|_| {
-        Error::parameter("regions must be None, 'label', 'solid', a spec such as '1,2;7', or a list of label lists")
+        Error::parameter(
+            "regions must be None, 'label', 'solid', a spec such as '1,2;7', or a list of label lists",
+        )
     })?;
     Ok(Some(Regions::Groups(groups)))
 }
@@ -48,22 +50,34 @@ fn clamp_arg(clamp: Option<&Bound<'_, PyAny>>) -> Result<Option<Clamp>> {
     if let Ok(b) = c.cast::<PyBool>() {
         return Ok(Some(if b.is_true() { Clamp::Eps(0.01) } else { Clamp::Off }));
     }
-    let eps: f64 = c.extract().map_err(|_| Error::parameter("clamp must be None, True, False or an epsilon in voxels"))?;
+    let eps: f64 = c
+        .extract()
+        .map_err(|_| Error::parameter("clamp must be None, True, False or an epsilon in voxels"))?;
     Ok(Some(Clamp::Eps(eps)))
 }
 
-fn palette_arg(colors: Option<PyReadonlyArray2<'_, u8>>, materials: Option<Vec<MaterialTuple>>) -> Result<Option<Palette>> {
+fn palette_arg(
+    colors: Option<PyReadonlyArray2<'_, u8>>,
+    materials: Option<Vec<MaterialTuple>>,
+) -> Result<Option<Palette>> {
     let Some(colors) = colors else { return Ok(None) };
     let view = colors.as_array();
     if view.ncols() != 4 {
-        return Err(Error::parameter(format!("palette colours must be an (n, 4) RGBA array, got {:?}", view.shape())));
+        return Err(Error::parameter(format!(
+            "palette colours must be an (n, 4) RGBA array, got {:?}",
+            view.shape()
+        )));
     }
     let colors: Vec<[u8; 4]> = view.rows().into_iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
     Ok(Some(match materials {
         None => Palette::from_colors(colors),
         Some(m) => {
             if m.len() != colors.len() {
-                return Err(Error::parameter(format!("{} palette materials for {} colours", m.len(), colors.len())));
+                return Err(Error::parameter(format!(
+                    "{} palette materials for {} colours",
+                    m.len(),
+                    colors.len()
+                )));
             }
             let materials = m
                 .into_iter()
@@ -82,16 +96,16 @@ fn palette_arg(colors: Option<PyReadonlyArray2<'_, u8>>, materials: Option<Vec<M
 }
 
 fn threads_arg(threads: i64) -> Result<usize> {
-    usize::try_from(threads)
-        .map_err(|_| Error::parameter(format!("threads must be a non-negative integer (0: every core), got {threads}")))
+    usize::try_from(threads).map_err(|_| {
+        Error::parameter(format!("threads must be a non-negative integer (0: every core), got {threads}"))
+    })
 }
 
 /// Runs `f` on a private pool of `threads` threads (0: rayon's default, every core).
 pub(crate) fn on_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<T> {
-    let pool = rayon::ThreadPoolBuilder::new()
-        .num_threads(threads)
-        .build()
-        .map_err(|e| Error::new(crate::error::Kind::Voxreg, format!("cannot start {threads} threads: {e}")))?;
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| {
+        Error::new(crate::error::Kind::Voxreg, format!("cannot start {threads} threads: {e}"))
+    })?;
     Ok(pool.install(f))
 }
 
@@ -209,7 +223,8 @@ fn finish<'py>(py: Python<'py>, out: Output, palette: Option<Palette>) -> PyResu
         r.energy.after.total,
         r.last_solve().relative_gradient(),
     );
-    let report = serde_json::to_string(r).map_err(|e| Error::new(crate::error::Kind::Voxreg, e.to_string()))?;
+    let report =
+        serde_json::to_string(r).map_err(|e| Error::new(crate::error::Kind::Voxreg, e.to_string()))?;
     let converged = r.converged();
     let surface = Surface { surface: Arc::clone(&out.surface), positions: Arc::new(out.positions), palette };
     let arrays = py.detach(|| crate::error::no_panic(|| Ok(surface.arrays(Part::All))))?;

@@ -85,7 +85,8 @@ fn convert<T: ToLabel>(view: ArrayView3<'_, T>) -> Result<Array3<u32>> {
     match built {
         Some(array) => array.map_err(|e| Error::input(format!("labels: {e}"))),
         None => {
-            let ((i, j, k), v) = view.indexed_iter().find(|(_, v)| v.to_label().is_none()).expect("a bad value");
+            let ((i, j, k), v) =
+                view.indexed_iter().find(|(_, v)| v.to_label().is_none()).expect("a bad value");
             let why = if v.to_string().starts_with('-') { "negative" } else { "beyond 4294967295" };
             Err(Error::input(format!(
                 "labels: voxel [{i}, {j}, {k}] has label {v}, which is {why} (labels are unsigned 32-bit integers)"
@@ -116,7 +117,11 @@ pub(crate) fn to_numpy<'py>(py: Python<'py>, labels: Array3<u32>) -> Bound<'py, 
     use numpy::IntoPyArray;
     let (x, y, z) = labels.dim();
     let fortran = !labels.is_standard_layout() && labels.t().is_standard_layout();
-    let labels = if fortran || labels.is_standard_layout() { labels } else { labels.as_standard_layout().into_owned() };
+    let labels = if fortran || labels.is_standard_layout() {
+        labels
+    } else {
+        labels.as_standard_layout().into_owned()
+    };
     let (data, _) = labels.into_raw_vec_and_offset();
     numpy::ndarray::Array3::from_shape_vec((x, y, z).set_f(fortran), data)
         .expect("the volume's shape")

@@ -114,7 +114,7 @@ def test_read_every_format(data, tmp_path):
     np.save(tmp_path / "b.npy", ball)
     labels, info = voxreg.read(tmp_path / "b.npy")
     assert np.array_equal(labels, ball) and info["preset"] == "default" and info["palette"] is None
-    np.asfortranarray(ball).tofile(tmp_path / "b.raw")
+    ball.ravel(order="F").tofile(tmp_path / "b.raw")  # raw data: x fastest
     labels, _ = voxreg.read(tmp_path / "b.raw", dims=ball.shape, dtype="u16", spacing=(1, 2, 3))
     assert np.array_equal(labels, ball)
     with pytest.raises(voxreg.InputError, match="raw data have no header"):

@@ -1,5 +1,6 @@
 """threads= and the GIL: identical output at every thread count; concurrent runs overlap."""
 
+import os
 import threading
 import time
 
@@ -42,18 +43,37 @@ def test_threads_identical_cg():
     assert np.array_equal(one.vertices, two.vertices)
 
 
-def test_gil_released():
-    # About a second with one thread on the CI machines.
-    labels = ball_labels(64, 28)
+def run_papers(labels):
+    voxreg.regularize(labels, threads=1, preset="papers", solver="cg")
 
-    def run():
-        voxreg.regularize(labels, threads=1, preset="papers", solver="cg")
 
-    run()  # warm up
+def test_gil_released_while_computing():
+    """A Python thread keeps running while another regularizes (robust on a busy machine:
+    with the GIL held, the main thread would stall for the whole run)."""
+    labels = ball_labels(96, 44)
+    worker = threading.Thread(target=run_papers, args=(labels,))
+    ticks = []
+    t0 = time.perf_counter()
+    worker.start()
+    while worker.is_alive():
+        ticks.append(time.perf_counter())
+        time.sleep(0.005)
+    total = time.perf_counter() - t0
+    gaps = np.diff([t0] + ticks)
+    assert len(ticks) > 10 and gaps.max() < 0.5 * total, f"longest stall {gaps.max():.2f} s of {total:.2f} s"
+
+
+@pytest.mark.skipif(
+    (os.cpu_count() or 1) < 2 or os.getloadavg()[0] > (os.cpu_count() or 1) - 1.5,
+    reason="needs two idle cores to time concurrent runs",
+)
+def test_gil_released_concurrent_runs():
+    labels = ball_labels(120, 56)  # about a second with one thread
+    run_papers(labels)  # warm up
     t = time.perf_counter()
-    run()
+    run_papers(labels)
     single = time.perf_counter() - t
-    threads = [threading.Thread(target=run) for _ in range(2)]
+    threads = [threading.Thread(target=run_papers, args=(labels,)) for _ in range(2)]
     t = time.perf_counter()
     for th in threads:
         th.start()

@@ -176,7 +176,13 @@ def regularize(
         Called with the stage ("normals", "solve 1/4", "refine 1/3", ... then "done")
         and the fraction of the run done, in [0, 1], at most every 50 ms and at every
         stage change, with the GIL held (a tqdm bar can follow it). An exception it
-        raises aborts the run and propagates.
+        raises aborts the run and propagates. With tqdm::
+
+            with tqdm(total=100, unit="%") as bar:
+                def progress(stage, fraction):
+                    bar.set_description(stage)
+                    bar.update(100 * fraction - bar.n)
+                mesh = voxreg.regularize(labels, progress=progress)
     palette : dict or (n, 3 | 4) uint8 array, default None
         Colours (and materials) indexed by label, as ``read`` returns them: the mesh's
         ``colors`` and the materials of saved files.
