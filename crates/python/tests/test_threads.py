@@ -81,3 +81,12 @@ def test_gil_released_concurrent_runs():
         th.join()
     both = time.perf_counter() - t
     assert both < 1.5 * single, f"two concurrent runs took {both:.2f} s, one {single:.2f} s"
+
+
+def test_threads_one_uses_one_core():
+    """threads=1 runs on one thread: the process's CPU time cannot exceed the wall time."""
+    labels = ball_labels(80, 36)
+    wall, cpu = time.perf_counter(), time.process_time()
+    run_papers(labels)
+    wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
+    assert cpu <= 1.1 * wall + 0.05, f"{cpu:.2f} s of CPU in {wall:.2f} s"
