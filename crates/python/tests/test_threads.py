@@ -90,3 +90,23 @@ def test_threads_one_uses_one_core():
     run_papers(labels)
     wall, cpu = time.perf_counter() - wall, time.process_time() - cpu
     assert cpu <= 1.1 * wall + 0.05, f"{cpu:.2f} s of CPU in {wall:.2f} s"
+
+
+def test_concurrent_runs_interleave():
+    """Two runs in two Python threads progress at the same time (neither waits for the other
+    to finish), whatever the machine's load."""
+    labels = ball_labels(96, 44)
+    events = []
+
+    def run(name):
+        voxreg.regularize(labels, threads=1, preset="papers", solver="cg",
+                          progress=lambda s, f: events.append((name, s)))
+
+    threads = [threading.Thread(target=run, args=(n,)) for n in "AB"]
+    for th in threads:
+        th.start()
+    for th in threads:
+        th.join()
+    first_done = [s for _, s in events].index("done")
+    solving = {n for n, s in events[:first_done] if s.startswith("solve")}
+    assert solving == {"A", "B"}, "one run finished before the other started solving"
