@@ -1,0 +1,184 @@
+"""``Mesh``: the regularized quad mesh as plain numpy arrays."""
+
+from __future__ import annotations
+
+import json
+import os
+from typing import Any, Dict, List, Optional, Tuple
+
+import numpy as np
+
+from . import _voxreg
+from ._errors import InputError, VoxregError
+
+
+class Mesh:
+    """A quad mesh: one quad per voxel face of the input, at regularized positions.
+
+    Attributes
+    ----------
+    vertices : ndarray, (n, 3) float64
+        Vertex positions in physical units (the input's ``spacing`` and ``origin``: the
+        centre of voxel ``[x, y, z]`` lies at ``origin + [x, y, z] * spacing``).
+    quads : ndarray, (m, 4) int64
+        Four vertex indices per quad, counter-clockwise seen from the side its normal
+        points to.
+    labels : ndarray, (m, 2) uint32
+        Per quad, the ``[inner, outer]`` labels: the normal points from the inner label's
+        voxel to the outer one's (the PLY files' face labels).
+    colors : ndarray, (m, 4) uint8, or None
+        Per quad, the RGBA colour of its solid voxel, when the input had a palette
+        (MagicaVoxel files); else None.
+    report : dict
+        What the run did (the CLI's ``--report`` JSON ``run`` object): parameters, cell
+        counts, seconds per stage, energies before and after, every solve's report.
+        Sub-meshes share their parent's.
+    """
+
+    def __init__(
+        self,
+        vertices: Any,
+        quads: Any,
+        labels: Any,
+        colors: Any = None,
+        report: Optional[Dict[str, Any]] = None,
+        *,
+        _surface: Any = None,
+        _part: Optional[Tuple[str, int]] = None,
+        _groups: Optional[List[Tuple[str, np.ndarray]]] = None,
+        _summary: Optional[str] = None,
+    ) -> None:
+        self.vertices = np.asarray(vertices, dtype=np.float64)
+        self.quads = np.asarray(quads, dtype=np.int64)
+        self.labels = np.asarray(labels, dtype=np.uint32)
+        self.colors = None if colors is None else np.asarray(colors, dtype=np.uint8)
+        self.report = {} if report is None else report
+        self._surface = _surface
+        self._part = _part
+        self._groups = _groups or []
+        self._summary = _summary
+
+    @classmethod
+    def _from_core(cls, d: Dict[str, Any], report: Dict[str, Any], surface: Any,
+                   part: Optional[Tuple[str, int]], summary: Optional[str] = None) -> "Mesh":
+        return cls(d["vertices"], d["quads"], d["labels"], d["colors"], report,
+                   _surface=surface, _part=part, _groups=d["groups"], _summary=summary)
+
+    def __repr__(self) -> str:
+        colored = ", colored" if self.colors is not None else ""
+        return f"<voxreg.Mesh: {len(self.quads)} quads, {len(self.vertices)} vertices{colored}>"
+
+    def __len__(self) -> int:
+        return len(self.quads)
+
+    @property
+    def summary(self) -> str:
+        """The CLI's summary line: quads, vertices, energy before -> after, relative
+        gradient of the last solve."""
+        if self._summary is not None:
+            return self._summary
+        return f"{len(self.quads)} quads, {len(self.vertices)} vertices"
+
+    # Parts -----------------------------------------------------------------------------
+
+    def _need_surface(self, what: str) -> Any:
+        if self._surface is None or self._part is not None:
+            raise VoxregError(f"{what} needs the whole mesh returned by voxreg.regularize")
+        return self._surface
+
+    def interfaces(self) -> List[Tuple[int, int]]:
+        """The interfaces present, as ``(a, b)`` label pairs: the smallest labels of the two
+        regions (materials) the interface separates, the lower region first; in interface
+        order. For a mesh built from arrays: the distinct ``labels`` rows, in order of
+        first appearance."""
+        if self._surface is not None:
+            names = {name: pair for name, pair, _ in self._surface.interfaces()}
+            return [tuple(int(x) for x in names[name]) for name, _ in self._groups]
+        _, first = np.unique(self.labels, axis=0, return_index=True)
+        return [tuple(int(x) for x in self.labels[i]) for i in sorted(first)]
+
+    def interface(self, a: int, b: int) -> "Mesh":
+        """The interface between the regions of labels ``a`` and ``b`` (either order), as
+        a mesh of its own, oriented from its lower region to its higher one (see
+        ``labels``). Its vertices copy the whole mesh's bit for bit, so interfaces and
+        regions meet exactly along junctions."""
+        s = self._need_surface("interface()")
+        ra, rb = s.region_of(int(a)), s.region_of(int(b))
+        for i, (_, _, regions) in enumerate(s.interfaces()):
+            if ra is not None and rb is not None and set(regions) == {ra, rb}:
+                return Mesh._from_core(s.mesh(("interface", i)), self.report, s, ("interface", i))
+        raise InputError(f"no interface between labels {a} and {b}")
+
+    def region(self, label: int) -> "Mesh":
+        """The surface of the region (material) holding ``label``, closed and oriented
+        outward (open along the volume border when the volume has no background). Its
+        vertices copy the whole mesh's bit for bit."""
+        s = self._need_surface("region()")
+        r = s.region_of(int(label))
+        if r is None:
+            raise InputError(f"no voxel has label {label}")
+        return Mesh._from_core(s.mesh(("region", r)), self.report, s, ("region", r))
+
+    def regions(self) -> List[int]:
+        """The smallest label of every region but the background, in region order."""
+        s = self._need_surface("regions()")
+        bg = s.background_region()
+        return [labels[0] for r, labels in enumerate(s.region_labels()) if r != bg and labels]
+
+    # Conversions -----------------------------------------------------------------------
+
+    def triangles(self) -> np.ndarray:
+        """The quads split along their first diagonal: (2m, 3) int64, quad ``i`` giving
+        triangles ``2i`` (vertices 0, 1, 2) and ``2i + 1`` (0, 2, 3)."""
+        q = self.quads
+        t = np.empty((2 * len(q), 3), dtype=np.int64)
+        t[0::2] = q[:, [0, 1, 2]]
+        t[1::2] = q[:, [0, 2, 3]]
+        return t
+
+    def to_pyvista(self) -> Any:
+        """A ``pyvista.PolyData`` of the quads, with cell data ``labels`` ((m, 2)), and
+        ``colors`` ((m, 4) uint8) when the mesh has colours. Needs pyvista."""
+        try:
+            import pyvista as pv
+        except ImportError as e:  # pragma: no cover - depends on the environment
+            raise ImportError("Mesh.to_pyvista needs pyvista (pip install pyvista)") from e
+        faces = np.hstack([np.full((len(self.quads), 1), 4, dtype=np.int64), self.quads]).ravel()
+        poly = pv.PolyData(self.vertices.copy(), faces)
+        poly.cell_data["labels"] = self.labels
+        if self.colors is not None:
+            poly.cell_data["colors"] = self.colors
+        return poly
+
+    def to_trimesh(self) -> Any:
+        """A ``trimesh.Trimesh`` of ``triangles()`` (not processed: vertices and faces as
+        here), with per-triangle face attribute ``labels`` and face colours when the mesh
+        has colours. Needs trimesh."""
+        try:
+            import trimesh
+        except ImportError as e:  # pragma: no cover - depends on the environment
+            raise ImportError("Mesh.to_trimesh needs trimesh (pip install trimesh)") from e
+        kwargs: Dict[str, Any] = {}
+        if self.colors is not None:
+            kwargs["face_colors"] = np.repeat(self.colors, 2, axis=0)
+        m = trimesh.Trimesh(self.vertices, self.triangles(), process=False, **kwargs)
+        m.face_attributes["labels"] = np.repeat(self.labels, 2, axis=0)
+        return m
+
+    def save(self, path: "str | os.PathLike[str]") -> None:
+        """Writes the mesh with voxreg's writers, chosen by extension: ``.obj`` (quads, one
+        group per interface, an ``.mtl`` for coloured meshes), ``.ply`` (binary, face
+        labels and colours), ``.glb`` or ``.gltf`` (glTF 2.0, triangulated, one material
+        per colour). The same bytes as the CLI's for the same mesh. A mesh built from
+        arrays is written without interface groups, one material per distinct colour."""
+        path = os.fspath(path)
+        if self._surface is not None:
+            self._surface.save(path, self._part)
+        else:
+            colors = None if self.colors is None else np.ascontiguousarray(self.colors, dtype=np.uint8)
+            _voxreg.write_arrays(path, np.ascontiguousarray(self.vertices), np.ascontiguousarray(self.quads),
+                                 np.ascontiguousarray(self.labels), colors)
+
+
+def _report(d: Dict[str, Any]) -> Dict[str, Any]:
+    return json.loads(d["report_json"])

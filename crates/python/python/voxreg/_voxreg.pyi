@@ -1,0 +1,59 @@
+# The Rust core (crates/python/src). Private: use the voxreg package's functions.
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+
+import numpy as np
+import numpy.typing as npt
+
+__version__: str
+
+_Part = Optional[Tuple[str, int]]
+
+class Surface:
+    def mesh(self, part: _Part = None) -> Dict[str, Any]: ...
+    def save(self, path: str, part: _Part = None) -> None: ...
+    def interfaces(self) -> List[Tuple[str, Tuple[int, int], Tuple[int, int]]]: ...
+    def region_of(self, label: int) -> Optional[int]: ...
+    def region_labels(self) -> List[List[int]]: ...
+    def background_region(self) -> Optional[int]: ...
+
+def regularize(
+    labels: npt.NDArray[Any],
+    spacing: Tuple[float, float, float],
+    origin: Tuple[float, float, float],
+    background: Optional[int],
+    regions: Any,
+    preset: str,
+    normals: Optional[str],
+    radius: Optional[float],
+    alpha: Optional[float],
+    beta: Optional[float],
+    gamma: Optional[float],
+    refine: Optional[int],
+    preserve_size: Optional[bool],
+    texture_aware: Optional[bool],
+    solver: Optional[str],
+    clamp: Any,
+    tolerance: Optional[float],
+    threads: int,
+    progress: Optional[Callable[[str, float], Any]],
+    palette_colors: Optional[npt.NDArray[np.uint8]],
+    palette_materials: Optional[List[Tuple[str, Tuple[int, int, int, int], float, float, float, float]]],
+) -> Dict[str, Any]: ...
+def read(
+    path: str,
+    threshold: Optional[float] = None,
+    dims: Optional[Sequence[int]] = None,
+    dtype: Optional[str] = None,
+    endian: Optional[str] = None,
+    spacing: Optional[Sequence[float]] = None,
+    keep_labels: Optional[Sequence[int]] = None,
+    background: Optional[int] = None,
+) -> Tuple[npt.NDArray[np.uint32], Dict[str, Any]]: ...
+def check(vertices: npt.NDArray[np.float64], quads: npt.NDArray[np.int64]) -> Dict[str, Any]: ...
+def write_arrays(
+    path: str,
+    vertices: npt.NDArray[np.float64],
+    quads: npt.NDArray[np.int64],
+    labels: npt.NDArray[np.uint32],
+    colors: Optional[npt.NDArray[np.uint8]] = None,
+) -> None: ...

@@ -1,0 +1,237 @@
+//! `regularize`: a numpy label volume through the library's front door, with the GIL
+//! released, a private thread pool and a throttled progress callback.
+
+use std::any::Any;
+use std::panic::{catch_unwind, resume_unwind, AssertUnwindSafe};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+use numpy::PyReadonlyArray2;
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyString};
+use voxreg_io::{Material, Palette};
+use voxreg_regularize::{Event, Output, Regularizer, Stage};
+
+use crate::error::{panic_error, Error, Result};
+use crate::mesh::{Part, Surface};
+use crate::params::{Clamp, Options, Regions};
+use crate::volume;
+
+/// The shortest interval between two progress calls (a stage change always calls).
+const THROTTLE: Duration = Duration::from_millis(50);
+
+/// The unwinding payload that aborts a run whose progress callback raised.
+struct Cancelled;
+
+/// A material as the Python layer passes it: name, RGBA, metallic, roughness, emission,
+/// transparency.
+type MaterialTuple = (String, [u8; 4], f32, f32, f32, f32);
+
+fn regions_arg(regions: Option<&Bound<'_, PyAny>>) -> Result<Option<Regions>> {
+    let Some(r) = regions else { return Ok(None) };
+    if let Ok(s) = r.cast::<PyString>() {
+        let s = s.to_string();
+        return Ok(Some(match s.as_str() {
+            "label" => Regions::Label,
+            "solid" => Regions::Solid,
+            _ => Regions::Spec(s),
+        }));
+    }
+    let groups: Vec<Vec<u32>> = r.extract().map_err(|_| {
+        Error::parameter(
+            "regions must be None, 'label', 'solid', a spec such as '1,2;7', or a list of label lists",
+        )
+    })?;
+    Ok(Some(Regions::Groups(groups)))
+}
+
+fn clamp_arg(clamp: Option<&Bound<'_, PyAny>>) -> Result<Option<Clamp>> {
+    let Some(c) = clamp else { return Ok(None) };
+    if let Ok(b) = c.cast::<PyBool>() {
+        return Ok(Some(if b.is_true() { Clamp::Eps(0.01) } else { Clamp::Off }));
+    }
+    let eps: f64 = c
+        .extract()
+        .map_err(|_| Error::parameter("clamp must be None, True, False or an epsilon in voxels"))?;
+    Ok(Some(Clamp::Eps(eps)))
+}
+
+fn palette_arg(
+    colors: Option<PyReadonlyArray2<'_, u8>>,
+    materials: Option<Vec<MaterialTuple>>,
+) -> Result<Option<Palette>> {
+    let Some(colors) = colors else { return Ok(None) };
+    let view = colors.as_array();
+    if view.ncols() != 4 {
+        return Err(Error::parameter(format!(
+            "palette colours must be an (n, 4) RGBA array, got {:?}",
+            view.shape()
+        )));
+    }
+    let colors: Vec<[u8; 4]> = view.rows().into_iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
+    Ok(Some(match materials {
+        None => Palette::from_colors(colors),
+        Some(m) => {
+            if m.len() != colors.len() {
+                return Err(Error::parameter(format!(
+                    "{} palette materials for {} colours",
+                    m.len(),
+                    colors.len()
+                )));
+            }
+            let materials = m
+                .into_iter()
+                .map(|(name, color, metallic, roughness, emission, transparency)| Material {
+                    name,
+                    color,
+                    metallic,
+                    roughness,
+                    emission,
+                    transparency,
+                })
+                .collect();
+            Palette { colors, materials }
+        }
+    }))
+}
+
+fn threads_arg(threads: i64) -> Result<usize> {
+    usize::try_from(threads).map_err(|_| {
+        Error::parameter(format!("threads must be a non-negative integer (0: every core), got {threads}"))
+    })
+}
+
+/// Runs `f` on a private pool of `threads` threads (0: rayon's default, every core).
+pub(crate) fn on_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> Result<T> {
+    let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().map_err(|e| {
+        Error::new(crate::error::Kind::Voxreg, format!("cannot start {threads} threads: {e}"))
+    })?;
+    Ok(pool.install(f))
+}
+
+/// The core of `voxreg.regularize` (documented there).
+#[pyfunction]
+#[pyo3(signature = (
+    labels, spacing, origin, background, regions, preset, normals, radius, alpha, beta, gamma,
+    refine, preserve_size, texture_aware, solver, clamp, tolerance, threads, progress,
+    palette_colors, palette_materials
+))]
+#[allow(clippy::too_many_arguments)]
+pub(crate) fn regularize<'py>(
+    py: Python<'py>,
+    labels: &Bound<'py, PyAny>,
+    spacing: [f64; 3],
+    origin: [f64; 3],
+    background: Option<u32>,
+    regions: Option<&Bound<'py, PyAny>>,
+    preset: String,
+    normals: Option<String>,
+    radius: Option<f64>,
+    alpha: Option<f64>,
+    beta: Option<f64>,
+    gamma: Option<f64>,
+    refine: Option<i64>,
+    preserve_size: Option<bool>,
+    texture_aware: Option<bool>,
+    solver: Option<String>,
+    clamp: Option<&Bound<'py, PyAny>>,
+    tolerance: Option<f64>,
+    threads: i64,
+    progress: Option<Py<PyAny>>,
+    palette_colors: Option<PyReadonlyArray2<'py, u8>>,
+    palette_materials: Option<Vec<MaterialTuple>>,
+) -> PyResult<Bound<'py, PyDict>> {
+    let options = Options {
+        preset,
+        regions: regions_arg(regions)?,
+        normals,
+        radius,
+        alpha,
+        beta,
+        gamma,
+        refine,
+        preserve_size,
+        texture_aware,
+        solver,
+        clamp: clamp_arg(clamp)?,
+        tolerance,
+    };
+    let params = options.params()?;
+    let threads = threads_arg(threads)?;
+    let palette = palette_arg(palette_colors, palette_materials)?;
+    // The one copy, with the GIL held (numpy arrays may be written by other threads).
+    let volume = volume::volume(volume::labels_of(labels)?, spacing, origin, background)?;
+
+    let mut callback_error: Option<PyErr> = None;
+    let outcome = {
+        let mut last: Option<(Stage, Instant)> = None;
+        let params = &params;
+        let callback_error = &mut callback_error;
+        let progress = progress.as_ref();
+        let mut report = move |e: &Event| {
+            let Some(callback) = progress else { return };
+            let now = Instant::now();
+            if last.is_some_and(|(stage, t)| stage == e.stage && now.duration_since(t) < THROTTLE) {
+                return;
+            }
+            last = Some((e.stage, now));
+            let label = e.stage.label(params);
+            if let Err(err) = Python::attach(|py| callback.bind(py).call1((label, e.fraction)).map(drop)) {
+                *callback_error = Some(err);
+                resume_unwind(Box::new(Cancelled));
+            }
+        };
+        let volume = &volume;
+        py.detach(move || {
+            on_pool(threads, move || {
+                catch_unwind(AssertUnwindSafe(|| -> Result<Output> {
+                    let mut regularizer = Regularizer::from_volume(volume, &params.regions)
+                        .map_err(|e| Error::regularize("labels: no surface to regularize: ", &e))?;
+                    regularizer.run_with(params, None, &mut report).map_err(|e| Error::regularize("", &e))
+                }))
+            })
+        })?
+    };
+    let out = match outcome {
+        Ok(result) => result?,
+        Err(payload) => return Err(aborted(payload, callback_error)),
+    };
+    if let Some(callback) = &progress {
+        callback.bind(py).call1(("done", 1.0))?;
+    }
+    drop(volume);
+    finish(py, out, palette)
+}
+
+/// The error of a run that unwound: the callback's exception, or a panic's `VoxregError`.
+fn aborted(payload: Box<dyn Any + Send>, callback_error: Option<PyErr>) -> PyErr {
+    match (payload.is::<Cancelled>(), callback_error) {
+        (true, Some(err)) => err,
+        _ => panic_error(payload).into(),
+    }
+}
+
+/// The result dict: the whole mesh's arrays, the report (JSON), the CLI's summary line and
+/// the surface handle for sub-meshes and writing.
+fn finish<'py>(py: Python<'py>, out: Output, palette: Option<Palette>) -> PyResult<Bound<'py, PyDict>> {
+    let r = &out.report;
+    let summary = format!(
+        "{} quads, {} vertices; energy {:.6e} -> {:.6e}; relative gradient {:.1e}",
+        r.counts.surfels,
+        r.counts.vertices,
+        r.energy.before.total,
+        r.energy.after.total,
+        r.last_solve().relative_gradient(),
+    );
+    let report =
+        serde_json::to_string(r).map_err(|e| Error::new(crate::error::Kind::Voxreg, e.to_string()))?;
+    let converged = r.converged();
+    let surface = Surface { surface: Arc::clone(&out.surface), positions: Arc::new(out.positions), palette };
+    let arrays = py.detach(|| crate::error::no_panic(|| Ok(surface.arrays(Part::All))))?;
+    let dict = arrays.into_dict(py)?;
+    dict.set_item("report_json", report)?;
+    dict.set_item("summary", summary)?;
+    dict.set_item("converged", converged)?;
+    dict.set_item("surface", Bound::new(py, surface)?)?;
+    Ok(dict)
+}

@@ -1,0 +1,130 @@
+//! numpy label arrays into the library's `LabelVolume`, and back.
+//!
+//! **Copies.** The library's volume owns an `Array3<u32>`, so a numpy array is copied
+//! exactly once, into that array: a plain `memcpy` for C- or Fortran-contiguous `uint32`
+//! input, a checked conversion for every other integer dtype, and for non-contiguous views
+//! a gather in logical order. The memory order is kept (C stays C, Fortran stays Fortran),
+//! so no transposition happens either.
+
+use glam::DVec3;
+use ndarray::{Array3, ShapeBuilder};
+use numpy::ndarray::ArrayView3;
+use numpy::{PyArray3, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use pyo3::prelude::*;
+use voxreg_digisurf::LabelVolume;
+
+use crate::error::{Error, Result};
+
+/// An integer type a label can come from.
+trait ToLabel: numpy::Element + Copy + std::fmt::Display {
+    fn to_label(self) -> Option<u32>;
+}
+
+macro_rules! to_label {
+    ($($t:ty),*) => {$(
+        impl ToLabel for $t {
+            #[inline]
+            fn to_label(self) -> Option<u32> {
+                u32::try_from(self).ok()
+            }
+        }
+    )*};
+}
+to_label!(u8, u16, u32, u64, i8, i16, i32, i64);
+
+impl ToLabel for bool {
+    #[inline]
+    fn to_label(self) -> Option<u32> {
+        Some(u32::from(self))
+    }
+}
+
+/// The labels of `array` (a numpy array of any integer or bool dtype, shape `(X, Y, Z)`
+/// indexed `[x, y, z]`) as the library's array, copied once.
+pub(crate) fn labels_of(array: &Bound<'_, PyAny>) -> Result<Array3<u32>> {
+    let untyped = array
+        .cast::<PyUntypedArray>()
+        .map_err(|_| Error::input("labels must be a numpy array (numpy.asarray accepts nested lists)"))?;
+    if untyped.ndim() != 3 {
+        return Err(Error::input(format!(
+            "labels must be a 3-D array indexed [x, y, z], got shape ({})",
+            untyped.shape().iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")
+        )));
+    }
+    macro_rules! try_dtype {
+        ($($t:ty),*) => {$(
+            if let Ok(a) = array.cast::<PyArray3<$t>>() {
+                let ro = a.try_readonly().map_err(|e| Error::input(format!("labels: {e}")))?;
+                return convert::<$t>(ro.as_array());
+            }
+        )*};
+    }
+    try_dtype!(u32, u8, u16, u64, i32, i8, i16, i64, bool);
+    let dtype = untyped.dtype().to_string();
+    Err(Error::input(format!(
+        "labels must be an integer array, got dtype {dtype} (grey levels: threshold them first, e.g. labels = grey > t)"
+    )))
+}
+
+fn convert<T: ToLabel>(view: ArrayView3<'_, T>) -> Result<Array3<u32>> {
+    let (x, y, z) = view.dim();
+    let collect = |values: &mut dyn Iterator<Item = &T>| -> Option<Vec<u32>> {
+        let mut out = Vec::with_capacity(x * y * z);
+        for v in values {
+            out.push(v.to_label()?);
+        }
+        Some(out)
+    };
+    let built = if let Some(c) = view.as_slice() {
+        collect(&mut c.iter()).map(|v| Array3::from_shape_vec((x, y, z), v))
+    } else if let Some(f) = view.t().as_slice() {
+        collect(&mut f.iter()).map(|v| Array3::from_shape_vec((x, y, z).f(), v))
+    } else {
+        collect(&mut view.iter()).map(|v| Array3::from_shape_vec((x, y, z), v))
+    };
+    match built {
+        Some(array) => array.map_err(|e| Error::input(format!("labels: {e}"))),
+        None => {
+            let ((i, j, k), v) =
+                view.indexed_iter().find(|(_, v)| v.to_label().is_none()).expect("a bad value");
+            let why = if v.to_string().starts_with('-') { "negative" } else { "beyond 4294967295" };
+            Err(Error::input(format!(
+                "labels: voxel [{i}, {j}, {k}] has label {v}, which is {why} (labels are unsigned 32-bit integers)"
+            )))
+        }
+    }
+}
+
+/// A volume over `labels` with its embedding and background.
+pub(crate) fn volume(
+    labels: Array3<u32>,
+    spacing: [f64; 3],
+    origin: [f64; 3],
+    background: Option<u32>,
+) -> Result<LabelVolume> {
+    LabelVolume::new(labels)
+        .with_spacing(DVec3::from_array(spacing))
+        .map_err(|e| Error::parameter(format!("spacing: {e}")))?
+        .with_origin(DVec3::from_array(origin))
+        .map_err(|e| Error::parameter(format!("origin: {e}")))
+        .map(|v| v.with_background(background))
+}
+
+/// The library's labels as a numpy array of the same shape and memory order, moved (not
+/// copied) into numpy.
+pub(crate) fn to_numpy<'py>(py: Python<'py>, labels: Array3<u32>) -> Bound<'py, PyAny> {
+    use numpy::ndarray::ShapeBuilder as _;
+    use numpy::IntoPyArray;
+    let (x, y, z) = labels.dim();
+    let fortran = !labels.is_standard_layout() && labels.t().is_standard_layout();
+    let labels = if fortran || labels.is_standard_layout() {
+        labels
+    } else {
+        labels.as_standard_layout().into_owned()
+    };
+    let (data, _) = labels.into_raw_vec_and_offset();
+    numpy::ndarray::Array3::from_shape_vec((x, y, z).set_f(fortran), data)
+        .expect("the volume's shape")
+        .into_pyarray(py)
+        .into_any()
+}

@@ -1,0 +1,95 @@
+"""Errors: the right class, the CLI's message, nothing panics across into Python."""
+
+import numpy as np
+import pytest
+
+import voxreg
+from conftest import ball_labels
+
+
+def test_hierarchy():
+    assert issubclass(voxreg.InputError, voxreg.VoxregError) and issubclass(voxreg.InputError, ValueError)
+    assert issubclass(voxreg.ParameterError, ValueError) and issubclass(voxreg.IoError, OSError)
+
+
+@pytest.mark.parametrize("labels, message", [
+    (np.zeros((4, 4)), r"3-D array indexed \[x, y, z\], got shape \(4, 4\)"),
+    (np.zeros((4, 4, 4), dtype=np.float32), "integer array, got dtype float32"),
+    (np.full((3, 3, 3), -2, dtype=np.int16), r"voxel \[0, 0, 0\] has label -2, which is negative"),
+    (np.full((3, 3, 3), 2**33, dtype=np.int64), "beyond 4294967295"),
+    (np.zeros((4, 4, 4), dtype=np.uint8), "labels: no surface to regularize"),
+])
+def test_input_errors(labels, message):
+    with pytest.raises(voxreg.InputError, match=message):
+        voxreg.regularize(labels)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(preset="fast"), "preset must be one of 'default', 'papers', 'voxel_art', got 'fast'"),
+    (dict(alpha=0), "alpha must be finite and positive, got 0"),
+    (dict(beta=-1), "beta must be finite and non-negative"),
+    (dict(radius=float("nan")), "radius must be finite and positive"),
+    (dict(normals="pca"), "normals must be one of"),
+    (dict(solver="lu"), "solver must be one of"),
+    (dict(solver="cg", clamp=0.1), "clamp needs the bounded solver"),
+    (dict(clamp=1.5), r"clamp: EPS must be in \(0, 1\) voxel, got 1.5"),
+    (dict(refine=-1), "refine must be a non-negative integer"),
+    (dict(threads=-2), "threads must be a non-negative integer"),
+    (dict(spacing=(1, 0, 1)), "spacing: invalid volume: voxel spacing must be finite and positive"),
+    (dict(spacing=(1, 1)), "spacing must be three numbers"),
+    (dict(regions="1,2;2"), "regions '1,2;2'"),
+])
+def test_parameter_errors(kwargs, message):
+    with pytest.raises(voxreg.ParameterError, match=message):
+        voxreg.regularize(ball_labels(8, 3), **kwargs)
+
+
+def test_io_errors(tmp_path, data):
+    with pytest.raises(voxreg.IoError, match="missing.vol"):
+        voxreg.read(tmp_path / "missing.vol")
+    with pytest.raises(voxreg.IoError, match="unknown file extension"):
+        voxreg.read(tmp_path / "x.txt")
+    with pytest.raises(voxreg.IoError):
+        voxreg.read(data / "not_a.vox")
+    mesh = voxreg.regularize(ball_labels(8, 3))
+    with pytest.raises(voxreg.IoError, match=r"unsupported output format \(expected .obj, .ply, .glb or .gltf\)"):
+        mesh.save(tmp_path / "m.stl")
+    with pytest.raises(voxreg.IoError):
+        mesh.save(tmp_path / "no" / "such" / "dir" / "m.ply")
+    with pytest.raises(voxreg.ParameterError, match="unknown data type"):
+        voxreg.read(tmp_path / "x.raw", dims=(2, 2, 2), dtype="u7")
+
+
+def test_progress_exception_aborts_and_propagates():
+    seen = []
+
+    class Stop(Exception):
+        pass
+
+    def progress(stage, fraction):
+        seen.append(stage)
+        if stage.startswith("solve"):
+            raise Stop(stage)
+
+    with pytest.raises(Stop, match="solve 1/4"):
+        voxreg.regularize(ball_labels(), progress=progress)
+    assert seen == ["normals", "solve 1/4"]
+    # The module still works afterwards.
+    assert len(voxreg.regularize(ball_labels(8, 3)).quads) > 0
+
+
+def test_progress_stages_fractions_and_throttle():
+    calls = []
+    voxreg.regularize(ball_labels(), progress=lambda s, f: calls.append((s, f)))
+    stages = [s for s, _ in calls]
+    assert stages[0] == "normals" and stages[-1] == "done" and calls[-1][1] == 1.0
+    assert {"solve 1/4", "refine 1/3", "solve 4/4"} <= set(stages)
+    fractions = [f for _, f in calls]
+    assert fractions == sorted(fractions) and all(0.0 <= f <= 1.0 for f in fractions)
+
+
+def test_docstrings_tell_units_and_defaults():
+    doc = voxreg.regularize.__doc__
+    for word in ["physical units", "default (1, 1, 1)", "alpha : float > 0, default None (preset: 1e-2",
+                 "threads : int >= 0, default 0", "voxels"]:
+        assert word in doc
