@@ -226,7 +226,8 @@ fn finish<'py>(py: Python<'py>, out: Output, palette: Option<Palette>) -> PyResu
     let report =
         serde_json::to_string(r).map_err(|e| Error::new(crate::error::Kind::Voxreg, e.to_string()))?;
     let converged = r.converged();
-    let surface = Surface { surface: Arc::clone(&out.surface), positions: Arc::new(out.positions), palette };
+    let surface =
+        Surface { surface: Arc::clone(&out.surface), positions: Arc::new(out.positions.into_vec()), palette };
     let arrays = py.detach(|| crate::error::no_panic(|| Ok(surface.arrays(Part::All))))?;
     let dict = arrays.into_dict(py)?;
     dict.set_item("report_json", report)?;

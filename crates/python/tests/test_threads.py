@@ -11,14 +11,6 @@ import voxreg
 from conftest import ball_labels
 
 
-NONDETERMINISTIC = pytest.mark.xfail(
-    strict=False,
-    reason="the solvers' parallel reductions (faer's sparse Cholesky, the multigrid CG) are not yet "
-    "deterministic across thread counts: differences of about 1e-14",
-)
-
-
-@NONDETERMINISTIC
 def test_threads_identical_direct():
     labels = ball_labels(24, 9)
     one = voxreg.regularize(labels, threads=1)
@@ -34,7 +26,6 @@ def test_same_thread_count_identical():
     assert np.array_equal(a.vertices, b.vertices)
 
 
-@NONDETERMINISTIC
 def test_threads_identical_cg():
     # Large enough for the multigrid CG (the direct solver is exact at every count).
     labels = ball_labels(48, 20)

@@ -7,9 +7,10 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
+use crate::boxqp::{minimize_in_boxes, BoxProblem};
 use crate::cg::check_tolerance;
 use crate::info::{BoundedInfo, SolveTimings};
-use crate::iterative::{Preconditioner, Setup};
+use crate::iterative::{Preconditioner, Prepared, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
 use crate::vecops::{dot, norm, tail_estimate};
@@ -118,173 +119,40 @@ impl BoundedSolver {
     ) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
         let mut prepared = self.setup.prepare(energy)?;
         let stencil = &self.setup.stencil;
-        let coef = &prepared.coef;
         let n = stencil.len();
         let input = energy.input();
         let h = self.setup.spacing;
         let half = self.params.clamp.map(|eps| (1.0 - eps) * 0.5 * self.setup.voxel);
 
         let t0 = Instant::now();
-        let zero = || vec![DVec3::ZERO; n];
         // u: displacement from the input; r = -grad E / 2 = b - H u.
-        let (mut u, mut r, mut z, mut q, mut tmp, mut trial) =
-            (zero(), zero(), zero(), zero(), zero(), zero());
-        let mut rp = zero();
-        stencil.apply(coef, input, &mut r, &mut tmp, false);
-        r.par_iter_mut().for_each(|x| *x = -*x);
-        let rhs = r.clone();
-        let r0 = norm(&r);
-        let alpha_min = energy.min_alpha();
-        let tol = self.params.tolerance * h;
-        let mut e = energy.terms(input).total;
-        let mut applications = 1;
-        let mut residuals = Vec::new();
-        let mut estimate = f64::INFINITY;
-        let mut correction = None;
-        let mut iterations = 0;
-        if let (Some(w), true) = (half, self.params.conjugate) {
-            // Warm start: the unconstrained minimizer (the same iteration without bounds,
-            // i.e. PCG) projected into the boxes, so that the bounded iteration starts
-            // with nearly the right set of clamped coordinates.
-            let free = crate::boxqp::minimize_in_boxes(
-                stencil,
-                &mut prepared,
-                DVec3::splat(f64::INFINITY),
-                &mut u,
-                &mut r,
-                &rhs,
-                tol,
-                self.params.max_iterations,
-                e,
-                r0,
-                alpha_min,
-                h,
-                &mut |_| {},
-            );
-            applications += free.applications;
-            u.par_iter_mut().for_each(|d| *d = d.clamp(-w, w));
-            let start = energy.terms(&input.iter().zip(&u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
-            if start <= e {
-                e = start;
-            } else {
-                // The projection can cost more than it gained: start from the input.
-                u.iter_mut().for_each(|d| *d = DVec3::ZERO);
-            }
-            stencil.residual(&prepared.coef, &u, &rhs, &mut r, &mut tmp);
-            applications += 1;
-            let stats = crate::boxqp::minimize_in_boxes(
-                stencil,
-                &mut prepared,
-                w,
-                &mut u,
-                &mut r,
-                &rhs,
-                tol,
-                self.params.max_iterations,
-                e,
-                r0,
-                alpha_min,
-                h,
-                progress,
-            );
-            iterations = stats.iterations;
-            applications += stats.applications;
-            estimate = stats.estimate;
-            e += stats.energy_change;
+        let mut s = Iterate { u: vec![DVec3::ZERO; n], r: vec![DVec3::ZERO; n], ..Iterate::default() };
+        let mut tmp = vec![DVec3::ZERO; n];
+        stencil.apply(&prepared.coef, input, &mut s.r, &mut tmp, false);
+        s.r.par_iter_mut().for_each(|x| *x = -*x);
+        let rhs = s.r.clone();
+        let problem = BoxProblem {
+            stencil,
+            rhs: &rhs,
+            tol: self.params.tolerance * h,
+            max_iterations: self.params.max_iterations,
+            energy0: energy.terms(input).total,
+            r0: norm(&rhs),
+            alpha_min: energy.min_alpha(),
+            h,
+        };
+        s.energy = problem.energy0;
+        s.applications = 1;
+        s.estimate = f64::INFINITY;
+        match (half, self.params.conjugate) {
+            (Some(w), true) => self.mprgp(energy, &problem, &mut prepared, w, &mut s, progress),
+            _ => self.projected_descent(&problem, &mut prepared, half, &mut s, progress),
         }
+        let (r0, alpha_min) = (problem.r0, problem.alpha_min);
+        let (u, mut r) = (s.u, s.r);
+        let (mut applications, iterations, estimate) = (s.applications, s.iterations, s.estimate);
         let coef = &prepared.coef;
-        while !(half.is_some() && self.params.conjugate) {
-            // Projected residual: zero the coordinates held on their box by the gradient.
-            rp.copy_from_slice(&r);
-            if let Some(w) = half {
-                project_residual(&u, w, &mut rp);
-            }
-            let rp_norm = norm(&rp);
-            residuals.push(rp_norm);
-            if let Some(c) = correction {
-                estimate = 2.0 * tail_estimate(c, &residuals[residuals.len().saturating_sub(6)..]);
-                progress(&Progress {
-                    iteration: iterations,
-                    energy: e,
-                    gradient_norm: 2.0 * rp_norm,
-                    relative_gradient: if r0 > 0.0 { rp_norm / r0 } else { 0.0 },
-                    error_bound: rp_norm / alpha_min / h,
-                    error_estimate: estimate / h,
-                });
-            }
-            let done = rp_norm == 0.0 || (half.is_none() && rp_norm <= alpha_min * tol) || estimate <= tol;
-            if done || iterations >= self.params.max_iterations {
-                break;
-            }
-            prepared.pre.apply(stencil, &rp, &mut z);
-            if let Some(w) = half {
-                freeze(&u, &r, w, &mut z);
-            }
-            let rd = dot(&r, &z);
-            stencil.apply(coef, &z, &mut q, &mut tmp, true);
-            applications += 1;
-            let dq = dot(&z, &q);
-            if !(rd > 0.0 && dq > 0.0) {
-                break; // converged to rounding
-            }
-            let mut step = rd / dq;
-            match half {
-                None => {
-                    u.par_chunks_mut(CHUNK).zip(z.par_chunks(CHUNK)).for_each(|(u, z)| {
-                        u.iter_mut().zip(z).for_each(|(u, z)| *u += step * *z);
-                    });
-                    r.par_chunks_mut(CHUNK).zip(q.par_chunks(CHUNK)).for_each(|(r, q)| {
-                        r.iter_mut().zip(q).for_each(|(r, q)| *r -= step * *q);
-                    });
-                    e -= step * rd;
-                    correction = Some(step * z.par_iter().map(|v| v.length()).reduce(|| 0.0, f64::max));
-                }
-                Some(w) => {
-                    // Project, and halve the step until the energy does not increase:
-                    // E(u + s) - E(u) = -2 r.s + s.H s.
-                    let mut accepted = false;
-                    let mut de = 0.0;
-                    for _ in 0..40 {
-                        trial
-                            .par_chunks_mut(CHUNK)
-                            .zip(u.par_chunks(CHUNK))
-                            .zip(z.par_chunks(CHUNK))
-                            .for_each(|((s, u), z)| {
-                                for i in 0..s.len() {
-                                    s[i] = (u[i] + step * z[i]).clamp(-w, w) - u[i];
-                                }
-                            });
-                        stencil.apply(coef, &trial, &mut q, &mut tmp, true);
-                        applications += 1;
-                        de = -2.0 * dot(&r, &trial) + dot(&trial, &q);
-                        if de <= 0.0 {
-                            accepted = true;
-                            break;
-                        }
-                        step *= 0.5;
-                    }
-                    if !accepted {
-                        break;
-                    }
-                    e += de;
-                    u.par_chunks_mut(CHUNK).zip(trial.par_chunks(CHUNK)).for_each(|(u, s)| {
-                        for i in 0..u.len() {
-                            u[i] = (u[i] + s[i]).clamp(-w, w);
-                        }
-                    });
-                    r.par_chunks_mut(CHUNK).zip(q.par_chunks(CHUNK)).for_each(|(r, q)| {
-                        r.iter_mut().zip(q).for_each(|(r, q)| *r -= *q);
-                    });
-                    correction = Some(trial.par_iter().map(|v| v.length()).reduce(|| 0.0, f64::max));
-                }
-            }
-            iterations += 1;
-            if iterations % 50 == 0 {
-                // Refresh the residual: the updates drift from b - H u.
-                stencil.residual(coef, &u, &rhs, &mut r, &mut tmp);
-                applications += 1;
-            }
-        }
+        let mut rp = vec![DVec3::ZERO; n];
         // The certificate, on the true residual.
         stencil.residual(coef, &u, &rhs, &mut r, &mut tmp);
         applications += 1;
@@ -326,6 +194,172 @@ impl BoundedSolver {
             },
         ))
     }
+
+    /// MPRGP inside the boxes of half-width `w`, warm-started from the unconstrained
+    /// minimizer (the same iteration without bounds, i.e. PCG) projected into the boxes
+    /// when that lowers the energy, so that it starts with nearly the right set of clamped
+    /// coordinates.
+    fn mprgp(
+        &self,
+        energy: &Energy<'_>,
+        problem: &BoxProblem<'_>,
+        prepared: &mut Prepared<'_>,
+        w: DVec3,
+        s: &mut Iterate,
+        progress: &mut dyn FnMut(&Progress),
+    ) {
+        let input = energy.input();
+        let free = minimize_in_boxes(
+            problem,
+            prepared,
+            DVec3::splat(f64::INFINITY),
+            &mut s.u,
+            &mut s.r,
+            &mut |_| {},
+        );
+        s.applications += free.applications;
+        s.u.par_iter_mut().for_each(|d| *d = d.clamp(-w, w));
+        let start = energy.terms(&input.iter().zip(&s.u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
+        if start <= s.energy {
+            s.energy = start;
+        } else {
+            // The projection can cost more than it gained: start from the input.
+            s.u.iter_mut().for_each(|d| *d = DVec3::ZERO);
+        }
+        let mut tmp = vec![DVec3::ZERO; s.u.len()];
+        problem.stencil.residual(&prepared.coef, &s.u, problem.rhs, &mut s.r, &mut tmp);
+        s.applications += 1;
+        let bounded = BoxProblem { energy0: s.energy, ..*problem };
+        let stats = minimize_in_boxes(&bounded, prepared, w, &mut s.u, &mut s.r, progress);
+        s.iterations = stats.iterations;
+        s.applications += stats.applications;
+        s.estimate = stats.estimate;
+        s.energy += stats.energy_change;
+    }
+
+    /// Projected preconditioned descent (the papers' iteration, `half = None` without
+    /// boxes): each step along `M^-1 r` restricted to the free coordinates, projected into
+    /// the boxes, halved until the energy does not increase.
+    fn projected_descent(
+        &self,
+        problem: &BoxProblem<'_>,
+        prepared: &mut Prepared<'_>,
+        half: Option<DVec3>,
+        s: &mut Iterate,
+        progress: &mut dyn FnMut(&Progress),
+    ) {
+        let BoxProblem { stencil, rhs, tol, r0, alpha_min, h, .. } = *problem;
+        let n = s.u.len();
+        let zero = || vec![DVec3::ZERO; n];
+        let (mut z, mut q, mut tmp, mut trial, mut rp) = (zero(), zero(), zero(), zero(), zero());
+        let (u, r) = (&mut s.u, &mut s.r);
+        let mut residuals = Vec::new();
+        let mut correction = None;
+        loop {
+            // Projected residual: zero the coordinates held on their box by the gradient.
+            rp.copy_from_slice(r);
+            if let Some(w) = half {
+                project_residual(u, w, &mut rp);
+            }
+            let rp_norm = norm(&rp);
+            residuals.push(rp_norm);
+            if let Some(c) = correction {
+                s.estimate = 2.0 * tail_estimate(c, &residuals[residuals.len().saturating_sub(6)..]);
+                progress(&Progress {
+                    iteration: s.iterations,
+                    energy: s.energy,
+                    gradient_norm: 2.0 * rp_norm,
+                    relative_gradient: if r0 > 0.0 { rp_norm / r0 } else { 0.0 },
+                    error_bound: rp_norm / alpha_min / h,
+                    error_estimate: s.estimate / h,
+                });
+            }
+            let done = rp_norm == 0.0 || (half.is_none() && rp_norm <= alpha_min * tol) || s.estimate <= tol;
+            if done || s.iterations >= self.params.max_iterations {
+                break;
+            }
+            prepared.pre.apply(stencil, &rp, &mut z);
+            if let Some(w) = half {
+                freeze(u, r, w, &mut z);
+            }
+            let rd = dot(r, &z);
+            stencil.apply(&prepared.coef, &z, &mut q, &mut tmp, true);
+            s.applications += 1;
+            let dq = dot(&z, &q);
+            if !(rd > 0.0 && dq > 0.0) {
+                break; // converged to rounding
+            }
+            let mut step = rd / dq;
+            match half {
+                None => {
+                    u.par_chunks_mut(CHUNK).zip(z.par_chunks(CHUNK)).for_each(|(u, z)| {
+                        u.iter_mut().zip(z).for_each(|(u, z)| *u += step * *z);
+                    });
+                    r.par_chunks_mut(CHUNK).zip(q.par_chunks(CHUNK)).for_each(|(r, q)| {
+                        r.iter_mut().zip(q).for_each(|(r, q)| *r -= step * *q);
+                    });
+                    s.energy -= step * rd;
+                    correction = Some(step * z.par_iter().map(|v| v.length()).reduce(|| 0.0, f64::max));
+                }
+                Some(w) => {
+                    // Project, and halve the step until the energy does not increase:
+                    // E(u + s) - E(u) = -2 r.s + s.H s.
+                    let mut accepted = false;
+                    let mut de = 0.0;
+                    for _ in 0..40 {
+                        trial
+                            .par_chunks_mut(CHUNK)
+                            .zip(u.par_chunks(CHUNK))
+                            .zip(z.par_chunks(CHUNK))
+                            .for_each(|((t, u), z)| {
+                                for i in 0..t.len() {
+                                    t[i] = (u[i] + step * z[i]).clamp(-w, w) - u[i];
+                                }
+                            });
+                        stencil.apply(&prepared.coef, &trial, &mut q, &mut tmp, true);
+                        s.applications += 1;
+                        de = -2.0 * dot(r, &trial) + dot(&trial, &q);
+                        if de <= 0.0 {
+                            accepted = true;
+                            break;
+                        }
+                        step *= 0.5;
+                    }
+                    if !accepted {
+                        break;
+                    }
+                    s.energy += de;
+                    u.par_chunks_mut(CHUNK).zip(trial.par_chunks(CHUNK)).for_each(|(u, t)| {
+                        for i in 0..u.len() {
+                            u[i] = (u[i] + t[i]).clamp(-w, w);
+                        }
+                    });
+                    r.par_chunks_mut(CHUNK).zip(q.par_chunks(CHUNK)).for_each(|(r, q)| {
+                        r.iter_mut().zip(q).for_each(|(r, q)| *r -= *q);
+                    });
+                    correction = Some(trial.par_iter().map(|v| v.length()).reduce(|| 0.0, f64::max));
+                }
+            }
+            s.iterations += 1;
+            if s.iterations % 50 == 0 {
+                // Refresh the residual: the updates drift from b - H u.
+                stencil.residual(&prepared.coef, u, rhs, r, &mut tmp);
+                s.applications += 1;
+            }
+        }
+    }
+}
+
+/// The state of a bounded solve: displacement `u` from the input, residual
+/// `r = -grad E / 2`, and what is reported.
+#[derive(Default)]
+struct Iterate {
+    u: Vec<DVec3>,
+    r: Vec<DVec3>,
+    energy: f64,
+    applications: usize,
+    iterations: usize,
+    estimate: f64,
 }
 
 /// Whether coordinate `u` is on the bound `+-w` towards which `r` (the descent direction

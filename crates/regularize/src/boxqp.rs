@@ -152,25 +152,35 @@ pub(crate) struct BoxStats {
     pub(crate) energy_change: f64,
 }
 
-/// Minimizes `E(input + u)` over `|u_a| <= w_a`, from `u` (feasible), where
-/// `r = rhs - H u` on entry; `tol` is the stopping tolerance in physical units (see
-/// [`crate::BoundedParams::tolerance`]).
-#[allow(clippy::too_many_arguments)]
+/// The fixed data of a bound-constrained minimization: `E(input + u)` with
+/// `r = rhs - H u`, for the progress reports and the stopping rule.
+pub(crate) struct BoxProblem<'a> {
+    pub(crate) stencil: &'a Stencil,
+    /// `-grad E / 2` at the input.
+    pub(crate) rhs: &'a [DVec3],
+    /// The stopping tolerance in physical units (see [`crate::BoundedParams::tolerance`]).
+    pub(crate) tol: f64,
+    pub(crate) max_iterations: usize,
+    /// The energy at the starting `u`.
+    pub(crate) energy0: f64,
+    /// `|rhs|`, the unit of relative gradients.
+    pub(crate) r0: f64,
+    /// The smallest attachment weight and the smallest spacing, for the error bounds.
+    pub(crate) alpha_min: f64,
+    pub(crate) h: f64,
+}
+
+/// Minimizes `E(input + u)` over `|u_a| <= w_a` (MPRGP), from `u` (feasible), where
+/// `r = rhs - H u` on entry.
 pub(crate) fn minimize_in_boxes(
-    stencil: &Stencil,
+    problem: &BoxProblem<'_>,
     prepared: &mut Prepared<'_>,
     w: DVec3,
     u: &mut [DVec3],
     r: &mut [DVec3],
-    rhs: &[DVec3],
-    tol: f64,
-    max_iterations: usize,
-    energy0: f64,
-    r0: f64,
-    alpha_min: f64,
-    h: f64,
     progress: &mut dyn FnMut(&Progress),
 ) -> BoxStats {
+    let BoxProblem { stencil, rhs, tol, max_iterations, energy0, r0, alpha_min, h } = *problem;
     let n = u.len();
     let coef = &prepared.coef;
     let zero = || vec![DVec3::ZERO; n];
