@@ -13,9 +13,12 @@
 //! - **Failed writes** leave nothing behind: missing directory, a directory as target,
 //!   unknown extension, an invalid mesh (and an existing file is kept unchanged).
 //! - [`fuzz_readers`]: mutated files never make a reader panic; replayed regressions.
+//! - [`hostile`]: small files declaring huge sizes or exploding scene graphs are refused
+//!   before allocating; contradictory data (overlapping pieces, bad palettes) too.
 //! - [`materials`]: colours and materials from .vox palettes to glTF, OBJ/MTL and PLY.
 
 mod fuzz_readers;
+mod hostile;
 mod materials;
 
 use std::collections::BTreeSet;
