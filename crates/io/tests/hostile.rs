@@ -274,3 +274,41 @@ fn zlib_data_are_never_inflated_past_the_declared_size() {
     let err = with_max_memory(1 << 20, || read_vol_bytes(&bytes, Path::new("long.vol"))).unwrap_err();
     assert!(err.to_string().contains("after decompression"), "{err}");
 }
+
+#[test]
+fn mesh_batch_with_a_directory_in_the_way_changes_nothing() {
+    use voxreg_io::MeshBatch;
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("out");
+    std::fs::create_dir_all(out.join("b.ply")).unwrap();
+    std::fs::write(out.join("a.ply"), "old").unwrap();
+    let mut batch = MeshBatch::new(&out).unwrap();
+    for name in ["a.ply", "b.ply", "c.ply"] {
+        batch.write(name, &crate::single_voxel_mesh()).unwrap();
+    }
+    let err = batch.commit().unwrap_err();
+    assert!(err.to_string().starts_with(&out.join("b.ply").display().to_string()), "{err}");
+    assert_eq!(std::fs::read_to_string(out.join("a.ply")).unwrap(), "old");
+    assert_eq!(crate::entries(&out), [out.join("a.ply"), out.join("b.ply")]);
+}
+
+#[test]
+fn failed_mesh_batch_removes_the_directories_it_created() {
+    let dir = tempfile::tempdir().unwrap();
+    let batch = voxreg_io::MeshBatch::new(&dir.path().join("x").join("y")).unwrap();
+    assert!(dir.path().join("x/y").is_dir());
+    drop(batch);
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0);
+}
+
+#[test]
+fn failed_obj_write_keeps_the_old_material_library() {
+    let (mesh, _) = crate::materials::coloured_mesh("chr_army1.vox");
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("m.obj");
+    std::fs::create_dir(&obj).unwrap(); // the OBJ cannot replace a directory
+    std::fs::write(dir.path().join("m.mtl"), "old").unwrap();
+    assert!(voxreg_io::write_mesh(&obj, &mesh).is_err());
+    assert_eq!(std::fs::read_to_string(dir.path().join("m.mtl")).unwrap(), "old");
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
+}
