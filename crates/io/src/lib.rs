@@ -107,7 +107,7 @@ pub use obj::write_obj;
 pub use pgm3d::{read_pgm3d, read_pgm3d_bytes};
 pub use ply::{scalar_ramp, write_ply, write_ply_with_vertex_scalar};
 pub use raw::{read_raw, read_raw_bytes, RawSpec};
-pub use read_mesh::read_mesh;
+pub use read_mesh::{read_mesh, read_mesh_bytes};
 pub use samples::{DataType, Endian};
 pub use vol::{read_vol, read_vol_bytes};
 pub use volume::{is_voxel_art, read_volume, read_voxels, LoadedVolume, LoadedVoxels, MAX_VOXELS};
