@@ -7,5 +7,6 @@ use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
     // A 1 GiB budget: well under libFuzzer's 2 GiB RSS limit.
-    let _ = voxreg_io::with_max_memory(1 << 30, || voxreg_io::read_pgm3d_bytes(data, Path::new("fuzz.pgm3d")));
+    let _ =
+        voxreg_io::with_max_memory(1 << 30, || voxreg_io::read_pgm3d_bytes(data, Path::new("fuzz.pgm3d")));
 });
