@@ -6,5 +6,6 @@ use std::path::Path;
 use libfuzzer_sys::fuzz_target;
 
 fuzz_target!(|data: &[u8]| {
-    let _ = voxreg_io::read_nifti_bytes(data, Path::new("fuzz.nii"));
+    // A 1 GiB budget: well under libFuzzer's 2 GiB RSS limit.
+    let _ = voxreg_io::with_max_memory(1 << 30, || voxreg_io::read_nifti_bytes(data, Path::new("fuzz.nii")));
 });

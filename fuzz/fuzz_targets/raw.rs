@@ -16,5 +16,7 @@ fuzz_target!(|data: &[u8]| {
         endian: if head[4] % 2 == 0 { Endian::Little } else { Endian::Big },
         spacing: DVec3::new(f64::from(head[5]), f64::from(head[6]), f64::from(head[7])) / 16.0,
     };
-    let _ = voxreg_io::read_raw_bytes(rest, Path::new("fuzz.raw"), &spec);
+    // A 1 GiB budget: well under libFuzzer's 2 GiB RSS limit.
+    let _ =
+        voxreg_io::with_max_memory(1 << 30, || voxreg_io::read_raw_bytes(rest, Path::new("fuzz.raw"), &spec));
 });

@@ -16,6 +16,10 @@ use voxreg_regularize::{Estimator, Params, SolverChoice};
 pub(crate) struct Cli {
     #[command(subcommand)]
     pub(crate) command: Command,
+    /// Memory budget: inputs (and upscaled volumes) declaring more are refused before
+    /// anything is allocated for them, e.g. 4G, 512M [default: half the physical memory].
+    #[arg(long, global = true, value_name = "SIZE", value_parser = parse_memory)]
+    pub(crate) max_memory: Option<u64>,
 }
 
 #[derive(Subcommand, Debug)]
@@ -384,6 +388,10 @@ fn parse_three<T: std::str::FromStr>(s: &str, what: &str) -> std::result::Result
         .collect::<std::result::Result<_, _>>()
         .map_err(|_| format!("'{s}' is not three {what} separated by commas"))?;
     parts.try_into().map_err(|_| format!("'{s}' is not three {what} separated by commas"))
+}
+
+fn parse_memory(s: &str) -> std::result::Result<u64, String> {
+    voxreg_io::parse_size(s).ok_or_else(|| format!("--max-memory '{s}' is not a size such as 4G or 512M"))
 }
 
 fn parse_dims(s: &str) -> std::result::Result<[u64; 3], String> {

@@ -25,6 +25,9 @@ fn main() -> std::process::ExitCode {
         Ok(cli) => cli,
         Err(e) => return usage_error(&e),
     };
+    if let Some(bytes) = cli.max_memory {
+        voxreg_io::set_max_memory(bytes);
+    }
     let result = match cli.command {
         Command::Info(args) => input::info(&args),
         Command::Regularize(args) => regularize(&args, Product::Mesh),
@@ -82,6 +85,7 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
     let stages = Stages::new(args.quiet);
     let path = &args.input.input;
     let ((volume, palette), read) = stages.run("read volume", || input::read_input(&args.input))?;
+    output::check_volume(args, product, &volume)?;
     let (mut regularizer, _) = stages.run("digital surface", || {
         Regularizer::from_volume(&volume, &params.regions)
             .with_context(|| format!("{}: no surface to regularize", path.display()))
@@ -108,6 +112,7 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
                     .with_context(|| format!("{}: cannot upscale", path.display()))
             })?;
             io.upscale = Some(secs);
+            output::check_upscaled(args, &volume, &fine, factor)?;
             let ((), secs) =
                 stages.run("write volume", || Ok(write_volume(&args.output, &fine, palette.as_ref())?))?;
             io.write = secs;

@@ -4,7 +4,7 @@
 use std::path::Path;
 
 use anyhow::{bail, Result};
-use voxreg_digisurf::{DigitalSurface, InterfaceId, PatchParams, RegionId};
+use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId};
 use voxreg_io::{interface_name, region_name, write_mesh, MeshBatch, Palette, QuadMesh};
 
 use crate::args::{RegularizeArgs, Split};
@@ -37,6 +37,7 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product) -> Result<(
         }
         _ => {}
     }
+    check_paths(args, product)?;
     if let Some(path) = &args.features {
         if product != Product::Mesh {
             bail!("--features {}: voxreg upscale writes no mesh to carry the feature field", path.display());
@@ -47,6 +48,138 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product) -> Result<(
         if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply")) {
             bail!("{}: --features writes PLY only (expected .ply)", path.display());
         }
+    }
+    Ok(())
+}
+
+/// Every output path (`-o`, `--report`, `--features`) can be written: its directory
+/// exists and is writable, it is not a directory (except `-o` with `--split`), it is not
+/// the input, and no two outputs are the same file.
+fn check_paths(args: &RegularizeArgs, product: Product) -> Result<()> {
+    let split = product == Product::Mesh && args.split != Split::None;
+    let mut outputs: Vec<(&str, &Path)> = vec![("-o", &args.output)];
+    outputs.extend(args.report.as_deref().map(|p| ("--report", p)));
+    outputs.extend(args.features.as_deref().map(|p| ("--features", p)));
+    for (k, &(option, path)) in outputs.iter().enumerate() {
+        if same_file(path, &args.input.input) {
+            bail!("{}: {option} would overwrite the input", path.display());
+        }
+        if let Some(&(other, _)) = outputs[..k].iter().find(|(_, p)| same_file(p, path)) {
+            bail!("{}: {option} and {other} name the same file", path.display());
+        }
+        if split && option == "-o" {
+            // The directory is created if missing: its nearest existing ancestor must be
+            // a writable directory.
+            let existing = path.ancestors().find(|a| a.as_os_str().is_empty() || a.exists());
+            match existing {
+                Some(a) if a == path => writable_dir(path, option)?,
+                Some(a) => writable_dir(if a.as_os_str().is_empty() { Path::new(".") } else { a }, option)
+                    .map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?,
+                None => {}
+            }
+            continue;
+        }
+        if path.is_dir() {
+            bail!("{}: {option} names a directory", path.display());
+        }
+        let parent = match path.parent() {
+            Some(p) if !p.as_os_str().is_empty() => p,
+            _ => Path::new("."),
+        };
+        if !parent.is_dir() {
+            bail!("{}: {option}: the directory {} does not exist", path.display(), parent.display());
+        }
+        writable_dir(parent, option).map_err(|e| anyhow::anyhow!("{}: {e}", path.display()))?;
+    }
+    Ok(())
+}
+
+/// Whether `a` and `b` are the same file: equal paths, or both existing with the same
+/// device and inode (or the same canonical path off Unix).
+fn same_file(a: &Path, b: &Path) -> bool {
+    if a == b {
+        return true;
+    }
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::MetadataExt;
+        match (std::fs::metadata(a), std::fs::metadata(b)) {
+            (Ok(x), Ok(y)) => x.dev() == y.dev() && x.ino() == y.ino(),
+            _ => false,
+        }
+    }
+    #[cfg(not(unix))]
+    {
+        matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
+    }
+}
+
+/// Checks that `dir` is a directory in which a file can be created (by creating and
+/// removing a temporary one).
+fn writable_dir(dir: &Path, option: &str) -> Result<()> {
+    if !dir.is_dir() {
+        bail!("{option}: {} is not a directory", dir.display());
+    }
+    tempfile::Builder::new()
+        .prefix(".voxreg-")
+        .suffix(".tmp")
+        .tempfile_in(dir)
+        .map(drop)
+        .map_err(|e| anyhow::anyhow!("{option}: cannot write in {}: {e}", dir.display()))
+}
+
+/// Checks, once the volume is read and before the regularization, what the output
+/// needs of it: labels PLY can hold, and for `upscale` a fine volume within the memory
+/// budget.
+pub(crate) fn check_volume(args: &RegularizeArgs, product: Product, volume: &LabelVolume) -> Result<()> {
+    let input = &args.input.input;
+    let ply = match product {
+        Product::Mesh if args.split == Split::None => {
+            args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
+        }
+        Product::Mesh => args.split_format == crate::args::SplitFormat::Ply,
+        Product::Volume { .. } => false,
+    };
+    if ply {
+        if let Some(&max) = volume.labels().iter().max().filter(|&&m| m > i32::MAX as u32) {
+            bail!(
+                "{}: label {max} does not fit PLY's int labels (at most {}): write .obj or .glb",
+                input.display(),
+                i32::MAX
+            );
+        }
+    }
+    if let Product::Volume { factor } = product {
+        let fine = volume.dims().map(|d| d as u128 * factor as u128);
+        let voxels = fine.iter().product::<u128>();
+        // The upscaled labels, the per-column buffers they are gathered from, and the
+        // written file's bytes.
+        let what = format!("upscaling x{factor} to {}x{}x{} voxels", fine[0], fine[1], fine[2]);
+        voxreg_io::check_memory(input, &what, voxels * 9)?;
+    }
+    Ok(())
+}
+
+/// Refuses an upscaled volume that lost the model: empty, or with less than half the
+/// solid voxels the input has at the finer resolution (thin parts collapsed).
+pub(crate) fn check_upscaled(
+    args: &RegularizeArgs,
+    coarse: &LabelVolume,
+    fine: &LabelVolume,
+    factor: usize,
+) -> Result<()> {
+    let solid = |v: &LabelVolume| {
+        let b = v.background();
+        v.labels().iter().filter(|&&l| Some(l) != b).count() as u128
+    };
+    let (before, after) = (solid(coarse) * (factor as u128).pow(3), solid(fine));
+    if after * 2 < before {
+        bail!(
+            "{}: the smooth surface keeps {after} of the {before} solid voxels at x{factor} \
+             (thin parts collapse); nothing written to {}",
+            args.input.input.display(),
+            args.output.display()
+        );
     }
     Ok(())
 }

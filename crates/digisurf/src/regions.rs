@@ -37,10 +37,20 @@ impl RegionMap {
         Ok(RegionMap { groups, all_in_one: false })
     }
 
-    /// Parses groups written as `"1,2,3;7"`: groups separated by `;`, labels by `,`.
+    /// Parses groups written as `"1,2,3;7"`: groups separated by `;`, labels by `,`
+    /// (one trailing `;` allowed). An empty text, an empty group (`"1;;2"`, `";"`) or an
+    /// empty label (`"1,,2"`) is an error.
     pub fn parse(text: &str) -> Result<Self, SurfaceError> {
+        let body = text.trim();
+        let body = body.strip_suffix(';').unwrap_or(body);
+        if body.trim().is_empty() {
+            return Err(SurfaceError::InvalidRegions(format!("'{text}' names no group of labels")));
+        }
         let mut groups = Vec::new();
-        for part in text.split(';').map(str::trim).filter(|p| !p.is_empty()) {
+        for part in body.split(';').map(str::trim) {
+            if part.is_empty() {
+                return Err(SurfaceError::InvalidRegions(format!("empty group in '{text}'")));
+            }
             let group = part
                 .split(',')
                 .map(|l| {
@@ -183,6 +193,10 @@ mod tests {
         assert_eq!(r.len(), 4); // {1,3}, {2}, {4}, {0}
         assert!(RegionMap::parse("1,2;2").is_err());
         assert!(RegionMap::parse("1,x").is_err());
+        for bad in ["", " ", ";", ";;", "1,2;;3", "1,,2", ";1"] {
+            assert!(RegionMap::parse(bad).is_err(), "'{bad}' accepted");
+        }
+        assert!(RegionMap::parse("1,2;3;").is_ok());
         let s = RegionMap::single_solid().resolve(&v).unwrap();
         assert_eq!(s.len(), 2);
         assert_eq!(s.region_of(2), Some(RegionId(0)));

@@ -49,6 +49,22 @@ pub enum IoError {
         /// The largest number of voxels accepted.
         limit: u64,
     },
+    /// What the file declares would need more memory than the budget
+    /// ([`max_memory`](crate::max_memory)); refused before anything is allocated for it.
+    #[error(
+        "{}: {what} needs {}, over the memory limit of {} (raise it with --max-memory)",
+        .path.display(), crate::format_size(*.bytes), crate::format_size(*.limit)
+    )]
+    OverBudget {
+        /// The file being read (or written).
+        path: PathBuf,
+        /// What needs the memory, e.g. `a volume of 700x700x700 voxels`.
+        what: String,
+        /// The bytes it needs.
+        bytes: u64,
+        /// The budget.
+        limit: u64,
+    },
     /// The file name has no extension, or one this crate does not know.
     #[error("{}: unknown file extension (expected {expected})", .path.display())]
     UnsupportedExtension {
@@ -84,6 +100,7 @@ impl IoError {
             | IoError::Format { path, .. }
             | IoError::Unsupported { path, .. }
             | IoError::TooLarge { path, .. }
+            | IoError::OverBudget { path, .. }
             | IoError::UnsupportedExtension { path, .. }
             | IoError::InvalidMesh { path, .. }
             | IoError::Volume { path, .. } => path,

@@ -27,8 +27,10 @@
 //!
 //! Readers never panic on malformed input: truncated data, bad headers, dimensions that
 //! do not match the data, unsupported types and NaN grey levels are [`IoError`]s naming
-//! the file, and volumes of more than [`MAX_VOXELS`] voxels are refused before anything
-//! is allocated for them. Each `read_*_bytes` entry point is fuzzed (`fuzz/`).
+//! the file, and volumes of more than [`MAX_VOXELS`] voxels, or needing more memory than
+//! the budget ([`max_memory`]: half the physical memory unless [`set_max_memory`] says
+//! otherwise), are refused before anything is allocated for them; compressed data are
+//! never inflated past their declared size. Each `read_*_bytes` entry point is fuzzed (`fuzz/`).
 //!
 //! **Writing meshes.** A [`QuadMesh`] (positions, quads, `[inner, outer]` labels per
 //! face, named [`FaceGroup`]s) is built from a digital surface by
@@ -70,6 +72,7 @@
 mod error;
 mod gltf;
 mod grey;
+mod limits;
 mod longvol;
 mod material;
 mod mesh;
@@ -91,6 +94,10 @@ mod write_volume;
 pub use error::IoError;
 pub use gltf::write_gltf;
 pub use grey::{GreyVolume, NotALabel, Voxels};
+pub use limits::{
+    check_memory, default_max_memory, format_size, max_memory, parse_size, set_max_memory, with_max_memory,
+    FALLBACK_MAX_MEMORY,
+};
 pub use longvol::{read_longvol, read_longvol_bytes};
 pub use material::{Material, Palette};
 pub use mesh::{interface_name, region_name, write_mesh, FaceGroup, MeshBatch, QuadMesh};
@@ -100,10 +107,10 @@ pub use obj::write_obj;
 pub use pgm3d::{read_pgm3d, read_pgm3d_bytes};
 pub use ply::{scalar_ramp, write_ply, write_ply_with_vertex_scalar};
 pub use raw::{read_raw, read_raw_bytes, RawSpec};
-pub use read_mesh::read_mesh;
+pub use read_mesh::{read_mesh, read_mesh_bytes};
 pub use samples::{DataType, Endian};
 pub use vol::{read_vol, read_vol_bytes};
 pub use volume::{is_voxel_art, read_volume, read_voxels, LoadedVolume, LoadedVoxels, MAX_VOXELS};
-pub use vox::{read_vox, read_vox_bytes};
+pub use vox::{read_vox, read_vox_bytes, VOX_MAX_INSTANCES, VOX_MAX_PLACED_VOXELS};
 pub use vti::{read_vti, read_vti_bytes};
 pub use write_volume::{write_vol, write_volume, write_vox, VOX_MAX_MODEL};

@@ -51,7 +51,7 @@ pub fn read_longvol_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> 
             ))
         }
     };
-    checked_voxel_count(path, dims)?;
+    checked_voxel_count(path, dims, 8 + 8)?;
     let layout = Layout {
         dims: dims.map(|d| d as usize), // fits: each is at most the voxel count
         dtype: DataType::U64,

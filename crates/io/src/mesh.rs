@@ -251,17 +251,44 @@ fn first_label(surface: &DigitalSurface, r: RegionId) -> u32 {
 #[derive(Debug)]
 pub struct MeshBatch {
     dir: std::path::PathBuf,
-    staging: tempfile::TempDir,
+    /// `None` once dropped.
+    staging: Option<tempfile::TempDir>,
     names: Vec<String>,
+    /// The outermost directory this batch created, removed again (with what it holds)
+    /// unless the batch is committed.
+    created: Option<std::path::PathBuf>,
+}
+
+impl Drop for MeshBatch {
+    fn drop(&mut self) {
+        drop(self.staging.take());
+        if let Some(created) = self.created.take() {
+            let _ = std::fs::remove_dir_all(created);
+        }
+    }
 }
 
 impl MeshBatch {
-    /// Starts a batch writing into `dir`, created (with its parents) if missing.
+    /// Starts a batch writing into `dir`, created (with its parents) if missing; if the
+    /// batch is not committed, what it created is removed again.
     pub fn new(dir: &Path) -> Result<MeshBatch, IoError> {
+        let created = dir
+            .ancestors()
+            .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
+            .last()
+            .map(Path::to_path_buf);
         std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, e))?;
-        let staging =
-            tempfile::Builder::new().prefix(".voxreg-").tempdir_in(dir).map_err(|e| IoError::io(dir, e))?;
-        Ok(MeshBatch { dir: dir.to_path_buf(), staging, names: Vec::new() })
+        let staging = tempfile::Builder::new().prefix(".voxreg-").tempdir_in(dir).map_err(|e| {
+            if let Some(c) = &created {
+                let _ = std::fs::remove_dir_all(c);
+            }
+            IoError::io(dir, e)
+        })?;
+        Ok(MeshBatch { dir: dir.to_path_buf(), staging: Some(staging), names: Vec::new(), created })
+    }
+
+    fn staging(&self) -> &Path {
+        self.staging.as_ref().map_or(Path::new(""), |s| s.path())
     }
 
     /// Writes `mesh` as `name` (a plain file name with a mesh extension) in the staging
@@ -274,7 +301,7 @@ impl MeshBatch {
                 message: format!("'{name}' is not a plain file name"),
             });
         }
-        let staged = self.staging.path().join(name);
+        let staged = self.staging().join(name);
         write_mesh(&staged, mesh).map_err(|e| match e {
             IoError::InvalidMesh { message, .. } => IoError::InvalidMesh { path: target, message },
             other => other,
@@ -286,18 +313,53 @@ impl MeshBatch {
     /// Moves every file written so far (and companions such as `.mtl` libraries) into
     /// the target directory, replacing files of the same names, and removes the
     /// staging directory. Returns the paths written.
-    pub fn commit(self) -> Result<Vec<std::path::PathBuf>, IoError> {
-        let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(self.staging.path())
+    ///
+    /// All or nothing: a target that is a directory is refused before anything moves;
+    /// files being replaced are first moved aside into the staging directory, and if a
+    /// rename fails, every file already moved in is taken out again and the replaced
+    /// ones are put back.
+    pub fn commit(mut self) -> Result<Vec<std::path::PathBuf>, IoError> {
+        let staging = self.staging().to_path_buf();
+        let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(&staging)
             .and_then(|entries| entries.map(|e| e.map(|e| e.path())).collect())
-            .map_err(|e| IoError::io(self.staging.path(), e))?;
+            .map_err(|e| IoError::io(&self.dir, e))?;
         files.sort();
-        let mut written = Vec::with_capacity(files.len());
-        for file in files {
-            let target = self.dir.join(file.file_name().unwrap_or_default());
-            std::fs::rename(&file, &target).map_err(|e| IoError::io(&target, e))?;
-            written.push(target);
+        let targets: Vec<std::path::PathBuf> =
+            files.iter().map(|f| self.dir.join(f.file_name().unwrap_or_default())).collect();
+        if let Some(t) = targets.iter().find(|t| t.is_dir()) {
+            return Err(IoError::io(t, io::Error::other("a directory is in the way of the file")));
         }
-        Ok(written)
+        let old = staging.join(".replaced");
+        std::fs::create_dir(&old).map_err(|e| IoError::io(&self.dir, e))?;
+        let mut moved_aside = Vec::new();
+        let mut moved_in = Vec::new();
+        let mut failure = None;
+        for (file, target) in files.iter().zip(&targets) {
+            let aside = old.join(file.file_name().unwrap_or_default());
+            if target.exists() {
+                if let Err(e) = std::fs::rename(target, &aside) {
+                    failure = Some(IoError::io(target, e));
+                    break;
+                }
+                moved_aside.push((aside, target.clone()));
+            }
+            if let Err(e) = std::fs::rename(file, target) {
+                failure = Some(IoError::io(target, e));
+                break;
+            }
+            moved_in.push(target.clone());
+        }
+        if let Some(e) = failure {
+            for target in &moved_in {
+                let _ = std::fs::remove_file(target);
+            }
+            for (aside, target) in &moved_aside {
+                let _ = std::fs::rename(aside, target);
+            }
+            return Err(e);
+        }
+        self.created = None; // committed: keep the directory
+        Ok(targets)
     }
 }
 
@@ -344,6 +406,17 @@ pub(crate) fn write_file_atomically(
     path: &Path,
     encode: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> Result<(), IoError> {
+    let tmp = write_temporary(path, encode)?;
+    tmp.persist(path).map_err(|e| IoError::io(path, e.error))?;
+    Ok(())
+}
+
+/// Writes through `encode` to a temporary file in the directory of `path`, to be
+/// renamed onto `path` by the caller (dropping it removes it).
+pub(crate) fn write_temporary(
+    path: &Path,
+    encode: impl FnOnce(&mut dyn Write) -> io::Result<()>,
+) -> Result<tempfile::NamedTempFile, IoError> {
     let dir = match path.parent() {
         Some(dir) if !dir.as_os_str().is_empty() => dir,
         _ => Path::new("."),
@@ -362,8 +435,7 @@ pub(crate) fn write_file_atomically(
         let mut writer = BufWriter::new(tmp.as_file_mut());
         encode(&mut writer).and_then(|()| writer.flush()).map_err(|e| IoError::io(path, e))?;
     }
-    tmp.persist(path).map_err(|e| IoError::io(path, e.error))?;
-    Ok(())
+    Ok(tmp)
 }
 
 #[cfg(test)]

@@ -185,7 +185,7 @@ impl Header {
                 ));
             }
         };
-        checked_voxel_count(path, dims)?;
+        checked_voxel_count(path, dims, dtype.size() as u64 + 8)?;
         let layout = Layout { dims: dims.map(|d| d as usize), dtype, endian, order: Order::XFastest };
 
         let vox_offset = h.f32(108);

@@ -97,7 +97,7 @@ pub fn read_npy_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> {
     if [x, y, z].contains(&0) {
         return Err(IoError::format(path, format!("empty array of shape ({x}, {y}, {z})")));
     }
-    checked_voxel_count(path, [x, y, z])?;
+    checked_voxel_count(path, [x, y, z], dtype.size() as u64 + 8)?;
     let order = if fortran { Order::XFastest } else { Order::ZFastest };
     let layout = Layout { dims: [x, y, z].map(|d| d as usize), dtype, endian, order };
     let data = &bytes[start + header_len..];

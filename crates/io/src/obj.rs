@@ -3,7 +3,7 @@
 use std::io::{self, Write};
 use std::path::Path;
 
-use crate::mesh::write_atomically;
+use crate::mesh::{write_atomically, write_temporary};
 use crate::{IoError, QuadMesh};
 
 /// Writes `mesh` to `path` as an ASCII Wavefront OBJ file.
@@ -21,8 +21,8 @@ use crate::{IoError, QuadMesh};
 /// A mesh with materials also gets a material library next to it, `<stem>.mtl`
 /// (named by `mtllib` in the OBJ, selected per face by `usemtl`), with the diffuse
 /// colour `Kd` (sRGB), opacity `d`, emission `Ke`, and the PBR extensions `Pm`
-/// (metalness) and `Pr` (roughness) that Blender reads. It is written first, also
-/// atomically, and removed again if the OBJ cannot be written.
+/// (metalness) and `Pr` (roughness) that Blender reads. Both are written to temporary
+/// files first; the library replaces an existing one only once the OBJ has.
 pub fn write_obj(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
     if mesh.materials.is_empty() || mesh.face_materials.is_empty() {
         return write_atomically(path, mesh, |_| Ok(()), |mesh, w| encode_obj(mesh, None, w));
@@ -37,13 +37,14 @@ pub fn write_obj(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
             ),
         });
     }
-    let existed = mtl.exists();
-    write_atomically(&mtl, mesh, |_| Ok(()), |mesh, w| encode_mtl(mesh, w))?;
-    let result = write_atomically(path, mesh, |_| Ok(()), |mesh, w| encode_obj(mesh, Some(&mtl_name), w));
-    if result.is_err() && !existed {
-        let _ = std::fs::remove_file(&mtl);
-    }
-    result
+    mesh.check().map_err(|message| IoError::InvalidMesh { path: path.to_path_buf(), message })?;
+    // Both written in full before either replaces anything: a failed OBJ leaves the old
+    // OBJ and its old library.
+    let mtl_tmp = write_temporary(&mtl, |w| encode_mtl(mesh, w))?;
+    let obj_tmp = write_temporary(path, |w| encode_obj(mesh, Some(&mtl_name), w))?;
+    obj_tmp.persist(path).map_err(|e| IoError::io(path, e.error))?;
+    mtl_tmp.persist(&mtl).map_err(|e| IoError::io(&mtl, e.error))?;
+    Ok(())
 }
 
 /// Writes the MTL text of `mesh`'s materials to `w`.

@@ -70,7 +70,7 @@ pub fn read_pgm3d_bytes(bytes: &[u8], path: &Path) -> Result<LabelVolume, IoErro
     if max == 0 || (binary && max > 65535) {
         return Err(IoError::format(path, format!("maximum value {max}: must be in 1..=65535")));
     }
-    let count = checked_voxel_count(path, [x, y, z])?;
+    let count = checked_voxel_count(path, [x, y, z], 2 + 4)?;
     let declared = || format!("{x}x{y}x{z} = {count} voxels declared");
 
     let labels: Vec<u32> = if binary {

@@ -32,7 +32,7 @@ impl RawSpec {
 /// `z`, with no header. See [`read_raw_bytes`].
 pub fn read_raw(path: &Path, spec: &RawSpec) -> Result<Voxels, IoError> {
     // Refuse absurd dimensions before reading anything.
-    checked_voxel_count(path, spec.dims)?;
+    checked_voxel_count(path, spec.dims, spec.dtype.size() as u64 + 8)?;
     read_raw_bytes(&read_file(path)?, path, spec)
 }
 
@@ -47,7 +47,7 @@ pub fn read_raw_bytes(bytes: &[u8], path: &Path, spec: &RawSpec) -> Result<Voxel
         let [x, y, z] = spec.dims;
         return Err(IoError::format(path, format!("dimensions {x}x{y}x{z}: each must be at least 1")));
     }
-    checked_voxel_count(path, spec.dims)?;
+    checked_voxel_count(path, spec.dims, spec.dtype.size() as u64 + 8)?;
     let layout = Layout {
         dims: spec.dims.map(|d| d as usize), // fits: each is at most the voxel count
         dtype: spec.dtype,

@@ -25,9 +25,18 @@ pub fn read_mesh(path: &Path) -> Result<QuadMesh, IoError> {
         return Err(IoError::UnsupportedExtension { path: path.to_path_buf(), expected: ".obj or .ply" });
     }
     let bytes = std::fs::read(path).map_err(|e| IoError::io(path, e))?;
-    let result = match ext.as_deref() {
-        Some("obj") => parse_obj(&bytes),
-        _ => parse_ply(&bytes),
+    read_mesh_bytes(&bytes, path)
+}
+
+/// Reads an OBJ or PLY mesh held in memory, the format chosen by the extension of
+/// `path`, which otherwise only names the file in errors. See [`read_mesh`].
+pub fn read_mesh_bytes(bytes: &[u8], path: &Path) -> Result<QuadMesh, IoError> {
+    let result = match lowercase_extension(path).as_deref() {
+        Some("obj") => parse_obj(bytes),
+        Some("ply") => parse_ply(bytes),
+        _ => {
+            return Err(IoError::UnsupportedExtension { path: path.to_path_buf(), expected: ".obj or .ply" })
+        }
     };
     let mesh = result.map_err(|m| IoError::format(path, m))?;
     mesh.check().map_err(|m| IoError::format(path, m))?;

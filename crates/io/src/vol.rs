@@ -68,7 +68,7 @@ pub fn read_vol_bytes(bytes: &[u8], path: &Path) -> Result<LabelVolume, IoError>
             ))
         }
     };
-    let count = checked_voxel_count(path, dims)?;
+    let count = checked_voxel_count(path, dims, 1 + 4)?;
     let data = &bytes[data_start..];
     let describe = || format!("{}x{}x{} = {count} voxels declared", dims[0], dims[1], dims[2]);
 

@@ -107,12 +107,20 @@ pub(crate) fn lowercase_extension(path: &Path) -> Option<String> {
 }
 
 /// The number of voxels of `dims`, or [`IoError::TooLarge`] above [`MAX_VOXELS`]
-/// (also when the product overflows).
-pub(crate) fn checked_voxel_count(path: &Path, dims: [u64; 3]) -> Result<usize, IoError> {
+/// (also when the product overflows), or [`IoError::OverBudget`] when reading them takes
+/// more than the memory budget at `bytes_per_voxel` (the reader's peak: the file's
+/// samples, decompressed, plus the volume made of them).
+pub(crate) fn checked_voxel_count(
+    path: &Path,
+    dims: [u64; 3],
+    bytes_per_voxel: u64,
+) -> Result<usize, IoError> {
     let count = dims.iter().map(|&d| u128::from(d)).product::<u128>();
     if count > u128::from(MAX_VOXELS) {
         return Err(IoError::TooLarge { path: path.to_path_buf(), dims, limit: MAX_VOXELS });
     }
+    let what = format!("a volume of {}x{}x{} voxels", dims[0], dims[1], dims[2]);
+    crate::check_memory(path, &what, count * u128::from(bytes_per_voxel))?;
     usize::try_from(count).map_err(|_| IoError::TooLarge {
         path: path.to_path_buf(),
         dims,
@@ -141,10 +149,14 @@ mod tests {
     #[test]
     fn voxel_limit() {
         let p = Path::new("x.vol");
-        assert_eq!(checked_voxel_count(p, [2, 3, 4]).unwrap(), 24);
-        assert_eq!(checked_voxel_count(p, [1 << 11, 1 << 10, 1 << 10]).unwrap(), 1 << 31);
-        assert!(matches!(checked_voxel_count(p, [1 << 11, 1 << 10, 1025]), Err(IoError::TooLarge { .. })));
-        assert!(matches!(checked_voxel_count(p, [u64::MAX; 3]), Err(IoError::TooLarge { .. })));
+        assert_eq!(checked_voxel_count(p, [2, 3, 4], 1).unwrap(), 24);
+        assert_eq!(
+            crate::with_max_memory(u64::MAX, || checked_voxel_count(p, [1 << 11, 1 << 10, 1 << 10], 1))
+                .unwrap(),
+            1 << 31
+        );
+        assert!(matches!(checked_voxel_count(p, [1 << 11, 1 << 10, 1025], 1), Err(IoError::TooLarge { .. })));
+        assert!(matches!(checked_voxel_count(p, [u64::MAX; 3], 1), Err(IoError::TooLarge { .. })));
     }
 
     #[test]

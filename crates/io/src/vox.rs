@@ -12,6 +12,13 @@ use crate::{IoError, LoadedVolume, Palette};
 
 /// Scene graphs nested deeper than this are refused (they are malformed or cyclic).
 const MAX_SCENE_DEPTH: usize = 64;
+/// At most this many scene-graph nodes are visited: groups listing the same child many
+/// times, nested, would otherwise expand exponentially.
+const MAX_SCENE_VISITS: usize = 1 << 20;
+/// At most this many model instances are placed.
+pub const VOX_MAX_INSTANCES: usize = 1 << 16;
+/// At most this many voxels are placed, over all instances.
+pub const VOX_MAX_PLACED_VOXELS: u64 = 1 << 28;
 
 /// Reads a MagicaVoxel `.vox` file as a labeled volume with its palette.
 ///
@@ -23,7 +30,8 @@ pub fn read_vox(path: &Path) -> Result<LoadedVolume, IoError> {
 /// Reads a MagicaVoxel `.vox` file held in memory; `path` only names the file in errors.
 ///
 /// **Labels.** A voxel of MagicaVoxel colour index `c` (`1..=255`) gets label `c`;
-/// label `0` is empty space (the background). The palette is returned as 256 RGBA
+/// label `0` is empty space (the background), and so are voxels of colour index `0`.
+/// A colour index past the end of a short `RGBA` palette is an [`IoError::Format`]. The palette is returned as 256 RGBA
 /// entries indexed by label, entry `0` transparent black.
 ///
 /// **Space.** MagicaVoxel coordinates `x, y, z` (`z` up) are the volume's `[x, y, z]`,
@@ -42,9 +50,13 @@ pub fn read_vox(path: &Path) -> Result<LoadedVolume, IoError> {
 ///   animated transforms and the first model of animated shapes are used. A multi-model
 ///   file without a scene graph is refused with [`IoError::Unsupported`].
 ///
-/// Files that `dot_vox` cannot parse, with no model, or with a voxel outside its
-/// model's size are [`IoError::Format`] errors; volumes above
-/// [`MAX_VOXELS`](crate::MAX_VOXELS) are [`IoError::TooLarge`].
+/// Files that `dot_vox` cannot parse, with no model, with a voxel outside its model's
+/// size, or with a `_t` translation that is not three integers are [`IoError::Format`]
+/// errors; scene graphs placing more than [`VOX_MAX_INSTANCES`] instances or
+/// [`VOX_MAX_PLACED_VOXELS`] voxels are [`IoError::Unsupported`] (checked while
+/// walking the graph, before any volume is allocated); volumes above
+/// [`MAX_VOXELS`](crate::MAX_VOXELS) are [`IoError::TooLarge`], and those above the
+/// memory budget [`IoError::OverBudget`].
 pub fn read_vox_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVolume, IoError> {
     let data = dot_vox::load_bytes(bytes)
         .map_err(|e| IoError::format(path, format!("not a valid MagicaVoxel .vox file (dot_vox: {e})")))?;
@@ -82,14 +94,31 @@ pub fn read_vox_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVolume, IoError
         }
     }
     let dims = [0, 1, 2].map(|k| (hi[k] - lo[k]).max(0) as u64);
-    let count = checked_voxel_count(path, dims)?;
+    let count = checked_voxel_count(path, dims, 4)?;
     let dims = dims.map(|d| d as usize);
 
+    let empty = empty_voxels(bytes, data.models.len());
     let mut labels = vec![0u32; count];
     for inst in &instances {
         let model = &data.models[inst.model];
         let size = model_size(model);
-        for v in &model.voxels {
+        let mut skip = empty.get(inst.model).map_or(&[][..], Vec::as_slice).iter().peekable();
+        for (k, v) in model.voxels.iter().enumerate() {
+            // Colour index 0 is empty space in MagicaVoxel (`dot_vox` reads it as 1).
+            if skip.next_if_eq(&&k).is_some() {
+                continue;
+            }
+            if usize::from(v.i) >= data.palette.len() {
+                return Err(IoError::format(
+                    path,
+                    format!(
+                        "model {}: colour index {} has no entry in the file's palette of {} colours",
+                        inst.model,
+                        u32::from(v.i) + 1,
+                        data.palette.len()
+                    ),
+                ));
+            }
             let p = [v.x, v.y, v.z].map(i64::from);
             if (0..3).any(|k| p[k] >= size[k]) {
                 return Err(IoError::format(
@@ -109,6 +138,47 @@ pub fn read_vox_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVolume, IoError
         .and_then(|v| v.with_origin(DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64) + 0.5))
         .map_err(|source| IoError::Volume { path: path.to_path_buf(), source })?;
     Ok(LoadedVolume { volume, palette: Some(palette(&data)) })
+}
+
+/// The positions, in each model's voxel list, of voxels of colour index 0 (empty in
+/// MagicaVoxel), found by walking the file's `XYZI` chunks as `dot_vox` does (a model
+/// for each `XYZI` after a `SIZE`). Empty lists when the walk does not find one chunk per
+/// model.
+fn empty_voxels(bytes: &[u8], models: usize) -> Vec<Vec<usize>> {
+    let word = |at: usize| -> Option<usize> {
+        let b = bytes.get(at..at.checked_add(4)?)?;
+        Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
+    };
+    let mut out = Vec::new();
+    // "VOX ", version, then MAIN: id, content size, children size, content, children.
+    let Some(children) = word(16) else { return vec![Vec::new(); models] };
+    let start = 20 + word(12).unwrap_or(0);
+    let end = start.saturating_add(children).min(bytes.len());
+    let mut at = start;
+    let mut size_seen = false;
+    while at + 12 <= end {
+        let (Some(n), Some(m)) = (word(at + 4), word(at + 8)) else { break };
+        let id = &bytes[at..at + 4];
+        let content = at + 12;
+        if id == b"SIZE" {
+            size_seen = true;
+        } else if id == b"XYZI" && size_seen {
+            let count = word(content).unwrap_or(0);
+            match bytes.get(content + 4..).and_then(|d| d.get(..count.checked_mul(4)?)) {
+                Some(voxels) if count.checked_mul(4).is_some_and(|b| b + 4 <= n) => out.push(
+                    voxels.chunks_exact(4).enumerate().filter(|(_, v)| v[3] == 0).map(|(k, _)| k).collect(),
+                ),
+                _ => out.push(Vec::new()),
+            }
+        }
+        let Some(next) = content.checked_add(n).and_then(|c| c.checked_add(m)) else { break };
+        at = next;
+    }
+    if out.len() == models {
+        out
+    } else {
+        vec![Vec::new(); models]
+    }
 }
 
 /// The palette as 256 RGBA entries indexed by label (`dot_vox`'s 0-based index + 1),
@@ -216,12 +286,22 @@ fn scene_instances(data: &DotVoxData, path: &Path) -> Result<Vec<Instance>, IoEr
             format!("{} models without a scene graph to place them", data.models.len()),
         ));
     }
-    let mut instances = Vec::new();
-    walk(data, path, 0, Placement::IDENTITY, 0, &mut instances)?;
+    let mut walk_state = Walk { instances: Vec::new(), visits: 0, voxels: 0 };
+    walk(data, path, 0, Placement::IDENTITY, 0, &mut walk_state)?;
+    let instances = walk_state.instances;
     if instances.is_empty() {
         return Err(IoError::format(path, "the scene graph places no model"));
     }
     Ok(instances)
+}
+
+/// What the scene-graph walk has found and how far it went.
+struct Walk {
+    instances: Vec<Instance>,
+    /// Nodes visited.
+    visits: usize,
+    /// Voxels of the instances found.
+    voxels: u64,
 }
 
 fn walk(
@@ -230,10 +310,17 @@ fn walk(
     node: u32,
     placement: Placement,
     depth: usize,
-    out: &mut Vec<Instance>,
+    out: &mut Walk,
 ) -> Result<(), IoError> {
     if depth > MAX_SCENE_DEPTH {
         return Err(IoError::format(path, format!("scene graph deeper than {MAX_SCENE_DEPTH} (a cycle?)")));
+    }
+    out.visits += 1;
+    if out.visits > MAX_SCENE_VISITS {
+        return Err(IoError::unsupported(
+            path,
+            format!("the scene graph expands to more than {MAX_SCENE_VISITS} nodes (groups listing the same child many times?)"),
+        ));
     }
     let Some(scene_node) = data.scenes.get(node as usize) else {
         return Err(IoError::format(path, format!("scene graph names node {node}, which does not exist")));
@@ -252,7 +339,14 @@ fn walk(
                             || IoError::format(path, format!("node {node}: '{r}' is not a rotation (_r)")),
                         )?;
                 }
-                if let Some(p) = frame.position() {
+                if let Some(t) = frame.attributes.get("_t") {
+                    let p =
+                        frame.position().filter(|_| t.split_whitespace().count() == 3).ok_or_else(|| {
+                            IoError::format(
+                                path,
+                                format!("node {node}: '{t}' is not a translation (_t: three integers)"),
+                            )
+                        })?;
                     local.translation = [i64::from(p.x), i64::from(p.y), i64::from(p.z)];
                 }
             }
@@ -276,7 +370,16 @@ fn walk(
                     format!("node {node} names model {model}, which does not exist"),
                 ));
             }
-            out.push(Instance { model, placement });
+            out.voxels += data.models[model].voxels.len() as u64;
+            if out.instances.len() >= VOX_MAX_INSTANCES || out.voxels > VOX_MAX_PLACED_VOXELS {
+                return Err(IoError::unsupported(
+                    path,
+                    format!(
+                        "the scene graph places more than {VOX_MAX_INSTANCES} model instances or {VOX_MAX_PLACED_VOXELS} voxels"
+                    ),
+                ));
+            }
+            out.instances.push(Instance { model, placement });
             Ok(())
         }
     }

@@ -118,12 +118,15 @@ pub fn read_vti_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> {
         choose_array(*first).ok_or_else(|| malformed("no <DataArray> in the first <Piece>".into()))?;
     let cells = section == "CellData";
     let dims = whole.map(|(lo, hi)| extent_len(lo, hi, cells));
-    let count = checked_voxel_count(path, dims)?;
+    let count = checked_voxel_count(path, dims, 8 + 8 + 8)?;
     let dims = dims.map(|d| d as usize); // fits: each is at most the voxel count
 
     let mut dtype = None;
     let mut assembled: Option<Vec<u8>> = None;
     let mut covered = 0usize;
+    // Which voxels the pieces have filled, one bit each, once there are several pieces.
+    let mut filled: Vec<u64> = Vec::new();
+    let mut boxes: Vec<([usize; 3], [usize; 3])> = Vec::new();
     for (k, piece) in pieces.iter().enumerate() {
         let where_ = format!("piece {k}");
         let extent = match piece.attribute("Extent") {
@@ -155,6 +158,17 @@ pub fn read_vti_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> {
             return Err(malformed(format!("{where_}: the array's type differs from the first piece's")));
         }
         dtype = Some(t);
+        // Cell-data pieces tile the extent; point-data pieces share their boundary points
+        // (VTK writes them in both), so only cells are refused for overlapping.
+        if cells {
+            if let Some(j) = boxes
+                .iter()
+                .position(|&(o, d)| (0..3).all(|a| offset[a] < o[a] + d[a] && o[a] < offset[a] + pdims[a]))
+            {
+                return Err(malformed(format!("{where_}: its Extent overlaps that of piece {j}")));
+            }
+            boxes.push((offset, pdims));
+        }
         covered += pcount;
         if pdims == dims {
             assembled = Some(data);
@@ -170,14 +184,20 @@ pub fn read_vti_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> {
                     )));
                 }
                 buffer.resize(count * t.size(), 0);
+                filled = vec![0; count.div_ceil(64)];
             }
             copy_piece(buffer, &data, dims, pdims, offset, t.size());
+            mark_piece(&mut filled, dims, pdims, offset);
         }
     }
     if covered < count {
         return Err(malformed(format!(
             "the pieces hold {covered} values for the {count} voxels of the WholeExtent"
         )));
+    }
+    if let Some(hole) = first_unfilled(&filled, count) {
+        let (x, y, z) = (hole % dims[0], hole / dims[0] % dims[1], hole / dims[0] / dims[1]);
+        return Err(malformed(format!("no piece covers voxel [{x}, {y}, {z}] of the WholeExtent")));
     }
     let (Some(dtype), Some(data)) = (dtype, assembled) else {
         return Err(malformed("no data".into()));
@@ -232,6 +252,32 @@ fn copy_piece(
             buffer[dst..dst + row].copy_from_slice(&data[src..src + row]);
         }
     }
+}
+
+/// Marks the voxels of a piece in the bit set `filled` (empty: a single piece, nothing
+/// to mark).
+fn mark_piece(filled: &mut [u64], dims: [usize; 3], pdims: [usize; 3], offset: [usize; 3]) {
+    if filled.is_empty() {
+        return;
+    }
+    for z in 0..pdims[2] {
+        for y in 0..pdims[1] {
+            let row = ((offset[2] + z) * dims[1] + offset[1] + y) * dims[0] + offset[0];
+            for i in row..row + pdims[0] {
+                filled[i / 64] |= 1 << (i % 64);
+            }
+        }
+    }
+}
+
+/// The first of `count` voxels not marked in `filled` (none when `filled` is empty).
+fn first_unfilled(filled: &[u64], count: usize) -> Option<usize> {
+    let (k, word) = filled.iter().enumerate().find(|&(k, &w)| {
+        let bits = (count - 64 * k).min(64);
+        let full = if bits == 64 { u64::MAX } else { (1u64 << bits) - 1 };
+        w & full != full
+    })?;
+    Some(64 * k + (!word).trailing_zeros() as usize)
 }
 
 /// Splits off the `<AppendedData>` section: the XML before it (closed so that it
@@ -478,6 +524,8 @@ fn parse_ascii(text: &str, dtype: DataType, count: usize) -> Result<Vec<u8>, Str
 trait Source {
     /// The next `n` bytes, or an error if there are fewer.
     fn take(&mut self, n: usize) -> Result<Vec<u8>, String>;
+    /// At most how many bytes are left: a bound for header-declared counts.
+    fn remaining(&self) -> usize;
 }
 
 struct Raw<'a> {
@@ -492,6 +540,10 @@ impl Source for Raw<'_> {
         let (head, tail) = self.data.split_at(n);
         self.data = tail;
         Ok(head.to_vec())
+    }
+
+    fn remaining(&self) -> usize {
+        self.data.len()
     }
 }
 
@@ -527,6 +579,10 @@ impl Source for Base64<'_> {
         }
         let rest = self.buf.split_off(n);
         Ok(std::mem::replace(&mut self.buf, rest))
+    }
+
+    fn remaining(&self) -> usize {
+        self.buf.len() + self.text.len() / 4 * 3
     }
 }
 
@@ -571,7 +627,22 @@ fn read_binary(src: &mut dyn Source, codec: Codec, expected: usize) -> Result<Ve
     if last > block_size {
         return Err(format!("last block of {last} bytes exceeds the block size {block_size}"));
     }
-    // `blocks` is at most `expected` here (each block holds at least one byte).
+    // Each block's compressed size is a header word still to be read: a count the data
+    // cannot hold is refused before allocating for it.
+    if blocks > (src.remaining() / codec.word) as u64 {
+        return Err(format!(
+            "the header declares {blocks} compressed blocks, but only {} bytes follow",
+            src.remaining()
+        ));
+    }
+    // zlib expands at most about 1032 times: more declared output than the compressed
+    // bytes left can give is a corrupt header.
+    if expected as u128 > (src.remaining() as u128 + 1) * 1032 {
+        return Err(format!(
+            "the header declares {expected} bytes, more than the {} compressed bytes that follow can hold",
+            src.remaining()
+        ));
+    }
     let mut sizes = Vec::with_capacity(blocks as usize);
     for _ in 0..blocks {
         sizes.push(word(src)?);

@@ -371,3 +371,47 @@ fn endianness_of_the_raw_spec_matters() {
     let v = read_raw_bytes(&[1, 2], Path::new(PATH), &spec).unwrap();
     assert_eq!(v.clone().into_labels().unwrap().label([0, 0, 0]), Some(0x0102));
 }
+
+/// Replays the fuzzing seeds (`fuzz/seeds/<target>/`, small files from `data/` and
+/// crashes found by fuzzing, kept as regressions) through the function each target
+/// fuzzes, under a 1 GiB memory budget: every `cargo test` runs them, with no nightly
+/// toolchain.
+#[test]
+fn fuzz_corpora_replay_without_panic() {
+    let root = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../fuzz/seeds"));
+    let readers = readers();
+    let mut replayed = 0;
+    for dir in std::fs::read_dir(root).unwrap() {
+        let dir = dir.unwrap().path();
+        let target = dir.file_name().unwrap().to_str().unwrap().to_string();
+        for file in std::fs::read_dir(&dir).unwrap() {
+            let file = file.unwrap().path();
+            let bytes = std::fs::read(&file).unwrap();
+            let what = file.display().to_string();
+            voxreg_io::with_max_memory(1 << 30, || match target.as_str() {
+                "mesh" => {
+                    let result = catch_unwind(|| {
+                        let Some((&pick, rest)) = bytes.split_first() else { return };
+                        let name = if pick % 2 == 0 { "fuzz.obj" } else { "fuzz.ply" };
+                        let _ = voxreg_io::read_mesh_bytes(rest, Path::new(name));
+                    });
+                    assert!(result.is_ok(), "{what}: panicked");
+                }
+                "regions" => {
+                    let text = String::from_utf8_lossy(&bytes).into_owned();
+                    let result = catch_unwind(|| voxreg_digisurf::RegionMap::parse(&text).is_ok());
+                    assert!(result.is_ok(), "{what}: panicked");
+                }
+                reader => {
+                    let (_, read) = readers
+                        .iter()
+                        .find(|(n, _)| *n == reader)
+                        .unwrap_or_else(|| panic!("{what}: no reader"));
+                    check(reader, *read, &bytes, &what);
+                }
+            });
+            replayed += 1;
+        }
+    }
+    assert!(replayed >= 20, "{replayed} corpus files");
+}

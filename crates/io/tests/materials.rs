@@ -10,7 +10,7 @@ fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data").join(name)
 }
 
-fn coloured_mesh(name: &str) -> (QuadMesh, Palette) {
+pub(crate) fn coloured_mesh(name: &str) -> (QuadMesh, Palette) {
     let loaded = read_volume(&data(name)).unwrap();
     let palette = loaded.palette.unwrap();
     let surface = DigitalSurface::new(&loaded.volume, &RegionMap::single_solid()).unwrap();

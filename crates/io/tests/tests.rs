@@ -13,9 +13,12 @@
 //! - **Failed writes** leave nothing behind: missing directory, a directory as target,
 //!   unknown extension, an invalid mesh (and an existing file is kept unchanged).
 //! - [`fuzz_readers`]: mutated files never make a reader panic; replayed regressions.
+//! - [`hostile`]: small files declaring huge sizes or exploding scene graphs are refused
+//!   before allocating; contradictory data (overlapping pieces, bad palettes) too.
 //! - [`materials`]: colours and materials from .vox palettes to glTF, OBJ/MTL and PLY.
 
 mod fuzz_readers;
+mod hostile;
 mod materials;
 
 use std::collections::BTreeSet;
@@ -121,7 +124,7 @@ fn wrong_format_for_the_extension() {
 
 /// The surface of one voxel of label 7 at `[1, 1, 1]` in a 3^3 volume of background 0,
 /// spacing 1 and origin 0: a unit cube from 0.5 to 1.5.
-fn single_voxel_mesh() -> QuadMesh {
+pub(crate) fn single_voxel_mesh() -> QuadMesh {
     let volume = LabelVolume::from_fn([3, 3, 3], |p| if p == [1, 1, 1] { 7 } else { 0 });
     let surface = DigitalSurface::from_volume(&volume).unwrap();
     QuadMesh::from_surface(&surface, &surface.positions())
@@ -314,7 +317,7 @@ fn obj_of_a_real_surface() {
 
 // ---------------------------------------------------------------- failed writes
 
-fn entries(dir: &Path) -> Vec<PathBuf> {
+pub(crate) fn entries(dir: &Path) -> Vec<PathBuf> {
     let mut all: Vec<PathBuf> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
     all.sort();
     all

@@ -1,0 +1,253 @@
+//! Hostile inputs and options through the `voxreg` binary: each is refused with one
+//! line on standard error naming the file or the option, exit 1, before any work and
+//! without leaving output behind.
+
+use std::io::Write;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+mod common;
+use common::{data, stderr, voxreg};
+
+/// Runs `voxreg args`, expects exit 1 and one error line holding every one of `needles`.
+fn refused(args: &[&str], needles: &[&str]) -> String {
+    let out = voxreg(args);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(1), "voxreg {args:?}: {err}");
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "voxreg {args:?}: not one error line: {err}");
+    assert!(err.trim_end().ends_with(errors[0]), "voxreg {args:?}: the error is not last: {err}");
+    for n in needles {
+        assert!(err.contains(n), "voxreg {args:?}: '{n}' not in {err}");
+    }
+    err
+}
+
+fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// A C-order `.npy` of `u4` labels, shape `dims`, from `f(x, y, z)`.
+fn write_npy_u32(path: &Path, dims: [usize; 3], f: impl Fn(usize, usize, usize) -> u32) {
+    let mut header = format!(
+        "{{'descr': '<u4', 'fortran_order': False, 'shape': ({}, {}, {}), }}",
+        dims[0], dims[1], dims[2]
+    );
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend((header.len() as u16).to_le_bytes());
+    bytes.extend(header.as_bytes());
+    for x in 0..dims[0] {
+        for y in 0..dims[1] {
+            for z in 0..dims[2] {
+                bytes.extend(f(x, y, z).to_le_bytes());
+            }
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn zlib(bytes: &[u8]) -> Vec<u8> {
+    let mut e = flate2::write::ZlibEncoder::new(Vec::new(), flate2::Compression::default());
+    e.write_all(bytes).unwrap();
+    e.finish().unwrap()
+}
+
+#[test]
+fn max_memory_refuses_a_zlib_vol_declaring_700_cubed_voxels() {
+    let dir = tempfile::tempdir().unwrap();
+    let bomb = dir.path().join("bomb.vol");
+    let mut bytes = b"X: 700\nY: 700\nZ: 700\nVersion: 3\n.\n".to_vec();
+    bytes.extend(zlib(&[0; 4096]));
+    std::fs::write(&bomb, bytes).unwrap();
+    refused(
+        &["info", s(&bomb), "--max-memory", "1G"],
+        &["bomb.vol: a volume of 700x700x700 voxels", "memory limit of 1.0 GiB"],
+    );
+    refused(&["info", s(&bomb), "--max-memory", "lots"], &["--max-memory 'lots'"]);
+}
+
+#[test]
+fn upscale_beyond_the_budget_is_refused_before_the_solve() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("fine.vol");
+    let start = Instant::now();
+    refused(
+        &["upscale", s(&data("Al.100.vol")), "--factor", "16", "-o", s(&out), "--max-memory", "2G", "-q"],
+        &["Al.100.vol: upscaling x16 to 1600x1600x1600 voxels needs", "memory limit of 2.0 GiB"],
+    );
+    assert!(start.elapsed().as_secs() < 20, "{:?}", start.elapsed());
+    assert!(!out.exists());
+}
+
+#[test]
+fn an_output_that_is_the_input_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("x.vol");
+    std::fs::copy(data("cat10.vol"), &input).unwrap();
+    let before = std::fs::read(&input).unwrap();
+    refused(&["upscale", s(&input), "-o", s(&input)], &["x.vol: -o would overwrite the input"]);
+    // The same file by another name.
+    std::fs::create_dir(dir.path().join("sub")).unwrap();
+    let other = dir.path().join("sub/../x.vol");
+    refused(&["upscale", s(&input), "-o", s(&other)], &["would overwrite the input"]);
+    refused(
+        &["regularize", s(&input), "-o", s(&dir.path().join("m.obj")), "--report", s(&input)],
+        &["--report would overwrite the input"],
+    );
+    assert_eq!(std::fs::read(&input).unwrap(), before);
+}
+
+#[test]
+fn bad_report_and_features_paths_fail_before_the_mesh_is_written() {
+    let dir = tempfile::tempdir().unwrap();
+    let mesh = dir.path().join("m.obj");
+    let cat = data("cat10.vol");
+    let missing = dir.path().join("nowhere/r.json");
+    refused(&["regularize", s(&cat), "-o", s(&mesh), "--report", s(&missing)], &["r.json", "does not exist"]);
+    refused(
+        &["regularize", s(&cat), "-o", s(&mesh), "--report", s(dir.path())],
+        &["--report names a directory"],
+    );
+    let features = dir.path().join("nowhere/f.ply");
+    refused(
+        &["regularize", s(&cat), "-o", s(&mesh), "--normals", "at", "--features", s(&features)],
+        &["f.ply", "does not exist"],
+    );
+    refused(&["regularize", s(&cat), "-o", s(&dir.path().join("no/m.obj"))], &["m.obj", "does not exist"]);
+    assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 0, "something was written");
+}
+
+#[test]
+fn empty_region_groups_are_refused() {
+    for spec in ["", ";", "1,2;;3", "1,,2"] {
+        refused(&["info", s(&data("cat10.vol")), "--regions", spec], &["--regions"]);
+    }
+}
+
+#[test]
+fn ply_labels_above_i32_are_refused_before_the_solve() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("big.npy");
+    write_npy_u32(&input, [4, 4, 4], |x, y, z| {
+        if (1..3).contains(&x) && (1..3).contains(&y) && (1..3).contains(&z) {
+            3_000_000_000
+        } else {
+            0
+        }
+    });
+    let out = dir.path().join("m.ply");
+    refused(&["regularize", s(&input), "-o", s(&out), "-q"], &["big.npy: label 3000000000 does not fit PLY"]);
+    assert!(!out.exists());
+}
+
+#[test]
+fn upscale_that_loses_the_model_is_refused() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("fine.vox");
+    // A single voxel, and a thin line of ten.
+    let one = dir.path().join("one.npy");
+    write_npy_u32(&one, [3, 3, 3], |x, y, z| u32::from([x, y, z] == [1, 1, 1]));
+    refused(
+        &["upscale", s(&one), "-o", s(&out), "-q"],
+        &["one.npy: the smooth surface keeps", "nothing written"],
+    );
+    let line = dir.path().join("line.npy");
+    write_npy_u32(&line, [12, 3, 3], |x, y, z| u32::from((1..11).contains(&x) && y == 1 && z == 1));
+    refused(
+        &["upscale", s(&line), "-o", s(&out), "-q"],
+        &["line.npy: the smooth surface keeps 6 of the 80 solid voxels at x2"],
+    );
+    assert!(!out.exists());
+}
+
+/// An OBJ of 2,000 tiny triangles and one a million units wide above them.
+fn spiky_obj(path: &Path) {
+    let mut text = String::new();
+    for k in 0..2000 {
+        let (x, y) = ((k % 50) as f64 * 0.1, (k / 50) as f64 * 0.1);
+        text += &format!("v {x} {y} 0\nv {} {y} 0\nv {x} {} 0\n", x + 0.01, y + 0.01);
+    }
+    text += "v -1000000 -1000000 10\nv 1000000 -1000000 10\nv 0 1000000 10\n";
+    for k in 0..2001 {
+        text += &format!("f {} {} {}\n", 3 * k + 1, 3 * k + 2, 3 * k + 3);
+    }
+    std::fs::write(path, text).unwrap();
+}
+
+#[test]
+fn check_survives_one_huge_triangle_among_tiny_ones() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("spiky.obj");
+    spiky_obj(&obj);
+    let start = Instant::now();
+    let out = voxreg(&["check", s(&obj)]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    assert!(common::stdout(&out).contains("2001 faces, 0 self-intersecting"), "{}", common::stdout(&out));
+    assert!(start.elapsed().as_secs() < 20);
+}
+
+/// Regularizes `dims` labels of `f` with `--split regions --manifold` and runs
+/// `voxreg check` on each file: (self-intersecting pairs, check passed) per file.
+fn split_and_check(dims: [usize; 3], f: impl Fn(usize, usize, usize) -> u32) -> Vec<(String, bool)> {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("v.npy");
+    write_npy_u32(&input, dims, f);
+    let out = dir.path().join("parts");
+    let o = voxreg(&["regularize", s(&input), "-o", s(&out), "--split", "regions", "--manifold", "-q"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let mut files: Vec<PathBuf> = std::fs::read_dir(&out).unwrap().map(|e| e.unwrap().path()).collect();
+    files.sort();
+    files
+        .iter()
+        .map(|f| {
+            let c = voxreg(&["check", s(f)]);
+            (common::stdout(&c), c.status.success())
+        })
+        .collect()
+}
+
+#[test]
+fn split_regions_manifold_output_passes_check() {
+    // Two boxes side by side.
+    let boxes = split_and_check([8, 5, 5], |x, y, z| {
+        if (1..7).contains(&x) && (1..4).contains(&y) && (1..4).contains(&z) {
+            1 + u32::from(x >= 4)
+        } else {
+            0
+        }
+    });
+    assert_eq!(boxes.len(), 2);
+    assert!(boxes.iter().all(|(_, ok)| *ok), "{boxes:?}");
+    // A checkerboard: every region pinched everywhere; the duplicated pinch vertices
+    // coincide and must not count as contacts.
+    let inside = |v: usize| (1..5).contains(&v);
+    let checker = split_and_check([6, 6, 6], |x, y, z| {
+        if inside(x) && inside(y) && inside(z) {
+            1 + ((x + y + z) % 2) as u32
+        } else {
+            0
+        }
+    });
+    assert_eq!(checker.len(), 2);
+    assert!(checker.iter().all(|(out, _)| out.contains(" 0 self-intersecting face pairs")), "{checker:?}");
+}
+
+#[test]
+fn failed_split_leaves_no_directory() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("big.npy");
+    write_npy_u32(&input, [4, 4, 4], |x, y, z| {
+        if [x, y, z] == [1, 1, 1] {
+            3_000_000_000
+        } else {
+            u32::from([x, y, z] == [2, 2, 2])
+        }
+    });
+    let out = dir.path().join("new/parts");
+    refused(&["regularize", s(&input), "-o", s(&out), "--split", "regions", "-q"], &["does not fit PLY"]);
+    assert!(!dir.path().join("new").exists());
+}
