@@ -86,6 +86,11 @@ pub(crate) struct InputArgs {
     /// Raw data: the byte order, little (default) or big.
     #[arg(long, value_name = "ORDER", requires = "dims")]
     pub(crate) endian: Option<Endian>,
+    /// MagicaVoxel: read only model K (0-based, as `voxreg info` lists them), alone,
+    /// instead of the scene [default: the scene graph, or model 0 of a file without one,
+    /// such as animation frames].
+    #[arg(long, value_name = "K")]
+    pub(crate) model: Option<usize>,
     /// The size of a voxel, for raw data, or overriding the file's.
     #[arg(long, value_name = "SX,SY,SZ", value_parser = parse_spacing, allow_hyphen_values = true)]
     pub(crate) spacing: Option<glam::DVec3>,

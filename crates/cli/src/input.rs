@@ -4,7 +4,10 @@ use std::fmt::Write as _;
 
 use anyhow::{bail, Context, Result};
 use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
-use voxreg_io::{is_voxel_art, read_raw, read_voxels, DataType, Palette, RawSpec, Voxels};
+use voxreg_io::{
+    is_voxel_art, read_raw, read_voxels_with, vox_model_sizes, DataType, Palette, RawSpec, ReadOptions,
+    Voxels,
+};
 
 use crate::args::{InputArgs, Preset};
 use crate::print_stdout;
@@ -26,7 +29,10 @@ pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palett
         }
         None if is_raw => bail!("{}: raw data have no header: give --dims X,Y,Z and --dtype", path.display()),
         None => {
-            let loaded = read_voxels(path)?;
+            if args.model.is_some() && !is_voxel_art(path) {
+                bail!("{}: --model applies to MagicaVoxel .vox files", path.display());
+            }
+            let loaded = read_voxels_with(path, &ReadOptions { vox_model: args.model })?;
             (loaded.voxels, loaded.palette)
         }
     };
@@ -83,6 +89,15 @@ pub(crate) fn info(args: &InputArgs) -> Result<()> {
     writeln!(out, "file: {}", args.input.display()).ok();
     writeln!(out, "dimensions: {x} x {y} x {z} ({} voxels)", volume.len()).ok();
     writeln!(out, "spacing: {} {} {}", s.x, s.y, s.z).ok();
+    if voxel_art(args) {
+        let bytes =
+            std::fs::read(&args.input).with_context(|| format!("{}: cannot read", args.input.display()))?;
+        let sizes = vox_model_sizes(&bytes, &args.input)?;
+        writeln!(out, "models: {}", sizes.len()).ok();
+        for (k, [x, y, z]) in sizes.iter().enumerate() {
+            writeln!(out, "  {k}: {x} x {y} x {z}").ok();
+        }
+    }
     match volume.background() {
         Some(b) => writeln!(out, "background: {b}").ok(),
         None => writeln!(out, "background: none").ok(),

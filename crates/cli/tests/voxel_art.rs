@@ -161,3 +161,50 @@ fn upscale_doubles_a_model_that_round_trips_through_dot_vox() {
     let out = voxreg(&["upscale", input.to_str().unwrap(), "-o", dir.path().join("x.obj").to_str().unwrap()]);
     assert!(!out.status.success() && stderr(&out).contains("expected .vox or .vol"));
 }
+
+#[test]
+fn every_model_of_a_file_without_a_scene_graph_opens() {
+    // Animation frames: two models and no scene graph. Model 0 by default, --model K picks
+    // another, voxreg info lists them.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("frames.vox");
+    let model = |n: u8| dot_vox::Model {
+        size: dot_vox::Size { x: u32::from(n), y: 1, z: 1 },
+        voxels: (0..n).map(|x| dot_vox::Voxel { x, y: 0, z: 0, i: 1 }).collect(),
+    };
+    let frames = dot_vox::DotVoxData {
+        version: 150,
+        index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
+        models: vec![model(2), model(3)],
+        palette: dot_vox::DEFAULT_PALETTE.to_vec(),
+        materials: Vec::new(),
+        scenes: Vec::new(),
+        layers: Vec::new(),
+    };
+    frames.write_vox(&mut std::fs::File::create(&path).unwrap()).unwrap();
+    let info = |extra: &[&str]| {
+        let mut args = vec!["info", path.to_str().unwrap()];
+        args.extend(extra);
+        let out = voxreg(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        String::from_utf8_lossy(&out.stdout).into_owned()
+    };
+    let text = info(&[]);
+    assert!(
+        text.contains("dimensions: 2 x 1 x 1") && text.contains("models: 2\n  0: 2 x 1 x 1\n  1: 3 x 1 x 1"),
+        "{text}"
+    );
+    assert!(info(&["--model", "1"]).contains("dimensions: 3 x 1 x 1"));
+    let obj = dir.path().join("frame1.obj");
+    let out =
+        voxreg(&["regularize", path.to_str().unwrap(), "--model", "1", "-o", obj.to_str().unwrap(), "-q"]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let out = voxreg(&["info", path.to_str().unwrap(), "--model", "2"]);
+    assert!(!out.status.success() && stderr(&out).contains("model 2 does not exist"), "{}", stderr(&out));
+    let out = voxreg(&["info", data("cat10.vol").to_str().unwrap(), "--model", "1"]);
+    assert!(
+        !out.status.success() && stderr(&out).contains("--model applies to MagicaVoxel"),
+        "{}",
+        stderr(&out)
+    );
+}

@@ -110,7 +110,13 @@ pub use raw::{read_raw, read_raw_bytes, RawSpec};
 pub use read_mesh::{read_mesh, read_mesh_bytes};
 pub use samples::{DataType, Endian};
 pub use vol::{read_vol, read_vol_bytes};
-pub use volume::{is_voxel_art, read_volume, read_voxels, LoadedVolume, LoadedVoxels, MAX_VOXELS};
-pub use vox::{read_vox, read_vox_bytes, VOX_MAX_INSTANCES, VOX_MAX_PLACED_VOXELS};
+pub use volume::{
+    is_voxel_art, read_volume, read_voxels, read_voxels_with, LoadedVolume, LoadedVoxels, ReadOptions,
+    MAX_VOXELS,
+};
+pub use vox::{
+    read_vox, read_vox_bytes, read_vox_bytes_with, vox_model_sizes, VoxOptions, VOX_MAX_INSTANCES,
+    VOX_MAX_PLACED_VOXELS,
+};
 pub use vti::{read_vti, read_vti_bytes};
 pub use write_volume::{write_vol, write_volume, write_vox, VOX_MAX_MODEL};

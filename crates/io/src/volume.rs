@@ -4,9 +4,7 @@ use std::path::Path;
 
 use voxreg_digisurf::LabelVolume;
 
-use crate::{
-    read_longvol, read_nifti, read_npy, read_pgm3d, read_vol, read_vox, read_vti, IoError, Palette, Voxels,
-};
+use crate::{read_longvol, read_nifti, read_npy, read_pgm3d, read_vol, read_vti, IoError, Palette, Voxels};
 
 /// The largest number of voxels a reader accepts: `2^31`.
 ///
@@ -69,6 +67,18 @@ const KNOWN_EXTENSIONS: &str = ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vt
 /// [`IoError::Unsupported`] for `.raw` (which has no header: see
 /// [`read_raw`](crate::read_raw)), before opening the file.
 pub fn read_voxels(path: &Path) -> Result<LoadedVoxels, IoError> {
+    read_voxels_with(path, &ReadOptions::default())
+}
+
+/// Options of [`read_voxels_with`] for formats that hold several volumes.
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+pub struct ReadOptions {
+    /// `.vox`: read only this model (see [`VoxOptions::model`](crate::VoxOptions::model)).
+    pub vox_model: Option<usize>,
+}
+
+/// [`read_voxels`] with `options`.
+pub fn read_voxels_with(path: &Path, options: &ReadOptions) -> Result<LoadedVoxels, IoError> {
     let plain = |voxels| Ok(LoadedVoxels { voxels, palette: None });
     let is_nii_gz = path
         .file_name()
@@ -80,7 +90,8 @@ pub fn read_voxels(path: &Path) -> Result<LoadedVoxels, IoError> {
         Some("longvol") => plain(read_longvol(path)?),
         Some("pgm3d") => plain(Voxels::Labels(read_pgm3d(path)?)),
         Some("vox") => {
-            let LoadedVolume { volume, palette } = read_vox(path)?;
+            let vox = crate::VoxOptions { model: options.vox_model };
+            let LoadedVolume { volume, palette } = crate::read_vox_bytes_with(&read_file(path)?, path, &vox)?;
             Ok(LoadedVoxels { voxels: Voxels::Labels(volume), palette })
         }
         Some("nii") => plain(read_nifti(path)?),

@@ -48,7 +48,9 @@ pub fn read_vox(path: &Path) -> Result<LoadedVolume, IoError> {
 ///   lands in one volume spanning all models, where overlapping models let the later one
 ///   win. Hidden nodes and nodes on hidden layers are skipped. Only the first frame of
 ///   animated transforms and the first model of animated shapes are used. A multi-model
-///   file without a scene graph is refused with [`IoError::Unsupported`].
+///   file without a scene graph (animation frames) gives its model 0, the first frame.
+/// - [`VoxOptions::model`] picks one model by index instead, placed as a single-model
+///   file is ([`read_vox_bytes_with`]; `voxreg --model K`).
 ///
 /// Files that `dot_vox` cannot parse, with no model, with a voxel outside its model's
 /// size, or with a `_t` translation that is not three integers are [`IoError::Format`]
@@ -58,6 +60,27 @@ pub fn read_vox(path: &Path) -> Result<LoadedVolume, IoError> {
 /// [`MAX_VOXELS`](crate::MAX_VOXELS) are [`IoError::TooLarge`], and those above the
 /// memory budget [`IoError::OverBudget`].
 pub fn read_vox_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVolume, IoError> {
+    read_vox_bytes_with(bytes, path, &VoxOptions::default())
+}
+
+/// How [`read_vox_bytes_with`] reads a file of several models.
+#[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
+pub struct VoxOptions {
+    /// Read only this model (0-based, in file order), alone in its own lattice, ignoring
+    /// the scene graph. Default: `None` (the scene graph; model 0 without one).
+    pub model: Option<usize>,
+}
+
+/// The size of every model of a `.vox` file held in memory, in file order (for
+/// `voxreg info` and choosing [`VoxOptions::model`]).
+pub fn vox_model_sizes(bytes: &[u8], path: &Path) -> Result<Vec<[u32; 3]>, IoError> {
+    let data = dot_vox::load_bytes(bytes)
+        .map_err(|e| IoError::format(path, format!("not a valid MagicaVoxel .vox file (dot_vox: {e})")))?;
+    Ok(data.models.iter().map(|m| [m.size.x, m.size.y, m.size.z]).collect())
+}
+
+/// [`read_vox_bytes`] with the choice of model of `options`.
+pub fn read_vox_bytes_with(bytes: &[u8], path: &Path, options: &VoxOptions) -> Result<LoadedVolume, IoError> {
     let data = dot_vox::load_bytes(bytes)
         .map_err(|e| IoError::format(path, format!("not a valid MagicaVoxel .vox file (dot_vox: {e})")))?;
     // MagicaVoxel models are at most 256 voxels per axis; a larger declared size is a
@@ -72,15 +95,25 @@ pub fn read_vox_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVolume, IoError
             ),
         ));
     }
-    let instances = match data.models.len() {
-        0 => return Err(IoError::format(path, "the .vox file holds no model")),
-        1 => {
-            // One model: exactly its own lattice, whatever its transform.
-            let size = model_size(&data.models[0]);
-            let placement = Placement { translation: size.map(|s| s / 2), ..Placement::IDENTITY };
-            vec![Instance { model: 0, placement }]
+    // One model alone: exactly its own lattice, whatever its transform.
+    let alone = |model: usize| {
+        let size = model_size(&data.models[model]);
+        let placement = Placement { translation: size.map(|s| s / 2), ..Placement::IDENTITY };
+        vec![Instance { model, placement }]
+    };
+    let instances = match (data.models.len(), options.model) {
+        (0, _) => return Err(IoError::format(path, "the .vox file holds no model")),
+        (n, Some(k)) if k >= n => {
+            return Err(IoError::format(
+                path,
+                format!("model {k} does not exist: the file has {n} model(s), 0 to {}", n - 1),
+            ))
         }
-        _ => scene_instances(&data, path)?,
+        (_, Some(k)) => alone(k),
+        (1, None) => alone(0),
+        // Models without a scene graph to place them: animation frames; the first.
+        (_, None) if data.scenes.is_empty() => alone(0),
+        (_, None) => scene_instances(&data, path)?,
     };
 
     // The bounding box of all instances, in MagicaVoxel coordinates.
@@ -552,9 +585,20 @@ mod tests {
         let none = encode(Vec::new(), Vec::new());
         assert!(read_vox_bytes(&none, Path::new("m.vox")).unwrap_err().to_string().contains("no model"));
 
-        let no_scene = encode(vec![model([1, 1, 1], &[]), model([1, 1, 1], &[])], Vec::new());
-        let err = read_vox_bytes(&no_scene, Path::new("m.vox")).unwrap_err();
-        assert!(err.to_string().contains("2 models without a scene graph"), "{err}");
+        // Models without a scene graph (animation frames): model 0, or the one asked for.
+        let no_scene =
+            encode(vec![model([1, 1, 1], &[[0, 0, 0, 1]]), model([2, 1, 1], &[[1, 0, 0, 3]])], Vec::new());
+        let first = read_vox_bytes(&no_scene, Path::new("m.vox")).unwrap().volume;
+        assert_eq!(first.dims(), [1, 1, 1]);
+        let second = read_vox_bytes_with(&no_scene, Path::new("m.vox"), &VoxOptions { model: Some(1) })
+            .unwrap()
+            .volume;
+        assert_eq!(second.dims(), [2, 1, 1]);
+        assert_eq!(second.labels()[[1, 0, 0]], 4);
+        let err =
+            read_vox_bytes_with(&no_scene, Path::new("m.vox"), &VoxOptions { model: Some(2) }).unwrap_err();
+        assert!(err.to_string().contains("model 2 does not exist: the file has 2 model(s), 0 to 1"), "{err}");
+        assert_eq!(vox_model_sizes(&no_scene, Path::new("m.vox")).unwrap(), vec![[1, 1, 1], [2, 1, 1]]);
 
         let dangling =
             encode(vec![model([1, 1, 1], &[]), model([1, 1, 1], &[])], vec![transform(7, "0 0 0", None)]);
