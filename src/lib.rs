@@ -1,6 +1,6 @@
 //! voxreg: regularize voxel data into smooth, faithful quad meshes.
 //!
-//! The front door is re-exported here: [`regularize`] (a labelled volume in, regularized
+//! The front door is re-exported here: [`regularize()`] (a labelled volume in, regularized
 //! positions and a serializable [`Report`] out), [`Regularizer`] (the same, reusable
 //! across runs) and [`Params`] with its presets ([`Params::default`],
 //! [`Params::papers`], [`Params::voxel_art`]). The workspace's crates follow, in the order

@@ -58,7 +58,7 @@ const KNOWN_EXTENSIONS: &str = ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vt
 /// - `.vol`: DGtal Vol, see [`read_vol`];
 /// - `.longvol`: DGtal Longvol, see [`read_longvol`](crate::read_longvol);
 /// - `.pgm3d`: DGtal PGM 3-D, see [`read_pgm3d`](crate::read_pgm3d);
-/// - `.vox`: MagicaVoxel, see [`read_vox`];
+/// - `.vox`: MagicaVoxel, see [`read_vox`](crate::read_vox);
 /// - `.nii`, `.nii.gz`: NIfTI-1, see [`read_nifti`](crate::read_nifti);
 /// - `.vti`: VTK XML image data, see [`read_vti`](crate::read_vti);
 /// - `.npy`: NumPy array, see [`read_npy`](crate::read_npy).

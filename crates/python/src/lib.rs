@@ -1,7 +1,7 @@
 //! The Rust core of the `voxreg` Python package (`voxreg._voxreg`).
 //!
 //! Thin bindings: every function takes and returns numpy arrays, plain Python values and
-//! one opaque handle ([`Surface`]); the pure-Python package (`python/voxreg`) shapes them
+//! one opaque handle (`Surface`); the pure-Python package (`python/voxreg`) shapes them
 //! into `voxreg.Mesh`, documents the public API and converts to pyvista and trimesh.
 //! Computation runs with the GIL released, on a private rayon pool of the requested size.
 //! No panic crosses into Python: each entry point catches them and raises `VoxregError`.
