@@ -175,3 +175,15 @@ fn front_door_presets() {
     assert_eq!(json["counts"]["surfels"].as_u64().unwrap() as usize, default.surface.num_surfels());
     assert!(json["solves"][0]["solver"].is_string());
 }
+
+#[test]
+fn non_finite_arithmetic_is_an_error_not_a_result() {
+    // A spacing whose squares overflow: the solve cannot be trusted, and says so.
+    let vol =
+        LabelVolume::from_fn([4, 4, 4], |[x, y, z]| u32::from([x, y, z].iter().all(|c| (1..3).contains(c))))
+            .with_spacing(DVec3::splat(1e300))
+            .unwrap();
+    let err = voxreg::regularize(&vol, &voxreg::Params::default()).unwrap_err();
+    assert!(matches!(err, voxreg::regularize::RegularizeError::NotFinite(_)), "{err}");
+    assert!(err.to_string().contains("out of range"), "{err}");
+}

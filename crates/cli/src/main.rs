@@ -90,7 +90,11 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
         Regularizer::from_volume(&volume, &params.regions)
             .with_context(|| format!("{}: no surface to regularize", path.display()))
     })?;
-    let out = stages.pipeline(&params, |progress| Ok(regularizer.run_with(&params, None, progress)?))?;
+    let out = stages.pipeline(&params, |progress| {
+        regularizer
+            .run_with(&params, None, progress)
+            .with_context(|| format!("{}: cannot regularize", path.display()))
+    })?;
     let surface = &out.surface;
     let mut io = IoTimes { read, ..Default::default() };
     let written = match product {

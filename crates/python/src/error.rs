@@ -45,7 +45,9 @@ impl Error {
     pub(crate) fn regularize(context: &str, e: &RegularizeError) -> Self {
         let kind = match e {
             RegularizeError::Surface(_) | RegularizeError::SizeMismatch(_) => Kind::Input,
-            RegularizeError::Normals(_) | RegularizeError::InvalidParams(_) => Kind::Parameter,
+            RegularizeError::Normals(_)
+            | RegularizeError::InvalidParams(_)
+            | RegularizeError::NotFinite(_) => Kind::Parameter,
             RegularizeError::Factorization(_) | RegularizeError::OutOfMemory(_) => Kind::Voxreg,
         };
         Self::new(kind, format!("{context}{e}"))

@@ -117,6 +117,10 @@ pub enum RegularizeError {
     /// Not enough memory for a solver's data.
     #[error("out of memory: {0}")]
     OutOfMemory(String),
+    /// The computation left the finite numbers (weights or spacings whose scale the
+    /// double-precision arithmetic cannot hold): never reported as converged.
+    #[error("numerical failure: {0}")]
+    NotFinite(String),
 }
 
 /// What an iterative solver reports after each iteration (for progress bars).

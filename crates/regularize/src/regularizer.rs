@@ -247,6 +247,21 @@ impl Regularizer {
                 progress(&Event { stage, fraction: base + within / stages_total, iteration: Some(p) });
             };
             let (x, info) = solver.solve_with(&energy, &mut report)?;
+            if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {
+                let h = surface.spacing();
+                return Err(RegularizeError::NotFinite(format!(
+                    "solve {} gave non-finite positions or residuals (alpha {:e}, beta {:e}, gamma {:e}, \
+                     voxel spacing {:e} {:e} {:e}): the weights or the spacing are out of range for \
+                     double precision",
+                    round + 1,
+                    params.energy.alpha,
+                    params.energy.beta,
+                    params.energy.gamma,
+                    h.x,
+                    h.y,
+                    h.z
+                )));
+            }
             let s = info.seconds();
             times.assemble += s.structure + s.assemble;
             times.solve += s.symbolic + s.factor + s.solve;
@@ -262,6 +277,13 @@ impl Regularizer {
             Some(w) => energy.with_weights(w)?,
             None => energy,
         };
+        let (before, after) = (energy.terms(&input), energy.terms(&positions));
+        if !(before.total.is_finite() && after.total.is_finite()) {
+            return Err(RegularizeError::NotFinite(format!(
+                "the energy is not finite ({} -> {}): the weights or the spacing are out of range",
+                before.total, after.total
+            )));
+        }
         let report = Report {
             params: params.clone(),
             counts: surface.counts(),
@@ -271,7 +293,7 @@ impl Regularizer {
                 at: at_info,
             },
             stages: times,
-            energy: EnergyReport { before: energy.terms(&input), after: energy.terms(&positions) },
+            energy: EnergyReport { before, after },
             solves,
         };
         Ok(Output { surface, positions, normals: field, targets, features, report })
