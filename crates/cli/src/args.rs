@@ -7,7 +7,7 @@ use anyhow::{Context, Result};
 use clap::{Args, Parser, Subcommand};
 use voxreg_digisurf::RegionMap;
 use voxreg_io::{DataType, Endian};
-use voxreg_regularize::{Estimator, Params, SolverChoice};
+use voxreg_regularize::{ClampOverride, Estimator, OverrideError, Params, SolverChoice};
 
 /// Regularize voxel data (digital surfaces, multi-label interfaces) into smooth,
 /// faithful quad meshes that keep one quad per voxel face.
@@ -273,30 +273,19 @@ impl RegularizeArgs {
         if let Some(t) = self.tolerance {
             p.solver = p.solver.with_tolerance(t);
         }
-        // Solver and boxes: an explicit --clamp needs the bounded solver; --solver direct
-        // or cg, and --no-clamp, drop the preset's boxes.
-        let mut clamp = p.solver.bounded.clamp;
-        if self.no_clamp || matches!(self.solver, Some(SolverKind::Direct | SolverKind::Cg)) {
-            clamp = None;
-        }
-        if let Some(eps) = self.clamp {
-            if matches!(self.solver, Some(SolverKind::Direct | SolverKind::Cg)) {
-                anyhow::bail!("--clamp needs the bounded solver (--solver bounded or auto)");
-            }
-            clamp = Some(eps);
-        }
-        p.solver.choice = match self.solver {
-            Some(s) => s.choice(),
-            None if clamp.is_some() => SolverChoice::Bounded,
-            None if p.solver.choice == SolverChoice::Bounded && self.no_clamp => SolverChoice::Auto,
-            None => p.solver.choice,
+        let clamp = match (self.clamp, self.no_clamp) {
+            (Some(eps), _) => ClampOverride::Eps(eps),
+            (None, true) => ClampOverride::Off,
+            (None, false) => ClampOverride::Keep,
         };
-        p.solver = p.solver.clamped(clamp);
-        if let Some(eps) = clamp {
-            if !(eps > 0.0 && eps < 1.0) {
-                anyhow::bail!("--clamp: EPS must be in (0, 1) voxel, got {eps}");
+        p.solver = p.solver.overridden(self.solver.map(SolverKind::choice), clamp).map_err(|e| match e {
+            OverrideError::ClampNeedsBoundedSolver => {
+                anyhow::anyhow!("--clamp needs the bounded solver (--solver bounded or auto)")
             }
-        }
+            OverrideError::ClampOutOfRange(eps) => {
+                anyhow::anyhow!("--clamp: EPS must be in (0, 1) voxel, got {eps}")
+            }
+        })?;
         Ok(p)
     }
 }

@@ -125,14 +125,7 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
     };
     let r = &out.report;
     if !args.quiet {
-        eprintln!(
-            "{} quads, {} vertices; energy {:.6e} -> {:.6e}; relative gradient {:.1e}; wrote {written}",
-            r.counts.surfels,
-            r.counts.vertices,
-            r.energy.before.total,
-            r.energy.after.total,
-            r.last_solve().relative_gradient(),
-        );
+        eprintln!("{}; wrote {written}", r.summary());
     }
     if let Some(report) = &args.report {
         let full = CliReport {

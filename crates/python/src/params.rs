@@ -1,9 +1,9 @@
 //! The keyword arguments of `voxreg.regularize` onto the library's `Params`, as the CLI maps
-//! its options (`crates/cli/src/args.rs`): a preset, then every argument given applied over
-//! it.
+//! its options: a preset, then every argument given applied over it (the solver and boxes
+//! by the library's `SolverParams::overridden`).
 
 use voxreg_digisurf::RegionMap;
-use voxreg_regularize::{Estimator, Params, SolverChoice};
+use voxreg_regularize::{ClampOverride, Estimator, OverrideError, Params, SolverChoice};
 
 use crate::error::{Error, Result};
 
@@ -148,32 +148,19 @@ impl Options {
                 ],
             )?),
         };
-        // Solver and boxes, as the CLI: an explicit clamp needs the bounded solver;
-        // solver="direct" or "cg", and clamp=False, drop the preset's boxes.
-        let explicit_unbounded = matches!(solver, Some(SolverChoice::Direct | SolverChoice::Cg));
-        let no_clamp = self.clamp == Some(Clamp::Off);
-        let mut clamp = p.solver.bounded.clamp;
-        if no_clamp || explicit_unbounded {
-            clamp = None;
-        }
-        if let Some(Clamp::Eps(eps)) = self.clamp {
-            if explicit_unbounded {
-                return Err(Error::parameter("clamp needs the bounded solver (solver='bounded' or 'auto')"));
-            }
-            clamp = Some(eps);
-        }
-        p.solver.choice = match solver {
-            Some(s) => s,
-            None if clamp.is_some() => SolverChoice::Bounded,
-            None if p.solver.choice == SolverChoice::Bounded && no_clamp => SolverChoice::Auto,
-            None => p.solver.choice,
+        let clamp = match self.clamp {
+            None => ClampOverride::Keep,
+            Some(Clamp::Off) => ClampOverride::Off,
+            Some(Clamp::Eps(eps)) => ClampOverride::Eps(eps),
         };
-        p.solver = p.solver.clamped(clamp);
-        if let Some(eps) = clamp {
-            if !(eps > 0.0 && eps < 1.0) {
-                return Err(Error::parameter(format!("clamp: EPS must be in (0, 1) voxel, got {eps}")));
+        p.solver = p.solver.overridden(solver, clamp).map_err(|e| match e {
+            OverrideError::ClampNeedsBoundedSolver => {
+                Error::parameter("clamp needs the bounded solver (solver='bounded' or 'auto')")
             }
-        }
+            OverrideError::ClampOutOfRange(eps) => {
+                Error::parameter(format!("clamp: EPS must be in (0, 1) voxel, got {eps}"))
+            }
+        })?;
         p.validate().map_err(|e| Error::regularize("", &e))?;
         Ok(p)
     }

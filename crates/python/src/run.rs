@@ -215,14 +215,7 @@ fn aborted(payload: Box<dyn Any + Send>, callback_error: Option<PyErr>) -> PyErr
 /// the surface handle for sub-meshes and writing.
 fn finish<'py>(py: Python<'py>, out: Output, palette: Option<Palette>) -> PyResult<Bound<'py, PyDict>> {
     let r = &out.report;
-    let summary = format!(
-        "{} quads, {} vertices; energy {:.6e} -> {:.6e}; relative gradient {:.1e}",
-        r.counts.surfels,
-        r.counts.vertices,
-        r.energy.before.total,
-        r.energy.after.total,
-        r.last_solve().relative_gradient(),
-    );
+    let summary = r.summary();
     let report =
         serde_json::to_string(r).map_err(|e| Error::new(crate::error::Kind::Voxreg, e.to_string()))?;
     let converged = r.converged();

@@ -9,7 +9,7 @@ use voxreg_digisurf::DigitalSurface;
 
 use crate::boxqp::{minimize_in_boxes, BoxProblem};
 use crate::cg::check_tolerance;
-use crate::info::{BoundedInfo, SolveTimings};
+use crate::info::BoundedInfo;
 use crate::iterative::{Preconditioner, Prepared, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
@@ -184,13 +184,7 @@ impl BoundedSolver {
                 preconditioner: self.params.preconditioner,
                 memory_bytes: memory,
                 bytes_per_iteration: traffic,
-                seconds: SolveTimings {
-                    structure: self.setup.structure_seconds,
-                    symbolic: 0.0,
-                    assemble: prepared.assemble_seconds,
-                    factor: prepared.factor_seconds,
-                    solve: solve_seconds,
-                },
+                seconds: self.setup.timings(&prepared, solve_seconds),
             },
         ))
     }

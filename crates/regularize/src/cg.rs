@@ -6,7 +6,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
-use crate::info::{CgInfo, SolveTimings};
+use crate::info::CgInfo;
 use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
@@ -245,13 +245,7 @@ impl CgSolver {
                 preconditioner: self.params.preconditioner,
                 memory_bytes: memory,
                 bytes_per_iteration: traffic,
-                seconds: SolveTimings {
-                    structure: self.setup.structure_seconds,
-                    symbolic: 0.0,
-                    assemble: prepared.assemble_seconds,
-                    factor: prepared.factor_seconds,
-                    solve: solve_seconds,
-                },
+                seconds: self.setup.timings(&prepared, solve_seconds),
             },
         ))
     }

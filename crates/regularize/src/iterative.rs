@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use crate::multigrid::{Hierarchy, MultigridParams, Vcycle};
 use crate::stencil::{Coefficients, MatrixFreeOperator, Stencil, CHUNK};
 use crate::vecops::{sym_inverse, sym_mul};
-use crate::{Energy, FairnessMask, RegularizeError};
+use crate::{Energy, FairnessMask, RegularizeError, SolveTimings};
 
 /// The preconditioner of the iterative solvers ([`crate::CgSolver`],
 /// [`crate::BoundedSolver`]).
@@ -86,6 +86,17 @@ impl Setup {
             voxel: spacing,
             structure_seconds: build_seconds + t.elapsed().as_secs_f64(),
         })
+    }
+
+    /// The seconds of a solve of `prepared` whose iterations took `solve` seconds.
+    pub(crate) fn timings(&self, prepared: &Prepared<'_>, solve: f64) -> SolveTimings {
+        SolveTimings {
+            structure: self.structure_seconds,
+            symbolic: 0.0,
+            assemble: prepared.assemble_seconds,
+            factor: prepared.factor_seconds,
+            solve,
+        }
     }
 
     /// Number of multigrid levels (1 without multigrid).

@@ -89,7 +89,7 @@ pub use multigrid::MultigridParams;
 pub use params::{EstimatedNormals, Estimator, NormalsParams, Params};
 pub use regularizer::{regularize, Event, Output, Regularizer, Stage};
 pub use report::{EnergyReport, NormalsReport, Report, StageTimes};
-pub use solver::{estimate_factor_nnz, Solver, SolverChoice, SolverParams};
+pub use solver::{estimate_factor_nnz, ClampOverride, OverrideError, Solver, SolverChoice, SolverParams};
 pub use stencil::MatrixFreeOperator;
 pub use weights::{colour_discontinuities, FairnessMask, Weights};
 

@@ -73,6 +73,19 @@ impl Report {
         self.solves.last().expect("a run solves at least once")
     }
 
+    /// One line for people: `"N quads, M vertices; energy a -> b; relative gradient g"`
+    /// (the CLI's summary, also the Python `Mesh.summary`).
+    pub fn summary(&self) -> String {
+        format!(
+            "{} quads, {} vertices; energy {:.6e} -> {:.6e}; relative gradient {:.1e}",
+            self.counts.surfels,
+            self.counts.vertices,
+            self.energy.before.total,
+            self.energy.after.total,
+            self.last_solve().relative_gradient(),
+        )
+    }
+
     /// Whether every solve met its stopping rule.
     pub fn converged(&self) -> bool {
         self.solves.iter().all(SolveInfo::converged)

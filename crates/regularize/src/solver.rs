@@ -41,6 +41,28 @@ impl SolverChoice {
     }
 }
 
+/// How a front end's clamping option changes a preset's boxes
+/// ([`SolverParams::overridden`]).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum ClampOverride {
+    /// Keep the preset's boxes (unless an unbounded solver is chosen).
+    Keep,
+    /// No boxes, whatever the preset.
+    Off,
+    /// Boxes of margin `eps` voxel, `0 < eps < 1`.
+    Eps(f64),
+}
+
+/// Why [`SolverParams::overridden`] refuses a combination; each front end words it with
+/// its own option names.
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub enum OverrideError {
+    /// Boxes asked for together with the direct or CG solver.
+    ClampNeedsBoundedSolver,
+    /// A box margin outside `(0, 1)` voxel.
+    ClampOutOfRange(f64),
+}
+
 /// Parameters of [`Solver::new`].
 #[derive(Copy, Clone, Debug, PartialEq, Serialize)]
 pub struct SolverParams {
@@ -78,6 +100,39 @@ impl SolverParams {
             self.choice = SolverChoice::Bounded;
         }
         self
+    }
+
+    /// A preset's solver settings with a front end's choices applied over them (the CLI's
+    /// `--solver` and `--clamp`/`--no-clamp`, the Python `solver=` and `clamp=`):
+    /// `choice`, when given, replaces the preset's; an explicit unbounded choice
+    /// ([`SolverChoice::Direct`] or [`SolverChoice::Cg`]) or [`ClampOverride::Off`] drops
+    /// the preset's boxes; [`ClampOverride::Eps`] sets them, which needs the bounded
+    /// solver (`Auto`, or no choice, becomes [`SolverChoice::Bounded`]); dropping the
+    /// voxel-art preset's boxes without a choice returns to [`SolverChoice::Auto`].
+    pub fn overridden(
+        self,
+        choice: Option<SolverChoice>,
+        clamp: ClampOverride,
+    ) -> Result<Self, OverrideError> {
+        let unbounded = matches!(choice, Some(SolverChoice::Direct | SolverChoice::Cg));
+        let eps = match clamp {
+            ClampOverride::Eps(_) if unbounded => return Err(OverrideError::ClampNeedsBoundedSolver),
+            ClampOverride::Eps(eps) if !(eps > 0.0 && eps < 1.0) => {
+                return Err(OverrideError::ClampOutOfRange(eps))
+            }
+            ClampOverride::Eps(eps) => Some(eps),
+            ClampOverride::Off => None,
+            ClampOverride::Keep if unbounded => None,
+            ClampOverride::Keep => self.bounded.clamp,
+        };
+        let mut p = self;
+        p.choice = match choice {
+            Some(c) => c,
+            None if eps.is_some() => SolverChoice::Bounded,
+            None if p.choice == SolverChoice::Bounded && clamp == ClampOverride::Off => SolverChoice::Auto,
+            None => p.choice,
+        };
+        Ok(p.clamped(eps))
     }
 
     /// Checks the combination: boxes need [`SolverChoice::Bounded`].
@@ -214,6 +269,25 @@ mod tests {
         assert_eq!(SolverParams::default().clamped(Some(0.01)).choice, SolverChoice::Bounded);
         let direct = SolverParams { choice: SolverChoice::Direct, ..Default::default() }.clamped(Some(0.01));
         assert!(direct.validate().is_err());
+    }
+
+    #[test]
+    fn front_end_overrides_of_the_presets_solver() {
+        let (plain, art) = (SolverParams::default(), SolverParams::default().clamped(Some(0.01)));
+        let o = |p: SolverParams, c, k| p.overridden(c, k).map(|p| (p.choice, p.bounded.clamp));
+        use ClampOverride::{Eps, Keep, Off};
+        assert_eq!(o(plain, None, Keep), Ok((SolverChoice::Auto, None)));
+        assert_eq!(o(art, None, Keep), Ok((SolverChoice::Bounded, Some(0.01))));
+        assert_eq!(o(art, None, Off), Ok((SolverChoice::Auto, None)));
+        assert_eq!(o(art, Some(SolverChoice::Cg), Keep), Ok((SolverChoice::Cg, None)));
+        assert_eq!(o(art, Some(SolverChoice::Bounded), Off), Ok((SolverChoice::Bounded, None)));
+        assert_eq!(o(plain, None, Eps(0.05)), Ok((SolverChoice::Bounded, Some(0.05))));
+        assert_eq!(o(plain, Some(SolverChoice::Bounded), Keep), Ok((SolverChoice::Bounded, None)));
+        assert_eq!(
+            o(plain, Some(SolverChoice::Direct), Eps(0.05)),
+            Err(OverrideError::ClampNeedsBoundedSolver)
+        );
+        assert_eq!(o(plain, None, Eps(1.5)), Err(OverrideError::ClampOutOfRange(1.5)));
         assert_eq!(SolverChoice::parse("cg"), Some(SolverChoice::Cg));
         assert_eq!(SolverChoice::parse("lu"), None);
     }
