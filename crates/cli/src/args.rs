@@ -177,7 +177,8 @@ pub(crate) struct RegularizeArgs {
     #[arg(long, value_enum)]
     pub(crate) normals: Option<NormalsKind>,
     /// Radius of the ii, convolved and at estimators, in physical units [default: the
-    /// multigrid rule 3 h^(1/3), h the largest voxel spacing: 3 at unit spacing].
+    /// multigrid rule 3 h^(1/3), h the largest voxel spacing, kept within 3 to 12 voxels:
+    /// 3 at unit spacing].
     #[arg(long, value_name = "R", value_parser = positive_named("--radius"))]
     pub(crate) radius: Option<f64>,
     /// With --normals at: also write the Ambrosio-Tortorelli feature field v (low on sharp

@@ -8,6 +8,7 @@ mod input;
 mod output;
 mod progress;
 mod report;
+mod signals;
 
 use anyhow::{bail, Context, Result};
 use clap::Parser as _;
@@ -25,6 +26,7 @@ fn main() -> std::process::ExitCode {
         Ok(cli) => cli,
         Err(e) => return usage_error(&e),
     };
+    signals::install();
     if let Some(bytes) = cli.max_memory {
         voxreg_io::set_max_memory(bytes);
     }

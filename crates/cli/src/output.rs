@@ -121,7 +121,7 @@ fn writable_dir(dir: &Path, option: &str) -> Result<()> {
         bail!("{option}: {} is not a directory", dir.display());
     }
     tempfile::Builder::new()
-        .prefix(".voxreg-")
+        .prefix(&voxreg_io::inflight::temp_prefix())
         .suffix(".tmp")
         .tempfile_in(dir)
         .map(drop)

@@ -31,10 +31,8 @@ pub(crate) struct CliReport<'a> {
 
 /// Writes `report` through a temporary file and a rename, like the mesh writers.
 pub(crate) fn write_report(path: &Path, report: &CliReport<'_>) -> Result<()> {
-    let dir = path.parent().filter(|p| !p.as_os_str().is_empty()).unwrap_or(Path::new("."));
-    let mut tmp =
-        tempfile::NamedTempFile::new_in(dir).with_context(|| format!("{}: cannot write", path.display()))?;
-    serde_json::to_writer_pretty(&mut tmp, report)?;
-    tmp.persist(path).with_context(|| format!("{}: cannot write", path.display()))?;
-    Ok(())
+    voxreg_io::write_file_atomically(path, |w| {
+        serde_json::to_writer_pretty(&mut *w, report).map_err(std::io::Error::other)
+    })
+    .with_context(|| format!("{}: cannot write", path.display()))
 }

@@ -251,3 +251,94 @@ fn failed_split_leaves_no_directory() {
     refused(&["regularize", s(&input), "-o", s(&out), "--split", "regions", "-q"], &["does not fit PLY"]);
     assert!(!dir.path().join("new").exists());
 }
+
+/// Waits for `child` at most `secs` seconds, then kills it; its exit code.
+#[cfg(unix)]
+fn wait_code(child: &mut std::process::Child, secs: u64) -> Option<i32> {
+    let start = Instant::now();
+    while start.elapsed().as_secs() < secs {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status.code();
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
+    }
+    let _ = child.kill();
+    panic!("voxreg did not exit within {secs} s of the signal");
+}
+
+#[cfg(unix)]
+#[test]
+fn sigint_and_sigterm_exit_with_nothing_left_behind() {
+    let dir = tempfile::tempdir().unwrap();
+    // 300k surfels: several seconds of work, so the signal lands mid-run.
+    let input = dir.path().join("balls.npy");
+    write_npy_u32(&input, [120, 120, 120], |x, y, z| {
+        let d = |c: f64| (x as f64 - c).powi(2) + (y as f64 - 60.0).powi(2) + (z as f64 - 60.0).powi(2);
+        u32::from(d(40.0) < 900.0) + 2 * u32::from(d(80.0) < 900.0)
+    });
+    for (signal, code) in [("INT", 130), ("TERM", 143)] {
+        let out_dir = dir.path().join(format!("out-{signal}"));
+        std::fs::create_dir(&out_dir).unwrap();
+        let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_voxreg"))
+            .args(["regularize", s(&input), "-o", s(&out_dir.join("parts")), "--split", "regions", "-q"])
+            .stderr(std::process::Stdio::piped())
+            .spawn()
+            .unwrap();
+        std::thread::sleep(std::time::Duration::from_millis(600));
+        let killed = std::process::Command::new("kill")
+            .args([format!("-{signal}"), child.id().to_string()])
+            .status()
+            .unwrap();
+        assert!(killed.success());
+        assert_eq!(wait_code(&mut child, 20), Some(code), "SIG{signal}");
+        let mut err = String::new();
+        std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
+        assert!(err.contains(&format!("interrupted by SIG{signal}")), "{err}");
+        let left: Vec<_> = std::fs::read_dir(&out_dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+        assert!(left.is_empty(), "SIG{signal} left {left:?}");
+    }
+}
+
+#[test]
+fn leftovers_of_a_killed_run_are_removed_by_the_next_run() {
+    let dir = tempfile::tempdir().unwrap();
+    // Left by a process that no longer runs (Linux pids stay below 2^22).
+    let stale_file = dir.path().join(".voxreg-999999999-a1b2.tmp");
+    let stale_dir = dir.path().join(".voxreg-999999999-c3d4");
+    std::fs::write(&stale_file, b"partial").unwrap();
+    std::fs::create_dir(&stale_dir).unwrap();
+    std::fs::write(stale_dir.join("part.ply"), b"partial").unwrap();
+    let out = dir.path().join("cube.ply");
+    let input = data("bunny-32.vol");
+    let run = voxreg(&["regularize", s(&input), "-o", s(&out), "-q"]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    assert!(out.exists());
+    if Path::new("/proc/self").exists() {
+        assert!(!stale_file.exists() && !stale_dir.exists(), "stale entries kept");
+    }
+}
+
+#[test]
+fn a_vanishing_alpha_is_refused_naming_it() {
+    let input = data("bunny-32.vol");
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("m.ply");
+    refused(&["regularize", s(&input), "-o", s(&out), "--alpha", "1e-300"], &["alpha 1e-300 is too small"]);
+    assert!(!out.exists());
+}
+
+#[test]
+fn spacing_in_other_units_and_huge_radii_cost_no_more_than_bounded() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("m.ply");
+    let input = data("cat10.vol");
+    // Millimetre voxels written in metres: the default radius stays within 12 voxels.
+    let start = Instant::now();
+    let run = voxreg(&["regularize", s(&input), "-o", s(&out), "--spacing", "0.001,0.001,0.001", "-q"]);
+    assert!(run.status.success(), "{}", stderr(&run));
+    assert!(start.elapsed().as_secs() < 30, "took {:?}", start.elapsed());
+    refused(
+        &["regularize", s(&input), "-o", s(&out.with_extension("obj")), "--radius", "400"],
+        &["radius 400", "larger than the whole volume"],
+    );
+}

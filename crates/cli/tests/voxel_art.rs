@@ -1,4 +1,4 @@
-//! Voxel art end to end (issue 5): every bundled MagicaVoxel model, with default options,
+//! Voxel art end to end: every bundled MagicaVoxel model, with default options,
 //! gives a valid, coloured, self-intersection-free mesh; `voxreg upscale` doubles a model
 //! into a .vox that dot_vox reads back.
 

@@ -72,6 +72,7 @@
 mod error;
 mod gltf;
 mod grey;
+pub mod inflight;
 mod limits;
 mod longvol;
 mod material;
@@ -100,7 +101,9 @@ pub use limits::{
 };
 pub use longvol::{read_longvol, read_longvol_bytes};
 pub use material::{Material, Palette};
-pub use mesh::{interface_name, region_name, write_mesh, FaceGroup, MeshBatch, QuadMesh};
+pub use mesh::{
+    interface_name, region_name, write_file_atomically, write_mesh, FaceGroup, MeshBatch, QuadMesh,
+};
 pub use nifti::{read_nifti, read_nifti_bytes};
 pub use npy::{read_npy, read_npy_bytes};
 pub use obj::write_obj;

@@ -263,7 +263,9 @@ impl Drop for MeshBatch {
     fn drop(&mut self) {
         drop(self.staging.take());
         if let Some(created) = self.created.take() {
-            let _ = std::fs::remove_dir_all(created);
+            let mut in_flight = crate::inflight::lock();
+            let _ = std::fs::remove_dir_all(&created);
+            crate::inflight::note_created(&mut in_flight, &created, false);
         }
     }
 }
@@ -277,13 +279,22 @@ impl MeshBatch {
             .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
             .last()
             .map(Path::to_path_buf);
+        let mut in_flight = crate::inflight::lock();
         std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, e))?;
-        let staging = tempfile::Builder::new().prefix(".voxreg-").tempdir_in(dir).map_err(|e| {
-            if let Some(c) = &created {
-                let _ = std::fs::remove_dir_all(c);
-            }
-            IoError::io(dir, e)
-        })?;
+        if let Some(c) = &created {
+            crate::inflight::note_created(&mut in_flight, c, true);
+        }
+        crate::inflight::note_dir(&mut in_flight, dir);
+        let staging = tempfile::Builder::new()
+            .prefix(&crate::inflight::temp_prefix())
+            .tempdir_in(dir)
+            .map_err(|e| {
+                if let Some(c) = &created {
+                    let _ = std::fs::remove_dir_all(c);
+                    crate::inflight::note_created(&mut in_flight, c, false);
+                }
+                IoError::io(dir, e)
+            })?;
         Ok(MeshBatch { dir: dir.to_path_buf(), staging: Some(staging), names: Vec::new(), created })
     }
 
@@ -319,6 +330,8 @@ impl MeshBatch {
     /// rename fails, every file already moved in is taken out again and the replaced
     /// ones are put back.
     pub fn commit(mut self) -> Result<Vec<std::path::PathBuf>, IoError> {
+        // Not cut in two by an interruption (see `remove_in_flight`).
+        let mut in_flight = crate::inflight::lock();
         let staging = self.staging().to_path_buf();
         let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(&staging)
             .and_then(|entries| entries.map(|e| e.map(|e| e.path())).collect())
@@ -358,7 +371,10 @@ impl MeshBatch {
             }
             return Err(e);
         }
-        self.created = None; // committed: keep the directory
+        if let Some(created) = self.created.take() {
+            // Committed: the directory stays.
+            crate::inflight::note_created(&mut in_flight, &created, false);
+        }
         Ok(targets)
     }
 }
@@ -402,7 +418,7 @@ pub(crate) fn write_atomically(
 /// Writes through `encode` to a temporary file in the directory of `path`, and renames
 /// that onto `path`. On any failure the temporary file is removed and `path` is left as
 /// it was.
-pub(crate) fn write_file_atomically(
+pub fn write_file_atomically(
     path: &Path,
     encode: impl FnOnce(&mut dyn Write) -> io::Result<()>,
 ) -> Result<(), IoError> {
@@ -421,8 +437,9 @@ pub(crate) fn write_temporary(
         Some(dir) if !dir.as_os_str().is_empty() => dir,
         _ => Path::new("."),
     };
+    let prefix = crate::inflight::temp_prefix();
     let mut builder = tempfile::Builder::new();
-    builder.prefix(".voxreg-").suffix(".tmp");
+    builder.prefix(&prefix).suffix(".tmp");
     #[cfg(unix)]
     {
         // The mode a plain `File::create` would give (0o666 less the umask), rather
@@ -430,7 +447,11 @@ pub(crate) fn write_temporary(
         use std::os::unix::fs::PermissionsExt;
         builder.permissions(std::fs::Permissions::from_mode(0o666));
     }
-    let mut tmp = builder.tempfile_in(dir).map_err(|e| IoError::io(path, e))?;
+    let mut tmp = {
+        let mut in_flight = crate::inflight::lock();
+        crate::inflight::note_dir(&mut in_flight, dir);
+        builder.tempfile_in(dir).map_err(|e| IoError::io(path, e))?
+    };
     {
         let mut writer = BufWriter::new(tmp.as_file_mut());
         encode(&mut writer).and_then(|()| writer.flush()).map_err(|e| IoError::io(path, e))?;

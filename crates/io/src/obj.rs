@@ -42,6 +42,8 @@ pub fn write_obj(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
     // OBJ and its old library.
     let mtl_tmp = write_temporary(&mtl, |w| encode_mtl(mesh, w))?;
     let obj_tmp = write_temporary(path, |w| encode_obj(mesh, Some(&mtl_name), w))?;
+    // Both renames or neither, should the process be interrupted (see `remove_in_flight`).
+    let _in_flight = crate::inflight::lock();
     obj_tmp.persist(path).map_err(|e| IoError::io(path, e.error))?;
     mtl_tmp.persist(&mtl).map_err(|e| IoError::io(&mtl, e.error))?;
     Ok(())

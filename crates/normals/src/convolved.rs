@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, RegionId, SurfelId};
 
 use crate::sides::combine_sides;
-use crate::{multigrid_radius, NormalError, NormalEstimator, NormalField};
+use crate::{default_radius, NormalError, NormalEstimator, NormalField};
 
 /// Trivial normals convolved over the surface: each surfel's normal is the normalized,
 /// distance-weighted average of the trivial normals of the surfels within distance `t`
@@ -35,15 +35,14 @@ use crate::{multigrid_radius, NormalError, NormalEstimator, NormalField};
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
 pub struct ConvolvedTrivial {
     /// Convolution radius `t` in physical units (distance over the surface); `None`
-    /// picks the multigrid rule [`multigrid_radius`] (3 at unit spacing). Default: `None`.
+    /// picks [`default_radius`] (3 at unit spacing). Default: `None`.
     pub radius: Option<f64>,
 }
 
 impl ConvolvedTrivial {
-    /// The radius used on `surface`: [`ConvolvedTrivial::radius`], or the multigrid rule
-    /// for the surface's spacing.
+    /// The radius used on `surface`: [`ConvolvedTrivial::radius`], or [`default_radius`].
     pub fn radius_for(&self, surface: &DigitalSurface) -> f64 {
-        self.radius.unwrap_or_else(|| multigrid_radius(surface.spacing()))
+        self.radius.unwrap_or_else(|| default_radius(surface))
     }
 }
 

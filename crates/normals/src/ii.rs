@@ -18,6 +18,33 @@ pub fn multigrid_radius(spacing: DVec3) -> f64 {
     3.0 * spacing.max_element().cbrt()
 }
 
+/// The default radius on `surface`, in physical units: [`multigrid_radius`], kept between
+/// 3 voxels (along the finest axis) and [`MAX_DEFAULT_RADIUS_VOXELS`] (along the coarsest),
+/// and within the volume's diagonal.
+///
+/// The multigrid rule reads `h` as a grid step relative to the shape's size, so it depends
+/// on the unit of the spacing: 1 mm voxels written in metres would ask for 300 voxels (and
+/// cost a million times more). The bounds keep the default meaningful and its cost within
+/// `(12 / 3)^3 = 64` times that of unit spacing, whatever the unit; inside them (spacings
+/// from 0.125 to 1 in the shape's units) the rule applies unchanged.
+pub fn default_radius(surface: &DigitalSurface) -> f64 {
+    let spacing = surface.spacing();
+    let r = multigrid_radius(spacing)
+        .min(MAX_DEFAULT_RADIUS_VOXELS * spacing.max_element())
+        .max(3.0 * spacing.min_element());
+    r.min(volume_diagonal(surface))
+}
+
+/// The largest default radius, in voxels along the coarsest axis: the multigrid rule's
+/// value at `h = 1/8` (see [`default_radius`]).
+pub const MAX_DEFAULT_RADIUS_VOXELS: f64 = 12.0;
+
+/// The length of the volume's diagonal, in physical units: no ball needs to be larger.
+pub(crate) fn volume_diagonal(surface: &DigitalSurface) -> f64 {
+    let [x, y, z] = surface.dims();
+    (DVec3::new(x as f64, y as f64, z as f64) * surface.spacing()).length()
+}
+
 /// The integral invariant normal estimator (Lachaud, Coeurjolly and Levallois, ref. \[53\]
 /// of the multi-label paper; Pottmann et al. for the continuous invariants).
 ///
@@ -89,8 +116,9 @@ pub fn multigrid_radius(spacing: DVec3) -> f64 {
 /// ```
 #[derive(Copy, Clone, Debug, Default, PartialEq)]
 pub struct IntegralInvariant {
-    /// Ball radius in physical units; `None` picks the multigrid rule
-    /// [`multigrid_radius`] `= 3 h^{1/3}` (3 at unit spacing). Default: `None`.
+    /// Ball radius in physical units; `None` picks [`default_radius`], the multigrid rule
+    /// [`multigrid_radius`] `= 3 h^{1/3}` (3 at unit spacing) within 3 to 12 voxels.
+    /// Default: `None`.
     pub radius: Option<f64>,
 }
 
@@ -470,6 +498,13 @@ impl Context {
                 "integral invariant radius must be finite and positive, got {radius}"
             )));
         }
+        let diagonal = volume_diagonal(surface);
+        if radius > diagonal {
+            return Err(NormalError::InvalidParameter(format!(
+                "the normals' radius {radius} is larger than the whole volume (its diagonal is \
+                 {diagonal:.4}, in the spacing's units)"
+            )));
+        }
         let chords = std::f64::consts::PI * (radius / spacing.y + 1.0) * (radius / spacing.z + 1.0);
         if chords > MAX_CHORDS {
             return Err(NormalError::InvalidParameter(format!(
@@ -542,10 +577,10 @@ impl Context {
 }
 
 impl IntegralInvariant {
-    /// The radius used on `surface`: [`IntegralInvariant::radius`], or the multigrid rule
-    /// for the surface's spacing.
+    /// The radius used on `surface`: [`IntegralInvariant::radius`], or
+    /// [`default_radius`] (the multigrid rule, bounded).
     pub fn radius_for(&self, surface: &DigitalSurface) -> f64 {
-        self.radius.unwrap_or_else(|| multigrid_radius(surface.spacing()))
+        self.radius.unwrap_or_else(|| default_radius(surface))
     }
 
     /// For each surfel, the [`BallMoments`] of the ball around its centre intersected with

@@ -51,7 +51,7 @@ mod trivial;
 pub use at::{AmbrosioTortorelli, AtInfo, AtLinearSolver, AtParams, AtSolver, FeatureField};
 pub use convolved::ConvolvedTrivial;
 pub use field::NormalField;
-pub use ii::{multigrid_radius, IntegralInvariant};
+pub use ii::{default_radius, multigrid_radius, IntegralInvariant, MAX_DEFAULT_RADIUS_VOXELS};
 pub use refined::Refined;
 pub use trivial::Trivial;
 

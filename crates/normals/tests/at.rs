@@ -495,7 +495,7 @@ fn lens_crease_run(
     crease_run(surface, input, truth, (&left, &right), &points, |p| lens.crease_distance(p))
 }
 
-/// Issue 3's criterion on an intersection of two balls, at a resolution where the crease's
+/// The crease criterion on an intersection of two balls, at a resolution where the crease's
 /// radius of curvature is 30 voxels: from the default input, the crease angle between the
 /// surfels on either side is kept within 5 degrees. The deviation left at radius 20 (6.8
 /// degrees, `lens_crease_stays_sharp`) is mostly the smoothing's one-sided bias next to the
@@ -852,7 +852,7 @@ fn invalid_parameters_are_rejected() {
 
 // ---- measurements behind the README (ignored: run them by name) ---------------------
 
-/// The README's table of issue 3's crease criterion: the crease-angle deviation (mean over
+/// The README's table of the crease criterion: the crease-angle deviation (mean over
 /// the pairs, degrees) on cubes and lenses from the default input (II) and from exact
 /// normals with 10 degrees of noise, with the sharpening thresholds 0.3 and 0.4; then the
 /// mean error on spheres (II, plain AT, sharpened with either threshold). About a minute:

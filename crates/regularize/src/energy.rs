@@ -27,7 +27,8 @@ impl Default for EnergyParams {
 }
 
 impl EnergyParams {
-    /// Checks that `alpha > 0`, `beta >= 0`, `gamma >= 0`, all finite.
+    /// Checks that `alpha > 0`, `beta >= 0`, `gamma >= 0`, all finite, and that
+    /// `max(beta, gamma) <= MAX_STIFFNESS_RATIO * alpha`.
     pub fn validate(&self) -> Result<(), RegularizeError> {
         let ok = |x: f64| x.is_finite() && x >= 0.0;
         if !(ok(self.alpha) && self.alpha > 0.0) {
@@ -42,9 +43,36 @@ impl EnergyParams {
                 self.beta, self.gamma
             )));
         }
+        // The system's eigenvalues lie between alpha and about alpha + 4 beta + 64 gamma
+        // (the fairness term is a squared Laplacian): past this ratio no factorization or
+        // iteration in double precision resolves the smallest ones.
+        let stiffest = self.beta.max(self.gamma);
+        if stiffest > MAX_STIFFNESS_RATIO * self.alpha {
+            return Err(RegularizeError::InvalidParams(format!(
+                "alpha {} is too small against beta {} and gamma {}: the system would be \
+                 numerically singular (alpha must be at least {:e} times the larger)",
+                Short(self.alpha),
+                Short(self.beta),
+                Short(self.gamma),
+                1.0 / MAX_STIFFNESS_RATIO
+            )));
+        }
         Ok(())
     }
 }
+
+/// A number in the shorter of its plain and exponent forms, for messages.
+struct Short(f64);
+
+impl std::fmt::Display for Short {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        let (plain, exp) = (format!("{}", self.0), format!("{:e}", self.0));
+        f.write_str(if exp.len() < plain.len() { &exp } else { &plain })
+    }
+}
+
+/// The largest `max(beta, gamma) / alpha` accepted by [`EnergyParams::validate`].
+pub const MAX_STIFFNESS_RATIO: f64 = 1e10;
 
 /// The value of each term of the energy, weights included.
 #[derive(Copy, Clone, Debug, Default, PartialEq, serde::Serialize)]

@@ -82,7 +82,7 @@ pub use assemble::{Operator, OperatorPattern};
 pub use bounded::{BoundedParams, BoundedSolver};
 pub use cg::{CgParams, CgSolver, StoppingRule};
 pub use direct::DirectSolver;
-pub use energy::{Energy, EnergyParams, EnergyTerms};
+pub use energy::{Energy, EnergyParams, EnergyTerms, MAX_STIFFNESS_RATIO};
 pub use info::{BoundedInfo, CgInfo, DirectInfo, SolveInfo, SolveTimings};
 pub use iterative::Preconditioner;
 pub use multigrid::MultigridParams;

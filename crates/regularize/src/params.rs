@@ -3,8 +3,8 @@
 use serde::Serialize;
 use voxreg_digisurf::{DigitalSurface, RegionMap};
 use voxreg_normals::{
-    multigrid_radius, AmbrosioTortorelli, AtInfo, AtParams, ConvolvedTrivial, FeatureField,
-    IntegralInvariant, NormalEstimator, NormalField, Trivial,
+    default_radius, AmbrosioTortorelli, AtInfo, AtParams, ConvolvedTrivial, FeatureField, IntegralInvariant,
+    NormalEstimator, NormalField, Trivial,
 };
 
 use crate::{EnergyParams, RegularizeError, SolverChoice, SolverParams};
@@ -44,7 +44,8 @@ pub struct NormalsParams {
     /// The estimator. Default: [`Estimator::Ii`].
     pub estimator: Estimator,
     /// Radius of the ball and disc estimators in physical units; `None` is the multigrid
-    /// rule [`multigrid_radius`] (`3 h^(1/3)`, 3 at unit spacing). Default: `None`.
+    /// rule `3 h^(1/3)` kept within 3 to 12 voxels ([`default_radius`]; 3 at unit spacing).
+    /// Default: `None`.
     pub radius: Option<f64>,
     /// Settings of [`Estimator::At`]. Default: [`AtParams::default`].
     pub at: AtParams,
@@ -88,7 +89,7 @@ impl NormalsParams {
     pub fn radius_on(&self, surface: &DigitalSurface) -> Option<f64> {
         match self.estimator {
             Estimator::Trivial => None,
-            _ => Some(self.radius.unwrap_or_else(|| multigrid_radius(surface.spacing()))),
+            _ => Some(self.radius.unwrap_or_else(|| default_radius(surface))),
         }
     }
 

@@ -283,3 +283,24 @@ fn weighted_and_masked_energy_is_consistent() {
         assert!(Energy::new(&s, &normals, &input, params).unwrap().with_weights(&short).is_err());
     }
 }
+
+#[path = "../../../fuzz/fuzz_targets/pipeline_case.rs"]
+mod pipeline_case;
+
+/// The seeds of the `pipeline` fuzz target (fuzz/seeds/pipeline/): finite positions or an
+/// error, never a panic.
+#[test]
+fn pipeline_fuzz_seeds_replay() {
+    let dir = std::path::Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../fuzz/seeds/pipeline"));
+    let mut replayed = 0;
+    for file in std::fs::read_dir(dir).unwrap() {
+        let path = file.unwrap().path();
+        let bytes = std::fs::read(&path).unwrap();
+        let Some((volume, params)) = pipeline_case::case(&bytes) else { continue };
+        if let Ok(out) = voxreg_regularize::regularize(&volume, &params) {
+            assert!(out.positions.as_slice().iter().all(|p| p.is_finite()), "{}", path.display());
+        }
+        replayed += 1;
+    }
+    assert!(replayed >= 8, "{replayed} seeds");
+}
