@@ -10,7 +10,7 @@ use voxreg_digisurf::LabelVolume;
 use voxreg_regularize::{Estimator, Params, SolverChoice};
 
 /// The volume and parameters `data` encodes, `None` when it is too short.
-pub fn case(data: &[u8]) -> Option<(LabelVolume, Params)> {
+pub(crate) fn case(data: &[u8]) -> Option<(LabelVolume, Params)> {
     let [shape, choices, numbers, voxels @ ..] = data else { return None };
     let dims = [0, 2, 4].map(|s| 1 + usize::from((shape >> s) & 3));
     let n = dims[0] * dims[1] * dims[2];
