@@ -61,6 +61,7 @@
 //! None.
 
 mod assemble;
+mod block;
 mod bounded;
 mod boxqp;
 mod cg;
@@ -82,6 +83,7 @@ pub use assemble::{Operator, OperatorPattern};
 pub use bounded::{BoundedParams, BoundedSolver};
 pub use cg::{CgParams, CgSolver, StoppingRule};
 pub use direct::DirectSolver;
+pub use block::{lattice_id, regularize_block, Block, BlockMesh, MIN_HALO};
 pub use energy::{Energy, EnergyParams, EnergyTerms, MAX_STIFFNESS_RATIO};
 pub use info::{BoundedInfo, CgInfo, DirectInfo, SolveInfo, SolveTimings};
 pub use iterative::Preconditioner;
