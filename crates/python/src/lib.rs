@@ -6,6 +6,7 @@
 //! Computation runs with the GIL released, on a private rayon pool of the requested size.
 //! No panic crosses into Python: each entry point catches them and raises `VoxregError`.
 
+mod block;
 mod error;
 mod mesh;
 mod params;
@@ -20,6 +21,7 @@ use pyo3::prelude::*;
 fn _voxreg(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(run::regularize, m)?)?;
     m.add_function(wrap_pyfunction!(read::read, m)?)?;
+    m.add_function(wrap_pyfunction!(block::regularize_block, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::check, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::write_arrays, m)?)?;
     m.add_class::<mesh::Surface>()?;

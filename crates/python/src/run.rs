@@ -27,7 +27,7 @@ struct Cancelled;
 /// transparency.
 type MaterialTuple = (String, [u8; 4], f32, f32, f32, f32);
 
-fn regions_arg(regions: Option<&Bound<'_, PyAny>>) -> Result<Option<Regions>> {
+pub(crate) fn regions_arg(regions: Option<&Bound<'_, PyAny>>) -> Result<Option<Regions>> {
     let Some(r) = regions else { return Ok(None) };
     if let Ok(s) = r.cast::<PyString>() {
         let s = s.to_string();
@@ -45,7 +45,7 @@ fn regions_arg(regions: Option<&Bound<'_, PyAny>>) -> Result<Option<Regions>> {
     Ok(Some(Regions::Groups(groups)))
 }
 
-fn clamp_arg(clamp: Option<&Bound<'_, PyAny>>) -> Result<Option<Clamp>> {
+pub(crate) fn clamp_arg(clamp: Option<&Bound<'_, PyAny>>) -> Result<Option<Clamp>> {
     let Some(c) = clamp else { return Ok(None) };
     if let Ok(b) = c.cast::<PyBool>() {
         return Ok(Some(if b.is_true() { Clamp::Eps(0.01) } else { Clamp::Off }));
@@ -95,7 +95,7 @@ fn palette_arg(
     }))
 }
 
-fn threads_arg(threads: i64) -> Result<usize> {
+pub(crate) fn threads_arg(threads: i64) -> Result<usize> {
     usize::try_from(threads).map_err(|_| {
         Error::parameter(format!("threads must be a non-negative integer (0: every core), got {threads}"))
     })

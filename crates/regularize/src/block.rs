@@ -70,7 +70,9 @@ impl Block {
                 return bad(format!("the sub-volume [{start}, {end}) exceeds the volume's {n} voxels"));
             }
             if !(start <= lo && lo <= hi && hi <= end) {
-                return bad(format!("the owned range [{lo}, {hi}) is not inside the sub-volume [{start}, {end})"));
+                return bad(format!(
+                    "the owned range [{lo}, {hi}) is not inside the sub-volume [{start}, {end})"
+                ));
             }
             if (lo > 0 && lo - start < MIN_HALO) || (hi < n && end - hi < MIN_HALO) {
                 return bad(format!(
@@ -107,7 +109,11 @@ impl Block {
 /// its origin, spacing and background those of the whole volume's part) with `params`,
 /// and returns the quads and vertices `block` owns. Deterministic; a sub-volume without
 /// a surface gives an empty mesh.
-pub fn regularize_block(sub: &LabelVolume, block: &Block, params: &Params) -> Result<BlockMesh, RegularizeError> {
+pub fn regularize_block(
+    sub: &LabelVolume,
+    block: &Block,
+    params: &Params,
+) -> Result<BlockMesh, RegularizeError> {
     block.validate(sub.dims())?;
     let mut regularizer = match Regularizer::from_volume(sub, &params.regions) {
         Ok(r) => r,
@@ -128,7 +134,12 @@ pub fn regularize_block(sub: &LabelVolume, block: &Block, params: &Params) -> Re
 }
 
 /// The part of `surface` (with `positions`) that `block` owns.
-fn owned_part(surface: &DigitalSurface, positions: &[DVec3], block: &Block, report: Option<Report>) -> BlockMesh {
+fn owned_part(
+    surface: &DigitalSurface,
+    positions: &[DVec3],
+    block: &Block,
+    report: Option<Report>,
+) -> BlockMesh {
     let global = |local: [u32; 3]| -> [usize; 3] { [0, 1, 2].map(|k| local[k] as usize + block.start[k]) };
     let mut local_to_out = vec![u32::MAX; surface.num_vertices()];
     let mut mesh = BlockMesh {
@@ -203,7 +214,12 @@ mod tests {
         let mut expected: Vec<_> = whole
             .surfels()
             .iter()
-            .map(|s| key(s.vertices.map(|v| lattice_id(whole.vertex_corner(v).map(|c| c as usize), dims)), s.labels))
+            .map(|s| {
+                key(
+                    s.vertices.map(|v| lattice_id(whole.vertex_corner(v).map(|c| c as usize), dims)),
+                    s.labels,
+                )
+            })
             .collect();
         expected.sort_unstable();
         let cuts: [[usize; 3]; 3] = [[0, 5, 12], [0, 4, 10], [0, 3, 9]];
@@ -212,7 +228,11 @@ mod tests {
         for i in 0..2 {
             for j in 0..2 {
                 for k in 0..2 {
-                    let owned = [[cuts[0][i], cuts[0][i + 1]], [cuts[1][j], cuts[1][j + 1]], [cuts[2][k], cuts[2][k + 1]]];
+                    let owned = [
+                        [cuts[0][i], cuts[0][i + 1]],
+                        [cuts[1][j], cuts[1][j + 1]],
+                        [cuts[2][k], cuts[2][k + 1]],
+                    ];
                     let start = [0, 1, 2].map(|a| owned[a][0].saturating_sub(MIN_HALO));
                     let end = [0, 1, 2].map(|a| (owned[a][1] + MIN_HALO).min(dims[a]));
                     let block = Block { global_dims: dims, start, owned };

@@ -80,10 +80,10 @@ mod vecops;
 mod weights;
 
 pub use assemble::{Operator, OperatorPattern};
+pub use block::{lattice_id, regularize_block, Block, BlockMesh, MIN_HALO};
 pub use bounded::{BoundedParams, BoundedSolver};
 pub use cg::{CgParams, CgSolver, StoppingRule};
 pub use direct::DirectSolver;
-pub use block::{lattice_id, regularize_block, Block, BlockMesh, MIN_HALO};
 pub use energy::{Energy, EnergyParams, EnergyTerms, MAX_STIFFNESS_RATIO};
 pub use info::{BoundedInfo, CgInfo, DirectInfo, SolveInfo, SolveTimings};
 pub use iterative::Preconditioner;
