@@ -33,10 +33,27 @@ let result = null; // latest positions (Float32Array)
 let normals = null, features = null;
 let frame = -1, loadingModel = 0, fetching = false;
 
+// A GET that gives up on a stalled connection after a few seconds and tries a fresh one.
+async function get(url) {
+  for (let attempt = 0; ; attempt++) {
+    const abort = new AbortController();
+    const timer = setTimeout(() => abort.abort(), 4000);
+    try {
+      const r = await fetch(url, { signal: abort.signal, cache: 'no-store' });
+      const body = await r.arrayBuffer();
+      return { r, body };
+    } catch (e) {
+      if (attempt >= 4) throw e;
+    } finally {
+      clearTimeout(timer);
+    }
+  }
+}
+
 async function bytes(url) {
-  const r = await fetch(url);
-  if (!r.ok) throw new Error((await r.json()).error);
-  return r.arrayBuffer();
+  const { r, body } = await get(url);
+  if (!r.ok) throw new Error(JSON.parse(new TextDecoder().decode(body)).error);
+  return body;
 }
 
 function showError(message) {
@@ -187,10 +204,10 @@ async function fetchPositions(s) {
   try {
     while (frame !== view.state.frame && model && view.state.model_id === model.id) {
       const want = view.state;
-      const r = await fetch('/api/positions');
+      const { r, body } = await get('/api/positions');
       if (!r.ok) break;
       const got = parseInt(r.headers.get('X-Frame'));
-      result = new Float32Array(await r.arrayBuffer());
+      result = new Float32Array(body);
       frame = got;
       view.frames++;
       if (want.final && got === want.frame) {
@@ -216,7 +233,7 @@ async function loadResult(s) {
   normals = new Float32Array(await bytes('/api/normals'));
   features = s.has_features ? new Float32Array(await bytes('/api/features')) : null;
   $('features').disabled = !features;
-  const r = await (await fetch('/api/report')).json();
+  const r = JSON.parse(new TextDecoder().decode((await get('/api/report')).body));
   const rep = r.report, times = rep.stages;
   $('report').textContent = [r.summary,
     `normals: ${rep.normals.estimator}`,
@@ -248,7 +265,12 @@ async function onState(s) {
   if (s.tuning && tuned !== s.model_id) { setTuning(s.tuning); tuned = s.model_id; }
   if (s.model_id && (!model || model.id !== s.model_id)) {
     if (loadingModel !== s.model_id) {
-      await loadModel(s);
+      try {
+        await loadModel(s);
+      } catch (e) {
+        loadingModel = 0; // the next event tries again
+        throw e;
+      }
       frame = -1;
     } else return;
   }
@@ -256,7 +278,7 @@ async function onState(s) {
 }
 
 const events = new EventSource('/api/events');
-events.onmessage = (e) => onState(JSON.parse(e.data));
+events.onmessage = (e) => onState(JSON.parse(e.data)).catch((err) => showError(`the page could not update: ${err}`));
 
 let pending = null;
 async function solve() {

@@ -82,9 +82,11 @@ impl Viewer {
     /// Listens on `127.0.0.1:port` (`port` 0: a free port); `loader` reads the files
     /// dropped on the page.
     pub fn bind(port: u16, loader: Box<Loader>) -> Result<Viewer, ViewError> {
-        let listener = TcpListener::bind(("127.0.0.1", port)).map_err(|e| ViewError::Bind(port, e.to_string()))?;
+        let listener =
+            TcpListener::bind(("127.0.0.1", port)).map_err(|e| ViewError::Bind(port, e.to_string()))?;
         let addr = listener.local_addr().map_err(|e| ViewError::Bind(port, e.to_string()))?;
-        let server = Server::from_listener(listener, None).map_err(|e| ViewError::Bind(port, e.to_string()))?;
+        let server =
+            Server::from_listener(listener, None).map_err(|e| ViewError::Bind(port, e.to_string()))?;
         let shared = Arc::new(Shared::default());
         let (tx, rx) = mpsc::channel();
         let worker_shared = Arc::clone(&shared);
@@ -134,7 +136,9 @@ impl Viewer {
                 break;
             }
             let v = Arc::clone(&viewer);
-            let spawned = std::thread::Builder::new().name("voxreg-view-request".into()).spawn(move || v.answer(request));
+            let spawned = std::thread::Builder::new()
+                .name("voxreg-view-request".into())
+                .spawn(move || v.answer(request));
             if spawned.is_err() {
                 // No thread to answer with: the request is dropped (its connection closes).
                 continue;
@@ -154,10 +158,9 @@ impl Viewer {
         let reply = catch_unwind(AssertUnwindSafe(|| self.route(&mut request)));
         let response = match reply {
             Ok(r) => r,
-            Err(panic) => json_response(
-                500,
-                &json!({ "error": format!("internal error: {}", panic_message(&*panic)) }),
-            ),
+            Err(panic) => {
+                json_response(500, &json!({ "error": format!("internal error: {}", panic_message(&*panic)) }))
+            }
         };
         let _ = request.respond(response);
     }
@@ -183,6 +186,7 @@ impl Viewer {
         let (path, query) = url.split_once('?').unwrap_or((&url, ""));
         let method = request.method().clone();
         match (&method, path) {
+            (Method::Get, "/favicon.ico") => Response::from_data(Vec::new()).with_status_code(204),
             (Method::Get, "/api/state") => json_response(200, &self.state_json()),
             (Method::Get, "/api/quads") => self.model_bytes(|m| m.quads.clone()),
             (Method::Get, "/api/face-groups") => self.model_bytes(|m| m.face_groups.clone()),
@@ -199,7 +203,10 @@ impl Viewer {
             (Method::Get, "/api/features") => self.finished_bytes(|f| f.features.clone()),
             (Method::Get, "/api/preset") => {
                 let name = query_value(query, "name").unwrap_or_default();
-                match [Preset::Default, Preset::Papers, Preset::VoxelArt].into_iter().find(|p| p.name() == name) {
+                match [Preset::Default, Preset::Papers, Preset::VoxelArt]
+                    .into_iter()
+                    .find(|p| p.name() == name)
+                {
                     Some(p) => json_response(200, &json!(Tuning::of(p, &p.params()))),
                     None => error(400, &format!("unknown preset '{name}' (default, papers or voxel-art)")),
                 }
@@ -219,9 +226,12 @@ impl Viewer {
                 let s = self.shared.lock();
                 match mesh_file(&s, &ext) {
                     Ok(bytes) => {
-                        let stem = Path::new(&s.name).file_stem().and_then(|s| s.to_str()).unwrap_or("result");
-                        let stem: String =
-                            stem.chars().map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' }).collect();
+                        let stem =
+                            Path::new(&s.name).file_stem().and_then(|s| s.to_str()).unwrap_or("result");
+                        let stem: String = stem
+                            .chars()
+                            .map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' })
+                            .collect();
                         binary(bytes).with_header(header(
                             "Content-Disposition",
                             &format!("attachment; filename=\"{stem}.{ext}\""),
@@ -261,7 +271,10 @@ impl Viewer {
             }
             #[cfg(test)]
             (Method::Get, "/api/test-panic") => panic!("a test panic"),
-            (Method::Get, p) => match ASSETS.iter().find(|a| a.path == p || (p == "/index.html" && a.path == "/")) {
+            (Method::Get, p) => match ASSETS
+                .iter()
+                .find(|a| a.path == p || (p == "/index.html" && a.path == "/"))
+            {
                 Some(a) => Response::from_data(a.bytes.to_vec()).with_header(header("Content-Type", a.mime)),
                 None => error(404, &format!("no such page: {p}")),
             },

@@ -103,7 +103,9 @@ impl Tuning {
         };
         p.solver = p.solver.overridden(None, clamp).map_err(|e| match e {
             OverrideError::ClampNeedsBoundedSolver => "clamping needs the bounded solver".to_string(),
-            OverrideError::ClampOutOfRange(eps) => format!("clamp: the margin must be in (0, 1) voxel, got {eps}"),
+            OverrideError::ClampOutOfRange(eps) => {
+                format!("clamp: the margin must be in (0, 1) voxel, got {eps}")
+            }
         })?;
         p.validate().map_err(|e| e.to_string())?;
         Ok(p)

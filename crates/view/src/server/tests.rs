@@ -16,14 +16,26 @@ fn ball(name: &str) -> Loaded {
         let d = |c: usize| c as f64 - 5.0;
         u32::from(d(x).powi(2) + d(y).powi(2) + d(z).powi(2) <= 16.0)
     });
-    Loaded { name: name.into(), volume, palette: None, preset: Preset::Papers, params: Preset::Papers.params() }
+    Loaded {
+        name: name.into(),
+        volume,
+        palette: None,
+        preset: Preset::Papers,
+        params: Preset::Papers.params(),
+    }
 }
 
 /// Reads what the command line reads (no options), as the CLI's loader does.
 fn load(path: &Path) -> Result<Loaded, String> {
     let v = voxreg_io::read_volume(path).map_err(|e| e.to_string())?;
     let name = path.display().to_string();
-    Ok(Loaded { name, volume: v.volume, palette: v.palette, preset: Preset::Papers, params: Preset::Papers.params() })
+    Ok(Loaded {
+        name,
+        volume: v.volume,
+        palette: v.palette,
+        preset: Preset::Papers,
+        params: Preset::Papers.params(),
+    })
 }
 
 struct Running {
@@ -55,8 +67,10 @@ fn request(addr: SocketAddr, method: &str, path: &str, host: Option<&str>, body:
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
     let host = host.map(|h| format!("Host: {h}\r\n")).unwrap_or_default();
-    let head =
-        format!("{method} {path} HTTP/1.1\r\n{host}Content-Length: {}\r\nConnection: close\r\n\r\n", body.len());
+    let head = format!(
+        "{method} {path} HTTP/1.1\r\n{host}Content-Length: {}\r\nConnection: close\r\n\r\n",
+        body.len()
+    );
     s.write_all(head.as_bytes()).unwrap();
     s.write_all(body).unwrap();
     let mut out = Vec::new();
@@ -119,7 +133,9 @@ fn serves_the_page_and_its_assets_to_its_own_host_only() {
     let (status, page) = get(&r, "/");
     assert_eq!(status, 200);
     assert!(String::from_utf8_lossy(&page).contains("<canvas"));
-    for asset in ["/app.js", "/style.css", "/three/three.module.min.js", "/three/OrbitControls.js", "/three/LICENSE"] {
+    for asset in
+        ["/app.js", "/style.css", "/three/three.module.min.js", "/three/OrbitControls.js", "/three/LICENSE"]
+    {
         let (status, body) = get(&r, asset);
         assert_eq!(status, 200, "{asset}");
         assert!(!body.is_empty(), "{asset}");
@@ -144,7 +160,10 @@ fn a_solve_streams_its_state_and_its_result_downloads_in_every_format() {
     assert_eq!(get(&r, "/api/staircase").1.len(), 12 * vertices);
     assert_eq!(get(&r, "/api/quads").1.len(), 16 * faces);
     assert_eq!(get(&r, "/api/normals").1.len(), 12 * faces);
-    assert!(state["command"].as_str().unwrap().starts_with("voxreg regularize ball.vol -o ball.glb --preset papers"));
+    assert!(state["command"]
+        .as_str()
+        .unwrap()
+        .starts_with("voxreg regularize ball.vol -o ball.glb --preset papers"));
     // The result, as the command line writes it.
     let (status, glb) = get(&r, "/api/download?format=glb");
     assert_eq!((status, &glb[..4]), (200, &b"glTF"[..]));
