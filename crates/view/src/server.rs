@@ -109,7 +109,8 @@ impl Viewer {
 
     /// Queues `loaded` as the input shown, and its first solve.
     pub fn open(&self, loaded: Loaded) {
-        self.send(Job::Open(Box::new(loaded), None));
+        let job = self.shared.next_job();
+        self.send(Job::Open(Box::new(loaded), None, job));
     }
 
     /// A handle that stops [`Viewer::serve`].
@@ -259,7 +260,8 @@ impl Viewer {
                 if let Err(e) = tuning.params(tuning.preset, &tuning.preset.params()) {
                     return error(400, &e);
                 }
-                self.send(Job::Solve(tuning));
+                let job = self.shared.next_job();
+                self.send(Job::Solve(tuning, job));
                 json_response(202, &json!({ "queued": true }))
             }
             (Method::Post, "/api/open") => {
@@ -299,7 +301,8 @@ impl Viewer {
         };
         loaded.name = file.to_string();
         let (tx, rx) = mpsc::channel();
-        self.send(Job::Open(Box::new(loaded), Some(tx)));
+        let job = self.shared.next_job();
+        self.send(Job::Open(Box::new(loaded), Some(tx), job));
         rx.recv().unwrap_or_else(|_| Err(format!("{file}: the solver stopped")))
     }
 
@@ -328,6 +331,7 @@ impl Viewer {
             "total_ms": s.total_ms,
             "summary": s.finished.as_ref().map(|f| f.summary.clone()),
             "has_features": s.finished.as_ref().is_some_and(|f| f.features.is_some()),
+            "superseded": s.superseded,
         })
     }
 

@@ -3,6 +3,7 @@
 //! polls and streams (the latest iterate, the final result, errors) in [`State`].
 
 use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, Sender};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
@@ -21,9 +22,9 @@ const FRAME_INTERVAL: Duration = Duration::from_millis(60);
 /// A job for the worker.
 pub(crate) enum Job {
     /// Show a new input; the reply says whether its surface could be built.
-    Open(Box<Loaded>, Option<Sender<Result<(), String>>>),
+    Open(Box<Loaded>, Option<Sender<Result<(), String>>>, u64),
     /// Re-solve the current input with these parameters.
-    Solve(Tuning),
+    Solve(Tuning, u64),
 }
 
 /// The last result of the current input, for downloads and the side panel.
@@ -60,6 +61,8 @@ pub(crate) struct State {
     pub(crate) first_frame_ms: Option<f64>,
     pub(crate) total_ms: Option<f64>,
     pub(crate) finished: Option<Arc<Finished>>,
+    /// Runs stopped because a newer job replaced them.
+    pub(crate) superseded: u64,
     pub(crate) shutdown: bool,
 }
 
@@ -68,9 +71,26 @@ pub(crate) struct State {
 pub(crate) struct Shared {
     state: Mutex<State>,
     pub(crate) changed: Condvar,
+    /// Counts the jobs queued: a run whose job is older than the latest stops at its next
+    /// iteration (the job that replaced it runs next).
+    jobs: AtomicU64,
 }
 
+/// The panic payload that stops a superseded run (through the progress callback, the
+/// front door's only way out of a run; it stops between iterations, where the solver's
+/// state is whole).
+struct Superseded;
+
 impl Shared {
+    /// Numbers a new job (and so supersedes the running one).
+    pub(crate) fn next_job(&self) -> u64 {
+        self.jobs.fetch_add(1, Ordering::SeqCst) + 1
+    }
+
+    fn superseded(&self, job: u64) -> bool {
+        self.jobs.load(Ordering::SeqCst) > job
+    }
+
     /// The state; a panic elsewhere never makes it unreachable.
     pub(crate) fn lock(&self) -> MutexGuard<'_, State> {
         self.state.lock().unwrap_or_else(|e| e.into_inner())
@@ -98,7 +118,7 @@ pub(crate) fn worker(shared: Arc<Shared>, jobs: Receiver<Job>) {
     let mut current: Option<Current> = None;
     while let Ok(mut job) = jobs.recv() {
         // Only the latest re-solve matters: skip those a newer one replaced.
-        while let Job::Solve(_) = job {
+        while let Job::Solve(..) = job {
             match jobs.try_recv() {
                 Ok(next) => job = next,
                 Err(_) => break,
@@ -107,6 +127,11 @@ pub(crate) fn worker(shared: Arc<Shared>, jobs: Receiver<Job>) {
         let t = Instant::now();
         let result = catch_unwind(AssertUnwindSafe(|| run(&shared, &mut current, job, t)));
         if let Err(panic) = result {
+            if panic.is::<Superseded>() {
+                // A newer job is queued: it runs next and publishes its own state.
+                shared.update(|s| s.superseded += 1);
+                continue;
+            }
             let message = panic_message(&*panic);
             current = None;
             shared.update(|s| {
@@ -128,7 +153,7 @@ pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
 
 fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
     match job {
-        Job::Open(loaded, reply) => {
+        Job::Open(loaded, reply, job) => {
             let loaded = *loaded;
             let tuning = Tuning::of(loaded.preset, &loaded.params);
             let params = loaded.params.clone();
@@ -145,7 +170,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                     if let Some(reply) = reply {
                         let _ = reply.send(Ok(()));
                     }
-                    solve(shared, c, tuning, params, t);
+                    solve(shared, c, tuning, params, t, job);
                 }
                 Err(e) => {
                     let message = format!("{}: {e}", loaded.name);
@@ -159,7 +184,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                 }
             }
         }
-        Job::Solve(tuning) => {
+        Job::Solve(tuning, job) => {
             let Some(c) = current.as_mut() else {
                 shared.update(|s| s.error = Some("no input to solve: open a file".into()));
                 return;
@@ -186,7 +211,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                     }
                 }
             }
-            solve(shared, c, tuning, params, t);
+            solve(shared, c, tuning, params, t, job);
         }
     }
 }
@@ -210,7 +235,7 @@ fn publish_model(shared: &Shared, c: &Current) {
     });
 }
 
-fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: Instant) {
+fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: Instant, job: u64) {
     shared.update(|s| {
         s.busy = true;
         s.error = None;
@@ -220,6 +245,9 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
     });
     let mut last: Option<Instant> = None;
     let result = c.regularizer.run_with(&params, None, &mut |e| {
+        if shared.superseded(job) {
+            std::panic::resume_unwind(Box::new(Superseded));
+        }
         let label = e.stage.label(&params);
         let due = last.is_none_or(|l| l.elapsed() >= FRAME_INTERVAL);
         let iterate = if due { e.iterate() } else { None };

@@ -54,10 +54,14 @@ impl Drop for Running {
 }
 
 fn start() -> Running {
+    start_with(ball("ball.vol"))
+}
+
+fn start_with(loaded: Loaded) -> Running {
     let viewer = Viewer::bind(0, Box::new(load)).unwrap();
     assert!(viewer.addr().ip().is_loopback());
     assert!(viewer.url().starts_with("http://127.0.0.1:"));
-    viewer.open(ball("ball.vol"));
+    viewer.open(loaded);
     let (addr, stop) = (viewer.addr(), viewer.stop_handle());
     Running { addr, stop, thread: Some(std::thread::spawn(move || viewer.serve())) }
 }
@@ -242,4 +246,30 @@ fn a_dropped_file_replaces_the_surface() {
     // The .vox palette colours the faces.
     let colors = get(&r, "/api/face-colors").1;
     assert_eq!(colors.len(), 3 * state["faces"].as_u64().unwrap() as usize);
+}
+
+#[test]
+fn a_newer_solve_stops_the_running_one() {
+    // A ball of radius 18 through the default pipeline (four solves), with the iterative
+    // solver, whose iterations are where a run can stop.
+    let volume = LabelVolume::from_fn([41, 41, 41], |[x, y, z]| {
+        let d = |c: usize| c as f64 - 20.0;
+        u32::from(d(x).powi(2) + d(y).powi(2) + d(z).powi(2) <= 324.0)
+    });
+    let mut params = Preset::Default.params();
+    params.solver.choice = voxreg_regularize::SolverChoice::Cg;
+    let r =
+        start_with(Loaded { name: "big.vol".into(), volume, palette: None, preset: Preset::Default, params });
+    let running = wait_for(&r, |s| {
+        let stage = s["stage"].as_str().unwrap_or("");
+        s["busy"] == true
+            && (stage.starts_with("refine") || ["solve 1/4", "solve 2/4", "solve 3/4"].contains(&stage))
+    });
+    let mut tuning = running["tuning"].clone();
+    tuning["gamma"] = serde_json::json!(0.7);
+    assert_eq!(post(&r, "/api/solve", tuning.to_string().as_bytes()).0, 202);
+    let done = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
+    assert_eq!(done["tuning"]["gamma"], 0.7);
+    assert_eq!(done["superseded"], 1, "{done}");
+    assert_eq!(done["error"], serde_json::Value::Null);
 }
