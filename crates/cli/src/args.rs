@@ -31,6 +31,9 @@ pub(crate) enum Command {
     /// Regularize INPUT's surface, then voxelize it at K times the resolution (papers,
     /// Fig. 13): a finer voxel model whose staircase follows the smooth surface.
     Upscale(UpscaleArgs),
+    /// Open INPUT in the browser: a local page (127.0.0.1 only) that shows the
+    /// regularized surface as it converges and re-solves it as parameters are tuned.
+    View(ViewArgs),
     /// Count the self-intersections of MESH (.obj or .ply, quads split into two triangles;
     /// faces sharing a vertex do not count); exits with an error if there are any.
     Check(CheckArgs),
@@ -50,12 +53,32 @@ pub(crate) struct UpscaleArgs {
 }
 
 #[derive(Args, Debug)]
+#[command(
+    mut_arg("output", |a| a.required(false).default_value("view.glb").hide(true)),
+    mut_arg("split", |a| a.hide(true)),
+    mut_arg("split_format", |a| a.hide(true)),
+    mut_arg("manifold", |a| a.hide(true)),
+    mut_arg("features", |a| a.hide(true)),
+    mut_arg("report", |a| a.hide(true))
+)]
+pub(crate) struct ViewArgs {
+    #[command(flatten)]
+    pub(crate) regularize: RegularizeArgs,
+    /// The port to listen on (on 127.0.0.1) [default: a free port].
+    #[arg(long, value_name = "PORT")]
+    pub(crate) port: Option<u16>,
+    /// Open the page in the default browser.
+    #[arg(long)]
+    pub(crate) open: bool,
+}
+
+#[derive(Args, Debug)]
 pub(crate) struct CheckArgs {
     /// The mesh: .obj or .ply (as written by voxreg regularize).
     pub(crate) mesh: PathBuf,
 }
 
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Clone)]
 pub(crate) struct InputArgs {
     /// Input volume: .vol, .longvol, .pgm3d (DGtal), .vox (MagicaVoxel), .nii, .nii.gz
     /// (NIfTI-1), .vti (VTK image data), .npy (NumPy, shape (X, Y, Z)), or raw data with
@@ -126,6 +149,15 @@ pub(crate) enum Preset {
 }
 
 impl Preset {
+    /// The viewer's name for this preset.
+    pub(crate) fn view(self) -> voxreg_view::Preset {
+        match self {
+            Preset::Default => voxreg_view::Preset::Default,
+            Preset::Papers => voxreg_view::Preset::Papers,
+            Preset::VoxelArt => voxreg_view::Preset::VoxelArt,
+        }
+    }
+
     pub(crate) fn params(self) -> Params {
         match self {
             Preset::Default => Params::default(),
@@ -135,7 +167,7 @@ impl Preset {
     }
 }
 
-#[derive(Args, Debug)]
+#[derive(Args, Debug, Clone)]
 pub(crate) struct RegularizeArgs {
     #[command(flatten)]
     pub(crate) input: InputArgs,

@@ -9,6 +9,7 @@ mod output;
 mod progress;
 mod report;
 mod signals;
+mod view;
 
 use anyhow::{bail, Context, Result};
 use clap::Parser as _;
@@ -35,22 +36,27 @@ fn main() -> std::process::ExitCode {
         Command::Regularize(args) => regularize(&args, Product::Mesh),
         Command::Upscale(args) => regularize(&args.regularize, Product::Volume { factor: args.factor }),
         Command::Check(args) => check(&args),
+        Command::View(args) => view::view(&args),
     };
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            // One line: the error and those of its causes that it does not already quote.
-            let mut line = e.to_string();
-            for cause in e.chain().skip(1) {
-                let cause = cause.to_string();
-                if !line.contains(&cause) {
-                    line = format!("{line}: {cause}");
-                }
-            }
-            eprintln!("error: {line}");
+            eprintln!("error: {}", one_line(&e));
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// One line: the error and those of its causes that it does not already quote.
+pub(crate) fn one_line(e: &anyhow::Error) -> String {
+    let mut line = e.to_string();
+    for cause in e.chain().skip(1) {
+        let cause = cause.to_string();
+        if !line.contains(&cause) {
+            line = format!("{line}: {cause}");
+        }
+    }
+    line
 }
 
 /// Help and version go to standard output (exit 0); any other argument error is one line

@@ -485,3 +485,72 @@ fn check_reports_self_intersections_and_fails() {
 fn last_solve(r: &serde_json::Value) -> &serde_json::Value {
     r["solves"].as_array().unwrap().last().unwrap()
 }
+
+#[test]
+fn view_refuses_bad_input_before_listening() {
+    let missing = data("no-such-file.vox");
+    let out = voxreg(&["view", missing.to_str().unwrap()]);
+    assert_eq!(out.status.code(), Some(1));
+    let err = stderr(&out);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    assert!(err.starts_with("error: ") && err.contains("no-such-file.vox"), "{err}");
+    let out = voxreg(&["view", data("axes.vox").to_str().unwrap(), "--clamp", "2"]);
+    assert_eq!(out.status.code(), Some(1));
+    assert!(stderr(&out).contains("--clamp: EPS must be in (0, 1) voxel"), "{}", stderr(&out));
+}
+
+/// One request to the viewer (`Connection: close`): the status and the body.
+fn http(addr: &str, method: &str, path: &str, body: &[u8]) -> (u16, String) {
+    use std::io::{Read, Write};
+    let mut s = std::net::TcpStream::connect(addr).unwrap();
+    let head = format!(
+        "{method} {path} HTTP/1.1\r\nHost: {addr}\r\nContent-Length: {}\r\nConnection: close\r\n\r\n",
+        body.len()
+    );
+    s.write_all(head.as_bytes()).unwrap();
+    s.write_all(body).unwrap();
+    let mut out = String::new();
+    s.read_to_string(&mut out).unwrap();
+    let status = out[9..12].parse().unwrap();
+    (status, out.split_once("\r\n\r\n").unwrap().1.to_string())
+}
+
+#[test]
+fn view_serves_the_input_and_reads_dropped_files_with_the_options() {
+    use std::io::{BufRead, BufReader};
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_voxreg"))
+        .args(["view", data("axes.vox").to_str().unwrap(), "--gamma", "0.5"])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    let mut line = String::new();
+    BufReader::new(child.stderr.take().unwrap()).read_line(&mut line).unwrap();
+    let result = std::panic::catch_unwind(|| {
+        let url = line.trim().strip_prefix("voxreg view: ").unwrap().split_whitespace().next().unwrap();
+        let addr = url.trim_start_matches("http://").trim_end_matches('/');
+        assert!(addr.starts_with("127.0.0.1:"), "{line}");
+        let t = std::time::Instant::now();
+        let state = loop {
+            let state: serde_json::Value =
+                serde_json::from_str(&http(addr, "GET", "/api/state", b"").1).unwrap();
+            if state["final"] == true {
+                break state;
+            }
+            assert!(t.elapsed().as_secs() < 60, "{state}");
+            std::thread::sleep(std::time::Duration::from_millis(20));
+        };
+        assert_eq!(state["name"], "axes.vox");
+        assert_eq!(state["tuning"]["preset"], "voxel-art");
+        assert_eq!(state["tuning"]["gamma"], 0.5);
+        // A corrupt drop: the reader's one-line message, naming the dropped file only.
+        let (status, body) = http(addr, "POST", "/api/open?name=bad.vox", b"VOX 1234");
+        assert_eq!(status, 400, "{body}");
+        let message: serde_json::Value = serde_json::from_str(&body).unwrap();
+        let message = message["error"].as_str().unwrap();
+        assert!(message.starts_with("bad.vox"), "{message}");
+        assert!(!message.contains("/tmp"), "{message}");
+    });
+    child.kill().unwrap();
+    child.wait().unwrap();
+    result.unwrap();
+}

@@ -266,6 +266,7 @@ impl BoundedSolver {
                     relative_gradient: if r0 > 0.0 { rp_norm / r0 } else { 0.0 },
                     error_bound: rp_norm / alpha_min / h,
                     error_estimate: s.estimate / h,
+                    displacement: u,
                 });
             }
             let done = rp_norm == 0.0 || (half.is_none() && rp_norm <= alpha_min * tol) || s.estimate <= tol;

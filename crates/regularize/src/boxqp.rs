@@ -207,6 +207,7 @@ pub(crate) fn minimize_in_boxes(
                 relative_gradient: if r0 > 0.0 { rp / r0 } else { 0.0 },
                 error_bound: rp / alpha_min / h,
                 error_estimate: estimate / h,
+                displacement: u,
             });
         }
         if rp == 0.0 || estimate <= tol || iterations >= max_iterations {

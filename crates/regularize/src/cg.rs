@@ -213,6 +213,7 @@ impl CgSolver {
                         relative_gradient: if r0 > 0.0 { rnorm / r0 } else { 0.0 },
                         error_bound: rnorm / alpha_min / h,
                         error_estimate: estimate / h,
+                        displacement: &b.u,
                     });
                 }
                 scale_add(&mut b.p, rz_new / rz, &b.z);

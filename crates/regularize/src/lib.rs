@@ -95,6 +95,7 @@ pub use solver::{estimate_factor_nnz, ClampOverride, OverrideError, Solver, Solv
 pub use stencil::MatrixFreeOperator;
 pub use weights::{colour_discontinuities, FairnessMask, Weights};
 
+use glam::DVec3;
 use voxreg_digisurf::SurfaceError;
 use voxreg_normals::NormalError;
 
@@ -125,9 +126,10 @@ pub enum RegularizeError {
     NotFinite(String),
 }
 
-/// What an iterative solver reports after each iteration (for progress bars).
-#[derive(Copy, Clone, Debug, PartialEq)]
-pub struct Progress {
+/// What an iterative solver reports after each iteration (for progress bars, and for
+/// viewers that show the surface converge).
+#[derive(Copy, Clone, PartialEq)]
+pub struct Progress<'a> {
     /// Iterations done.
     pub iteration: usize,
     /// The energy at the current iterate.
@@ -142,4 +144,22 @@ pub struct Progress {
     pub error_bound: f64,
     /// The current estimate of that distance in voxels (see [`StoppingRule::Estimate`]).
     pub error_estimate: f64,
+    /// The current iterate minus the solve's input positions ([`Energy::input`], the
+    /// attachment targets), one per vertex: the iterate is `input[i] + displacement[i]`.
+    pub displacement: &'a [DVec3],
+}
+
+impl std::fmt::Debug for Progress<'_> {
+    // The displacement has one entry per vertex: show its length, not its values.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("Progress")
+            .field("iteration", &self.iteration)
+            .field("energy", &self.energy)
+            .field("gradient_norm", &self.gradient_norm)
+            .field("relative_gradient", &self.relative_gradient)
+            .field("error_bound", &self.error_bound)
+            .field("error_estimate", &self.error_estimate)
+            .field("displacement", &format_args!("[{} vectors]", self.displacement.len()))
+            .finish()
+    }
 }

@@ -49,7 +49,19 @@ pub struct Event<'a> {
     /// weighted equally; iterations advance it within a solve).
     pub fraction: f64,
     /// The latest iteration of an iterative solver, within [`Stage::Solve`].
-    pub iteration: Option<&'a Progress>,
+    pub iteration: Option<&'a Progress<'a>>,
+    /// With `iteration`: the solve's input positions (its attachment targets), which
+    /// the iterate is displaced from; see [`Event::iterate`].
+    pub input: Option<&'a [DVec3]>,
+}
+
+impl Event<'_> {
+    /// The current iterate of the solve under way, one position per vertex: `input +
+    /// displacement` (`None` between iterations, and for the direct solver).
+    pub fn iterate(&self) -> Option<Vec<DVec3>> {
+        let (p, input) = (self.iteration?, self.input?);
+        Some(input.iter().zip(p.displacement).map(|(x, d)| *x + *d).collect())
+    }
 }
 
 /// The regularized positions and what produced them.
@@ -143,7 +155,7 @@ impl Regularizer {
 
         // Initial normals.
         let t = Instant::now();
-        progress(&Event { stage: Stage::Normals, fraction: 0.0, iteration: None });
+        progress(&Event { stage: Stage::Normals, fraction: 0.0, iteration: None, input: None });
         let (start, features, at_info, estimator) = match initial {
             Some(field) => {
                 if field.len() != surface.num_surfels() {
@@ -197,6 +209,7 @@ impl Regularizer {
                     stage: Stage::Refine { round },
                     fraction: done / stages_total,
                     iteration: None,
+                    input: None,
                 });
                 field = Refined {
                     positions: &positions,
@@ -239,12 +252,17 @@ impl Regularizer {
             };
             let stage = Stage::Solve { round };
             let base = done / stages_total;
-            progress(&Event { stage, fraction: base, iteration: None });
+            progress(&Event { stage, fraction: base, iteration: None, input: None });
             let mut report = |p: &Progress| {
                 // Iterations close the gap to the tolerance geometrically: show the
                 // fraction of the way (in log scale) from the first error estimate.
                 let within = (1.0 - 1.0 / (1.0 + p.iteration as f64 / 20.0)).clamp(0.0, 1.0);
-                progress(&Event { stage, fraction: base + within / stages_total, iteration: Some(p) });
+                progress(&Event {
+                    stage,
+                    fraction: base + within / stages_total,
+                    iteration: Some(p),
+                    input: Some(&targets),
+                });
             };
             let (x, info) = solver.solve_with(&energy, &mut report)?;
             if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {

@@ -486,3 +486,39 @@ fn clamped_minimizer_satisfies_the_optimality_conditions() {
         assert!(ex <= ey * (1.0 + 1e-6), "{name}: conjugate {ex} vs projected descent {ey}");
     }
 }
+
+/// The iterates the front door streams (`Event::iterate`) are the solvers' own: their
+/// energy is the one each `Progress` reports, and they approach the final positions.
+#[test]
+fn streamed_iterates_match_the_reported_energy_and_converge() {
+    use voxreg_regularize::{Params, Regularizer, SolverChoice, Stage};
+    let volume = digitize(&Sphere { radius: 7.0 }, 1.0);
+    for (choice, clamp) in [(SolverChoice::Cg, false), (SolverChoice::Bounded, true)] {
+        let mut params = Params::papers();
+        params.solver.choice = choice;
+        if !clamp {
+            params.solver.bounded.clamp = None;
+        }
+        let mut r = Regularizer::from_volume(&volume, &params.regions).unwrap();
+        let mut iterates = Vec::new();
+        let mut energies = Vec::new();
+        let out = r
+            .run_with(&params, None, &mut |e| {
+                if let (Stage::Solve { round: 0 }, Some(x)) = (e.stage, e.iterate()) {
+                    iterates.push(x);
+                    energies.push(e.iteration.unwrap().energy);
+                }
+            })
+            .unwrap();
+        assert!(iterates.len() >= 2, "{choice:?}: {} iterates", iterates.len());
+        let surface = r.surface();
+        let energy = Energy::new(surface, &out.normals, &out.targets, params.energy).unwrap();
+        for (x, e) in iterates.iter().zip(&energies) {
+            let exact = energy.terms(x).total;
+            assert!((exact - e).abs() <= 1e-6 * exact.abs().max(1.0), "{choice:?}: {exact} vs {e}");
+        }
+        let first = max_distance(&iterates[0], &out.positions);
+        let last = max_distance(iterates.last().unwrap(), &out.positions);
+        assert!(last < first && last < 1e-2, "{choice:?}: {first} -> {last}");
+    }
+}

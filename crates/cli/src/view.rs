@@ -1,0 +1,59 @@
+//! `voxreg view`: reads INPUT as `voxreg regularize` does and hands it to the viewer
+//! library (`voxreg_view`), with a loader that reads dropped files the same way.
+
+use std::path::Path;
+
+use anyhow::{Context, Result};
+use voxreg_view::{Loaded, Viewer};
+
+use crate::args::{Preset, RegularizeArgs, ViewArgs};
+use crate::input;
+
+/// Reads `args.input` with the options, and the parameters of its first solve.
+fn load(args: &RegularizeArgs) -> Result<Loaded> {
+    let voxel_art = input::voxel_art(&args.input);
+    let preset = args.preset.unwrap_or(if voxel_art { Preset::VoxelArt } else { Preset::Default });
+    let params = args.params(voxel_art)?;
+    params.validate()?;
+    let (volume, palette) = input::read_input(&args.input)?;
+    let path = &args.input.input;
+    let name =
+        path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());
+    Ok(Loaded { name, volume, palette, preset: preset.view(), params })
+}
+
+pub(crate) fn view(args: &ViewArgs) -> Result<()> {
+    let first = load(&args.regularize)?;
+    let options = args.regularize.clone();
+    let loader = move |path: &Path| {
+        let mut a = options.clone();
+        a.input.input = path.to_path_buf();
+        // A dropped file is read with the same options, but its own preset.
+        if a.preset.is_some() && input::voxel_art(&a.input) != input::voxel_art(&options.input) {
+            a.preset = None;
+        }
+        load(&a).map_err(|e| crate::one_line(&e))
+    };
+    let viewer = Viewer::bind(args.port.unwrap_or(0), Box::new(loader))?;
+    let url = viewer.url();
+    eprintln!("voxreg view: {url} (Ctrl-C to stop)");
+    if args.open {
+        open_browser(&url).with_context(|| format!("cannot open a browser: open {url} by hand"))?;
+    }
+    viewer.open(first);
+    viewer.serve();
+    Ok(())
+}
+
+/// Opens `url` in the desktop's default browser.
+fn open_browser(url: &str) -> Result<()> {
+    let program = if cfg!(target_os = "macos") {
+        "open"
+    } else if cfg!(windows) {
+        "explorer"
+    } else {
+        "xdg-open"
+    };
+    std::process::Command::new(program).arg(url).spawn().with_context(|| format!("{program} {url}"))?;
+    Ok(())
+}

@@ -1,0 +1,64 @@
+//! `voxreg view`: a local web page that shows a voxel volume's regularized surface, the
+//! solver's iterates as it converges, and re-solves it as its parameters are tuned.
+//!
+//! The [`Viewer`] is an HTTP server on the loopback interface (`127.0.0.1`, a free port
+//! by default) serving one page and everything it loads (three.js included: no network
+//! needed), and a worker thread that owns the input's
+//! [`Regularizer`](voxreg_regularize::Regularizer), so that a re-solve reuses the
+//! surface, the solver's symbolic analysis and unchanged normals. The page receives the
+//! state as server-sent events (`/api/events`) and fetches positions as little-endian
+//! `f32` arrays; while a solve runs, the iterates stream
+//! ([`Event::iterate`](voxreg_regularize::Event::iterate)) at most every 60 ms.
+//!
+//! - [`Viewer::bind`], [`Viewer::open`], [`Viewer::serve`]: listen, queue the first input
+//!   ([`Loaded`]), answer requests; [`StopHandle`] stops it.
+//! - [`Tuning`]: the page's parameter panel, mapped onto [`Params`](voxreg_regularize::Params)
+//!   as the command line maps its options, and back to that command line.
+//!
+//! Bad input from the page (a corrupt file, an absurd parameter) is answered with the
+//! library's error message; a request that panics is answered with an error, and the
+//! server keeps serving.
+//!
+//! # Example
+//!
+//! ```no_run
+//! use voxreg_view::{Loaded, Preset, Viewer};
+//! # let volume = voxreg_digisurf::LabelVolume::from_fn([3, 3, 3], |_| 1);
+//! let loaded = Loaded {
+//!     name: "ball.vol".into(),
+//!     volume,
+//!     palette: None,
+//!     preset: Preset::Default,
+//!     params: Preset::Default.params(),
+//! };
+//! // What to do with a file dropped on the page (the CLI reads it with its options).
+//! let loader = |path: &std::path::Path| -> Result<Loaded, String> {
+//!     Err(format!("{}: not accepted", path.display()))
+//! };
+//! let viewer = Viewer::bind(0, Box::new(loader))?;
+//! println!("{}", viewer.url());
+//! viewer.open(loaded);
+//! viewer.serve();
+//! # Ok::<(), voxreg_view::ViewError>(())
+//! ```
+//!
+//! # Features
+//!
+//! None.
+
+mod model;
+mod server;
+mod session;
+mod tuning;
+
+pub use model::Loaded;
+pub use server::{Loader, StopHandle, Viewer};
+pub use tuning::{Preset, Tuning};
+
+/// What can go wrong starting the viewer.
+#[derive(Debug, thiserror::Error)]
+pub enum ViewError {
+    /// The port cannot be listened on (in use, or not permitted).
+    #[error("cannot listen on 127.0.0.1:{0}: {1}")]
+    Bind(u16, String),
+}

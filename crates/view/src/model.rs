@@ -1,0 +1,154 @@
+//! What the page draws of one surface: its quads, face groups and colours, the staircase
+//! positions, and the arrays the server sends as little-endian binary.
+
+use serde::Serialize;
+use voxreg_digisurf::{DigitalSurface, LabelVolume};
+use voxreg_io::{interface_name, Palette};
+use voxreg_regularize::Params;
+
+use crate::tuning::Preset;
+
+/// An input the viewer shows: the volume, its palette, and the parameters to start from.
+#[derive(Clone, Debug)]
+pub struct Loaded {
+    /// The file name shown on the page and in the equivalent command line.
+    pub name: String,
+    /// The labelled volume.
+    pub volume: LabelVolume,
+    /// The `.vox` palette (colours of the labels), if any.
+    pub palette: Option<Palette>,
+    /// The preset `params` came from.
+    pub preset: Preset,
+    /// The parameters of the first solve (a preset with the command line's options).
+    pub params: Params,
+}
+
+/// A group of faces the page lists, with a visibility toggle and a colour: the interfaces
+/// of a multi-region surface, or the labels (colours) of a single-interface one.
+#[derive(Clone, Debug, Serialize, PartialEq)]
+pub(crate) struct Group {
+    pub(crate) name: String,
+    pub(crate) color: [u8; 3],
+    pub(crate) faces: usize,
+}
+
+/// The static part of what the page draws (per surface).
+#[derive(Debug)]
+pub(crate) struct Model {
+    pub(crate) quads: Vec<u8>,
+    pub(crate) face_groups: Vec<u8>,
+    pub(crate) face_colors: Vec<u8>,
+    pub(crate) staircase: Vec<u8>,
+    pub(crate) groups: Vec<Group>,
+    pub(crate) vertices: usize,
+    pub(crate) faces: usize,
+}
+
+/// A distinct colour per label without a palette: hues spaced by the golden angle.
+pub(crate) fn label_color(label: u32) -> [u8; 3] {
+    let h = (f64::from(label) * 0.618_033_988_75 + 0.1).fract() * 6.0;
+    let (s, v) = (0.55, 0.9);
+    let c = v * s;
+    let x = c * (1.0 - (h % 2.0 - 1.0).abs());
+    let (r, g, b) = match h as u32 {
+        0 => (c, x, 0.0),
+        1 => (x, c, 0.0),
+        2 => (0.0, c, x),
+        3 => (0.0, x, c),
+        4 => (x, 0.0, c),
+        _ => (c, 0.0, x),
+    };
+    let m = v - c;
+    [r, g, b].map(|t| ((t + m) * 255.0).round() as u8)
+}
+
+/// `values` as little-endian `f32`s.
+pub(crate) fn f32_bytes(values: impl IntoIterator<Item = f64>) -> Vec<u8> {
+    values.into_iter().flat_map(|v| (v as f32).to_le_bytes()).collect()
+}
+
+impl Model {
+    pub(crate) fn new(surface: &DigitalSurface, palette: Option<&Palette>) -> Model {
+        let surfels = surface.surfels();
+        let color_of = |label: u32| match palette.and_then(|p| p.material(label)) {
+            Some(m) => [m.color[0], m.color[1], m.color[2]],
+            None => label_color(label),
+        };
+        // The solid side of a face is its inner label (the background's region is last).
+        let mut face_groups = vec![0u32; surfels.len()];
+        let mut groups = Vec::new();
+        if surface.interfaces().len() > 1 {
+            for (i, interface) in surface.interfaces().iter().enumerate() {
+                let first = interface.surfels.first().map(|s| surfels[s.index()].labels[0]).unwrap_or(0);
+                groups.push(Group {
+                    name: interface_name(surface, voxreg_digisurf::InterfaceId(i as u32)),
+                    color: color_of(first),
+                    faces: interface.surfels.len(),
+                });
+                for s in &interface.surfels {
+                    face_groups[s.index()] = i as u32;
+                }
+            }
+        } else {
+            let mut labels: Vec<u32> = surfels.iter().map(|s| s.labels[0]).collect();
+            labels.sort_unstable();
+            labels.dedup();
+            let mut counts = vec![0usize; labels.len()];
+            for (f, s) in surfels.iter().enumerate() {
+                let g = labels.binary_search(&s.labels[0]).unwrap_or(0);
+                face_groups[f] = g as u32;
+                counts[g] += 1;
+            }
+            groups = labels
+                .iter()
+                .zip(counts)
+                .map(|(&l, faces)| Group { name: format!("label_{l}"), color: color_of(l), faces })
+                .collect();
+        }
+        let face_colors = surfels.iter().flat_map(|s| color_of(s.labels[0])).collect();
+        Model {
+            quads: surfels.iter().flat_map(|s| s.vertices.map(|v| v.0)).flat_map(u32::to_le_bytes).collect(),
+            face_groups: face_groups.iter().flat_map(|g| g.to_le_bytes()).collect(),
+            face_colors,
+            staircase: f32_bytes(surface.positions().iter().flat_map(|p| p.to_array())),
+            groups,
+            vertices: surface.num_vertices(),
+            faces: surfels.len(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn label_colours_are_distinct_and_bright() {
+        let colours: Vec<_> = (0..16).map(label_color).collect();
+        for (i, a) in colours.iter().enumerate() {
+            assert!(a.iter().any(|&c| c > 150), "{a:?}");
+            for b in &colours[..i] {
+                let d: i32 = a.iter().zip(b).map(|(&x, &y)| (i32::from(x) - i32::from(y)).abs()).sum();
+                assert!(d > 20, "{a:?} {b:?}");
+            }
+        }
+    }
+
+    #[test]
+    fn two_labels_give_their_interfaces_as_groups() {
+        // Labels 1 and 2 side by side in background 0: interfaces 1|2, 1|0, 2|0.
+        let volume = LabelVolume::from_fn([4, 2, 2], |[x, _, _]| if x < 2 { 1 } else { 2 });
+        let surface = DigitalSurface::new(&volume, &voxreg_digisurf::RegionMap::per_label()).unwrap();
+        let m = Model::new(&surface, None);
+        assert_eq!(m.groups.len(), 3);
+        assert_eq!(m.groups.iter().map(|g| g.faces).sum::<usize>(), m.faces);
+        assert_eq!(m.quads.len(), 16 * m.faces);
+        assert_eq!(m.staircase.len(), 12 * m.vertices);
+        assert_eq!(m.face_colors.len(), 3 * m.faces);
+        // Solid: one interface, so the groups are the labels.
+        let surface = DigitalSurface::new(&volume, &voxreg_digisurf::RegionMap::single_solid()).unwrap();
+        let m = Model::new(&surface, None);
+        let names: Vec<_> = m.groups.iter().map(|g| g.name.as_str()).collect();
+        assert_eq!(names, ["label_1", "label_2"]);
+    }
+}

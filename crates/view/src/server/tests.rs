@@ -1,0 +1,275 @@
+//! The server over real loopback connections: pages, the event stream, solves, downloads,
+//! and bad requests answered with messages while the server keeps serving.
+
+use std::io::{Read, Write};
+use std::net::{SocketAddr, TcpStream};
+use std::path::Path;
+use std::time::{Duration, Instant};
+
+use voxreg_digisurf::LabelVolume;
+
+use crate::{Loaded, Preset, StopHandle, Viewer};
+
+/// A digital ball of radius 4 (papers preset: one quick solve).
+fn ball(name: &str) -> Loaded {
+    let volume = LabelVolume::from_fn([11, 11, 11], |[x, y, z]| {
+        let d = |c: usize| c as f64 - 5.0;
+        u32::from(d(x).powi(2) + d(y).powi(2) + d(z).powi(2) <= 16.0)
+    });
+    Loaded {
+        name: name.into(),
+        volume,
+        palette: None,
+        preset: Preset::Papers,
+        params: Preset::Papers.params(),
+    }
+}
+
+/// Reads what the command line reads (no options), as the CLI's loader does.
+fn load(path: &Path) -> Result<Loaded, String> {
+    let v = voxreg_io::read_volume(path).map_err(|e| e.to_string())?;
+    let name = path.display().to_string();
+    Ok(Loaded {
+        name,
+        volume: v.volume,
+        palette: v.palette,
+        preset: Preset::Papers,
+        params: Preset::Papers.params(),
+    })
+}
+
+struct Running {
+    addr: SocketAddr,
+    stop: StopHandle,
+    thread: Option<std::thread::JoinHandle<()>>,
+}
+
+impl Drop for Running {
+    fn drop(&mut self) {
+        self.stop.stop();
+        if let Some(t) = self.thread.take() {
+            t.join().expect("the server thread ends cleanly");
+        }
+    }
+}
+
+fn start() -> Running {
+    start_with(ball("ball.vol"))
+}
+
+fn start_with(loaded: Loaded) -> Running {
+    let viewer = Viewer::bind(0, Box::new(load)).unwrap();
+    assert!(viewer.addr().ip().is_loopback());
+    assert!(viewer.url().starts_with("http://127.0.0.1:"));
+    viewer.open(loaded);
+    let (addr, stop) = (viewer.addr(), viewer.stop_handle());
+    Running { addr, stop, thread: Some(std::thread::spawn(move || viewer.serve())) }
+}
+
+/// One request (`Connection: close`): the status and the body.
+fn request(addr: SocketAddr, method: &str, path: &str, host: Option<&str>, body: &[u8]) -> (u16, Vec<u8>) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
+    let host = host.map(|h| format!("Host: {h}\r\n")).unwrap_or_default();
+    let head = format!(
+        "{method} {path} HTTP/1.1\r\n{host}Content-Length: {}\r\nConnection: close\r\n\r\n",
+        body.len()
+    );
+    s.write_all(head.as_bytes()).unwrap();
+    s.write_all(body).unwrap();
+    let mut out = Vec::new();
+    s.read_to_end(&mut out).unwrap();
+    let end = out.windows(4).position(|w| w == b"\r\n\r\n").expect("a response head") + 4;
+    let status = String::from_utf8_lossy(&out[9..12]).parse().unwrap();
+    (status, decode_body(&out[..end], &out[end..]))
+}
+
+fn decode_body(head: &[u8], body: &[u8]) -> Vec<u8> {
+    let chunked = String::from_utf8_lossy(head).to_ascii_lowercase().contains("transfer-encoding: chunked");
+    if !chunked {
+        return body.to_vec();
+    }
+    let (mut out, mut rest) = (Vec::new(), body);
+    loop {
+        let line = rest.windows(2).position(|w| w == b"\r\n").unwrap();
+        let n = usize::from_str_radix(std::str::from_utf8(&rest[..line]).unwrap().trim(), 16).unwrap();
+        if n == 0 {
+            return out;
+        }
+        out.extend_from_slice(&rest[line + 2..line + 2 + n]);
+        rest = &rest[line + 4 + n..];
+    }
+}
+
+fn get(r: &Running, path: &str) -> (u16, Vec<u8>) {
+    request(r.addr, "GET", path, Some(&format!("127.0.0.1:{}", r.addr.port())), b"")
+}
+
+fn post(r: &Running, path: &str, body: &[u8]) -> (u16, Vec<u8>) {
+    request(r.addr, "POST", path, Some(&format!("127.0.0.1:{}", r.addr.port())), body)
+}
+
+fn json(bytes: &[u8]) -> serde_json::Value {
+    serde_json::from_slice(bytes).unwrap_or_else(|e| panic!("{e}: {}", String::from_utf8_lossy(bytes)))
+}
+
+/// Polls the state until `done` holds of it.
+fn wait_for(r: &Running, done: impl Fn(&serde_json::Value) -> bool) -> serde_json::Value {
+    let t = Instant::now();
+    loop {
+        let state = json(&get(r, "/api/state").1);
+        if done(&state) {
+            return state;
+        }
+        assert!(t.elapsed() < Duration::from_secs(60), "timed out: {state}");
+        std::thread::sleep(Duration::from_millis(20));
+    }
+}
+
+fn error_of(reply: (u16, Vec<u8>)) -> (u16, String) {
+    let message = json(&reply.1)["error"].as_str().unwrap_or_default().to_string();
+    (reply.0, message)
+}
+
+#[test]
+fn serves_the_page_and_its_assets_to_its_own_host_only() {
+    let r = start();
+    let (status, page) = get(&r, "/");
+    assert_eq!(status, 200);
+    assert!(String::from_utf8_lossy(&page).contains("<canvas"));
+    for asset in
+        ["/app.js", "/style.css", "/three/three.module.min.js", "/three/OrbitControls.js", "/three/LICENSE"]
+    {
+        let (status, body) = get(&r, asset);
+        assert_eq!(status, 200, "{asset}");
+        assert!(!body.is_empty(), "{asset}");
+    }
+    let localhost = format!("localhost:{}", r.addr.port());
+    assert_eq!(request(r.addr, "GET", "/", Some(&localhost), b"").0, 200);
+    // Another site's name for this address (DNS rebinding), or none: refused.
+    let (status, message) = error_of(request(r.addr, "GET", "/", Some("evil.example:80"), b""));
+    assert_eq!((status, message.as_str()), (403, "unexpected Host 'evil.example:80'"));
+    assert_eq!(error_of(get(&r, "/nothing-here")), (404, "no such page: /nothing-here".into()));
+    assert_eq!(error_of(request(r.addr, "DELETE", "/", Some(&localhost), b"")).0, 405);
+}
+
+#[test]
+fn a_solve_streams_its_state_and_its_result_downloads_in_every_format() {
+    let r = start();
+    let state = wait_for(&r, |s| s["final"] == true);
+    let vertices = state["vertices"].as_u64().unwrap() as usize;
+    let faces = state["faces"].as_u64().unwrap() as usize;
+    assert!(state["summary"].as_str().unwrap().contains(&format!("{faces} quads")));
+    assert_eq!(get(&r, "/api/positions").1.len(), 12 * vertices);
+    assert_eq!(get(&r, "/api/staircase").1.len(), 12 * vertices);
+    assert_eq!(get(&r, "/api/quads").1.len(), 16 * faces);
+    assert_eq!(get(&r, "/api/normals").1.len(), 12 * faces);
+    assert!(state["command"]
+        .as_str()
+        .unwrap()
+        .starts_with("voxreg regularize ball.vol -o ball.glb --preset papers"));
+    // The result, as the command line writes it.
+    let (status, glb) = get(&r, "/api/download?format=glb");
+    assert_eq!((status, &glb[..4]), (200, &b"glTF"[..]));
+    let (status, ply) = get(&r, "/api/download?format=ply");
+    assert_eq!((status, &ply[..3]), (200, &b"ply"[..]));
+    let (status, obj) = get(&r, "/api/download?format=obj");
+    assert_eq!(status, 200);
+    assert_eq!(String::from_utf8_lossy(&obj).lines().filter(|l| l.starts_with("f ")).count(), faces);
+    // A re-solve with other weights: a new final frame with other positions.
+    let mut tuning = state["tuning"].clone();
+    tuning["gamma"] = serde_json::json!(2.0);
+    let before = get(&r, "/api/positions").1;
+    assert_eq!(post(&r, "/api/solve", tuning.to_string().as_bytes()).0, 202);
+    let frame = state["frame"].as_u64().unwrap();
+    let again = wait_for(&r, |s| s["final"] == true && s["frame"].as_u64().unwrap() > frame);
+    assert_eq!(again["tuning"]["gamma"], 2.0);
+    assert_ne!(get(&r, "/api/positions").1, before);
+    // The event stream sends the state.
+    let mut s = TcpStream::connect(r.addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    write!(s, "GET /api/events HTTP/1.1\r\nHost: 127.0.0.1:{}\r\n\r\n", r.addr.port()).unwrap();
+    let mut seen = Vec::new();
+    let mut buf = [0u8; 4096];
+    while !String::from_utf8_lossy(&seen).contains("\n\n{") && !seen.windows(2).any(|w| w == b"}\n") {
+        let n = s.read(&mut buf).unwrap();
+        assert!(n > 0, "the stream ended: {}", String::from_utf8_lossy(&seen));
+        seen.extend_from_slice(&buf[..n]);
+    }
+    let text = String::from_utf8_lossy(&seen);
+    assert!(text.starts_with("HTTP/1.1 200 OK\r\nContent-Type: text/event-stream"), "{text}");
+    let data = text.split("data: ").nth(1).unwrap().lines().next().unwrap();
+    assert_eq!(json(data.as_bytes())["name"], "ball.vol");
+}
+
+#[test]
+fn bad_requests_are_answered_with_messages_and_the_server_keeps_serving() {
+    let r = start();
+    let state = wait_for(&r, |s| s["final"] == true);
+    let (status, message) = error_of(post(&r, "/api/solve", b"{not json"));
+    assert_eq!(status, 400);
+    assert!(message.starts_with("bad parameters:"), "{message}");
+    let mut tuning = state["tuning"].clone();
+    tuning["alpha"] = serde_json::json!(0.0);
+    let (status, message) = error_of(post(&r, "/api/solve", tuning.to_string().as_bytes()));
+    assert_eq!(status, 400);
+    assert!(message.contains("alpha must be positive"), "{message}");
+    tuning["alpha"] = serde_json::json!(0.01);
+    tuning["clamp"] = serde_json::json!(3.0);
+    assert!(error_of(post(&r, "/api/solve", tuning.to_string().as_bytes())).1.contains("(0, 1)"));
+    assert_eq!(error_of(get(&r, "/api/download?format=stl")).0, 400);
+    assert_eq!(error_of(post(&r, "/api/open", b"abc")).0, 400);
+    // A corrupt file: the reader's message, naming the file; the old surface stays.
+    let (status, message) = error_of(post(&r, "/api/open?name=broken%20model.vox", b"VOX garbage"));
+    assert_eq!(status, 400);
+    assert!(message.contains("broken model.vox"), "{message}");
+    let (status, message) = error_of(post(&r, "/api/open?name=empty.vol", b""));
+    assert_eq!(status, 400, "{message}");
+    assert_eq!(json(&get(&r, "/api/state").1)["name"], "ball.vol");
+    // A panicking request is answered, and the next one too.
+    assert_eq!(error_of(get(&r, "/api/test-panic")), (500, "internal error: a test panic".into()));
+    assert_eq!(get(&r, "/").0, 200);
+    assert_eq!(json(&get(&r, "/api/state").1)["final"], true);
+}
+
+#[test]
+fn a_dropped_file_replaces_the_surface() {
+    let r = start();
+    let first = wait_for(&r, |s| s["final"] == true);
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/axes.vox");
+    let bytes = std::fs::read(path).unwrap();
+    let (status, body) = post(&r, "/api/open?name=axes.vox", &bytes);
+    assert_eq!(status, 200, "{}", String::from_utf8_lossy(&body));
+    let state = wait_for(&r, |s| s["final"] == true && s["name"] == "axes.vox");
+    assert!(state["model_id"].as_u64() > first["model_id"].as_u64());
+    assert_ne!(state["faces"], first["faces"]);
+    // The .vox palette colours the faces.
+    let colors = get(&r, "/api/face-colors").1;
+    assert_eq!(colors.len(), 3 * state["faces"].as_u64().unwrap() as usize);
+}
+
+#[test]
+fn a_newer_solve_stops_the_running_one() {
+    // A ball of radius 18 through the default pipeline (four solves), with the iterative
+    // solver, whose iterations are where a run can stop.
+    let volume = LabelVolume::from_fn([41, 41, 41], |[x, y, z]| {
+        let d = |c: usize| c as f64 - 20.0;
+        u32::from(d(x).powi(2) + d(y).powi(2) + d(z).powi(2) <= 324.0)
+    });
+    let mut params = Preset::Default.params();
+    params.solver.choice = voxreg_regularize::SolverChoice::Cg;
+    let r =
+        start_with(Loaded { name: "big.vol".into(), volume, palette: None, preset: Preset::Default, params });
+    let running = wait_for(&r, |s| {
+        let stage = s["stage"].as_str().unwrap_or("");
+        s["busy"] == true
+            && (stage.starts_with("refine") || ["solve 1/4", "solve 2/4", "solve 3/4"].contains(&stage))
+    });
+    let mut tuning = running["tuning"].clone();
+    tuning["gamma"] = serde_json::json!(0.7);
+    assert_eq!(post(&r, "/api/solve", tuning.to_string().as_bytes()).0, 202);
+    let done = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
+    assert_eq!(done["tuning"]["gamma"], 0.7);
+    assert_eq!(done["superseded"], 1, "{done}");
+    assert_eq!(done["error"], serde_json::Value::Null);
+}

@@ -1,0 +1,325 @@
+//! The solve worker: one thread owns the current input and its [`Regularizer`] (surface,
+//! solver analysis, normals), runs the jobs the page sends, and publishes what the page
+//! polls and streams (the latest iterate, the final result, errors) in [`State`].
+
+use std::panic::{catch_unwind, AssertUnwindSafe};
+use std::sync::atomic::{AtomicU64, Ordering};
+use std::sync::mpsc::{Receiver, Sender};
+use std::sync::{Arc, Condvar, Mutex, MutexGuard};
+use std::time::{Duration, Instant};
+
+use glam::DVec3;
+use voxreg_io::{Palette, QuadMesh};
+use voxreg_regularize::{Output, Params, Regularizer};
+
+use crate::model::{f32_bytes, Model};
+use crate::tuning::Tuning;
+use crate::Loaded;
+
+/// The least time between two streamed iterates (the first of a run is sent at once).
+const FRAME_INTERVAL: Duration = Duration::from_millis(60);
+
+/// A job for the worker.
+pub(crate) enum Job {
+    /// Show a new input; the reply says whether its surface could be built.
+    Open(Box<Loaded>, Option<Sender<Result<(), String>>>, u64),
+    /// Re-solve the current input with these parameters.
+    Solve(Tuning, u64),
+}
+
+/// The last result of the current input, for downloads and the side panel.
+#[derive(Debug)]
+pub(crate) struct Finished {
+    pub(crate) positions: Vec<DVec3>,
+    pub(crate) normals: Vec<u8>,
+    pub(crate) features: Option<Vec<u8>>,
+    pub(crate) report: serde_json::Value,
+    pub(crate) summary: String,
+}
+
+/// What the page sees; `version` grows on every change (the event stream sends each).
+#[derive(Debug, Default)]
+pub(crate) struct State {
+    pub(crate) version: u64,
+    /// Grows with each new surface (a new input, or regions changed with the preset).
+    pub(crate) model_id: u64,
+    pub(crate) name: String,
+    pub(crate) model: Option<Arc<Model>>,
+    pub(crate) surface: Option<Arc<voxreg_digisurf::DigitalSurface>>,
+    pub(crate) palette: Option<Palette>,
+    pub(crate) tuning: Option<Tuning>,
+    /// The latest positions (an iterate, or the final result), little-endian `f32`.
+    pub(crate) positions: Option<Arc<Vec<u8>>>,
+    /// Grows with every new `positions`.
+    pub(crate) frame: u64,
+    pub(crate) frame_final: bool,
+    pub(crate) stage: String,
+    pub(crate) iteration: Option<usize>,
+    pub(crate) busy: bool,
+    pub(crate) error: Option<String>,
+    /// Milliseconds from the job's arrival to its first streamed iterate, and to its end.
+    pub(crate) first_frame_ms: Option<f64>,
+    pub(crate) total_ms: Option<f64>,
+    pub(crate) finished: Option<Arc<Finished>>,
+    /// Runs stopped because a newer job replaced them.
+    pub(crate) superseded: u64,
+    pub(crate) shutdown: bool,
+}
+
+/// The state and the condition the event streams wait on.
+#[derive(Debug, Default)]
+pub(crate) struct Shared {
+    state: Mutex<State>,
+    pub(crate) changed: Condvar,
+    /// Counts the jobs queued: a run whose job is older than the latest stops at its next
+    /// iteration (the job that replaced it runs next).
+    jobs: AtomicU64,
+}
+
+/// The panic payload that stops a superseded run (through the progress callback, the
+/// front door's only way out of a run; it stops between iterations, where the solver's
+/// state is whole).
+struct Superseded;
+
+impl Shared {
+    /// Numbers a new job (and so supersedes the running one).
+    pub(crate) fn next_job(&self) -> u64 {
+        self.jobs.fetch_add(1, Ordering::SeqCst) + 1
+    }
+
+    fn superseded(&self, job: u64) -> bool {
+        self.jobs.load(Ordering::SeqCst) > job
+    }
+
+    /// The state; a panic elsewhere never makes it unreachable.
+    pub(crate) fn lock(&self) -> MutexGuard<'_, State> {
+        self.state.lock().unwrap_or_else(|e| e.into_inner())
+    }
+
+    /// Applies `f` to the state, bumps its version and wakes the event streams.
+    pub(crate) fn update(&self, f: impl FnOnce(&mut State)) {
+        let mut s = self.lock();
+        f(&mut s);
+        s.version += 1;
+        drop(s);
+        self.changed.notify_all();
+    }
+}
+
+/// The worker's own data for the current input.
+struct Current {
+    loaded: Loaded,
+    regularizer: Regularizer,
+    regions: voxreg_digisurf::RegionMap,
+}
+
+/// Runs jobs until the channel closes; a panicking job becomes an error on the page.
+pub(crate) fn worker(shared: Arc<Shared>, jobs: Receiver<Job>) {
+    let mut current: Option<Current> = None;
+    while let Ok(mut job) = jobs.recv() {
+        // Only the latest re-solve matters: skip those a newer one replaced.
+        while let Job::Solve(..) = job {
+            match jobs.try_recv() {
+                Ok(next) => job = next,
+                Err(_) => break,
+            }
+        }
+        let t = Instant::now();
+        let result = catch_unwind(AssertUnwindSafe(|| run(&shared, &mut current, job, t)));
+        if let Err(panic) = result {
+            if panic.is::<Superseded>() {
+                // A newer job is queued: it runs next and publishes its own state.
+                shared.update(|s| s.superseded += 1);
+                continue;
+            }
+            let message = panic_message(&*panic);
+            current = None;
+            shared.update(|s| {
+                s.busy = false;
+                s.error = Some(format!("internal error: {message}"));
+            });
+        }
+    }
+}
+
+/// A panic payload's message.
+pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
+    match (panic.downcast_ref::<&str>(), panic.downcast_ref::<String>()) {
+        (Some(s), _) => s.to_string(),
+        (_, Some(s)) => s.clone(),
+        _ => "a panic".to_string(),
+    }
+}
+
+fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
+    match job {
+        Job::Open(loaded, reply, job) => {
+            let loaded = *loaded;
+            let tuning = Tuning::of(loaded.preset, &loaded.params);
+            let params = loaded.params.clone();
+            shared.update(|s| {
+                s.busy = true;
+                s.stage = "digital surface".into();
+            });
+            match Regularizer::from_volume(&loaded.volume, &params.regions) {
+                Ok(regularizer) => {
+                    let regions = params.regions.clone();
+                    *current = Some(Current { loaded, regularizer, regions });
+                    let c = current.as_mut().expect("set above");
+                    publish_model(shared, c);
+                    if let Some(reply) = reply {
+                        let _ = reply.send(Ok(()));
+                    }
+                    solve(shared, c, tuning, params, t, job);
+                }
+                Err(e) => {
+                    let message = format!("{}: {e}", loaded.name);
+                    shared.update(|s| {
+                        s.busy = false;
+                        s.error = Some(message.clone());
+                    });
+                    if let Some(reply) = reply {
+                        let _ = reply.send(Err(message));
+                    }
+                }
+            }
+        }
+        Job::Solve(tuning, job) => {
+            let Some(c) = current.as_mut() else {
+                shared.update(|s| s.error = Some("no input to solve: open a file".into()));
+                return;
+            };
+            let params = match tuning.params(c.loaded.preset, &c.loaded.params) {
+                Ok(p) => p,
+                Err(e) => {
+                    shared.update(|s| s.error = Some(e));
+                    return;
+                }
+            };
+            if params.regions != c.regions {
+                // The preset groups labels differently: a new surface.
+                match Regularizer::from_volume(&c.loaded.volume, &params.regions) {
+                    Ok(r) => {
+                        c.regularizer = r;
+                        c.regions = params.regions.clone();
+                        publish_model(shared, c);
+                    }
+                    Err(e) => {
+                        let message = format!("{}: {e}", c.loaded.name);
+                        shared.update(|s| s.error = Some(message));
+                        return;
+                    }
+                }
+            }
+            solve(shared, c, tuning, params, t, job);
+        }
+    }
+}
+
+fn publish_model(shared: &Shared, c: &Current) {
+    let surface = Arc::clone(c.regularizer.surface());
+    let model = Arc::new(Model::new(&surface, c.loaded.palette.as_ref()));
+    let name = c.loaded.name.clone();
+    let palette = c.loaded.palette.clone();
+    shared.update(|s| {
+        s.model_id += 1;
+        s.name = name;
+        s.positions = Some(Arc::new(model.staircase.clone()));
+        s.frame += 1;
+        s.frame_final = false;
+        s.model = Some(model);
+        s.surface = Some(surface);
+        s.palette = palette;
+        s.finished = None;
+        s.error = None;
+    });
+}
+
+fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: Instant, job: u64) {
+    shared.update(|s| {
+        s.busy = true;
+        s.error = None;
+        s.tuning = Some(tuning);
+        s.first_frame_ms = None;
+        s.total_ms = None;
+    });
+    let mut last: Option<Instant> = None;
+    let result = c.regularizer.run_with(&params, None, &mut |e| {
+        if shared.superseded(job) {
+            std::panic::resume_unwind(Box::new(Superseded));
+        }
+        let label = e.stage.label(&params);
+        let due = last.is_none_or(|l| l.elapsed() >= FRAME_INTERVAL);
+        let iterate = if due { e.iterate() } else { None };
+        match iterate {
+            Some(x) => {
+                last = Some(Instant::now());
+                let bytes = Arc::new(f32_bytes(x.iter().flat_map(|p| p.to_array())));
+                let ms = t.elapsed().as_secs_f64() * 1e3;
+                shared.update(|s| {
+                    s.positions = Some(bytes);
+                    s.frame += 1;
+                    s.frame_final = false;
+                    s.stage = label;
+                    s.iteration = e.iteration.map(|p| p.iteration);
+                    s.first_frame_ms.get_or_insert(ms);
+                });
+            }
+            None if e.iteration.is_none() => shared.update(|s| {
+                s.stage = label;
+                s.iteration = None;
+            }),
+            None => {}
+        }
+    });
+    let ms = t.elapsed().as_secs_f64() * 1e3;
+    match result {
+        Ok(out) => {
+            let finished = Arc::new(finish(&out));
+            let bytes = Arc::new(f32_bytes(out.positions.iter().flat_map(|p| p.to_array())));
+            shared.update(|s| {
+                s.positions = Some(bytes);
+                s.frame += 1;
+                s.frame_final = true;
+                s.stage = "done".into();
+                s.iteration = None;
+                s.busy = false;
+                s.total_ms = Some(ms);
+                s.finished = Some(finished);
+            });
+        }
+        Err(e) => {
+            let message = format!("{}: cannot regularize: {e}", c.loaded.name);
+            shared.update(|s| {
+                s.busy = false;
+                s.error = Some(message);
+            });
+        }
+    }
+}
+
+fn finish(out: &Output) -> Finished {
+    Finished {
+        positions: out.positions.to_vec(),
+        normals: f32_bytes(out.normals.as_slice().iter().flat_map(|n| n.to_array())),
+        features: out.features.as_ref().map(|f| f32_bytes(f.as_slice().iter().copied())),
+        report: serde_json::to_value(&out.report).unwrap_or(serde_json::Value::Null),
+        summary: out.report.summary(),
+    }
+}
+
+/// The final result as a mesh file of format `ext` (`glb`, `ply` or `obj`), written by
+/// `voxreg_io::write_mesh` (what `voxreg regularize` writes).
+pub(crate) fn mesh_file(state: &State, ext: &str) -> Result<Vec<u8>, String> {
+    let (Some(surface), Some(finished)) = (&state.surface, &state.finished) else {
+        return Err("no result yet: wait for the solve to finish".into());
+    };
+    let mut mesh = QuadMesh::from_surface(surface, &finished.positions);
+    if let Some(p) = &state.palette {
+        mesh.assign_materials(p);
+    }
+    let dir = tempfile::tempdir().map_err(|e| format!("cannot create a temporary directory: {e}"))?;
+    let path = dir.path().join(format!("result.{ext}"));
+    voxreg_io::write_mesh(&path, &mesh).map_err(|e| e.to_string())?;
+    std::fs::read(&path).map_err(|e| format!("cannot read back {}: {e}", path.display()))
+}
