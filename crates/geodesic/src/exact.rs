@@ -78,6 +78,8 @@ struct Occupant {
     tri: u32,
     k: u8,
     crossing: f64,
+    /// The window's source, in the frame of side `k` of `tri`.
+    source: DVec2,
 }
 
 struct Propagation<'m> {
@@ -96,12 +98,13 @@ struct Propagation<'m> {
 /// Spec: windows (intervals of edges seen straight from one unfolded source) are
 /// propagated across triangles in order of their least distance (Chen and Han 1990),
 /// with the improvements of Xin and Wang 2009: a window is dropped when a vertex of its
-/// edge already reaches every point of it by a shorter path (`d(v) + |v x| < sigma + |s x|`
-/// at the interval's far end, which bounds the whole interval), and a window seeing a
+/// triangle already reaches every point of it by a shorter path (`d(v) + |v x| < sigma +
+/// |s x|`, checked where it decides for the whole interval), and a window seeing a
 /// vertex that an earlier window reached by a shorter path through the same side keeps
 /// only its child on its own side of that path (one angle, one split). Saddle vertices
 /// (angle sum at least `2 pi`) and vertices on boundary or non-manifold edges become
-/// pseudo-sources once final. Every rule only drops windows that another path dominates,
+/// pseudo-sources once final, a saddle reached by a window only into its shadow (where a
+/// shortest path through it turns by at least `pi` on both sides). Every rule only drops windows that another path dominates,
 /// so the distances are exact up to rounding.
 pub fn exact_distances(mesh: &GeodesicMesh, sources: &[u32]) -> Result<(Vec<f64>, ExactInfo), GeodesicError> {
     mesh.check_sources(sources)?;
@@ -174,11 +177,12 @@ impl Propagation<'_> {
     }
 
     /// A pseudo-source at `v`: its neighbours directly, and a full window on the far side
-    /// of every triangle around it.
+    /// of every triangle around it that a shortest path through `v` can enter.
     fn expand_vertex(&mut self, v: u32) {
         let mesh = self.mesh;
         let dv = self.dist[v as usize];
-        for &t in mesh.vertex_tris(v) {
+        let shadow = self.shadow(v);
+        for (i, &t) in mesh.vertex_tris(v).iter().enumerate() {
             let tri = mesh.triangles[t as usize];
             let j = tri.iter().position(|&x| x == v).expect("vertex of its triangle");
             // The side opposite v: corners j+1, j+2 (side k = j + 1 of t).
@@ -187,11 +191,60 @@ impl Propagation<'_> {
             let [a, b, _] = corners(tri, k);
             self.relax(a, dv + apex.length(), None);
             self.relax(b, dv + apex.distance(DVec2::new(len, 0.0)), None);
+            if shadow.as_ref().is_some_and(|open| !open[i]) {
+                continue;
+            }
             // In the frame of side k of t the source is the apex; the window goes into
             // every other triangle on that side.
-            let s = apex;
-            self.cross_side(t, k, [DVec2::ZERO, DVec2::new(len, 0.0)], apex, 0.0, len, s, dv);
+            self.cross_side(t, k, [DVec2::ZERO, DVec2::new(len, 0.0)], apex, 0.0, len, apex, dv);
         }
+    }
+
+    /// Which triangles around `v` (in `vertex_tris` order) a shortest path through `v`
+    /// can continue into, or `None` for all of them.
+    ///
+    /// A shortest path through a vertex turns by at least `pi` on both sides (otherwise
+    /// it shortens around the vertex), so from the direction it arrives from, measured
+    /// around `v` (total angle `Theta`), it leaves within `[pi, Theta - pi]`: only the
+    /// saddle's shadow. Known when `v` got its distance from a window (its occupant) and
+    /// its triangles form one fan of manifold edges; otherwise every triangle is open.
+    fn shadow(&self, v: u32) -> Option<Vec<bool>> {
+        let o = self.occupant[v as usize]?;
+        let mesh = self.mesh;
+        let fan = mesh.vertex_tris(v);
+        let [a, b, _] = corners(mesh.triangles[o.tri as usize], o.k as usize);
+        let (_, pc) = self.apex(o.tri, o.k as usize);
+        // The arrival direction, as an angle from the side v-a towards v-b.
+        let arrival = (-pc).angle_to(o.source - pc).abs();
+        let pv = mesh.pos(v);
+        let mut spans = vec![(f64::NAN, f64::NAN); fan.len()];
+        let (mut t, mut from, mut to, mut phi) = (o.tri, a, b, 0.0);
+        for _ in 0..fan.len() {
+            let i = fan.iter().position(|&x| x == t)?;
+            let angle = (mesh.pos(from) - pv).angle_between(mesh.pos(to) - pv);
+            spans[i] = (phi, phi + angle);
+            phi += angle;
+            // Across the side v-to into the next triangle of the fan.
+            let tri = mesh.triangles[t as usize];
+            let side = (0..3).find(|&s| {
+                let (p, q) = (tri[s], tri[(s + 1) % 3]);
+                (p == v && q == to) || (p == to && q == v)
+            })?;
+            let across = mesh.edge_tris(mesh.triangle_edges[t as usize][side]);
+            if across.len() != 2 {
+                return None;
+            }
+            t = if across[0] == t { across[1] } else { across[0] };
+            let next = mesh.triangles[t as usize];
+            from = to;
+            to = *next.iter().find(|&&x| x != v && x != from)?;
+        }
+        if t != o.tri || from != a || spans.iter().any(|s| s.0.is_nan()) {
+            return None;
+        }
+        let pi = std::f64::consts::PI;
+        let (lo, hi) = (arrival + pi - 1e-9, arrival + phi - pi + 1e-9);
+        Some(spans.iter().map(|&(p0, p1)| p1 >= lo && p0 <= hi).collect())
     }
 
     /// Queues the windows continuing interval `[t0, t1]` (from corner `k` towards corner
@@ -248,14 +301,31 @@ impl Propagation<'_> {
         }
     }
 
-    /// Whether a vertex of the window's side reaches all of it by a shorter path.
+    /// Whether a vertex of the window's triangle reaches all of its interval by a shorter
+    /// path.
+    ///
+    /// For an end `v` of the side, `d(v) + |v x| - (sigma + |s x|)` only grows towards
+    /// `v` along the side (`|s x|` changes by at most the distance moved), so the far end
+    /// of the interval decides. For the apex `c`, the points where
+    /// `|s x| - |c x| >= m`, `m >= 0`, form a convex set (the focus-`c` side of a
+    /// hyperbola branch, a half-plane for `m = 0`): with `m = max(d(c) - sigma, 0)`, both
+    /// ends of the interval in it put the whole interval in it.
     fn dominated(&self, w: &Window) -> bool {
-        let [a, b, _] = corners(self.mesh.triangles[w.tri as usize], w.k as usize);
-        let len = self.mesh.pos(a).distance(self.mesh.pos(b));
-        let via_source = |x: f64| w.sigma + w.s.distance(DVec2::new(x, 0.0));
+        let [a, b, c] = corners(self.mesh.triangles[w.tri as usize], w.k as usize);
+        let (len, pc) = self.apex(w.tri, w.k as usize);
+        let ends = [DVec2::new(w.b0, 0.0), DVec2::new(w.b1, 0.0)];
+        let via_source = |x: DVec2| w.sigma + w.s.distance(x);
         let margin = 1e-12 * (1.0 + w.sigma);
-        self.dist[a as usize] + w.b1 + margin < via_source(w.b1)
-            || self.dist[b as usize] + (len - w.b0) + margin < via_source(w.b0)
+        if self.dist[a as usize] + w.b1 + margin < via_source(ends[1])
+            || self.dist[b as usize] + (len - w.b0) + margin < via_source(ends[0])
+        {
+            return true;
+        }
+        let dc = self.dist[c as usize];
+        dc.is_finite() && {
+            let m = (dc - w.sigma).max(0.0) + margin;
+            ends.iter().all(|&x| w.s.distance(x) - pc.distance(x) > m)
+        }
     }
 
     /// Propagates `w` across its triangle: the apex's distance, and the children on the
@@ -278,7 +348,7 @@ impl Propagation<'_> {
         let mut left = w.b0 < tc;
         let mut right = w.b1 > tc;
         if w.b0 <= tc && tc <= w.b1 {
-            let occupant = Occupant { tri: w.tri, k: w.k, crossing: tc };
+            let occupant = Occupant { tri: w.tri, k: w.k, crossing: tc, source: w.s };
             if !self.relax(c, w.sigma + w.s.distance(pc), Some(occupant)) {
                 if let Some(o) = self.occupant[c as usize] {
                     if o.tri == w.tri && o.k == w.k {
