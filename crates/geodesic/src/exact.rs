@@ -82,8 +82,57 @@ struct Occupant {
     source: DVec2,
 }
 
+/// A window kept on its side, for trimming later windows there.
+#[derive(Copy, Clone)]
+struct Kept {
+    b0: f64,
+    b1: f64,
+    s: DVec2,
+    sigma: f64,
+}
+
+impl Kept {
+    fn at(&self, x: f64) -> f64 {
+        self.sigma + self.s.distance(DVec2::new(x, 0.0))
+    }
+
+    /// Whether `self` gives a shorter distance than `other` on all of `[lo, hi]` (both
+    /// windows on the same side). Where they are equal, `sigma1 + |s1 x| = sigma2 +
+    /// |s2 x|`, squaring twice leaves a quadratic in `x`: shorter at both ends and no
+    /// root between means shorter throughout.
+    fn shorter(&self, other: &Kept, lo: f64, hi: f64) -> bool {
+        let margin = 1e-12 * (1.0 + self.sigma.max(other.sigma));
+        if !(other.at(lo) - self.at(lo) > margin && other.at(hi) - self.at(hi) > margin) {
+            return false;
+        }
+        let (a1, c1, a2, c2) = (self.s.x, self.s.y, other.s.x, other.s.y);
+        let d = self.sigma - other.sigma;
+        let alpha = 2.0 * (a1 - a2);
+        let beta = a2 * a2 - a1 * a1 + c2 * c2 - c1 * c1 - d * d;
+        let qa = 4.0 * d * d - alpha * alpha;
+        let qb = -8.0 * d * d * a1 - 2.0 * alpha * beta;
+        let qc = 4.0 * d * d * (a1 * a1 + c1 * c1) - beta * beta;
+        let inside = |x: f64| x > lo && x < hi;
+        let scale = qa.abs().max(qb.abs()).max(qc.abs());
+        if scale == 0.0 {
+            return true;
+        }
+        if qa.abs() <= 1e-12 * scale {
+            return qb == 0.0 || !inside(-qc / qb);
+        }
+        let disc = qb * qb - 4.0 * qa * qc;
+        if disc < 0.0 {
+            return true;
+        }
+        let r = disc.sqrt();
+        !inside((-qb - r) / (2.0 * qa)) && !inside((-qb + r) / (2.0 * qa))
+    }
+}
+
 struct Propagation<'m> {
     mesh: &'m GeodesicMesh,
+    /// Windows queued so far on each triangle side (`3 * tri + k`).
+    kept: Vec<Vec<Kept>>,
     dist: Vec<f64>,
     occupant: Vec<Option<Occupant>>,
     queue: BinaryHeap<Queued>,
@@ -101,7 +150,9 @@ struct Propagation<'m> {
 /// triangle already reaches every point of it by a shorter path (`d(v) + |v x| < sigma +
 /// |s x|`, checked where it decides for the whole interval), and a window seeing a
 /// vertex that an earlier window reached by a shorter path through the same side keeps
-/// only its child on its own side of that path (one angle, one split). Saddle vertices
+/// only its child on its own side of that path (one angle, one split). As in
+/// Mitchell-Mount-Papadimitriou, a new window loses the parts of its interval where a
+/// window already on the same side is shorter. Saddle vertices
 /// (angle sum at least `2 pi`) and vertices on boundary or non-manifold edges become
 /// pseudo-sources once final, a saddle reached by a window only into its shadow (where a
 /// shortest path through it turns by at least `pi` on both sides). Every rule only drops windows that another path dominates,
@@ -111,6 +162,7 @@ pub fn exact_distances(mesh: &GeodesicMesh, sources: &[u32]) -> Result<(Vec<f64>
     let n = mesh.num_vertices();
     let mut run = Propagation {
         mesh,
+        kept: vec![Vec::new(); 3 * mesh.triangles.len()],
         dist: vec![f64::INFINITY; n],
         occupant: vec![None; n],
         queue: BinaryHeap::new(),
@@ -294,10 +346,42 @@ impl Propagation<'_> {
                 continue;
             }
             let w = Window { tri: t, k: k2 as u8, b0: b0.max(0.0), b1: b1.min(len), s: s2, sigma };
-            if !self.dominated(&w) {
-                self.info.windows += 1;
-                self.queue.push(Queued { key: w.key(), event: Event::Window(w) });
+            self.push(w);
+        }
+    }
+
+    /// Queues what is left of `w` once the parts where a window already on its side is
+    /// shorter are cut out (none of it if a vertex dominates it).
+    fn push(&mut self, w: Window) {
+        if w.b1 - w.b0 <= self.tiny || self.dominated(&w) {
+            return;
+        }
+        let side = 3 * w.tri as usize + w.k as usize;
+        let new = Kept { b0: w.b0, b1: w.b1, s: w.s, sigma: w.sigma };
+        let mut covered: Vec<(f64, f64)> = Vec::new();
+        for old in &self.kept[side] {
+            let (lo, hi) = (old.b0.max(w.b0), old.b1.min(w.b1));
+            if hi - lo > self.tiny && old.shorter(&new, lo, hi) {
+                covered.push((lo, hi));
             }
+        }
+        covered.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut pieces = Vec::new();
+        let mut start = w.b0;
+        for (lo, hi) in covered {
+            if lo > start + self.tiny {
+                pieces.push((start, lo));
+            }
+            start = start.max(hi);
+        }
+        if w.b1 > start + self.tiny {
+            pieces.push((start, w.b1));
+        }
+        for (b0, b1) in pieces {
+            let piece = Window { b0, b1, ..w };
+            self.kept[side].push(Kept { b0, b1, ..new });
+            self.info.windows += 1;
+            self.queue.push(Queued { key: piece.key(), event: Event::Window(piece) });
         }
     }
 

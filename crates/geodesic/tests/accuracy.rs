@@ -79,7 +79,7 @@ fn sphere_proxy_geodesics_match_great_circles_and_beat_the_digital_metric() {
 
 #[test]
 fn torus_meridian_distances_and_heat_agree_with_exact() {
-    let torus = Torus { major: 12.0, minor: 5.0 };
+    let torus = Torus { major: 16.0, minor: 8.0 };
     let volume = digitize(&torus, 1.0);
     let (_, proxy) = meshes(&volume);
     // Source on the outer equator at angle 0.
