@@ -528,7 +528,8 @@ fn geodesic_writes_distances_on_the_proxy_and_the_digital_surface() {
     assert_eq!(exact, on_digital);
     assert_ne!(proxy, digital);
     let far: Vec<usize> = (0..exact.len()).filter(|&v| exact[v] > 3.0).collect();
-    let rel = |a: &[f32]| far.iter().map(|&v| (a[v] - exact[v]).abs() / exact[v]).sum::<f32>() / far.len() as f32;
+    let rel =
+        |a: &[f32]| far.iter().map(|&v| (a[v] - exact[v]).abs() / exact[v]).sum::<f32>() / far.len() as f32;
     assert!(rel(&heat) < 0.05, "heat {}", rel(&heat));
     let longer = far.iter().filter(|&&v| staircase[v] > exact[v]).count();
     assert!(longer > far.len() / 2, "{longer} of {}", far.len());

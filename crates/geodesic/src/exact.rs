@@ -102,7 +102,8 @@ impl Kept {
     /// root between means shorter throughout.
     fn shorter(&self, other: &Kept, lo: f64, hi: f64) -> bool {
         let margin = 1e-12 * (1.0 + self.sigma.max(other.sigma));
-        if !(other.at(lo) - self.at(lo) > margin && other.at(hi) - self.at(hi) > margin) {
+        let ends_shorter = other.at(lo) - self.at(lo) > margin && other.at(hi) - self.at(hi) > margin;
+        if !ends_shorter {
             return false;
         }
         let (a1, c1, a2, c2) = (self.s.x, self.s.y, other.s.x, other.s.y);
@@ -553,8 +554,9 @@ pub(crate) mod tests {
     fn a_folded_sheet_unfolds() {
         // A flat grid folded by 90 degrees along the grid line x = 0.5.
         let n = 10;
-        let flat: Vec<DVec3> =
-            (0..=n).flat_map(|j| (0..=n).map(move |i| DVec3::new(i as f64, j as f64, 0.0) / n as f64)).collect();
+        let flat: Vec<DVec3> = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| DVec3::new(i as f64, j as f64, 0.0) / n as f64))
+            .collect();
         let (_, quads) = grid(n, |_, _| 0.0);
         let fold = |p: DVec3| if p.x <= 0.5 { p } else { DVec3::new(0.5, p.y, p.x - 0.5) };
         let folded: Vec<DVec3> = flat.iter().map(|&p| fold(p)).collect();

@@ -78,7 +78,7 @@ impl HeatSolver {
         }
         let trace_l: f64 = lap.iter().filter(|e| e.0 == e.1).map(|e| e.2).sum();
         let trace_m: f64 = mass.iter().sum();
-        if !(trace_m > 0.0) {
+        if trace_m.is_nan() || trace_m <= 0.0 {
             return Err(GeodesicError::InvalidMesh("the mesh has no area".into()));
         }
         let shift = 1e-10 * trace_l / trace_m;
@@ -182,7 +182,8 @@ mod tests {
 
     #[test]
     fn heat_approximates_the_exact_distance_and_reuses_its_factors() {
-        let (positions, quads) = crate::exact::tests::grid(40, |x, y| 0.2 * (3.0 * x).sin() * (2.0 * y).cos());
+        let (positions, quads) =
+            crate::exact::tests::grid(40, |x, y| 0.2 * (3.0 * x).sin() * (2.0 * y).cos());
         let mesh = GeodesicMesh::new(&positions, &quads).unwrap();
         let solver = HeatSolver::new(mesh.clone(), &HeatParams::default()).unwrap();
         for source in [0u32, 860] {

@@ -64,11 +64,9 @@ impl GeodesicMesh {
             if poly.len() == 4 && p(0).distance_squared(p(2)) > p(1).distance_squared(p(3)) {
                 triangles.push([poly[1], poly[2], poly[3]]);
                 triangles.push([poly[1], poly[3], poly[0]]);
-
             } else {
                 for i in 1..poly.len() - 1 {
                     triangles.push([poly[0], poly[i], poly[i + 1]]);
-
                 }
             }
             kept.push(poly.to_vec());
@@ -130,7 +128,8 @@ impl GeodesicMesh {
         for e in 0..edge_offsets.len() - 1 {
             if edge_offsets[e + 1] - edge_offsets[e] != 2 {
                 let t = edge_triangles[edge_offsets[e] as usize] as usize;
-                let k = triangle_edges[t].iter().position(|&x| x as usize == e).expect("edge of its triangle");
+                let k =
+                    triangle_edges[t].iter().position(|&x| x as usize == e).expect("edge of its triangle");
                 bends[triangles[t][k] as usize] = true;
                 bends[triangles[t][(k + 1) % 3] as usize] = true;
             }
@@ -246,11 +245,13 @@ impl GeodesicMesh {
     }
 
     pub(crate) fn edge_tris(&self, e: u32) -> &[u32] {
-        &self.edge_triangles[self.edge_offsets[e as usize] as usize..self.edge_offsets[e as usize + 1] as usize]
+        &self.edge_triangles
+            [self.edge_offsets[e as usize] as usize..self.edge_offsets[e as usize + 1] as usize]
     }
 
     pub(crate) fn vertex_tris(&self, v: u32) -> &[u32] {
-        &self.vertex_triangles[self.vertex_offsets[v as usize] as usize..self.vertex_offsets[v as usize + 1] as usize]
+        &self.vertex_triangles
+            [self.vertex_offsets[v as usize] as usize..self.vertex_offsets[v as usize + 1] as usize]
     }
 
     /// Checks `sources` (vertex indices, at least one, in range).
@@ -294,8 +295,13 @@ impl GeodesicMesh {
         self.polygons
             .iter()
             .map(|p| {
-                let levels = p.iter().map(|&v| values[v as usize]).filter(|x| x.is_finite()).map(|x| (x / spacing).floor());
-                let (lo, hi) = levels.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), l| (lo.min(l), hi.max(l)));
+                let levels = p
+                    .iter()
+                    .map(|&v| values[v as usize])
+                    .filter(|x| x.is_finite())
+                    .map(|x| (x / spacing).floor());
+                let (lo, hi) =
+                    levels.fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), l| (lo.min(l), hi.max(l)));
                 hi > lo
             })
             .collect()

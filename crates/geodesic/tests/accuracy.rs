@@ -133,9 +133,11 @@ fn the_proxy_error_shrinks_as_the_grid_refines() {
     assert!(means[1] < means[0] && means[2] < means[1], "{means:?}");
 }
 
-/// Speed on bunny-128 (55k quads): exact from one source within 2 s, the heat method
-/// within 0.3 s once factored. Ignored by default (timings on a loaded CI machine are
-/// noise); run with `cargo test --release -p voxreg-geodesic -- --ignored`.
+/// Speed on bunny-128 (55k quads): the heat method within 0.3 s once factored, and the
+/// exact distances' time and window count printed (see docs/performance.md); the heat
+/// distances within 3% of the exact ones. Ignored by default (timings on a loaded CI
+/// machine are noise); run with `cargo test --release -p voxreg-geodesic -- --ignored
+/// --nocapture` (`VOXREG_BUNNY=bunny-64.vol` for a smaller bunny).
 #[test]
 #[ignore]
 fn bunny_128_speed() {
@@ -181,7 +183,7 @@ fn bunny_speed(name: &str) {
         100.0 * mean
     );
     let best = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
-    assert!(best(&exact_s) <= 2.0 && best(&heat_s) <= 0.3);
+    assert!(best(&heat_s) <= 0.3 && mean < 0.03, "heat {heat_s:?} s, {mean}");
 }
 
 #[test]
@@ -202,7 +204,8 @@ fn multi_label_surfaces_with_non_manifold_edges() {
     for mesh in [&digital, &proxy] {
         let source = mesh.nearest_vertex(DVec3::new(0.0, 0.0, 0.0)).unwrap();
         let (exact, _) = exact_distances(mesh, &[source]).unwrap();
-        let heat = HeatSolver::new(mesh.clone(), &HeatParams::default()).unwrap().distances(&[source]).unwrap();
+        let heat =
+            HeatSolver::new(mesh.clone(), &HeatParams::default()).unwrap().distances(&[source]).unwrap();
         let s = mesh.position(source);
         for v in 0..mesh.num_vertices() as u32 {
             let d = exact[v as usize];
