@@ -9,6 +9,8 @@
 //!   fairness term, voxreg.
 //! - Fig. 10: a multi-label volume, one colour per interface.
 //! - Fig. 11: voxel art with its palette colours.
+//! - Figs. 12-14 (`figures/extensions.rs`): exact geodesics on the digital surface and on
+//!   the regularized proxy; upscaling; texture-aware fairness.
 //! - Fig. 15: the ablation grid, each energy term switched off in turn.
 //!
 //! Deterministic: fixed cameras, single-threaded rendering, no timing in any file; the
@@ -34,6 +36,8 @@ use voxreg_render::{render, viridis, Camera, Image, RenderParams, Shading};
 use voxreg_testkit::{digitize, Shape};
 
 use crate::compare::BallTet;
+
+mod extensions;
 
 /// Panel size in pixels (square).
 const PANEL: u32 = 280;
@@ -223,6 +227,10 @@ pub(crate) fn figures(args: &[String]) -> Result<()> {
     timed("fig. 4", &mut || fig4(&mut index, &small_bunny))?;
     timed("fig. 10", &mut || fig10(&mut index, quick))?;
     timed("figs. 11, 15", &mut || fig11_15(&mut index, &art))?;
+    timed("fig. 12", &mut || extensions::fig12(&mut index, &bunny))?;
+    // Upscaling the 64^3 bunny to 256^3 and 512^3 (quick: the 32^3 one to 128^3, 256^3).
+    timed("fig. 13", &mut || extensions::fig13(&mut index, &bunny, &[4, 8]))?;
+    timed("fig. 14", &mut || extensions::fig14(&mut index, &art))?;
     index.write(quick)?;
     eprintln!(
         "wrote {} figures and index.html to {} in {:.1} s",

@@ -34,6 +34,10 @@ pub(crate) enum Command {
     /// Open INPUT in the browser: a local page (127.0.0.1 only) that shows the
     /// regularized surface as it converges and re-solves it as parameters are tuned.
     View(ViewArgs),
+    /// Regularize INPUT's surface, then compute geodesic distances on it from the surface
+    /// points nearest the --from points (papers, Fig. 12): a PLY mesh with a per-vertex
+    /// `distance` and a colour ramp with iso-lines.
+    Geodesic(GeodesicArgs),
     /// Count the self-intersections of MESH (.obj or .ply, quads split into two triangles;
     /// faces sharing a vertex do not count); exits with an error if there are any.
     Check(CheckArgs),
@@ -70,6 +74,70 @@ pub(crate) struct ViewArgs {
     /// Open the page in the default browser.
     #[arg(long)]
     pub(crate) open: bool,
+}
+
+#[derive(Args, Debug)]
+#[command(mut_arg("output", |a| a.help(
+    "Output mesh: .ply (binary quads, face labels, a per-vertex float `distance` and a \
+     colour ramp from dark red at the sources to light grey, with darker iso-lines)"
+)))]
+pub(crate) struct GeodesicArgs {
+    #[command(flatten)]
+    pub(crate) regularize: RegularizeArgs,
+    #[command(flatten)]
+    pub(crate) geodesic: GeodesicOptions,
+}
+
+#[derive(Args, Debug, PartialEq)]
+pub(crate) struct GeodesicOptions {
+    /// A source point, in the output's coordinates (the volume's, with its spacing and
+    /// origin); the nearest vertex of the surface measured on is the source. Repeat for
+    /// several sources: each vertex gets the distance to the nearest.
+    #[arg(long = "from", value_name = "X,Y,Z", required = true, value_parser = parse_point, allow_hyphen_values = true)]
+    pub(crate) from: Vec<glam::DVec3>,
+    /// exact (polyhedral geodesics, window propagation) or heat (the heat method: faster
+    /// on large surfaces, within a few percent).
+    #[arg(long, value_enum, default_value_t = GeodesicMethod::Exact)]
+    pub(crate) method: GeodesicMethod,
+    /// The mesh written: the regularized surface (proxy) or the staircase (digital) with
+    /// the same distances, vertex for vertex (papers, Fig. 12 (b)).
+    #[arg(long, value_enum, value_name = "SURFACE", default_value_t = SurfaceKind::Proxy)]
+    pub(crate) on: SurfaceKind,
+    /// The surface distances are measured on: the regularized proxy, or the staircase
+    /// itself for comparison (papers, Fig. 12 (a): anisotropic).
+    #[arg(long, value_enum, value_name = "SURFACE", default_value_t = SurfaceKind::Proxy)]
+    pub(crate) metric: SurfaceKind,
+    /// Spacing of the iso-lines, in the output's units [default: a tenth of the largest
+    /// distance].
+    #[arg(long, value_name = "D", value_parser = positive_named("--iso"))]
+    pub(crate) iso: Option<f64>,
+}
+
+/// `--method` of `voxreg geodesic`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum GeodesicMethod {
+    /// Exact polyhedral geodesics.
+    Exact,
+    /// The heat method.
+    Heat,
+}
+
+impl GeodesicMethod {
+    pub(crate) fn method(self) -> voxreg_geodesic::Method {
+        match self {
+            GeodesicMethod::Exact => voxreg_geodesic::Method::Exact,
+            GeodesicMethod::Heat => voxreg_geodesic::Method::Heat,
+        }
+    }
+}
+
+/// `--on` and `--metric` of `voxreg geodesic`.
+#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
+pub(crate) enum SurfaceKind {
+    /// The regularized surface.
+    Proxy,
+    /// The digital surface (the voxels' faces).
+    Digital,
 }
 
 #[derive(Args, Debug)]
@@ -415,6 +483,15 @@ fn parse_three<T: std::str::FromStr>(s: &str, what: &str) -> std::result::Result
         .collect::<std::result::Result<_, _>>()
         .map_err(|_| format!("'{s}' is not three {what} separated by commas"))?;
     parts.try_into().map_err(|_| format!("'{s}' is not three {what} separated by commas"))
+}
+
+fn parse_point(s: &str) -> std::result::Result<glam::DVec3, String> {
+    let [x, y, z] = parse_three::<f64>(s, "coordinates")?;
+    let p = glam::DVec3::new(x, y, z);
+    if !p.is_finite() {
+        return Err(format!("'{s}': coordinates must be finite"));
+    }
+    Ok(p)
 }
 
 fn parse_memory(s: &str) -> std::result::Result<u64, String> {

@@ -4,6 +4,7 @@
 //! presets ([`voxreg_regularize::Params`]) hold every default.
 
 mod args;
+mod geodesic;
 mod input;
 mod output;
 mod progress;
@@ -35,6 +36,7 @@ fn main() -> std::process::ExitCode {
         Command::Info(args) => input::info(&args),
         Command::Regularize(args) => regularize(&args, Product::Mesh),
         Command::Upscale(args) => regularize(&args.regularize, Product::Volume { factor: args.factor }),
+        Command::Geodesic(args) => regularize(&args.regularize, Product::Geodesic(&args.geodesic)),
         Command::Check(args) => check(&args),
         Command::View(args) => view::view(&args),
     };
@@ -85,8 +87,8 @@ fn usage_error(e: &clap::Error) -> std::process::ExitCode {
     }
 }
 
-/// `voxreg regularize` and `voxreg upscale`.
-fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
+/// `voxreg regularize`, `voxreg upscale` and `voxreg geodesic`.
+fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     output::check_outputs(args, product)?;
     let params = args.params(input::voxel_art(&args.input))?;
     params.validate()?;
@@ -114,6 +116,13 @@ fn regularize(args: &RegularizeArgs, product: Product) -> Result<()> {
                     write_ply_with_vertex_scalar(path, &mesh, "feature", v.as_slice())?;
                 }
                 Ok(written)
+            })?;
+            io.write = secs;
+            written
+        }
+        Product::Geodesic(opts) => {
+            let (written, secs) = stages.run("geodesic distances", || {
+                geodesic::write_distances(args, opts, surface, &out.positions)
             })?;
             io.write = secs;
             written

@@ -7,19 +7,21 @@ use anyhow::{bail, Result};
 use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId};
 use voxreg_io::{interface_name, region_name, write_mesh, MeshBatch, Palette, QuadMesh};
 
-use crate::args::{RegularizeArgs, Split};
+use crate::args::{GeodesicOptions, RegularizeArgs, Split};
 
 /// What `regularize` makes of the regularized surface.
-#[derive(Copy, Clone, Debug, PartialEq, Eq)]
-pub(crate) enum Product {
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub(crate) enum Product<'a> {
     /// The quad mesh (`voxreg regularize`).
     Mesh,
     /// A labeled volume `factor` times finer (`voxreg upscale`).
     Volume { factor: usize },
+    /// The quad mesh with geodesic distances (`voxreg geodesic`).
+    Geodesic(&'a GeodesicOptions),
 }
 
 /// Refuses option combinations and output paths that cannot be written, before any work.
-pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product) -> Result<()> {
+pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     match (product, args.split) {
         (Product::Volume { .. }, Split::None) if args.manifold => {
             bail!("--manifold applies to split meshes (voxreg regularize --split), not to voxreg upscale")
@@ -32,6 +34,13 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product) -> Result<(
             bail!("--manifold needs --split interfaces or regions (where three regions meet, one mesh cannot be manifold)")
         }
         (Product::Mesh, Split::None) => check_extension(&args.output, product)?,
+        (Product::Geodesic(_), Split::None) if args.manifold => {
+            bail!("--manifold applies to split meshes (voxreg regularize --split), not to voxreg geodesic")
+        }
+        (Product::Geodesic(_), Split::None) => check_extension(&args.output, product)?,
+        (Product::Geodesic(_), _) => {
+            bail!("--split applies to voxreg regularize, not to voxreg geodesic (one mesh carries the distances)")
+        }
         _ if args.output.is_file() => {
             bail!("{}: --split writes a directory, but this is a file", args.output.display())
         }
@@ -40,7 +49,7 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product) -> Result<(
     check_paths(args, product)?;
     if let Some(path) = &args.features {
         if product != Product::Mesh {
-            bail!("--features {}: voxreg upscale writes no mesh to carry the feature field", path.display());
+            bail!("--features {}: only voxreg regularize writes the feature field", path.display());
         }
         if args.normals != Some(crate::args::NormalsKind::At) {
             bail!("--features {}: only --normals at has a feature field", path.display());
@@ -55,7 +64,7 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product) -> Result<(
 /// Every output path (`-o`, `--report`, `--features`) can be written: its directory
 /// exists and is writable, it is not a directory (except `-o` with `--split`), it is not
 /// the input, and no two outputs are the same file.
-fn check_paths(args: &RegularizeArgs, product: Product) -> Result<()> {
+fn check_paths(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     let split = product == Product::Mesh && args.split != Split::None;
     let mut outputs: Vec<(&str, &Path)> = vec![("-o", &args.output)];
     outputs.extend(args.report.as_deref().map(|p| ("--report", p)));
@@ -131,13 +140,14 @@ fn writable_dir(dir: &Path, option: &str) -> Result<()> {
 /// Checks, once the volume is read and before the regularization, what the output
 /// needs of it: labels PLY can hold, and for `upscale` a fine volume within the memory
 /// budget.
-pub(crate) fn check_volume(args: &RegularizeArgs, product: Product, volume: &LabelVolume) -> Result<()> {
+pub(crate) fn check_volume(args: &RegularizeArgs, product: Product<'_>, volume: &LabelVolume) -> Result<()> {
     let input = &args.input.input;
     let ply = match product {
         Product::Mesh if args.split == Split::None => {
             args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply"))
         }
         Product::Mesh => args.split_format == crate::args::SplitFormat::Ply,
+        Product::Geodesic(_) => true,
         Product::Volume { .. } => false,
     };
     if ply {
@@ -184,7 +194,7 @@ pub(crate) fn check_upscaled(
     Ok(())
 }
 
-fn check_extension(path: &Path, product: Product) -> Result<()> {
+fn check_extension(path: &Path, product: Product<'_>) -> Result<()> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     match (product, ext.as_deref()) {
         (Product::Mesh, Some("obj" | "ply" | "glb" | "gltf")) => Ok(()),
@@ -199,6 +209,10 @@ fn check_extension(path: &Path, product: Product) -> Result<()> {
         }
         (Product::Volume { .. }, _) => {
             bail!("{}: unsupported output format (expected .vox or .vol)", path.display())
+        }
+        (Product::Geodesic(_), Some("ply")) => Ok(()),
+        (Product::Geodesic(_), _) => {
+            bail!("{}: voxreg geodesic writes PLY only (expected .ply)", path.display())
         }
     }
 }

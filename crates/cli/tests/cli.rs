@@ -553,4 +553,61 @@ fn view_serves_the_input_and_reads_dropped_files_with_the_options() {
     child.kill().unwrap();
     child.wait().unwrap();
     result.unwrap();
+/// The per-vertex `distance` values and vertex positions of a `voxreg geodesic` PLY.
+fn ply_distances(path: &Path) -> (Vec<f32>, Vec<[f32; 3]>) {
+    let bytes = std::fs::read(path).unwrap();
+    let end = b"end_header\n";
+    let body = bytes.windows(end.len()).position(|w| w == end).unwrap() + end.len();
+    let header = String::from_utf8(bytes[..body].to_vec()).unwrap();
+    assert!(header.contains("property float distance\nproperty uchar red\n"), "{header}");
+    let count: usize =
+        header.lines().find_map(|l| l.strip_prefix("element vertex ")).unwrap().parse().unwrap();
+    let float = |o: usize| f32::from_le_bytes(bytes[o..o + 4].try_into().unwrap());
+    (0..count)
+        .map(|i| {
+            let o = body + 19 * i;
+            (float(o + 12), [float(o), float(o + 4), float(o + 8)])
+        })
+        .unzip()
+}
+
+#[test]
+fn geodesic_writes_distances_on_the_proxy_and_the_digital_surface() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = data("cat10.vol");
+    let i = input.to_str().unwrap();
+    let run = |name: &str, extra: &[&str]| {
+        let path = dir.path().join(name);
+        let mut args = vec!["geodesic", i, "--from", "0,0,0", "-o", path.to_str().unwrap(), "-q"];
+        args.extend(extra);
+        let out = voxreg(&args);
+        assert!(out.status.success(), "{}", stderr(&out));
+        ply_distances(&path)
+    };
+    let (exact, proxy) = run("exact.ply", &[]);
+    let (heat, _) = run("heat.ply", &["--method", "heat"]);
+    let (on_digital, digital) = run("on-digital.ply", &["--on", "digital"]);
+    let (staircase, _) = run("digital.ply", &["--metric", "digital", "--on", "digital"]);
+    // One source vertex at distance 0; the same distances on either mesh, whose
+    // vertices differ; heat within a few percent of exact; the staircase metric longer.
+    assert_eq!(exact.iter().filter(|&&d| d == 0.0).count(), 1);
+    assert!(exact.iter().all(|&d| d >= 0.0));
+    assert_eq!(exact, on_digital);
+    assert_ne!(proxy, digital);
+    let far: Vec<usize> = (0..exact.len()).filter(|&v| exact[v] > 3.0).collect();
+    let rel =
+        |a: &[f32]| far.iter().map(|&v| (a[v] - exact[v]).abs() / exact[v]).sum::<f32>() / far.len() as f32;
+    assert!(rel(&heat) < 0.05, "heat {}", rel(&heat));
+    let longer = far.iter().filter(|&&v| staircase[v] > exact[v]).count();
+    assert!(longer > far.len() / 2, "{longer} of {}", far.len());
+
+    for (args, message) in [
+        (vec!["geodesic", i, "-o", "x.ply"], "--from"),
+        (vec!["geodesic", i, "--from", "0,0", "-o", "x.ply"], "three coordinates"),
+        (vec!["geodesic", i, "--from", "0,0,0", "-o", "x.obj"], "expected .ply"),
+    ] {
+        let out = voxreg(&args);
+        assert!(!out.status.success());
+        assert!(stderr(&out).contains(message), "{}", stderr(&out));
+    }
 }

@@ -124,15 +124,44 @@ pub(crate) fn encode_ply(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
 /// ```
 ///
 /// The colour is [`scalar_ramp`] of the value. Refused with [`IoError::InvalidMesh`]
-/// before anything is created if `values` does not have one finite `f32` value per
-/// vertex, if `name` is not a plain identifier (ASCII letters, digits and `_`, not
-/// starting with a digit) or is taken by another vertex property, or for the reasons of
-/// [`write_ply`]. Written to a temporary file renamed onto `path` when complete.
+/// before anything is created for the reasons of [`write_ply_with_vertex_field`]. Written
+/// to a temporary file renamed onto `path` when complete.
 pub fn write_ply_with_vertex_scalar(
     path: &Path,
     mesh: &QuadMesh,
     name: &str,
     values: &[f64],
+) -> Result<(), IoError> {
+    let colours: Vec<[u8; 3]> = values.iter().map(|&v| scalar_ramp(v)).collect();
+    write_vertex_field(path, mesh, name, values, &colours, true)
+}
+
+/// Writes `mesh` to `path` as the binary PLY of [`write_ply_with_vertex_scalar`], with
+/// the given vertex colours instead of the ramp (e.g. a distance field with iso-lines);
+/// the header's colour comment is left out.
+///
+/// Refused with [`IoError::InvalidMesh`] before anything is created if `values` or
+/// `colours` do not have one entry per vertex, a value is not a finite `f32`, `name` is
+/// not a plain identifier (ASCII letters, digits and `_`, not starting with a digit) or
+/// is taken by another vertex property, or for the reasons of [`write_ply`].
+pub fn write_ply_with_vertex_field(
+    path: &Path,
+    mesh: &QuadMesh,
+    name: &str,
+    values: &[f64],
+    colours: &[[u8; 3]],
+) -> Result<(), IoError> {
+    write_vertex_field(path, mesh, name, values, colours, false)
+}
+
+/// [`write_ply_with_vertex_field`], with the ramp's header comment when `ramp`.
+fn write_vertex_field(
+    path: &Path,
+    mesh: &QuadMesh,
+    name: &str,
+    values: &[f64],
+    colours: &[[u8; 3]],
+    ramp: bool,
 ) -> Result<(), IoError> {
     let check = |mesh: &QuadMesh| -> Result<(), String> {
         check_ply(mesh)?;
@@ -146,12 +175,17 @@ pub fn write_ply_with_vertex_scalar(
         if values.len() != mesh.positions.len() {
             return Err(format!("{} values for {} vertices", values.len(), mesh.positions.len()));
         }
+        if colours.len() != mesh.positions.len() {
+            return Err(format!("{} colours for {} vertices", colours.len(), mesh.positions.len()));
+        }
         if let Some(i) = values.iter().position(|x| !(*x as f32).is_finite()) {
             return Err(format!("vertex {i} has value {}, not a finite PLY float", values[i]));
         }
         Ok(())
     };
-    write_atomically(path, mesh, check, |mesh, w| encode_ply_with_vertex_scalar(mesh, name, values, w))
+    write_atomically(path, mesh, check, |mesh, w| {
+        encode_ply_with_vertex_scalar(mesh, name, values, colours, ramp, w)
+    })
 }
 
 /// The colour of `value` on the ramp of [`write_ply_with_vertex_scalar`]: clamped to
@@ -169,26 +203,30 @@ fn encode_ply_with_vertex_scalar(
     mesh: &QuadMesh,
     name: &str,
     values: &[f64],
+    colours: &[[u8; 3]],
+    ramp: bool,
     w: &mut dyn Write,
 ) -> io::Result<()> {
+    write!(w, "ply\nformat binary_little_endian 1.0\ncomment voxreg quad mesh\n")?;
+    if ramp {
+        writeln!(w, "comment {name} colour ramp: 0 dark red, 0.5 amber, 1 light grey")?;
+    }
     write!(
         w,
-        "ply\nformat binary_little_endian 1.0\ncomment voxreg quad mesh\n\
-         comment {name} colour ramp: 0 dark red, 0.5 amber, 1 light grey\n\
-         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+        "element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
          property float {name}\nproperty uchar red\nproperty uchar green\nproperty uchar blue\n\
          element face {}\nproperty list uchar int vertex_indices\n\
          property int inner_label\nproperty int outer_label\nend_header\n",
         mesh.positions.len(),
         mesh.quads.len()
     )?;
-    for (p, &value) in mesh.positions.iter().zip(values) {
+    for ((p, &value), colour) in mesh.positions.iter().zip(values).zip(colours) {
         let mut record = [0u8; 19];
         let floats = p.as_vec3().to_array().into_iter().chain([value as f32]);
         for (chunk, c) in record[..16].chunks_exact_mut(4).zip(floats) {
             chunk.copy_from_slice(&c.to_le_bytes());
         }
-        record[16..].copy_from_slice(&scalar_ramp(value));
+        record[16..].copy_from_slice(colour);
         w.write_all(&record)?;
     }
     for (quad, labels) in mesh.quads.iter().zip(&mesh.face_labels) {
