@@ -553,6 +553,8 @@ fn view_serves_the_input_and_reads_dropped_files_with_the_options() {
     child.kill().unwrap();
     child.wait().unwrap();
     result.unwrap();
+}
+
 /// The per-vertex `distance` values and vertex positions of a `voxreg geodesic` PLY.
 fn ply_distances(path: &Path) -> (Vec<f32>, Vec<[f32; 3]>) {
     let bytes = std::fs::read(path).unwrap();
