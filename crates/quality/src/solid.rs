@@ -23,6 +23,19 @@ pub struct Occupancy {
 }
 
 impl Occupancy {
+    /// The grid of `dims` voxels whose voxel `[i, j, k]` is solid when `f([i, j, k])`.
+    pub fn from_fn(dims: [usize; 3], origin: DVec3, spacing: DVec3, mut f: impl FnMut([usize; 3]) -> bool) -> Self {
+        let mut solid = Vec::with_capacity(dims.iter().product());
+        for k in 0..dims[2] {
+            for j in 0..dims[1] {
+                for i in 0..dims[0] {
+                    solid.push(f([i, j, k]));
+                }
+            }
+        }
+        Occupancy { dims, solid, origin, spacing }
+    }
+
     /// Whether voxel `v` (possibly outside the grid) is solid.
     pub fn get(&self, v: [i64; 3]) -> bool {
         let d = self.dims.map(|d| d as i64);

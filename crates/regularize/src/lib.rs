@@ -64,6 +64,7 @@ mod assemble;
 mod bounded;
 mod boxqp;
 mod cg;
+mod clamping;
 mod direct;
 mod energy;
 mod info;
@@ -75,6 +76,7 @@ mod regularizer;
 mod report;
 mod solver;
 mod stencil;
+mod unfold;
 mod vecops;
 mod weights;
 
