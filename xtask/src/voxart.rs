@@ -7,11 +7,11 @@ use std::time::Instant;
 
 use anyhow::{bail, Context, Result};
 use glam::DVec3;
+use voxreg_baselines::Mesh;
 use voxreg_digisurf::LabelVolume;
 use voxreg_io::{read_volume, QuadMesh};
 use voxreg_quality::{check, mean_adjacent_angle_deg, solid_report, Occupancy, SolidReport};
 use voxreg_regularize::{Output, Params, Regularizer};
-use voxreg_baselines::Mesh;
 use voxreg_render::{Camera, Image, Shading};
 
 use crate::figures::{grid, panel, Shot};
@@ -107,7 +107,9 @@ pub(crate) fn voxart(args: &[String]) -> Result<()> {
                     _ => bail!("--normals needs at, ii or convolved"),
                 }
             }
-            "--radius" => params.normals.radius = Some(it.next().context("--radius needs a number")?.parse()?),
+            "--radius" => {
+                params.normals.radius = Some(it.next().context("--radius needs a number")?.parse()?)
+            }
             other if other.starts_with("--") => bail!("unknown option {other}"),
             other => files.push(other.to_string()),
         }
@@ -194,7 +196,9 @@ pub(crate) fn gallery(args: &[String]) -> Result<()> {
             let c = colours(&loaded, &out);
             if cameras.is_empty() {
                 let input = out.surface.positions();
-                let (lo, hi) = input.iter().fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(a, b), p| (a.min(*p), b.max(*p)));
+                let (lo, hi) = input
+                    .iter()
+                    .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(a, b), p| (a.min(*p), b.max(*p)));
                 cameras.push(Camera::fit(lo, hi, DVec3::new(-0.6, 0.75, -0.3), DVec3::Z));
                 cameras.push(Camera::fit(lo, hi, DVec3::new(0.6, -0.75, -0.3), DVec3::Z));
             }

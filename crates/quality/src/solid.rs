@@ -24,7 +24,12 @@ pub struct Occupancy {
 
 impl Occupancy {
     /// The grid of `dims` voxels whose voxel `[i, j, k]` is solid when `f([i, j, k])`.
-    pub fn from_fn(dims: [usize; 3], origin: DVec3, spacing: DVec3, mut f: impl FnMut([usize; 3]) -> bool) -> Self {
+    pub fn from_fn(
+        dims: [usize; 3],
+        origin: DVec3,
+        spacing: DVec3,
+        mut f: impl FnMut([usize; 3]) -> bool,
+    ) -> Self {
         let mut solid = Vec::with_capacity(dims.iter().product());
         for k in 0..dims[2] {
             for j in 0..dims[1] {
@@ -357,8 +362,10 @@ mod tests {
         let occ = plate();
         let (p, q) = staircase(&occ);
         // Squeeze the plate (x in [0.5, 1.5]) to 0.2 voxel thick around its mid-plane.
-        let squeezed: Vec<DVec3> =
-            p.iter().map(|v| if v.x < 2.0 { DVec3::new(1.0 + (v.x - 1.0) * 0.2, v.y, v.z) } else { *v }).collect();
+        let squeezed: Vec<DVec3> = p
+            .iter()
+            .map(|v| if v.x < 2.0 { DVec3::new(1.0 + (v.x - 1.0) * 0.2, v.y, v.z) } else { *v })
+            .collect();
         let r = solid_report(&occ, &squeezed, &q);
         assert!(r.thin_shallow >= 15 && r.thin_min_depth < 0.11, "{r:?}");
         assert_eq!(r.solid_outside, 0);

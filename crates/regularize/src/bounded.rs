@@ -8,8 +8,8 @@ use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
 use crate::boxqp::{minimize_in_boxes, place, BoxProblem, Boxes, Place};
-use crate::clamping::clamp_boxes;
 use crate::cg::check_tolerance;
+use crate::clamping::clamp_boxes;
 use crate::info::BoundedInfo;
 use crate::iterative::{Preconditioner, Prepared, Setup};
 use crate::multigrid::MultigridParams;
@@ -123,7 +123,8 @@ impl BoundedSolver {
             }
         }
         let setup = Setup::new(operator, params.preconditioner, params.multigrid)?;
-        let boxes = params.clamp.map(|eps| Boxes::uniform(setup.stencil.len(), (1.0 - eps) * 0.5 * setup.voxel));
+        let boxes =
+            params.clamp.map(|eps| Boxes::uniform(setup.stencil.len(), (1.0 - eps) * 0.5 * setup.voxel));
         Ok(BoundedSolver { params, setup, boxes })
     }
 

@@ -111,6 +111,9 @@ mod tests {
             }
         }
         // Without a thin cap, the uniform boxes.
-        assert_eq!(clamp_boxes(&surface, 0.495, None), Boxes::uniform(surface.num_vertices(), DVec3::splat(0.495)));
+        assert_eq!(
+            clamp_boxes(&surface, 0.495, None),
+            Boxes::uniform(surface.num_vertices(), DVec3::splat(0.495))
+        );
     }
 }

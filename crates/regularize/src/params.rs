@@ -218,7 +218,13 @@ impl Params {
     pub fn voxel_art() -> Self {
         let mut solver = SolverParams::default().clamped(Some(0.01));
         solver.bounded.thin_depth = Some(Self::THIN_DEPTH);
-        Params { regions: RegionMap::single_solid(), refine: 0, solver, fold_free: true, ..Default::default() }
+        Params {
+            regions: RegionMap::single_solid(),
+            refine: 0,
+            solver,
+            fold_free: true,
+            ..Default::default()
+        }
     }
 
     /// The same parameters with the boxes of smoothness `s` in `(0, 1]`: each vertex

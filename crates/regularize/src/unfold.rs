@@ -44,8 +44,10 @@ mod tests {
 
     #[test]
     fn folds_are_pulled_back_and_the_rest_is_kept() {
-        let volume = LabelVolume::from_fn([4, 4, 4], |[x, y, z]| u32::from((1..3).contains(&x) && (1..3).contains(&y) && (1..3).contains(&z)))
-            .with_background(Some(0));
+        let volume = LabelVolume::from_fn([4, 4, 4], |[x, y, z]| {
+            u32::from((1..3).contains(&x) && (1..3).contains(&y) && (1..3).contains(&z))
+        })
+        .with_background(Some(0));
         let surface = DigitalSurface::new(&volume, &RegionMap::single_solid()).unwrap();
         let input = surface.positions();
         // Shrink everything a little, then fold one quad over its diagonal.
