@@ -162,9 +162,10 @@ fn colours(loaded: &voxreg_io::LoadedVolume, out: &Output) -> Vec<[u8; 3]> {
     }
 }
 
-/// `cargo xtask gallery [--out DIR]`: every bundled model, voxels and output at the
-/// default smoothness and two others, from two views, in `docs/gallery/` (one PNG per
-/// model) with the measurements in `docs/gallery/README.md`.
+/// `cargo xtask gallery [--out DIR]`: every bundled model as voxels, with the former
+/// default (uniform boxes, no fold removal), the default and `--smoothness 0.3`, from two
+/// views, in `docs/gallery/` (one PNG per model) with the measurements in
+/// `docs/gallery/README.md`.
 pub(crate) fn gallery(args: &[String]) -> Result<()> {
     let mut out_dir = crate::root().join("docs/gallery");
     let mut it = args.iter();
@@ -175,11 +176,20 @@ pub(crate) fn gallery(args: &[String]) -> Result<()> {
         }
     }
     std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
-    let smoothness = [0.3, 1.0];
+    let mut former = Params::voxel_art();
+    former.solver.bounded.thin_depth = None;
+    former.fold_free = false;
+    let variants: [(&str, Params); 4] = [
+        ("voxels", Params::voxel_art()),
+        ("before: uniform boxes", former),
+        ("default", Params::voxel_art()),
+        ("--smoothness 0.3", Params::voxel_art().with_smoothness(0.3)?),
+    ];
     let mut md = String::from(
-        "# Gallery\n\nEvery bundled MagicaVoxel model (`data/`), made by `cargo xtask gallery`: the voxels, \
-         then voxreg's output with the default options (smoothness 1) and with `--smoothness 0.3`, from two \
-         views, in the palette's colours.\n\n",
+        "# Gallery\n\nEvery bundled MagicaVoxel model (`data/`), made by `cargo xtask gallery`: the voxels; the \
+         former default (uniform clamping boxes, no fold removal: thin parts collapse, some quads fold); \
+         voxreg's output with the default options; and with `--smoothness 0.3`; from two views, in the \
+         palette's colours.\n\n",
     );
     for path in model_paths(&[]) {
         let name = path.file_stem().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
@@ -187,29 +197,20 @@ pub(crate) fn gallery(args: &[String]) -> Result<()> {
         let mut cameras = Vec::new();
         let mut columns: Vec<Vec<Image>> = vec![Vec::new(), Vec::new()];
         let mut default_row = None;
-        for (k, s) in std::iter::once(None).chain(smoothness.iter().map(|s| Some(*s))).enumerate() {
-            let params = match s {
-                None => Params::voxel_art().with_smoothness(1.0)?,
-                Some(s) => Params::voxel_art().with_smoothness(s)?,
-            };
-            let (row, out, loaded) = measure(&path, &params)?;
+        for (k, (caption, params)) in variants.iter().enumerate() {
+            let (row, out, loaded) = measure(&path, params)?;
             let c = colours(&loaded, &out);
+            let input = out.surface.positions();
             if cameras.is_empty() {
-                let input = out.surface.positions();
                 let (lo, hi) = input
                     .iter()
                     .fold((DVec3::INFINITY, DVec3::NEG_INFINITY), |(a, b), p| (a.min(*p), b.max(*p)));
                 cameras.push(Camera::fit(lo, hi, DVec3::new(-0.6, 0.75, -0.3), DVec3::Z));
                 cameras.push(Camera::fit(lo, hi, DVec3::new(0.6, -0.75, -0.3), DVec3::Z));
             }
-            let (positions, caption) = match (k, s) {
-                (0, _) => (out.surface.positions().to_vec(), "voxels".to_string()),
-                (_, Some(s)) if s == 1.0 => (out.positions.to_vec(), "default (smoothness 1)".to_string()),
-                (_, Some(s)) => (out.positions.to_vec(), format!("--smoothness {s}")),
-                _ => unreachable!(),
-            };
+            let positions = if k == 0 { input.to_vec() } else { out.positions.to_vec() };
             let shot = Shot {
-                caption,
+                caption: caption.to_string(),
                 mesh: Mesh::from_surface(&out.surface, &positions),
                 colours: Some(c),
                 shading: Shading::Flat,
@@ -218,7 +219,7 @@ pub(crate) fn gallery(args: &[String]) -> Result<()> {
             for (v, cam) in cameras.iter().enumerate() {
                 columns[v].push(panel(&shot, cam));
             }
-            if s == Some(1.0) {
+            if k == 2 {
                 default_row = Some(row);
             }
         }

@@ -1,7 +1,7 @@
 //! The fold-free post-condition: vertices of folded quads pulled back towards the input.
 
 use glam::DVec3;
-use voxreg_digisurf::DigitalSurface;
+use voxreg_digisurf::{DigitalSurface, VertexId};
 use voxreg_quality::{folded_pairs, folded_quads};
 
 /// Removes every folded quad and folded adjacent pair (as [`voxreg_quality`] defines
@@ -19,20 +19,55 @@ pub(crate) fn unfold(surface: &DigitalSurface, input: &[DVec3], positions: &mut 
     let displacement: Vec<DVec3> = positions.iter().zip(input).map(|(x, p)| *x - *p).collect();
     let mut keep = vec![1.0f64; positions.len()];
     let mut moved = vec![false; positions.len()];
+    // The quads to check: all at first, then those within reach of the vertices just moved
+    // (every quad around every vertex of a quad around a moved vertex), so that each
+    // edge at a moved vertex has all its quads in the subset and pairs count as on the
+    // whole mesh.
+    let mut candidates: Vec<usize> = (0..quads.len()).collect();
+    let mut mark = vec![false; quads.len()];
     for round in 0.. {
-        let mut folded = folded_quads(positions, &quads);
-        folded.extend(folded_pairs(positions, &quads).into_iter().flat_map(|(a, b)| [a, b]));
+        let sub: Vec<[u32; 4]> = candidates.iter().map(|&f| quads[f]).collect();
+        let mut folded: Vec<usize> =
+            folded_quads(positions, &sub).into_iter().map(|i| candidates[i]).collect();
+        folded.extend(
+            folded_pairs(positions, &sub).into_iter().flat_map(|(a, b)| [candidates[a], candidates[b]]),
+        );
         if folded.is_empty() {
             break;
         }
+        let mut changed = Vec::new();
         for f in folded {
             for v in quads[f] {
                 let v = v as usize;
                 keep[v] = if round >= 7 { 0.0 } else { 0.5 * keep[v] };
                 moved[v] = true;
                 positions[v] = input[v] + keep[v] * displacement[v];
+                changed.push(v);
             }
         }
+        changed.sort_unstable();
+        changed.dedup();
+        let mut ring = Vec::new();
+        for &v in &changed {
+            for s in surface.vertex_surfels(VertexId(v as u32)) {
+                for w in surface.surfel(*s).vertices {
+                    ring.push(w);
+                }
+            }
+        }
+        ring.sort_unstable();
+        ring.dedup();
+        candidates.clear();
+        for w in ring {
+            for s in surface.vertex_surfels(w) {
+                if !mark[s.index()] {
+                    mark[s.index()] = true;
+                    candidates.push(s.index());
+                }
+            }
+        }
+        candidates.iter().for_each(|&f| mark[f] = false);
+        candidates.sort_unstable();
     }
     moved.iter().filter(|m| **m).count()
 }
