@@ -342,7 +342,7 @@ mod tests {
                 solid[1 + 3 * (y + 4 * z)] = true;
             }
         }
-        solid[2 + 3 * (1 + 4 * 1)] = true;
+        solid[2 + 3 * (1 + 4)] = true; // voxel (2, 1, 1)
         Occupancy { dims, solid, origin: DVec3::ZERO, spacing: DVec3::ONE }
     }
 

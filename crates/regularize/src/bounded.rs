@@ -116,7 +116,7 @@ impl BoundedSolver {
             }
         }
         if let Some(d) = params.thin_depth {
-            if !(d >= 0.0 && d < 0.5) {
+            if !(0.0..0.5).contains(&d) {
                 return Err(RegularizeError::InvalidParams(format!(
                     "the thin depth must be in [0, 0.5) voxel, got {d}"
                 )));

@@ -15,10 +15,12 @@ pub(crate) fn thin_voxels(surface: &DigitalSurface) -> HashSet<[i64; 3]> {
     thin_and_faces(surface).0
 }
 
-/// The thin voxels and the surfels as `(axis, cell)`.
-fn thin_and_faces(surface: &DigitalSurface) -> (HashSet<[i64; 3]>, HashSet<(u8, [i64; 3])>) {
-    let faces: HashSet<(u8, [i64; 3])> =
-        surface.surfels().iter().map(|s| (s.axis, s.cell.map(i64::from))).collect();
+/// Surfels as `(axis, cell)`.
+type Faces = HashSet<(u8, [i64; 3])>;
+
+/// The thin voxels and the surfels.
+fn thin_and_faces(surface: &DigitalSurface) -> (HashSet<[i64; 3]>, Faces) {
+    let faces: Faces = surface.surfels().iter().map(|s| (s.axis, s.cell.map(i64::from))).collect();
     let mut thin = HashSet::new();
     for &(axis, cell) in &faces {
         // Surfel (axis, cell) is the lower face of voxel `cell`: is its upper face one too?

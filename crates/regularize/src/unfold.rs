@@ -95,7 +95,7 @@ mod tests {
         let before = x.clone();
         let moved = unfold(&surface, &input, &mut x);
         assert!(folded_quads(&x, &quads).is_empty() && folded_pairs(&x, &quads).is_empty());
-        assert!(moved >= 1 && moved <= 8, "{moved}");
+        assert!((1..=8).contains(&moved), "{moved}");
         // Unflagged vertices did not move; moved ones lie between input and solution.
         let unchanged = x.iter().zip(&before).filter(|(a, b)| a == b).count();
         assert_eq!(unchanged, x.len() - moved);
