@@ -50,12 +50,12 @@ const TEXT: [u8; 3] = [20, 20, 20];
 const CLAMP_EPS: f64 = 0.1;
 
 /// One rendered mesh: geometry, optional per-face colours, and a caption.
-struct Shot {
-    caption: String,
-    mesh: Mesh,
-    colours: Option<Vec<[u8; 3]>>,
-    shading: Shading,
-    wireframe: bool,
+pub(crate) struct Shot {
+    pub(crate) caption: String,
+    pub(crate) mesh: Mesh,
+    pub(crate) colours: Option<Vec<[u8; 3]>>,
+    pub(crate) shading: Shading,
+    pub(crate) wireframe: bool,
 }
 
 impl Shot {
@@ -79,7 +79,7 @@ fn bounds(points: &[DVec3]) -> (DVec3, DVec3) {
 }
 
 /// Renders `shot` into a captioned panel of `PANEL x (PANEL + CAPTION)` pixels.
-fn panel(shot: &Shot, camera: &Camera) -> Image {
+pub(crate) fn panel(shot: &Shot, camera: &Camera) -> Image {
     let params = RenderParams {
         width: PANEL,
         height: PANEL,
@@ -106,7 +106,7 @@ fn empty_panel(caption: &str, why: &str) -> Image {
 }
 
 /// Lays out rows of equally sized panels under a title, each row with a label on its left.
-fn grid(title: &str, rows: &[(String, Vec<Image>)]) -> Image {
+pub(crate) fn grid(title: &str, rows: &[(String, Vec<Image>)]) -> Image {
     let label_w = if rows.iter().any(|(l, _)| !l.is_empty()) { 70 } else { 0 };
     let (pw, ph) = (PANEL, PANEL + CAPTION);
     let cols = rows.iter().map(|(_, r)| r.len()).max().unwrap_or(0) as u32;

@@ -15,11 +15,17 @@
 //! - `figures [--quick] [--out DIR]`: the papers' Figs. 4, 7, 8, 9, 10, 11 and 15 as PNG
 //!   renders and charts with an `index.html`, in `target/xtask/figures/` (see
 //!   `figures.rs`).
+//! - `voxart [--smoothness S] [--no-clamp] [FILE.vox...]`: voxel art's targets per model
+//!   (voxel centres inside and outside, thin voxels' depth, folds, intersections, mean
+//!   angle between adjacent quads, time), default: the bundled models (see `voxart.rs`).
+//! - `gallery [--out DIR]`: every bundled model rendered as voxels and output, two views,
+//!   into `docs/gallery/` (see `voxart.rs`).
 
 mod compare;
 mod figures;
 mod synth;
 mod table1;
+mod voxart;
 
 use std::path::{Path, PathBuf};
 use std::time::Instant;
@@ -36,12 +42,16 @@ fn main() -> Result<()> {
         Some("table1") => table1::table1(&args[1..]),
         Some("synth-labels") => synth::synth_labels(&args[1..]),
         Some("figures") => figures::figures(&args[1..]),
+        Some("voxart") => voxart::voxart(&args[1..]),
+        Some("gallery") => voxart::gallery(&args[1..]),
         _ => {
             eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
             eprintln!("       cargo xtask compare [--quick] [--out DIR]");
             eprintln!("       cargo xtask table1 [--runs N] [FILE...]");
             eprintln!("       cargo xtask synth-labels [--dims X,Y,Z] [--out FILE.npy]");
             eprintln!("       cargo xtask figures [--quick] [--out DIR]");
+            eprintln!("       cargo xtask voxart [--smoothness S] [--no-clamp] [FILE.vox...]");
+            eprintln!("       cargo xtask gallery [--out DIR]");
             bail!("unknown or missing command")
         }
     }

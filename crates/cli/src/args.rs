@@ -144,6 +144,12 @@ pub(crate) enum SurfaceKind {
 pub(crate) struct CheckArgs {
     /// The mesh: .obj or .ply (as written by voxreg regularize).
     pub(crate) mesh: PathBuf,
+    /// Also measure the mesh against the labeled volume it came from (any non-background
+    /// voxel solid): solid voxel centres next to the surface left outside, empty ones put
+    /// inside, and thin voxels (both neighbours along an axis empty) less than 0.25 voxel
+    /// deep; reported, not errors.
+    #[arg(long, value_name = "VOLUME")]
+    pub(crate) voxels: Option<PathBuf>,
 }
 
 #[derive(Args, Debug, Clone)]
@@ -311,6 +317,12 @@ pub(crate) struct RegularizeArgs {
     /// thin parts collapse: check it with `voxreg check`).
     #[arg(long, conflicts_with = "clamp")]
     pub(crate) no_clamp: bool,
+    /// Voxel art: how rounded, from 0 (exclusive: blocky, edges only softened) to 1
+    /// (rounded, the default): each vertex moves at most S times half a voxel from its
+    /// voxel corner. Thin parts keep their thickness and no face folds at any S.
+    /// Implies --solver bounded.
+    #[arg(long, value_name = "S", conflicts_with_all = ["clamp", "no_clamp"])]
+    pub(crate) smoothness: Option<f64>,
     /// Iterative solvers: stop when every vertex is estimated within this many voxels of
     /// the exact minimizer [default: 1e-3].
     #[arg(long, value_name = "VOXELS", value_parser = positive_named("--tolerance"))]
@@ -373,6 +385,11 @@ impl RegularizeArgs {
         p.texture_aware |= self.texture_aware;
         if let Some(t) = self.tolerance {
             p.solver = p.solver.with_tolerance(t);
+        }
+        if let Some(s) = self.smoothness {
+            p = p
+                .with_smoothness(s)
+                .map_err(|_| anyhow::anyhow!("--smoothness: S must be in (0, 1], got {s}"))?;
         }
         let clamp = match (self.clamp, self.no_clamp) {
             (Some(eps), _) => ClampOverride::Eps(eps),

@@ -168,6 +168,26 @@ fn check(args: &CheckArgs) -> Result<()> {
         r.folded_quads,
         r.folded_pairs,
     ))?;
+    if let Some(path) = &args.voxels {
+        let volume = voxreg_io::read_volume(path)?.volume;
+        let (bg, labels) = (volume.background(), volume.labels());
+        let occ = voxreg_quality::Occupancy::from_fn(volume.dims(), volume.origin(), volume.spacing(), |v| {
+            Some(labels[v]) != bg
+        });
+        let s = voxreg_quality::solid_report(&occ, &mesh.positions, &mesh.quads);
+        print_stdout(&format!(
+            "{}: {} of {} solid voxel centres outside, {} of {} empty ones inside, {} of {} thin voxels \
+             less than 0.25 voxel deep (thinnest {:.3})\n",
+            path.display(),
+            s.solid_outside,
+            s.solid_surface_voxels,
+            s.empty_inside,
+            s.empty_surface_voxels,
+            s.thin_shallow,
+            s.thin_voxels,
+            s.thin_min_depth
+        ))?;
+    }
     if let Some((a, b)) = r.first_intersection {
         bail!(
             "{}: {} self-intersections (first: faces {a} and {b})",

@@ -7,7 +7,7 @@ use std::process::Command;
 
 use voxreg_digisurf::{DigitalSurface, RegionMap};
 use voxreg_io::{read_mesh, read_voxels, Voxels};
-use voxreg_quality::self_intersections;
+use voxreg_quality::{check, self_intersections, solid_report, Occupancy};
 
 mod common;
 use common::{data, stderr, voxreg};
@@ -21,6 +21,14 @@ const MODELS: [&str; 6] = [
     "metal-material.vox",
     "placeholder-with-materials.vox",
 ];
+
+/// The solid voxels of a bundled model.
+fn occupancy_of(name: &str) -> Occupancy {
+    let loaded = read_voxels(&data(name)).unwrap();
+    let Voxels::Labels(volume) = loaded.voxels else { panic!("{name}: .vox models are labels") };
+    let labels = volume.labels();
+    Occupancy::from_fn(volume.dims(), volume.origin(), volume.spacing(), |v| labels[v] != 0)
+}
 
 /// The digital surface the CLI builds for a .vox model by default (one solid region).
 fn surface_of(name: &str) -> DigitalSurface {
@@ -76,6 +84,13 @@ fn every_bundled_vox_model_gives_a_clean_coloured_mesh_by_default() {
         let pairs = self_intersections(&mesh.positions, &mesh.quads);
         assert!(pairs.is_empty(), "{name}: {} self-intersecting face pairs", pairs.len());
         assert!(mesh.positions.iter().zip(surface.positions()).any(|(q, p)| q.distance(p) > 0.1));
+        // Voxel art's targets: no fold; solid centres inside, empty ones outside; thin
+        // voxels (one-voxel plates, arms, slits) at least a quarter voxel deep.
+        let r = check(&mesh.positions, &mesh.quads);
+        assert!(r.is_clean(), "{name}: {r:?}");
+        let s = solid_report(&occupancy_of(name), &mesh.positions, &mesh.quads);
+        assert_eq!((s.solid_outside, s.empty_inside, s.thin_shallow), (0, 0, 0), "{name}: {s:?}");
+        assert!(s.thin_min_depth >= 0.25, "{name}: {s:?}");
 
         // glTF: one material per colour of the model, every quad as two triangles.
         let glb = dir.path().join(format!("{name}.glb"));
@@ -105,10 +120,50 @@ fn every_bundled_vox_model_gives_a_clean_coloured_mesh_by_default() {
 }
 
 #[test]
+fn smoothness_bounds_the_movement_and_check_measures_the_voxels() {
+    let dir = tempfile::tempdir().unwrap();
+    let ply = dir.path().join("army.ply");
+    let input = data("chr_army1.vox");
+    let out = voxreg(&[
+        "regularize",
+        input.to_str().unwrap(),
+        "-o",
+        ply.to_str().unwrap(),
+        "-q",
+        "--smoothness",
+        "0.3",
+    ]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let mesh = read_mesh(&ply).unwrap();
+    let surface = surface_of("chr_army1.vox");
+    let half = 0.3 * 0.495 + 1e-4;
+    let input_positions = surface.positions();
+    let moved = input_positions.iter().zip(&mesh.positions).map(|(p, q)| (*p - *q).abs().max_element());
+    let most = moved.fold(0.0, f64::max);
+    assert!(most <= half && most > 0.1, "moved {most}");
+    // voxreg check measures the mesh against its voxels.
+    let out = voxreg(&["check", ply.to_str().unwrap(), "--voxels", input.to_str().unwrap()]);
+    assert!(out.status.success(), "{}", stderr(&out));
+    let text = String::from_utf8_lossy(&out.stdout);
+    assert!(
+        text.contains("0 of 222 solid voxel centres outside") && text.contains("0 of 15 thin voxels"),
+        "{text}"
+    );
+    // Out of range, or with the boxes given another way: a clear error.
+    for bad in [&["--smoothness", "0"][..], &["--smoothness", "1.5"], &["--smoothness", "0.5", "--no-clamp"]]
+    {
+        let mut a = vec!["regularize", input.to_str().unwrap(), "-o", "x.ply", "-q"];
+        a.extend_from_slice(bad);
+        let out = voxreg(&a);
+        assert!(!out.status.success(), "{bad:?}");
+    }
+}
+
+#[test]
 fn no_clamp_is_faster_but_may_self_intersect() {
     let dir = tempfile::tempdir().unwrap();
     let ply = dir.path().join("fire.ply");
-    let input = data("veh_fire.vox");
+    let input = data("extended.vox");
     let out =
         voxreg(&["regularize", input.to_str().unwrap(), "-o", ply.to_str().unwrap(), "-q", "--no-clamp"]);
     assert!(out.status.success(), "{}", stderr(&out));

@@ -12,6 +12,11 @@
 //!   than 120 degrees apart (across edges that exactly two quads share; at junction and
 //!   pinched edges the pairing is ambiguous and left out).
 //!
+//! Two measurements describe how a mesh made from voxels treats them:
+//! [`mean_adjacent_angle_deg`] (smoothness: the mean angle between edge-adjacent quads)
+//! and [`solid_report`] (which voxel centres of an [`Occupancy`] end up inside, and how
+//! deep the thin ones are).
+//!
 //! # Example
 //!
 //! ```
@@ -33,6 +38,7 @@
 //! None.
 
 mod intersections;
+mod solid;
 
 use std::collections::HashMap;
 
@@ -40,6 +46,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 
 pub use intersections::{self_intersections, triangles_intersect};
+pub use solid::{point_triangle_distance, solid_report, Occupancy, SolidReport};
 
 /// What [`check`] counts.
 #[derive(Clone, Debug, Default, PartialEq, Eq, serde::Serialize)]
@@ -103,11 +110,10 @@ fn vector_area(p: [DVec3; 4]) -> DVec3 {
     0.5 * (p[2] - p[0]).cross(p[3] - p[1])
 }
 
-/// The pairs `(a, b)`, `a < b`, of quads sharing an edge that no other quad shares, whose
-/// vector areas are more than 120 degrees apart once orientations agree (a pair that
-/// runs the shared edge in the same direction is oriented oppositely: one normal is
-/// flipped first). Sorted.
-pub fn folded_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
+/// The pairs of quads sharing an edge that no other quad shares, with their vector
+/// areas, the second one flipped when the pair runs the shared edge in the same direction
+/// (so that orientations agree). Degenerate quads are left out.
+fn adjacent_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize), DVec3, DVec3)> {
     // Undirected edge -> (quad, runs low to high), for up to two quads; more marks the
     // edge as shared by more than two.
     let mut edges: HashMap<(u32, u32), Vec<(usize, bool)>> = HashMap::with_capacity(2 * quads.len());
@@ -122,8 +128,7 @@ pub fn folded_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usiz
             }
         }
     }
-    let cos_max = (120f64).to_radians().cos();
-    let mut out: Vec<(usize, usize)> = edges
+    let mut out: Vec<((usize, usize), DVec3, DVec3)> = edges
         .values()
         .filter(|e| e.len() == 2 && e[0].0 != e[1].0)
         .filter_map(|e| {
@@ -133,13 +138,38 @@ pub fn folded_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usiz
             if df == dg {
                 ng = -ng;
             }
-            let (lf, lg) = (nf.length(), ng.length());
-            (lf > 0.0 && lg > 0.0 && nf.dot(ng) < cos_max * lf * lg).then_some((f.min(g), f.max(g)))
+            (nf.length() > 0.0 && ng.length() > 0.0).then_some(((f.min(g), f.max(g)), nf, ng))
         })
         .collect();
-    out.sort_unstable();
+    out.sort_unstable_by_key(|x| x.0);
+    out
+}
+
+/// The pairs `(a, b)`, `a < b`, of quads sharing an edge that no other quad shares, whose
+/// vector areas are more than 120 degrees apart once orientations agree (a pair that
+/// runs the shared edge in the same direction is oriented oppositely: one normal is
+/// flipped first). Sorted.
+pub fn folded_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
+    let cos_max = (120f64).to_radians().cos();
+    let mut out: Vec<(usize, usize)> = adjacent_pairs(positions, quads)
+        .into_iter()
+        .filter(|(_, nf, ng)| nf.dot(*ng) < cos_max * nf.length() * ng.length())
+        .map(|x| x.0)
+        .collect();
     out.dedup();
     out
+}
+
+/// The mean angle, in degrees, between the normals (vector areas) of quads sharing an
+/// edge that no other quad shares: `90 * 2/3`-ish on a staircase, lower when smoother,
+/// `0` on a plane (and without such pairs).
+pub fn mean_adjacent_angle_deg(positions: &[DVec3], quads: &[[u32; 4]]) -> f64 {
+    let pairs = adjacent_pairs(positions, quads);
+    if pairs.is_empty() {
+        return 0.0;
+    }
+    let sum: f64 = pairs.iter().map(|(_, a, b)| a.angle_between(*b).to_degrees()).sum();
+    sum / pairs.len() as f64
 }
 
 #[cfg(test)]

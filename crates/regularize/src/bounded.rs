@@ -7,8 +7,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
-use crate::boxqp::{minimize_in_boxes, BoxProblem};
+use crate::boxqp::{minimize_in_boxes, place, BoxProblem, Boxes, Place};
 use crate::cg::check_tolerance;
+use crate::clamping::clamp_boxes;
 use crate::info::BoundedInfo;
 use crate::iterative::{Preconditioner, Prepared, Setup};
 use crate::multigrid::MultigridParams;
@@ -32,6 +33,14 @@ pub struct BoundedParams {
     /// `0 < eps < 1`. With faces embedded in the convex hull of their vertices (two
     /// triangles per quad), the result then has no self-intersection. Default: `None`.
     pub clamp: Option<f64>,
+    /// When clamping: the depth, in voxels, kept inside every thin voxel (one whose two
+    /// neighbours along some axis are both of another region: a one-voxel plate, arm or
+    /// slit). Each vertex at a corner of a thin voxel moves towards that voxel's centre by
+    /// at most `0.5 - thin_depth` voxel along each axis, so the thin part cannot collapse
+    /// onto its mid-plane; the boxes only shrink, so Proposition 2 still holds. Needs the
+    /// surface ([`BoundedSolver::for_surface`]); `None` keeps the uniform boxes.
+    /// Default: `None`.
+    pub thin_depth: Option<f64>,
     /// The metric of the descent: the direction is `-M^-1 grad E` (restricted to the free
     /// coordinates when clamping); [`Preconditioner::Identity`] is plain steepest
     /// descent. Default: [`Preconditioner::Multigrid`].
@@ -56,6 +65,7 @@ impl Default for BoundedParams {
             tolerance: 1e-3,
             max_iterations: 10_000,
             clamp: None,
+            thin_depth: None,
             preconditioner: Preconditioner::Multigrid,
             multigrid: MultigridParams::default(),
             conjugate: true,
@@ -78,13 +88,20 @@ impl Default for BoundedParams {
 pub struct BoundedSolver {
     params: BoundedParams,
     setup: Setup,
+    /// The boxes when clamping.
+    boxes: Option<Boxes>,
 }
 
 impl BoundedSolver {
     /// The solver of energies on `surface`: its operator ([`MatrixFreeOperator::new`]),
-    /// then [`BoundedSolver::new`].
+    /// then [`BoundedSolver::new`], with the boxes shrunk around thin voxels when
+    /// [`BoundedParams::thin_depth`] is set.
     pub fn for_surface(surface: &DigitalSurface, params: BoundedParams) -> Result<Self, RegularizeError> {
-        Self::new(MatrixFreeOperator::new(surface)?, params)
+        let mut solver = Self::new(MatrixFreeOperator::new(surface)?, params)?;
+        if let (Some(eps), Some(depth)) = (params.clamp, params.thin_depth) {
+            solver.boxes = Some(clamp_boxes(surface, 0.5 * (1.0 - eps), Some(0.5 - depth)));
+        }
+        Ok(solver)
     }
 
     /// The solver of energies with the matrix-free `operator`, inside the boxes of
@@ -98,7 +115,17 @@ impl BoundedSolver {
                 )));
             }
         }
-        Ok(BoundedSolver { params, setup: Setup::new(operator, params.preconditioner, params.multigrid)? })
+        if let Some(d) = params.thin_depth {
+            if !(0.0..0.5).contains(&d) {
+                return Err(RegularizeError::InvalidParams(format!(
+                    "the thin depth must be in [0, 0.5) voxel, got {d}"
+                )));
+            }
+        }
+        let setup = Setup::new(operator, params.preconditioner, params.multigrid)?;
+        let boxes =
+            params.clamp.map(|eps| Boxes::uniform(setup.stencil.len(), (1.0 - eps) * 0.5 * setup.voxel));
+        Ok(BoundedSolver { params, setup, boxes })
     }
 
     /// The parameters.
@@ -122,7 +149,7 @@ impl BoundedSolver {
         let n = stencil.len();
         let input = energy.input();
         let h = self.setup.spacing;
-        let half = self.params.clamp.map(|eps| (1.0 - eps) * 0.5 * self.setup.voxel);
+        let half = self.boxes.as_ref();
 
         let t0 = Instant::now();
         // u: displacement from the input; r = -grad E / 2 = b - H u.
@@ -159,7 +186,7 @@ impl BoundedSolver {
         rp.copy_from_slice(&r);
         let clamped = half.map(|w| {
             project_residual(&u, w, &mut rp);
-            u.iter().filter(|d| (d.abs() - w).max_element() >= -1e-12 * w.max_element()).count()
+            w.count_on_bound(&u)
         });
         let rp_norm_true = norm(&rp);
         let x: Vec<DVec3> = input.par_iter().zip(&u).map(|(p, u)| *p + *u).collect();
@@ -198,21 +225,15 @@ impl BoundedSolver {
         energy: &Energy<'_>,
         problem: &BoxProblem<'_>,
         prepared: &mut Prepared<'_>,
-        w: DVec3,
+        w: &Boxes,
         s: &mut Iterate,
         progress: &mut dyn FnMut(&Progress),
     ) {
         let input = energy.input();
-        let free = minimize_in_boxes(
-            problem,
-            prepared,
-            DVec3::splat(f64::INFINITY),
-            &mut s.u,
-            &mut s.r,
-            &mut |_| {},
-        );
+        let unbounded = Boxes::unbounded(s.u.len());
+        let free = minimize_in_boxes(problem, prepared, &unbounded, &mut s.u, &mut s.r, &mut |_| {});
         s.applications += free.applications;
-        s.u.par_iter_mut().for_each(|d| *d = d.clamp(-w, w));
+        w.project(&mut s.u);
         let start = energy.terms(&input.iter().zip(&s.u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
         if start <= s.energy {
             s.energy = start;
@@ -238,7 +259,7 @@ impl BoundedSolver {
         &self,
         problem: &BoxProblem<'_>,
         prepared: &mut Prepared<'_>,
-        half: Option<DVec3>,
+        half: Option<&Boxes>,
         s: &mut Iterate,
         progress: &mut dyn FnMut(&Progress),
     ) {
@@ -306,9 +327,10 @@ impl BoundedSolver {
                             .par_chunks_mut(CHUNK)
                             .zip(u.par_chunks(CHUNK))
                             .zip(z.par_chunks(CHUNK))
-                            .for_each(|((t, u), z)| {
+                            .zip(w.chunks())
+                            .for_each(|(((t, u), z), (lo, hi))| {
                                 for i in 0..t.len() {
-                                    t[i] = (u[i] + step * z[i]).clamp(-w, w) - u[i];
+                                    t[i] = (u[i] + step * z[i]).clamp(lo[i], hi[i]) - u[i];
                                 }
                             });
                         stencil.apply(&prepared.coef, &trial, &mut q, &mut tmp, true);
@@ -326,9 +348,10 @@ impl BoundedSolver {
                     s.energy += de;
                     u.par_chunks_mut(CHUNK).zip(trial.par_chunks(CHUNK)).for_each(|(u, t)| {
                         for i in 0..u.len() {
-                            u[i] = (u[i] + t[i]).clamp(-w, w);
+                            u[i] += t[i];
                         }
                     });
+                    w.project(u);
                     r.par_chunks_mut(CHUNK).zip(q.par_chunks(CHUNK)).for_each(|(r, q)| {
                         r.iter_mut().zip(q).for_each(|(r, q)| *r -= *q);
                     });
@@ -357,20 +380,12 @@ struct Iterate {
     estimate: f64,
 }
 
-/// Whether coordinate `u` is on the bound `+-w` towards which `r` (the descent direction
-/// of the unpreconditioned gradient) pushes.
-#[inline]
-fn held(u: f64, r: f64, w: f64) -> bool {
-    let eps = 1e-12 * w;
-    (u >= w - eps && r > 0.0) || (u <= -w + eps && r < 0.0)
-}
-
 /// Zeroes the residual's coordinates held on their bound.
-fn project_residual(u: &[DVec3], w: DVec3, r: &mut [DVec3]) {
-    r.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).for_each(|(r, u)| {
+fn project_residual(u: &[DVec3], b: &Boxes, r: &mut [DVec3]) {
+    r.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).zip(b.chunks()).for_each(|((r, u), (lo, hi))| {
         for i in 0..r.len() {
             for a in 0..3 {
-                if held(u[i][a], r[i][a], w[a]) {
+                if place(u[i][a], r[i][a], lo[i][a], hi[i][a]) == Place::Held {
                     r[i][a] = 0.0;
                 }
             }
@@ -380,14 +395,16 @@ fn project_residual(u: &[DVec3], w: DVec3, r: &mut [DVec3]) {
 
 /// Zeroes the direction's coordinates held on their bound (by the gradient `r`), so that
 /// it stays a descent direction: `r . d = rp^T M^-1 rp > 0`.
-fn freeze(u: &[DVec3], r: &[DVec3], w: DVec3, d: &mut [DVec3]) {
-    d.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).zip(r.par_chunks(CHUNK)).for_each(|((d, u), r)| {
-        for i in 0..d.len() {
-            for a in 0..3 {
-                if held(u[i][a], r[i][a], w[a]) {
-                    d[i][a] = 0.0;
+fn freeze(u: &[DVec3], r: &[DVec3], b: &Boxes, d: &mut [DVec3]) {
+    d.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).zip(r.par_chunks(CHUNK)).zip(b.chunks()).for_each(
+        |(((d, u), r), (lo, hi))| {
+            for i in 0..d.len() {
+                for a in 0..3 {
+                    if place(u[i][a], r[i][a], lo[i][a], hi[i][a]) == Place::Held {
+                        d[i][a] = 0.0;
+                    }
                 }
             }
-        }
-    });
+        },
+    );
 }

@@ -1,8 +1,8 @@
 //! Minimization of the energy over the clamping boxes: a preconditioned variant of
 //! Dostál's MPRGP (modified proportioning with reduced gradient projections).
 //!
-//! The constraint `|u_a| <= w_a` (one interval per coordinate of every vertex's
-//! displacement `u`) makes the problem a bound-constrained convex QP. Plain projected
+//! The constraint `lo_a <= u_a <= hi_a` (one interval per coordinate of every vertex's
+//! displacement `u`, containing 0) makes the problem a bound-constrained convex QP. Plain projected
 //! descent converges as slowly as unpreconditioned steepest descent on the smooth modes
 //! (thousands of iterations). MPRGP runs conjugate gradients on the current *face* (the
 //! coordinates strictly inside their interval), and leaves the face in two ways:
@@ -25,9 +25,50 @@ use crate::stencil::{Stencil, CHUNK};
 use crate::vecops::{dot, tail_estimate};
 use crate::Progress;
 
+/// Per-vertex boxes of the displacement from the input: `lo <= u <= hi` coordinate-wise,
+/// with `lo <= 0 <= hi` (the input is feasible).
+#[derive(Clone, Debug, PartialEq)]
+pub(crate) struct Boxes {
+    pub(crate) lo: Vec<DVec3>,
+    pub(crate) hi: Vec<DVec3>,
+}
+
+impl Boxes {
+    /// The same box `[-w, w]` for each of `n` vertices.
+    pub(crate) fn uniform(n: usize, w: DVec3) -> Boxes {
+        Boxes { lo: vec![-w; n], hi: vec![w; n] }
+    }
+
+    /// No bounds.
+    pub(crate) fn unbounded(n: usize) -> Boxes {
+        Self::uniform(n, DVec3::splat(f64::INFINITY))
+    }
+
+    /// `u` projected into the boxes.
+    pub(crate) fn project(&self, u: &mut [DVec3]) {
+        u.par_chunks_mut(CHUNK).zip(self.chunks()).for_each(|(u, (lo, hi))| {
+            for i in 0..u.len() {
+                u[i] = u[i].clamp(lo[i], hi[i]);
+            }
+        });
+    }
+
+    /// The coordinates on a bound.
+    pub(crate) fn count_on_bound(&self, u: &[DVec3]) -> usize {
+        u.iter()
+            .zip(self.lo.iter().zip(&self.hi))
+            .filter(|(u, (lo, hi))| (0..3).any(|a| place(u[a], 0.0, lo[a], hi[a]) != Place::Inside))
+            .count()
+    }
+
+    pub(crate) fn chunks(&self) -> impl IndexedParallelIterator<Item = (&[DVec3], &[DVec3])> {
+        self.lo.par_chunks(CHUNK).zip(self.hi.par_chunks(CHUNK))
+    }
+}
+
 /// How a coordinate sits in its interval.
-#[derive(Copy, Clone, PartialEq, Eq)]
-enum Place {
+#[derive(Copy, Clone, PartialEq, Eq, Debug)]
+pub(crate) enum Place {
     Inside,
     /// On a bound, and the descent direction `r` points out of the interval.
     Held,
@@ -35,21 +76,15 @@ enum Place {
     Chopped,
 }
 
+/// Where `u` sits in `[lo, hi]` given the descent direction `r`.
 #[inline]
-fn place(u: f64, r: f64, w: f64) -> Place {
-    let tol = 1e-12 * w;
-    if u >= w - tol {
-        if r > 0.0 {
-            Place::Held
-        } else {
-            Place::Chopped
-        }
-    } else if u <= -w + tol {
-        if r < 0.0 {
-            Place::Held
-        } else {
-            Place::Chopped
-        }
+pub(crate) fn place(u: f64, r: f64, lo: f64, hi: f64) -> Place {
+    let tol = 1e-12 * (hi - lo).min(1.0);
+    let (at_hi, at_lo) = (u >= hi - tol, u <= lo + tol);
+    if (at_hi && r > 0.0) || (at_lo && r < 0.0) || (at_hi && at_lo) {
+        Place::Held
+    } else if at_hi || at_lo {
+        Place::Chopped
     } else {
         Place::Inside
     }
@@ -57,15 +92,16 @@ fn place(u: f64, r: f64, w: f64) -> Place {
 
 /// Splits `r` into its part on the face (`phi`) and its chopped part (`beta`); returns
 /// `(|phi|^2, |beta|^2)`.
-fn split(u: &[DVec3], r: &[DVec3], w: DVec3, phi: &mut [DVec3], beta: &mut [DVec3]) -> (f64, f64) {
+fn split(u: &[DVec3], r: &[DVec3], b: &Boxes, phi: &mut [DVec3], beta: &mut [DVec3]) -> (f64, f64) {
     phi.par_chunks_mut(CHUNK)
         .zip(beta.par_chunks_mut(CHUNK))
         .zip(u.par_chunks(CHUNK).zip(r.par_chunks(CHUNK)))
-        .map(|((phi, beta), (u, r))| {
-            let (mut f, mut b) = (0.0, 0.0);
+        .zip(b.chunks())
+        .map(|(((phi, beta), (u, r)), (lo, hi))| {
+            let (mut f, mut g) = (0.0, 0.0);
             for i in 0..u.len() {
                 for a in 0..3 {
-                    let (x, y) = match place(u[i][a], r[i][a], w[a]) {
+                    let (x, y) = match place(u[i][a], r[i][a], lo[i][a], hi[i][a]) {
                         Place::Inside => (r[i][a], 0.0),
                         Place::Held => (0.0, 0.0),
                         Place::Chopped => (0.0, r[i][a]),
@@ -73,10 +109,10 @@ fn split(u: &[DVec3], r: &[DVec3], w: DVec3, phi: &mut [DVec3], beta: &mut [DVec
                     phi[i][a] = x;
                     beta[i][a] = y;
                     f += x * x;
-                    b += y * y;
+                    g += y * y;
                 }
             }
-            (f, b)
+            (f, g)
         })
         .collect::<Vec<_>>()
         .into_iter()
@@ -84,11 +120,11 @@ fn split(u: &[DVec3], r: &[DVec3], w: DVec3, phi: &mut [DVec3], beta: &mut [DVec
 }
 
 /// Zeroes the coordinates of `z` that are not on the face of `u`.
-fn restrict_to_face(u: &[DVec3], w: DVec3, z: &mut [DVec3]) {
-    z.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).for_each(|(z, u)| {
+fn restrict_to_face(u: &[DVec3], b: &Boxes, z: &mut [DVec3]) {
+    z.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).zip(b.chunks()).for_each(|((z, u), (lo, hi))| {
         for i in 0..z.len() {
             for a in 0..3 {
-                if u[i][a].abs() >= w[a] * (1.0 - 1e-12) {
+                if place(u[i][a], 0.0, lo[i][a], hi[i][a]) != Place::Inside {
                     z[i][a] = 0.0;
                 }
             }
@@ -96,19 +132,20 @@ fn restrict_to_face(u: &[DVec3], w: DVec3, z: &mut [DVec3]) {
     });
 }
 
-/// The largest `t >= 0` with `|u + t d| <= w` coordinate-wise.
-fn feasible_step(u: &[DVec3], d: &[DVec3], w: DVec3) -> f64 {
+/// The largest `t >= 0` with `lo <= u + t d <= hi` coordinate-wise.
+fn feasible_step(u: &[DVec3], d: &[DVec3], b: &Boxes) -> f64 {
     u.par_chunks(CHUNK)
         .zip(d.par_chunks(CHUNK))
-        .map(|(u, d)| {
+        .zip(b.chunks())
+        .map(|((u, d), (lo, hi))| {
             let mut t = f64::INFINITY;
             for i in 0..u.len() {
                 for a in 0..3 {
                     let (x, y) = (u[i][a], d[i][a]);
                     if y > 0.0 {
-                        t = t.min(((w[a] - x) / y).max(0.0));
+                        t = t.min(((hi[i][a] - x) / y).max(0.0));
                     } else if y < 0.0 {
-                        t = t.min(((-w[a] - x) / y).max(0.0));
+                        t = t.min(((lo[i][a] - x) / y).max(0.0));
                     }
                 }
             }
@@ -119,14 +156,15 @@ fn feasible_step(u: &[DVec3], d: &[DVec3], w: DVec3) -> f64 {
 
 /// `u += t d`, `r -= t q`, then `u` clamped (rounding at a bound); returns the largest
 /// vertex movement.
-fn step(u: &mut [DVec3], r: &mut [DVec3], t: f64, d: &[DVec3], q: &[DVec3], w: DVec3) -> f64 {
+fn step(u: &mut [DVec3], r: &mut [DVec3], t: f64, d: &[DVec3], q: &[DVec3], b: &Boxes) -> f64 {
     u.par_chunks_mut(CHUNK)
         .zip(r.par_chunks_mut(CHUNK))
         .zip(d.par_chunks(CHUNK).zip(q.par_chunks(CHUNK)))
-        .map(|((u, r), (d, q))| {
+        .zip(b.chunks())
+        .map(|(((u, r), (d, q)), (lo, hi))| {
             let mut m = 0.0f64;
             for i in 0..u.len() {
-                u[i] = (u[i] + t * d[i]).clamp(-w, w);
+                u[i] = (u[i] + t * d[i]).clamp(lo[i], hi[i]);
                 r[i] -= t * q[i];
                 m = m.max((t * d[i]).length());
             }
@@ -136,12 +174,14 @@ fn step(u: &mut [DVec3], r: &mut [DVec3], t: f64, d: &[DVec3], q: &[DVec3], w: D
 }
 
 /// `trial = P(u + s d) - u`, `P` the projection into the boxes.
-fn project_step(u: &[DVec3], d: &[DVec3], s: f64, w: DVec3, trial: &mut [DVec3]) {
-    trial.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).zip(d.par_chunks(CHUNK)).for_each(|((t, u), d)| {
-        for i in 0..t.len() {
-            t[i] = (u[i] + s * d[i]).clamp(-w, w) - u[i];
-        }
-    });
+fn project_step(u: &[DVec3], d: &[DVec3], s: f64, b: &Boxes, trial: &mut [DVec3]) {
+    trial.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).zip(d.par_chunks(CHUNK)).zip(b.chunks()).for_each(
+        |(((t, u), d), (lo, hi))| {
+            for i in 0..t.len() {
+                t[i] = (u[i] + s * d[i]).clamp(lo[i], hi[i]) - u[i];
+            }
+        },
+    );
 }
 
 /// What [`minimize_in_boxes`] reports.
@@ -170,12 +210,12 @@ pub(crate) struct BoxProblem<'a> {
     pub(crate) h: f64,
 }
 
-/// Minimizes `E(input + u)` over `|u_a| <= w_a` (MPRGP), from `u` (feasible), where
+/// Minimizes `E(input + u)` over the boxes `b` (MPRGP), from `u` (feasible), where
 /// `r = rhs - H u` on entry.
 pub(crate) fn minimize_in_boxes(
     problem: &BoxProblem<'_>,
     prepared: &mut Prepared<'_>,
-    w: DVec3,
+    w: &Boxes,
     u: &mut [DVec3],
     r: &mut [DVec3],
     progress: &mut dyn FnMut(&Progress),
@@ -318,15 +358,21 @@ mod tests {
 
     #[test]
     fn places_and_feasible_steps() {
-        let w = DVec3::splat(0.5);
-        assert!(place(0.5, 1.0, 0.5) == Place::Held);
-        assert!(place(0.5, -1.0, 0.5) == Place::Chopped);
-        assert!(place(-0.5, -1.0, 0.5) == Place::Held);
-        assert!(place(0.2, 1.0, 0.5) == Place::Inside);
+        assert!(place(0.5, 1.0, -0.5, 0.5) == Place::Held);
+        assert!(place(0.5, -1.0, -0.5, 0.5) == Place::Chopped);
+        assert!(place(-0.5, -1.0, -0.5, 0.5) == Place::Held);
+        assert!(place(0.2, 1.0, -0.5, 0.5) == Place::Inside);
+        // A coordinate whose interval is a point is held whatever the direction.
+        assert!(place(0.0, -1.0, 0.0, 0.0) == Place::Held && place(0.0, 1.0, 0.0, 0.0) == Place::Held);
+        let b = Boxes::uniform(1, DVec3::splat(0.5));
         let u = vec![DVec3::new(0.0, 0.25, -0.5)];
         let d = vec![DVec3::new(1.0, 1.0, 0.0)];
-        assert_eq!(feasible_step(&u, &d, w), 0.25);
+        assert_eq!(feasible_step(&u, &d, &b), 0.25);
         let d = vec![DVec3::new(0.0, 0.0, -1.0)];
-        assert_eq!(feasible_step(&u, &d, w), 0.0);
+        assert_eq!(feasible_step(&u, &d, &b), 0.0);
+        // Asymmetric: room 0.1 upwards along x.
+        let b = Boxes { lo: vec![DVec3::splat(-0.5)], hi: vec![DVec3::new(0.1, 0.5, 0.5)] };
+        let d = vec![DVec3::new(1.0, 0.0, 0.0)];
+        assert_eq!(feasible_step(&[DVec3::ZERO], &d, &b), 0.1);
     }
 }

@@ -65,6 +65,7 @@ mod block;
 mod bounded;
 mod boxqp;
 mod cg;
+mod clamping;
 mod direct;
 mod energy;
 mod info;
@@ -76,6 +77,7 @@ mod regularizer;
 mod report;
 mod solver;
 mod stencil;
+mod unfold;
 mod vecops;
 mod weights;
 

@@ -179,6 +179,12 @@ pub struct Params {
     /// The solver and its boxes. Default: [`SolverParams::default`] (exact factorization
     /// for small surfaces, else multigrid CG, to `1e-3` voxel; no clamping).
     pub solver: SolverParams,
+    /// Fold-free post-condition: after the last solve, the vertices of quads folded over
+    /// their diagonal and of edge-adjacent quads folded onto each other (as
+    /// `voxreg_quality` counts them) move back towards their input positions until none is
+    /// left; each stays on the segment to its solved position, so inside its box.
+    /// Default: `false` (`true` in [`Params::voxel_art`]).
+    pub fold_free: bool,
 }
 
 impl Params {
@@ -198,17 +204,43 @@ impl Params {
         }
     }
 
+    /// The depth kept inside thin voxels by [`Params::voxel_art`], in voxels
+    /// ([`crate::BoundedParams::thin_depth`]).
+    pub const THIN_DEPTH: f64 = 0.3;
+
     /// Voxel art (MagicaVoxel models): every non-background label one solid region (the
     /// colours are materials of one object, not interfaces), one solve (blocky art is
     /// not a sampled smooth shape) with every vertex clamped to its box of margin `0.01`
-    /// voxel, so the result has no self-intersection (the papers' Proposition 2).
+    /// voxel, so the result has no self-intersection (the papers' Proposition 2); the
+    /// boxes shrink around thin voxels so that one-voxel parts keep
+    /// [`Params::THIN_DEPTH`] voxel of depth, and folds are removed afterwards
+    /// ([`Params::fold_free`]). [`Params::with_smoothness`] trades roundness for
+    /// blockiness.
     pub fn voxel_art() -> Self {
+        let mut solver = SolverParams::default().clamped(Some(0.01));
+        solver.bounded.thin_depth = Some(Self::THIN_DEPTH);
         Params {
             regions: RegionMap::single_solid(),
             refine: 0,
-            solver: SolverParams::default().clamped(Some(0.01)),
+            solver,
+            fold_free: true,
             ..Default::default()
         }
+    }
+
+    /// The same parameters with the boxes of smoothness `s` in `(0, 1]`: each vertex
+    /// moves at most `s` times half a voxel (less `0.005`) from its voxel corner along
+    /// each axis. `1` is [`Params::voxel_art`]'s default (rounded), small values keep the
+    /// model blocky (clean, with softened edges). Sets the clamping margin to
+    /// `1 - 0.99 s` voxel, which needs the bounded solver.
+    pub fn with_smoothness(mut self, s: f64) -> Result<Self, RegularizeError> {
+        if !(s > 0.0 && s <= 1.0) {
+            return Err(RegularizeError::InvalidParams(format!("the smoothness must be in (0, 1], got {s}")));
+        }
+        let thin = self.solver.bounded.thin_depth;
+        self.solver = self.solver.clamped(Some(1.0 - 0.99 * s));
+        self.solver.bounded.thin_depth = thin;
+        Ok(self)
     }
 
     /// Checks every field's range and their combination.
@@ -261,6 +293,7 @@ impl Default for Params {
             crease_dilation: 1,
             texture_aware: false,
             solver: SolverParams::default(),
+            fold_free: false,
         }
     }
 }
@@ -277,6 +310,12 @@ mod tests {
         assert_eq!(Params::papers().energy.alpha, 1e-3);
         assert!(Params::voxel_art().clamps() && !Params::default().clamps());
         assert_eq!(Params::voxel_art().regions, RegionMap::single_solid());
+        assert!(Params::voxel_art().fold_free && !Params::default().fold_free);
+        let blocky = Params::voxel_art().with_smoothness(0.5).unwrap();
+        assert_eq!(blocky.solver.bounded.clamp, Some(1.0 - 0.495));
+        assert_eq!(blocky.solver.bounded.thin_depth, Some(Params::THIN_DEPTH));
+        assert!(Params::voxel_art().with_smoothness(0.0).is_err());
+        assert!(Params::voxel_art().with_smoothness(1.5).is_err());
         let bad = Params { crease_alignment: 2.0, ..Default::default() };
         assert!(bad.validate().is_err());
         let bad = Params {

@@ -288,6 +288,10 @@ impl Regularizer {
             done += 1.0;
         }
 
+        if params.fold_free {
+            crate::unfold::unfold(&surface, &input, &mut positions);
+        }
+
         // The energy of the last round (its normals and targets, without crease weights),
         // before and after.
         let energy = Energy::new(&surface, &field, &targets, params.energy)?;

@@ -1,0 +1,121 @@
+//! The clamping boxes of voxel art: the papers' cubes around each vertex, shrunk around
+//! thin voxels so that one-voxel parts keep their thickness.
+
+use std::collections::HashSet;
+
+use voxreg_digisurf::{DigitalSurface, VertexId};
+
+use crate::boxqp::Boxes;
+
+/// The voxels (lattice coordinates, possibly one outside the domain) whose two neighbours
+/// along some axis are both separated from them by a surfel: the thin voxels of every
+/// region, background included (one-voxel slits).
+#[cfg(test)]
+pub(crate) fn thin_voxels(surface: &DigitalSurface) -> HashSet<[i64; 3]> {
+    thin_and_faces(surface).0
+}
+
+/// Surfels as `(axis, cell)`.
+type Faces = HashSet<(u8, [i64; 3])>;
+
+/// The thin voxels and the surfels.
+fn thin_and_faces(surface: &DigitalSurface) -> (HashSet<[i64; 3]>, Faces) {
+    let faces: Faces = surface.surfels().iter().map(|s| (s.axis, s.cell.map(i64::from))).collect();
+    let mut thin = HashSet::new();
+    for &(axis, cell) in &faces {
+        // Surfel (axis, cell) is the lower face of voxel `cell`: is its upper face one too?
+        let mut up = cell;
+        up[axis as usize] += 1;
+        if faces.contains(&(axis, up)) {
+            thin.insert(cell);
+        }
+    }
+    (thin, faces)
+}
+
+/// The boxes of the displacement from the input: `[-half, half]` voxel along each axis
+/// (scaled by the spacing), except towards a thin voxel ([`thin_voxels`]) that has the
+/// vertex as a corner: along each axis where the voxel's face on the vertex's side is a
+/// surfel, the bound towards the voxel is `min(half, thin)`.
+///
+/// With `thin = 0.5 - d`, each surfel of a thin voxel keeps its vertices at least `d`
+/// voxel from the voxel's centre along its axis, so the face stays `d` away from it;
+/// along the other axes (across a solid neighbour) the vertices slide freely. The boxes
+/// lie inside the uniform ones, so the result still has no self-intersection.
+pub(crate) fn clamp_boxes(surface: &DigitalSurface, half: f64, thin: Option<f64>) -> Boxes {
+    let n = surface.num_vertices();
+    let h = surface.spacing();
+    let mut boxes = Boxes::uniform(n, half * h);
+    let Some(t) = thin else { return boxes };
+    let cap = t.min(half) * h;
+    let (thin, faces) = thin_and_faces(surface);
+    if thin.is_empty() {
+        return boxes;
+    }
+    for v in 0..n {
+        let k = surface.vertex_corner(VertexId(v as u32)).map(i64::from);
+        for o in 0..8usize {
+            let off = [o & 1, (o >> 1) & 1, (o >> 2) & 1];
+            // Voxel `k - off` has its centre on the + side along axis a when off[a] = 0.
+            let voxel = [k[0] - off[0] as i64, k[1] - off[1] as i64, k[2] - off[2] as i64];
+            if !thin.contains(&voxel) {
+                continue;
+            }
+            for a in 0..3 {
+                // The voxel's face on the vertex's side along a: its lower face when the
+                // voxel is on the + side.
+                let mut cell = voxel;
+                cell[a] += off[a] as i64;
+                if !faces.contains(&(a as u8, cell)) {
+                    continue;
+                }
+                if off[a] == 0 {
+                    boxes.hi[v][a] = boxes.hi[v][a].min(cap[a]);
+                } else {
+                    boxes.lo[v][a] = boxes.lo[v][a].max(-cap[a]);
+                }
+            }
+        }
+    }
+    boxes
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use glam::DVec3;
+    use voxreg_digisurf::{LabelVolume, RegionMap};
+
+    #[test]
+    fn a_plate_is_thin_and_its_vertices_keep_a_quarter_voxel_from_its_mid_plane() {
+        // A 1 x 3 x 3 plate in a 3^3 volume.
+        let volume = LabelVolume::from_fn([3, 3, 3], |[x, _, _]| u32::from(x == 1)).with_background(Some(0));
+        let surface = DigitalSurface::new(&volume, &RegionMap::single_solid()).unwrap();
+        let thin = thin_voxels(&surface);
+        for y in 0..3 {
+            for z in 0..3 {
+                assert!(thin.contains(&[1, y, z]), "{y} {z}");
+            }
+        }
+        let boxes = clamp_boxes(&surface, 0.495, Some(0.25));
+        for v in 0..surface.num_vertices() {
+            let id = VertexId(v as u32);
+            let x = surface.vertex_position(id).x;
+            let (lo, hi) = (boxes.lo[v], boxes.hi[v]);
+            assert!(lo.cmple(DVec3::ZERO).all() && hi.cmpge(DVec3::ZERO).all());
+            // The -x side moves at most 0.25 in +x, the +x side at most 0.25 in -x.
+            if x < 1.0 {
+                assert_eq!(hi.x, 0.25, "{v}");
+                assert_eq!(lo.x, -0.495);
+            } else {
+                assert_eq!(lo.x, -0.25);
+                assert_eq!(hi.x, 0.495);
+            }
+        }
+        // Without a thin cap, the uniform boxes.
+        assert_eq!(
+            clamp_boxes(&surface, 0.495, None),
+            Boxes::uniform(surface.num_vertices(), DVec3::splat(0.495))
+        );
+    }
+}
