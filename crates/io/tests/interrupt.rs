@@ -2,7 +2,6 @@
 //! own: `remove_in_flight` removes every temporary entry of the process, which would
 //! break the other tests' writes running beside it.
 
-use std::io::Write;
 use std::path::Path;
 
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
