@@ -141,7 +141,8 @@ pub(crate) struct RegularizeArgs {
     pub(crate) input: InputArgs,
     /// Output mesh: .obj (quads, one group per interface, with an .mtl for coloured
     /// inputs), .ply (binary quads, face labels and colours), .glb or .gltf (glTF 2.0,
-    /// triangulated, one material per colour).
+    /// triangulated, one material per colour), .stl (binary, triangles only) or .vtp
+    /// (VTK PolyData: quads, face labels and colours as cell data).
     /// With --split interfaces or regions, a directory (created if missing).
     #[arg(short, long, value_name = "OUTPUT")]
     pub(crate) output: PathBuf,
@@ -337,6 +338,10 @@ pub(crate) enum SplitFormat {
     Glb,
     /// glTF JSON with an embedded buffer.
     Gltf,
+    /// Binary STL (triangles; with --split regions, one closed solid per file).
+    Stl,
+    /// VTK XML PolyData with face labels.
+    Vtp,
 }
 
 impl SplitFormat {
@@ -346,6 +351,8 @@ impl SplitFormat {
             SplitFormat::Obj => "obj",
             SplitFormat::Glb => "glb",
             SplitFormat::Gltf => "gltf",
+            SplitFormat::Stl => "stl",
+            SplitFormat::Vtp => "vtp",
         }
     }
 }

@@ -35,8 +35,9 @@
 //! **Writing meshes.** A [`QuadMesh`] (positions, quads, `[inner, outer]` labels per
 //! face, named [`FaceGroup`]s) is built from a digital surface by
 //! [`QuadMesh::from_surface`] and written by [`write_mesh`], which picks the format by
-//! extension: ASCII OBJ with one group per interface ([`write_obj`]) or binary PLY with
-//! per-face labels ([`write_ply`]); [`write_ply_with_vertex_scalar`] adds one value
+//! extension: ASCII OBJ with one group per interface ([`write_obj`]), binary PLY with
+//! per-face labels ([`write_ply`]), glTF ([`write_gltf`]), binary STL ([`write_stl`])
+//! or VTK PolyData with per-face labels and colours ([`write_vtp`]); [`write_ply_with_vertex_scalar`] adds one value
 //! per vertex (a `float` property and a colour ramp) for inspecting a field such as the
 //! AT feature field. Writers go through a temporary file renamed onto
 //! the target, so a failed write leaves no partial file. Parts of the surface (one
@@ -85,10 +86,12 @@ mod ply;
 mod raw;
 mod read_mesh;
 mod samples;
+mod stl;
 mod vol;
 mod volume;
 mod vox;
 mod vti;
+mod vtp;
 mod write_volume;
 
 pub use error::IoError;
@@ -109,6 +112,7 @@ pub use ply::{scalar_ramp, write_ply, write_ply_with_vertex_scalar};
 pub use raw::{read_raw, read_raw_bytes, RawSpec};
 pub use read_mesh::{read_mesh, read_mesh_bytes};
 pub use samples::{DataType, Endian};
+pub use stl::write_stl;
 pub use vol::{read_vol, read_vol_bytes};
 pub use volume::{
     is_voxel_art, read_volume, read_voxels, read_voxels_with, LoadedVolume, LoadedVoxels, ReadOptions,
@@ -119,4 +123,5 @@ pub use vox::{
     VOX_MAX_PLACED_VOXELS,
 };
 pub use vti::{read_vti, read_vti_bytes};
+pub use vtp::write_vtp;
 pub use write_volume::{write_vol, write_volume, write_vox, VOX_MAX_MODEL};

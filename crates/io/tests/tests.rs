@@ -16,10 +16,13 @@
 //! - [`hostile`]: small files declaring huge sizes or exploding scene graphs are refused
 //!   before allocating; contradictory data (overlapping pieces, bad palettes) too.
 //! - [`materials`]: colours and materials from .vox palettes to glTF, OBJ/MTL and PLY.
+//! - [`mesh_formats`]: STL (closed solids of the right volume) and VTK PolyData, parsed
+//!   back by independent minimal readers.
 
 mod fuzz_readers;
 mod hostile;
 mod materials;
+mod mesh_formats;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -351,11 +354,12 @@ fn write_onto_a_directory_fails_cleanly() {
 #[test]
 fn unknown_extension_creates_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    for name in ["mesh.stl", "mesh"] {
+    for name in ["mesh.off", "mesh"] {
         let err = write_mesh(&dir.path().join(name), &single_voxel_mesh()).unwrap_err();
         assert!(matches!(err, IoError::UnsupportedExtension { .. }), "{err:?}");
         assert!(
-            err.to_string().ends_with("unknown file extension (expected .obj, .ply, .glb or .gltf)"),
+            err.to_string()
+                .ends_with("unknown file extension (expected .obj, .ply, .glb, .gltf, .stl or .vtp)"),
             "{err}"
         );
     }
