@@ -22,6 +22,9 @@
 //!   ASCII, base64 or appended, raw or zlib-compressed.
 //! - NumPy `.npy` (versions 1 to 3): [`read_npy`], [`read_npy_bytes`]; a 3-D array
 //!   `a[x, y, z]`, C or Fortran order.
+//! - TIFF stacks `.tif`, `.tiff` (multi-page, or a directory or pattern of single-page
+//!   slices): [`read_tiff`], [`read_tiff_bytes`], [`read_tiff_slices`]; 8 to 64-bit
+//!   integer or float greyscale, spacing and units from OME-TIFF or ImageJ metadata.
 //! - Raw data, whose layout ([`RawSpec`]: dimensions, [`DataType`], [`Endian`],
 //!   spacing) the caller gives: [`read_raw`], [`read_raw_bytes`].
 //!
@@ -87,6 +90,7 @@ mod raw;
 mod read_mesh;
 mod samples;
 mod stl;
+mod tiff;
 mod vol;
 mod volume;
 mod vox;
@@ -113,6 +117,7 @@ pub use raw::{read_raw, read_raw_bytes, RawSpec};
 pub use read_mesh::{read_mesh, read_mesh_bytes};
 pub use samples::{DataType, Endian};
 pub use stl::write_stl;
+pub use tiff::{read_tiff, read_tiff_bytes, read_tiff_slices, tiff_slices};
 pub use vol::{read_vol, read_vol_bytes};
 pub use volume::{
     is_voxel_art, read_volume, read_voxels, read_voxels_with, LoadedVolume, LoadedVoxels, ReadOptions,

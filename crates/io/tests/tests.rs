@@ -12,6 +12,8 @@
 //!   reader; the same surface written as OBJ and counted.
 //! - **Failed writes** leave nothing behind: missing directory, a directory as target,
 //!   unknown extension, an invalid mesh (and an existing file is kept unchanged).
+//! - [`formats`]: TIFF, NRRD, MRC and Zarr samples written by the formats' own Python
+//!   tools read as the same labels, spacing and units; round trips.
 //! - [`fuzz_readers`]: mutated files never make a reader panic; replayed regressions.
 //! - [`hostile`]: small files declaring huge sizes or exploding scene graphs are refused
 //!   before allocating; contradictory data (overlapping pieces, bad palettes) too.
@@ -19,6 +21,7 @@
 //! - [`mesh_formats`]: STL (closed solids of the right volume) and VTK PolyData, parsed
 //!   back by independent minimal readers.
 
+mod formats;
 mod fuzz_readers;
 mod hostile;
 mod materials;
@@ -54,7 +57,7 @@ fn bundled_vol_files() {
         ("Al.100.vol", 100, Some(&[0, 1])),
     ];
     for (name, n, expected) in cases {
-        let LoadedVolume { volume, palette } = read_volume(&data(name)).unwrap();
+        let LoadedVolume { volume, palette, .. } = read_volume(&data(name)).unwrap();
         assert_eq!(volume.dims(), [n; 3], "{name}");
         assert_eq!(palette, None);
         assert_eq!(volume.background(), Some(0));
@@ -79,7 +82,7 @@ fn bunny_32_is_grey_levels_that_threshold_to_one_solid() {
 #[test]
 fn bundled_vox_files() {
     for (name, dims, colours) in [("chr_army1.vox", [8, 7, 12], 8), ("veh_fire.vox", [24, 58, 20], 17)] {
-        let LoadedVolume { volume, palette } = read_volume(&data(name)).unwrap();
+        let LoadedVolume { volume, palette, .. } = read_volume(&data(name)).unwrap();
         assert_eq!(volume.dims(), dims, "{name}");
         let found = labels(&volume);
         assert!(found.contains(&0), "{name}: some voxels are empty");
