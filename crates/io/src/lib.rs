@@ -25,6 +25,9 @@
 //! - TIFF stacks `.tif`, `.tiff` (multi-page, or a directory or pattern of single-page
 //!   slices): [`read_tiff`], [`read_tiff_bytes`], [`read_tiff_slices`]; 8 to 64-bit
 //!   integer or float greyscale, spacing and units from OME-TIFF or ImageJ metadata.
+//! - NRRD `.nrrd`, `.nhdr` (detached), and 3D Slicer's `.seg.nrrd`: [`read_nrrd`],
+//!   [`read_nrrd_bytes`]; raw, gzip or ascii, `space directions`/`space origin`,
+//!   `space units`; segment names and colours as the palette.
 //! - Raw data, whose layout ([`RawSpec`]: dimensions, [`DataType`], [`Endian`],
 //!   spacing) the caller gives: [`read_raw`], [`read_raw_bytes`].
 //!
@@ -82,6 +85,7 @@ mod material;
 mod mesh;
 mod nifti;
 mod npy;
+mod nrrd;
 mod obj;
 mod orient;
 mod pgm3d;
@@ -110,6 +114,7 @@ pub use material::{Material, Palette};
 pub use mesh::{interface_name, region_name, write_mesh, FaceGroup, MeshBatch, QuadMesh};
 pub use nifti::{read_nifti, read_nifti_bytes};
 pub use npy::{read_npy, read_npy_bytes};
+pub use nrrd::{read_nrrd, read_nrrd_bytes};
 pub use obj::write_obj;
 pub use pgm3d::{read_pgm3d, read_pgm3d_bytes};
 pub use ply::{scalar_ramp, write_ply, write_ply_with_vertex_scalar};

@@ -56,7 +56,7 @@ pub struct LoadedVoxels {
 
 /// The extensions [`read_voxels`] knows, for error messages.
 const KNOWN_EXTENSIONS: &str =
-    ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, .npy, .tif, .tiff (or a directory or pattern of slices)";
+    ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd or .nhdr";
 
 /// Reads the voxels of a file, labels or grey levels, choosing the format by the
 /// file's extension (case insensitive):
@@ -70,7 +70,8 @@ const KNOWN_EXTENSIONS: &str =
 /// - `.npy`: NumPy array, see [`read_npy`](crate::read_npy);
 /// - `.tif`, `.tiff`: a TIFF stack, see [`read_tiff`](crate::read_tiff); a directory, or a
 ///   file name with `*` or `?`: the TIFF slices it holds or matches, stacked in name order
-///   (see [`tiff_slices`](crate::tiff_slices)).
+///   (see [`tiff_slices`](crate::tiff_slices));
+/// - `.nrrd`, `.nhdr` (and `.seg.nrrd`): NRRD, see [`read_nrrd`](crate::read_nrrd).
 ///
 /// Fails with [`IoError::UnsupportedExtension`] for any other name, and with
 /// [`IoError::Unsupported`] for `.raw` (which has no header: see
@@ -112,6 +113,7 @@ pub fn read_voxels_with(path: &Path, options: &ReadOptions) -> Result<LoadedVoxe
         Some("vti") => plain(read_vti(path)?),
         Some("npy") => plain(read_npy(path)?),
         Some("tif" | "tiff") => crate::read_tiff(path),
+        Some("nrrd" | "nhdr") => crate::read_nrrd(path),
         Some("raw") => Err(IoError::unsupported(
             path,
             "raw voxel data have no header: give their dimensions and type (read_raw with a RawSpec)",

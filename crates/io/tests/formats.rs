@@ -88,3 +88,64 @@ fn tiff_round_trip_and_mismatched_pages() {
     assert!(matches!(err, IoError::Format { .. }), "{err}");
     assert_eq!(err.to_string(), "round.tif: page 1 is 3x2 of u8, page 0 2x2 of u8");
 }
+
+#[test]
+fn nrrd_files() {
+    for name in ["labels.nrrd", "detached.nhdr", "organs.seg.nrrd"] {
+        let loaded = read_sample(name);
+        assert_spacing(&loaded, [0.5, 0.5, 1.5], Some("mm"), name);
+        assert_eq!(loaded.voxels.origin(), DVec3::new(10.0, -4.0, 2.5), "{name}");
+        assert_eq!(loaded.palette.is_some(), name.ends_with(".seg.nrrd"), "{name}");
+    }
+    let palette = read_sample("organs.seg.nrrd").palette.unwrap();
+    assert_eq!(palette.colors.len(), 3);
+    assert_eq!(palette.colors[1], [204, 51, 51, 255]);
+    assert_eq!(palette.colors[2], [51, 102, 230, 255]);
+    let names: Vec<&str> = palette.materials.iter().map(|m| m.name.as_str()).collect();
+    assert_eq!(names, ["color_0", "liver", "spleen"]);
+}
+
+/// Hand-made headers: a flipped, permuted space; ascii data; and the errors naming the
+/// file for truncated data, a 4-D array and a missing detached file.
+#[test]
+fn nrrd_space_and_errors() {
+    let path = Path::new("t.nrrd");
+    // Index axis 0 runs along -y (step 2), axis 1 along +x (step 3), axis 2 along z.
+    let header = "NRRD0004\ntype: uchar\ndimension: 3\nsizes: 3 2 1\nencoding: raw\n\
+                  space: left-posterior-superior\nspace directions: (0,-2,0) (3,0,0) (0,0,1)\n\
+                  space origin: (1,2,3)\n\n";
+    let mut bytes = header.as_bytes().to_vec();
+    bytes.extend(1..=6u8);
+    let loaded = voxreg_io::read_nrrd_bytes(&bytes, path).unwrap();
+    let Voxels::Labels(v) = loaded.voxels else { panic!("grey") };
+    assert_eq!(v.dims(), [2, 3, 1]);
+    assert_eq!(v.spacing(), DVec3::new(3.0, 2.0, 1.0));
+    // World (1 + 3 i, 2 - 2 j, 3) holds index [j, i, 0], value 1 + j + 3 i.
+    assert_eq!(v.origin(), DVec3::new(1.0, -2.0, 3.0));
+    for (x, y) in [(0i64, 0i64), (1, 0), (0, 2), (1, 1)] {
+        let (i, j) = (x, 2 - y);
+        assert_eq!(v.label([x, y, 0]), Some(1 + j as u32 + 3 * i as u32), "[{x}, {y}]");
+    }
+    let ascii =
+        "NRRD0004\ntype: float\ndimension: 3\nsizes: 2 1 1\nencoding: ascii\nspacings: 2 2 2\n\n0.5 7\n";
+    let grey = voxreg_io::read_nrrd_bytes(ascii.as_bytes(), path).unwrap().voxels;
+    assert!(matches!(grey, Voxels::Grey(_)));
+    assert_eq!(grey.spacing(), DVec3::splat(2.0));
+
+    let cases: [(Vec<u8>, &str); 4] = [
+        (bytes[..bytes.len() - 1].to_vec(), "t.nrrd: truncated data: 5 bytes of 6"),
+        (header.replace("dimension: 3", "dimension: 4").into_bytes(), "t.nrrd: unsupported: dimension 4"),
+        (
+            header.replace("encoding: raw\n", "encoding: raw\ndata file: none.raw\n").into_bytes(),
+            "none.raw: ",
+        ),
+        (b"P3D\n".to_vec(), "t.nrrd: not a NRRD file: no magic"),
+    ];
+    for (bytes, expected) in cases {
+        let err = voxreg_io::read_nrrd_bytes(&bytes, path).unwrap_err().to_string();
+        assert!(err.starts_with(expected), "{err}");
+    }
+    let sizes = header.replace("sizes: 3 2 1", "sizes: 100000 100000 100000");
+    let err = voxreg_io::read_nrrd_bytes(sizes.as_bytes(), path).unwrap_err();
+    assert!(matches!(err, IoError::TooLarge { .. }), "{err}");
+}
