@@ -28,6 +28,8 @@
 //! - NRRD `.nrrd`, `.nhdr` (detached), and 3D Slicer's `.seg.nrrd`: [`read_nrrd`],
 //!   [`read_nrrd_bytes`]; raw, gzip or ascii, `space directions`/`space origin`,
 //!   `space units`; segment names and colours as the palette.
+//! - MRC/CCP4 `.mrc`, `.map`, `.rec`: [`read_mrc`], [`read_mrc_bytes`]; modes 0, 1, 2
+//!   and 6, voxel size in ångström from the cell.
 //! - Raw data, whose layout ([`RawSpec`]: dimensions, [`DataType`], [`Endian`],
 //!   spacing) the caller gives: [`read_raw`], [`read_raw_bytes`].
 //!
@@ -83,6 +85,7 @@ mod limits;
 mod longvol;
 mod material;
 mod mesh;
+mod mrc;
 mod nifti;
 mod npy;
 mod nrrd;
@@ -112,6 +115,7 @@ pub use limits::{
 pub use longvol::{read_longvol, read_longvol_bytes};
 pub use material::{Material, Palette};
 pub use mesh::{interface_name, region_name, write_mesh, FaceGroup, MeshBatch, QuadMesh};
+pub use mrc::{read_mrc, read_mrc_bytes};
 pub use nifti::{read_nifti, read_nifti_bytes};
 pub use npy::{read_npy, read_npy_bytes};
 pub use nrrd::{read_nrrd, read_nrrd_bytes};

@@ -56,7 +56,7 @@ pub struct LoadedVoxels {
 
 /// The extensions [`read_voxels`] knows, for error messages.
 const KNOWN_EXTENSIONS: &str =
-    ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd or .nhdr";
+    ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd, .nhdr, .mrc, .map or .rec";
 
 /// Reads the voxels of a file, labels or grey levels, choosing the format by the
 /// file's extension (case insensitive):
@@ -71,7 +71,8 @@ const KNOWN_EXTENSIONS: &str =
 /// - `.tif`, `.tiff`: a TIFF stack, see [`read_tiff`](crate::read_tiff); a directory, or a
 ///   file name with `*` or `?`: the TIFF slices it holds or matches, stacked in name order
 ///   (see [`tiff_slices`](crate::tiff_slices));
-/// - `.nrrd`, `.nhdr` (and `.seg.nrrd`): NRRD, see [`read_nrrd`](crate::read_nrrd).
+/// - `.nrrd`, `.nhdr` (and `.seg.nrrd`): NRRD, see [`read_nrrd`](crate::read_nrrd);
+/// - `.mrc`, `.map`, `.rec`: MRC/CCP4 maps, see [`read_mrc`](crate::read_mrc).
 ///
 /// Fails with [`IoError::UnsupportedExtension`] for any other name, and with
 /// [`IoError::Unsupported`] for `.raw` (which has no header: see
@@ -114,6 +115,7 @@ pub fn read_voxels_with(path: &Path, options: &ReadOptions) -> Result<LoadedVoxe
         Some("npy") => plain(read_npy(path)?),
         Some("tif" | "tiff") => crate::read_tiff(path),
         Some("nrrd" | "nhdr") => crate::read_nrrd(path),
+        Some("mrc" | "map" | "rec") => crate::read_mrc(path),
         Some("raw") => Err(IoError::unsupported(
             path,
             "raw voxel data have no header: give their dimensions and type (read_raw with a RawSpec)",

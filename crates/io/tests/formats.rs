@@ -149,3 +149,50 @@ fn nrrd_space_and_errors() {
     let err = voxreg_io::read_nrrd_bytes(sizes.as_bytes(), path).unwrap_err();
     assert!(matches!(err, IoError::TooLarge { .. }), "{err}");
 }
+
+#[test]
+fn mrc_files() {
+    for name in ["mode0.mrc", "mode1.mrc", "mode6.mrc", "labels.map"] {
+        let loaded = read_sample(name);
+        assert_spacing(&loaded, [1.5, 1.5, 3.0], Some("Å"), name);
+    }
+}
+
+/// An MRC file made here, big-endian, with sections along x and columns along z
+/// (`MAPC/MAPR/MAPS = 3, 2, 1`): the permutation is applied; a short file is refused.
+#[test]
+fn mrc_axis_map_and_errors() {
+    let (nc, nr, ns) = (2i32, 3i32, 4i32);
+    let mut h = vec![0u8; 1024];
+    let mut put = |i: usize, v: [u8; 4]| h[4 * i..4 * i + 4].copy_from_slice(&v);
+    for (i, v) in [(0, nc), (1, nr), (2, ns), (3, 1), (7, ns), (8, nr), (9, nc), (16, 3), (17, 2), (18, 1)] {
+        put(i, v.to_be_bytes());
+    }
+    // Cell: x spans 4 sections of 2 Å, y 3 rows of 1 Å, z 2 columns of 0.5 Å.
+    for (i, v) in [(10, 8.0f32), (11, 3.0), (12, 1.0)] {
+        put(i, v.to_be_bytes());
+    }
+    h[208..212].copy_from_slice(b"MAP ");
+    h[212] = 0x11;
+    let value = |c: i32, r: i32, s: i32| (c + 10 * r + 100 * s) as i16;
+    let mut bytes = h.clone();
+    for s in 0..ns {
+        for r in 0..nr {
+            for c in 0..nc {
+                bytes.extend(value(c, r, s).to_be_bytes());
+            }
+        }
+    }
+    let path = Path::new("t.mrc");
+    let loaded = voxreg_io::read_mrc_bytes(&bytes, path).unwrap();
+    let Voxels::Labels(v) = loaded.voxels else { panic!("grey") };
+    assert_eq!(v.dims(), [4, 3, 2]);
+    assert_eq!(v.spacing(), DVec3::new(2.0, 1.0, 0.5));
+    for [x, y, z] in [[0, 0, 0], [3, 2, 1], [1, 2, 0]] {
+        assert_eq!(v.label([x, y, z]), Some(value(z as i32, y as i32, x as i32) as u32), "{x} {y} {z}");
+    }
+    let err = voxreg_io::read_mrc_bytes(&bytes[..bytes.len() - 2], path).unwrap_err();
+    assert!(err.to_string().starts_with("t.mrc: truncated voxel data"), "{err}");
+    let err = voxreg_io::read_mrc_bytes(&bytes[..100], path).unwrap_err();
+    assert!(err.to_string().starts_with("t.mrc: not an MRC file"), "{err}");
+}
