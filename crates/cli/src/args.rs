@@ -58,8 +58,9 @@ pub(crate) struct CheckArgs {
 #[derive(Args, Debug)]
 pub(crate) struct InputArgs {
     /// Input volume: .vol, .longvol, .pgm3d (DGtal), .vox (MagicaVoxel), .nii, .nii.gz
-    /// (NIfTI-1), .vti (VTK image data), .npy (NumPy, shape (X, Y, Z)), or raw data with
-    /// --dims.
+    /// (NIfTI-1), .vti (VTK image data), .npy (NumPy, shape (X, Y, Z)), .tif/.tiff (a
+    /// stack; or a directory or 'slice_*.tif' pattern of slices), .nrrd/.nhdr (NRRD,
+    /// .seg.nrrd), .mrc/.map/.rec (MRC), or raw data with --dims.
     pub(crate) input: PathBuf,
     /// Make a binary volume: voxels whose value (label or grey level) is > T are inside.
     /// Needed for grey-level data (fractional, negative or scaled values).
