@@ -123,7 +123,13 @@ fn wrong_format_for_the_extension() {
     assert!(matches!(read_volume(&vox), Err(IoError::Format { .. })));
     let err = read_volume(&data("README.md")).unwrap_err();
     assert!(matches!(err, IoError::UnsupportedExtension { .. }));
-    assert!(err.to_string().ends_with("README.md: unknown file extension (expected .vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti or .npy)"), "{err}");
+    assert!(
+        err.to_string().ends_with(
+            "README.md: unknown file extension (expected .vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, \
+             .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd, .nhdr, .mrc, .map or .rec)"
+        ),
+        "{err}"
+    );
 }
 
 // ---------------------------------------------------------------- snapshots
