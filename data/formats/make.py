@@ -1,9 +1,10 @@
-"""Writes the small format samples of data/formats/ with each format's own Python tool.
+"""Writes the small format samples of data/formats/ with each format's own Python tool
+(tifffile, pynrrd, mrcfile).
 
 Made with:  python3 -m venv target/formats-venv
-            target/formats-venv/bin/pip install numpy tifffile pynrrd mrcfile zarr meshio
+            target/formats-venv/bin/pip install numpy tifffile pynrrd mrcfile
             target/formats-venv/bin/python data/formats/make.py
-(versions used: see the `versions` line this script prints). Every sample holds the same
+(with numpy 2.4.6, tifffile 2026.3.3, pynrrd 1.1.3, mrcfile 1.5.4). Every sample holds the same
 6 x 5 x 4 volume `labels()`, indexed [x, y, z]: label 1, a 3 x 3 x 2 block, and label 2, a
 2 x 2 x 2 block, in background 0. The tools store arrays z-slowest ([z, y, x]), so each
 array below is `labels().transpose()`.
@@ -84,43 +85,15 @@ def mrcs(zyx):
     shutil.copy(f"{HERE}/mode1.mrc", f"{HERE}/labels.map")
 
 
-def zarrs(zyx):
-    import zarr
-
-    for v in (2, 3):
-        path = f"{HERE}/labels_v{v}.zarr"
-        shutil.rmtree(path, ignore_errors=True)
-        z = zarr.create_array(
-            store=path, shape=zyx.shape, chunks=(2, 3, 4), dtype="uint16", zarr_format=v, fill_value=0,
-        )
-        z[...] = zyx
-    # OME-Zarr 0.4 image: two levels, level 0 at 0.5 x 0.5 x 2 micrometer (x, y, z).
-    path = f"{HERE}/image.ome.zarr"
-    shutil.rmtree(path, ignore_errors=True)
-    root = zarr.open_group(path, mode="w", zarr_format=2)
-    for level, (data, scale) in enumerate([(zyx, [2.0, 0.5, 0.5]), (zyx[::2, ::2, ::2], [4.0, 1.0, 1.0])]):
-        a = root.create_array(str(level), shape=data.shape, chunks=(2, 2, 2), dtype="uint8", fill_value=0)
-        a[...] = data
-    root.attrs["multiscales"] = [{
-        "version": "0.4",
-        "axes": [{"name": n, "type": "space", "unit": "micrometer"} for n in "zyx"],
-        "datasets": [
-            {"path": "0", "coordinateTransformations": [{"type": "scale", "scale": [2.0, 0.5, 0.5]}]},
-            {"path": "1", "coordinateTransformations": [{"type": "scale", "scale": [4.0, 1.0, 1.0]}]},
-        ],
-    }]
-
-
 def main():
-    import mrcfile, nrrd, tifffile, zarr
+    import mrcfile, nrrd, tifffile
 
     print("versions:", json.dumps({"numpy": np.__version__, "tifffile": tifffile.__version__,
-                                    "pynrrd": nrrd.__version__, "mrcfile": mrcfile.__version__,
-                                    "zarr": zarr.__version__}))
+                                    "pynrrd": nrrd.__version__, "mrcfile": mrcfile.__version__}))
     zyx = np.ascontiguousarray(labels().transpose())
-    formats = sys.argv[1:] or ["tiff", "nrrd", "mrc", "zarr"]
+    formats = sys.argv[1:] or ["tiff", "nrrd", "mrc"]
     for f in formats:
-        {"tiff": tiffs, "nrrd": nrrds, "mrc": mrcs, "zarr": zarrs}[f](zyx)
+        {"tiff": tiffs, "nrrd": nrrds, "mrc": mrcs}[f](zyx)
 
 
 if __name__ == "__main__":

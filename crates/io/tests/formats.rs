@@ -1,5 +1,5 @@
 //! Volumes written by the formats' own tools (`data/formats/`, made by
-//! `data/formats/make.py`: tifffile, pynrrd, mrcfile, zarr): each reads as the same
+//! `data/formats/make.py`: tifffile, pynrrd, mrcfile): each reads as the same
 //! labels with the spacing and units its metadata give; and round trips.
 
 use std::path::{Path, PathBuf};

@@ -12,7 +12,7 @@
 //!   reader; the same surface written as OBJ and counted.
 //! - **Failed writes** leave nothing behind: missing directory, a directory as target,
 //!   unknown extension, an invalid mesh (and an existing file is kept unchanged).
-//! - [`formats`]: TIFF, NRRD, MRC and Zarr samples written by the formats' own Python
+//! - [`formats`]: TIFF, NRRD and MRC samples written by the formats' own Python
 //!   tools read as the same labels, spacing and units; round trips.
 //! - [`fuzz_readers`]: mutated files never make a reader panic; replayed regressions.
 //! - [`hostile`]: small files declaring huge sizes or exploding scene graphs are refused
