@@ -155,8 +155,9 @@ pub(crate) struct CheckArgs {
 #[derive(Args, Debug, Clone)]
 pub(crate) struct InputArgs {
     /// Input volume: .vol, .longvol, .pgm3d (DGtal), .vox (MagicaVoxel), .nii, .nii.gz
-    /// (NIfTI-1), .vti (VTK image data), .npy (NumPy, shape (X, Y, Z)), or raw data with
-    /// --dims.
+    /// (NIfTI-1), .vti (VTK image data), .npy (NumPy, shape (X, Y, Z)), .tif/.tiff (a
+    /// stack; or a directory or 'slice_*.tif' pattern of slices), .nrrd/.nhdr (NRRD,
+    /// .seg.nrrd), .mrc/.map/.rec (MRC), or raw data with --dims.
     pub(crate) input: PathBuf,
     /// Make a binary volume: voxels whose value (label or grey level) is > T are inside.
     /// Needed for grey-level data (fractional, negative or scaled values).
@@ -247,7 +248,8 @@ pub(crate) struct RegularizeArgs {
     pub(crate) input: InputArgs,
     /// Output mesh: .obj (quads, one group per interface, with an .mtl for coloured
     /// inputs), .ply (binary quads, face labels and colours), .glb or .gltf (glTF 2.0,
-    /// triangulated, one material per colour).
+    /// triangulated, one material per colour), .stl (binary, triangles only) or .vtp
+    /// (VTK PolyData: quads, face labels and colours as cell data).
     /// With --split interfaces or regions, a directory (created if missing).
     #[arg(short, long, value_name = "OUTPUT")]
     pub(crate) output: PathBuf,
@@ -455,6 +457,10 @@ pub(crate) enum SplitFormat {
     Glb,
     /// glTF JSON with an embedded buffer.
     Gltf,
+    /// Binary STL (triangles; with --split regions, one closed solid per file).
+    Stl,
+    /// VTK XML PolyData with face labels.
+    Vtp,
 }
 
 impl SplitFormat {
@@ -464,6 +470,8 @@ impl SplitFormat {
             SplitFormat::Obj => "obj",
             SplitFormat::Glb => "glb",
             SplitFormat::Gltf => "gltf",
+            SplitFormat::Stl => "stl",
+            SplitFormat::Vtp => "vtp",
         }
     }
 }

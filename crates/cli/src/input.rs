@@ -14,10 +14,11 @@ use crate::print_stdout;
 
 /// Reads INPUT (raw with `--dims`, else by extension), applies `--spacing`, then
 /// `--threshold` (or checks that grey levels are labels), `--labels` and the background.
-pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palette>)> {
+/// Also returns the palette and the unit of the spacing, where the file has them.
+pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palette>, Option<String>)> {
     let path = &args.input;
     let is_raw = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("raw"));
-    let (voxels, palette) = match args.dims {
+    let (voxels, palette, units) = match args.dims {
         Some(dims) => {
             let spec = RawSpec {
                 dims,
@@ -25,7 +26,7 @@ pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palett
                 endian: args.endian.unwrap_or_default(),
                 spacing: args.spacing.unwrap_or(glam::DVec3::ONE),
             };
-            (read_raw(path, &spec)?, None)
+            (read_raw(path, &spec)?, None, None)
         }
         None if is_raw => bail!("{}: raw data have no header: give --dims X,Y,Z and --dtype", path.display()),
         None => {
@@ -33,9 +34,11 @@ pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palett
                 bail!("{}: --model applies to MagicaVoxel .vox files", path.display());
             }
             let loaded = read_voxels_with(path, &ReadOptions { vox_model: args.model })?;
-            (loaded.voxels, loaded.palette)
+            (loaded.voxels, loaded.palette, loaded.units)
         }
     };
+    // A unit the file gives no longer applies to spacing given on the command line.
+    let units = if args.spacing.is_some() { None } else { units };
     let voxels = match args.spacing {
         Some(s) => voxels.with_spacing(s).with_context(|| format!("{}: --spacing", path.display()))?,
         None => voxels,
@@ -64,7 +67,7 @@ pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palett
     } else if let Some(b) = args.background {
         volume = volume.with_background(Some(b));
     }
-    Ok((volume, palette))
+    Ok((volume, palette, units))
 }
 
 /// Whether INPUT is voxel art (the voxel-art preset's input).
@@ -81,14 +84,17 @@ pub(crate) fn surface_of(args: &InputArgs, volume: &LabelVolume, map: &RegionMap
 /// `voxreg info`: the volume's dimensions and labels, and its digital surface's cells.
 pub(crate) fn info(args: &InputArgs) -> Result<()> {
     let mut out = String::new();
-    let (volume, _) = read_input(args)?;
+    let (volume, palette, units) = read_input(args)?;
     let preset = if voxel_art(args) { Preset::VoxelArt } else { Preset::Default };
     let map = args.region_map()?.unwrap_or_else(|| preset.params().regions);
     let [x, y, z] = volume.dims();
     let s = volume.spacing();
     writeln!(out, "file: {}", args.input.display()).ok();
     writeln!(out, "dimensions: {x} x {y} x {z} ({} voxels)", volume.len()).ok();
-    writeln!(out, "spacing: {} {} {}", s.x, s.y, s.z).ok();
+    match units {
+        Some(u) => writeln!(out, "spacing: {} {} {} {u}", s.x, s.y, s.z).ok(),
+        None => writeln!(out, "spacing: {} {} {}", s.x, s.y, s.z).ok(),
+    };
     if voxel_art(args) {
         let bytes =
             std::fs::read(&args.input).with_context(|| format!("{}: cannot read", args.input.display()))?;
@@ -104,7 +110,12 @@ pub(crate) fn info(args: &InputArgs) -> Result<()> {
     };
     writeln!(out, "labels:").ok();
     for (label, count) in volume.label_counts() {
-        writeln!(out, "  {label}: {count} voxels").ok();
+        // Names the file gives its labels (`.seg.nrrd` segments), not the generic ones.
+        let name = palette.as_ref().and_then(|p| p.material(label)).map(|m| m.name.as_str());
+        match name.filter(|&n| n != format!("color_{label}")) {
+            Some(name) => writeln!(out, "  {label}: {count} voxels ({name})").ok(),
+            None => writeln!(out, "  {label}: {count} voxels").ok(),
+        };
     }
     let surface = surface_of(args, &volume, &map)?;
     let c = surface.counts();

@@ -94,7 +94,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     params.validate()?;
     let stages = Stages::new(args.quiet);
     let path = &args.input.input;
-    let ((volume, palette), read) = stages.run("read volume", || input::read_input(&args.input))?;
+    let ((volume, palette, _units), read) = stages.run("read volume", || input::read_input(&args.input))?;
     output::check_volume(args, product, &volume)?;
     let (mut regularizer, _) = stages.run("digital surface", || {
         Regularizer::from_volume(&volume, &params.regions)

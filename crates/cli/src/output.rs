@@ -197,9 +197,12 @@ pub(crate) fn check_upscaled(
 fn check_extension(path: &Path, product: Product<'_>) -> Result<()> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     match (product, ext.as_deref()) {
-        (Product::Mesh, Some("obj" | "ply" | "glb" | "gltf")) => Ok(()),
+        (Product::Mesh, Some("obj" | "ply" | "glb" | "gltf" | "stl" | "vtp")) => Ok(()),
         (Product::Mesh, _) => {
-            bail!("{}: unsupported output format (expected .obj, .ply, .glb or .gltf)", path.display())
+            bail!(
+                "{}: unsupported output format (expected .obj, .ply, .glb, .gltf, .stl or .vtp)",
+                path.display()
+            )
         }
         (Product::Volume { factor }, Some("vox" | "vol")) => {
             if !(1..=16).contains(&factor) {

@@ -148,8 +148,8 @@ fn bad_input_is_a_clear_error_and_writes_nothing() {
         ),
         (vec!["regularize".into(), "missing.vol".into(), "-o".into(), out_str.into()], "missing.vol"),
         (
-            vec!["regularize".into(), data("cat10.vol").display().to_string(), "-o".into(), "out.stl".into()],
-            "out.stl",
+            vec!["regularize".into(), data("cat10.vol").display().to_string(), "-o".into(), "out.off".into()],
+            "out.off",
         ),
         (
             vec![

@@ -347,3 +347,44 @@ fn every_bundled_format_reads_through_the_cli() {
     assert!(err.starts_with(&format!("error: {}: ", bad.display())), "{err}");
     assert!(!err.contains("panicked"), "{err}");
 }
+
+/// `voxreg info` of the samples of `data/formats/` (written by tifffile, pynrrd,
+/// mrcfile: see `data/formats/make.py`): dimensions, spacing with its unit, segment
+/// names.
+#[test]
+fn info_snapshots_of_scientific_formats() {
+    let root = data("formats");
+    for name in
+        ["stack_imagej.tif", "stack.ome.tif", "slices", "organs.seg.nrrd", "detached.nhdr", "mode6.mrc"]
+    {
+        let path = root.join(name);
+        let text = info(&[path.to_str().unwrap()]).replace(root.to_str().unwrap(), "data/formats");
+        insta::assert_snapshot!(format!("info_{}", name.replace('.', "_")), text);
+    }
+}
+
+/// A broken file of each new reader: one line naming the file on stderr, exit status 1.
+#[test]
+fn broken_scientific_files_fail_with_one_line() {
+    let dir = tempfile::tempdir().unwrap();
+    let cases = [
+        ("bad.tif", &b"II*\x00\x08\x00\x00\x00\xff"[..], "bad.tif: "),
+        (
+            "bad.nrrd",
+            b"NRRD0004\ntype: uchar\ndimension: 3\nsizes: 9 9 9\nencoding: raw\n\n\x01",
+            "truncated data",
+        ),
+        ("bad.mrc", b"short", "bad.mrc: not an MRC file"),
+    ];
+    for (name, bytes, expected) in cases {
+        let path = dir.path().join(name);
+        std::fs::write(&path, bytes).unwrap();
+        let out =
+            voxreg(&["regularize", path.to_str().unwrap(), "-o", dir.path().join("m.stl").to_str().unwrap()]);
+        assert_eq!(out.status.code(), Some(1), "{name}");
+        let err = stderr(&out);
+        assert_eq!(err.trim_end().lines().count(), 1, "{name}: {err}");
+        assert!(err.contains(path.to_str().unwrap()) && err.contains(expected), "{name}: {err}");
+        assert!(!dir.path().join("m.stl").exists());
+    }
+}

@@ -285,3 +285,33 @@ fn split_options_are_checked_and_write_nothing_on_error() {
     let text = std::fs::read_to_string(objs.join("interface_1_2.obj")).unwrap();
     assert!(text.contains("\ng interface_1_2\n"), "{text}");
 }
+
+/// A 3D Slicer segmentation to one closed STL solid per segment, and to one VTK
+/// PolyData file: the binary writers through the CLI.
+#[test]
+fn seg_nrrd_to_stl_solids_and_vtp() {
+    let input = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../data/formats/organs.seg.nrrd"));
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("solids");
+    let args = ["regularize", input.to_str().unwrap(), "--split", "regions", "--split-format", "stl"];
+    run_ok(&[&args[..], &["-o", out.to_str().unwrap()]].concat());
+    let mut names: Vec<String> = std::fs::read_dir(&out)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["region_1.stl", "region_2.stl"]);
+    for name in &names {
+        let bytes = std::fs::read(out.join(name)).unwrap();
+        let triangles = u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize;
+        assert!(triangles > 0 && bytes.len() == 84 + 50 * triangles, "{name}");
+    }
+    let vtp = dir.path().join("organs.vtp");
+    run_ok(&["regularize", input.to_str().unwrap(), "-o", vtp.to_str().unwrap()]);
+    let text = String::from_utf8_lossy(&std::fs::read(&vtp).unwrap()).into_owned();
+    assert!(
+        text.starts_with("<?xml")
+            && text.contains(r#"Name="inner_label""#)
+            && text.contains(r#"Name="color""#)
+    );
+}

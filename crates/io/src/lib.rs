@@ -22,6 +22,14 @@
 //!   ASCII, base64 or appended, raw or zlib-compressed.
 //! - NumPy `.npy` (versions 1 to 3): [`read_npy`], [`read_npy_bytes`]; a 3-D array
 //!   `a[x, y, z]`, C or Fortran order.
+//! - TIFF stacks `.tif`, `.tiff` (multi-page, or a directory or pattern of single-page
+//!   slices): [`read_tiff`], [`read_tiff_bytes`], [`read_tiff_slices`]; 8 to 64-bit
+//!   integer or float greyscale, spacing and units from OME-TIFF or ImageJ metadata.
+//! - NRRD `.nrrd`, `.nhdr` (detached), and 3D Slicer's `.seg.nrrd`: [`read_nrrd`],
+//!   [`read_nrrd_bytes`]; raw, gzip or ascii, `space directions`/`space origin`,
+//!   `space units`; segment names and colours as the palette.
+//! - MRC/CCP4 `.mrc`, `.map`, `.rec`: [`read_mrc`], [`read_mrc_bytes`]; modes 0, 1, 2
+//!   and 6, voxel size in ångström from the cell.
 //! - Raw data, whose layout ([`RawSpec`]: dimensions, [`DataType`], [`Endian`],
 //!   spacing) the caller gives: [`read_raw`], [`read_raw_bytes`].
 //!
@@ -35,8 +43,9 @@
 //! **Writing meshes.** A [`QuadMesh`] (positions, quads, `[inner, outer]` labels per
 //! face, named [`FaceGroup`]s) is built from a digital surface by
 //! [`QuadMesh::from_surface`] and written by [`write_mesh`], which picks the format by
-//! extension: ASCII OBJ with one group per interface ([`write_obj`]) or binary PLY with
-//! per-face labels ([`write_ply`]); [`write_ply_with_vertex_scalar`] adds one value
+//! extension: ASCII OBJ with one group per interface ([`write_obj`]), binary PLY with
+//! per-face labels ([`write_ply`]), glTF ([`write_gltf`]), binary STL ([`write_stl`])
+//! or VTK PolyData with per-face labels and colours ([`write_vtp`]); [`write_ply_with_vertex_scalar`] adds one value
 //! per vertex (a `float` property and a colour ramp) for inspecting a field such as the
 //! AT feature field, and [`write_ply_with_vertex_field`] the same with given colours
 //! (geodesic distances with iso-lines). Writers go through a temporary file renamed onto
@@ -78,8 +87,10 @@ mod limits;
 mod longvol;
 mod material;
 mod mesh;
+mod mrc;
 mod nifti;
 mod npy;
+mod nrrd;
 mod obj;
 mod orient;
 mod pgm3d;
@@ -87,10 +98,13 @@ mod ply;
 mod raw;
 mod read_mesh;
 mod samples;
+mod stl;
+mod tiff;
 mod vol;
 mod volume;
 mod vox;
 mod vti;
+mod vtp;
 mod write_volume;
 
 pub use error::IoError;
@@ -105,14 +119,18 @@ pub use material::{Material, Palette};
 pub use mesh::{
     interface_name, region_name, write_file_atomically, write_mesh, FaceGroup, MeshBatch, QuadMesh,
 };
+pub use mrc::{read_mrc, read_mrc_bytes};
 pub use nifti::{read_nifti, read_nifti_bytes};
 pub use npy::{read_npy, read_npy_bytes};
+pub use nrrd::{read_nrrd, read_nrrd_bytes};
 pub use obj::write_obj;
 pub use pgm3d::{read_pgm3d, read_pgm3d_bytes};
 pub use ply::{scalar_ramp, write_ply, write_ply_with_vertex_field, write_ply_with_vertex_scalar};
 pub use raw::{read_raw, read_raw_bytes, RawSpec};
 pub use read_mesh::{read_mesh, read_mesh_bytes};
 pub use samples::{DataType, Endian};
+pub use stl::write_stl;
+pub use tiff::{read_tiff, read_tiff_bytes, read_tiff_slices, tiff_slices};
 pub use vol::{read_vol, read_vol_bytes};
 pub use volume::{
     is_voxel_art, read_volume, read_voxels, read_voxels_with, LoadedVolume, LoadedVoxels, ReadOptions,
@@ -123,4 +141,5 @@ pub use vox::{
     VOX_MAX_PLACED_VOXELS,
 };
 pub use vti::{read_vti, read_vti_bytes};
+pub use vtp::write_vtp;
 pub use write_volume::{write_vol, write_volume, write_vox, VOX_MAX_MODEL};

@@ -7,7 +7,7 @@ use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, InterfaceId, Patch, RegionId};
 
 use crate::volume::lowercase_extension;
-use crate::{write_gltf, write_obj, write_ply, IoError, Material, Palette};
+use crate::{write_gltf, write_obj, write_ply, write_stl, write_vtp, IoError, Material, Palette};
 
 /// A mesh of quads with two labels per face and named groups of faces: what the
 /// writers take.
@@ -383,7 +383,9 @@ impl MeshBatch {
 ///
 /// - `.obj`: Wavefront OBJ, ASCII, with groups, see [`write_obj`];
 /// - `.ply`: binary little-endian PLY with per-face labels (and colours), see [`write_ply`];
-/// - `.glb`, `.gltf`: glTF 2.0 with materials, see [`write_gltf`].
+/// - `.glb`, `.gltf`: glTF 2.0 with materials, see [`write_gltf`];
+/// - `.stl`: binary STL, triangles only, see [`write_stl`];
+/// - `.vtp`: VTK XML PolyData with per-face labels (and colours), see [`write_vtp`].
 ///
 /// Fails with [`IoError::UnsupportedExtension`] for any other name, before creating
 /// anything. Like every writer of this crate, it writes a temporary file next to
@@ -394,9 +396,11 @@ pub fn write_mesh(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
         Some("obj") => write_obj(path, mesh),
         Some("ply") => write_ply(path, mesh),
         Some("glb" | "gltf") => write_gltf(path, mesh),
+        Some("stl") => write_stl(path, mesh),
+        Some("vtp") => write_vtp(path, mesh),
         _ => Err(IoError::UnsupportedExtension {
             path: path.to_path_buf(),
-            expected: ".obj, .ply, .glb or .gltf",
+            expected: ".obj, .ply, .glb, .gltf, .stl or .vtp",
         }),
     }
 }

@@ -21,6 +21,9 @@ pub struct LoadedVolume {
     /// (MagicaVoxel `.vox`: 256 entries, entry 0, the background, transparent); `None`
     /// for formats without (`.vol`).
     pub palette: Option<Palette>,
+    /// The unit of the spacing and origin, where the file names one (`mm`, `µm`, `nm`,
+    /// `Å`...).
+    pub units: Option<String>,
 }
 
 /// Reads a labeled volume, choosing the format by the file's extension, as
@@ -30,14 +33,14 @@ pub struct LoadedVolume {
 /// with [`IoError::Unsupported`]: read them with [`read_voxels`] and threshold them
 /// ([`Voxels::threshold`]).
 pub fn read_volume(path: &Path) -> Result<LoadedVolume, IoError> {
-    let LoadedVoxels { voxels, palette } = read_voxels(path)?;
+    let LoadedVoxels { voxels, palette, units } = read_voxels(path)?;
     let volume = voxels.into_labels().map_err(|e| {
         IoError::unsupported(
             path,
             format!("grey-level data, {e}: threshold them (read_voxels, Voxels::threshold)"),
         )
     })?;
-    Ok(LoadedVolume { volume, palette })
+    Ok(LoadedVolume { volume, palette, units })
 }
 
 /// The voxels read from a file (labels or grey levels), with its palette if any.
@@ -47,10 +50,13 @@ pub struct LoadedVoxels {
     pub voxels: Voxels,
     /// As [`LoadedVolume::palette`].
     pub palette: Option<Palette>,
+    /// As [`LoadedVolume::units`].
+    pub units: Option<String>,
 }
 
 /// The extensions [`read_voxels`] knows, for error messages.
-const KNOWN_EXTENSIONS: &str = ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti or .npy";
+const KNOWN_EXTENSIONS: &str =
+    ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd, .nhdr, .mrc, .map or .rec";
 
 /// Reads the voxels of a file, labels or grey levels, choosing the format by the
 /// file's extension (case insensitive):
@@ -61,7 +67,12 @@ const KNOWN_EXTENSIONS: &str = ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vt
 /// - `.vox`: MagicaVoxel, see [`read_vox`](crate::read_vox);
 /// - `.nii`, `.nii.gz`: NIfTI-1, see [`read_nifti`](crate::read_nifti);
 /// - `.vti`: VTK XML image data, see [`read_vti`](crate::read_vti);
-/// - `.npy`: NumPy array, see [`read_npy`](crate::read_npy).
+/// - `.npy`: NumPy array, see [`read_npy`](crate::read_npy);
+/// - `.tif`, `.tiff`: a TIFF stack, see [`read_tiff`](crate::read_tiff); a directory, or a
+///   file name with `*` or `?`: the TIFF slices it holds or matches, stacked in name order
+///   (see [`tiff_slices`](crate::tiff_slices));
+/// - `.nrrd`, `.nhdr` (and `.seg.nrrd`): NRRD, see [`read_nrrd`](crate::read_nrrd);
+/// - `.mrc`, `.map`, `.rec`: MRC/CCP4 maps, see [`read_mrc`](crate::read_mrc).
 ///
 /// Fails with [`IoError::UnsupportedExtension`] for any other name, and with
 /// [`IoError::Unsupported`] for `.raw` (which has no header: see
@@ -79,7 +90,11 @@ pub struct ReadOptions {
 
 /// [`read_voxels`] with `options`.
 pub fn read_voxels_with(path: &Path, options: &ReadOptions) -> Result<LoadedVoxels, IoError> {
-    let plain = |voxels| Ok(LoadedVoxels { voxels, palette: None });
+    let plain = |voxels| Ok(LoadedVoxels { voxels, palette: None, units: None });
+    let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+    if path.is_dir() || name.contains(['*', '?']) {
+        return crate::read_tiff_slices(&crate::tiff_slices(path)?, path);
+    }
     let is_nii_gz = path
         .file_name()
         .and_then(|n| n.to_str())
@@ -91,12 +106,16 @@ pub fn read_voxels_with(path: &Path, options: &ReadOptions) -> Result<LoadedVoxe
         Some("pgm3d") => plain(Voxels::Labels(read_pgm3d(path)?)),
         Some("vox") => {
             let vox = crate::VoxOptions { model: options.vox_model };
-            let LoadedVolume { volume, palette } = crate::read_vox_bytes_with(&read_file(path)?, path, &vox)?;
-            Ok(LoadedVoxels { voxels: Voxels::Labels(volume), palette })
+            let LoadedVolume { volume, palette, .. } =
+                crate::read_vox_bytes_with(&read_file(path)?, path, &vox)?;
+            Ok(LoadedVoxels { voxels: Voxels::Labels(volume), palette, units: None })
         }
         Some("nii") => plain(read_nifti(path)?),
         Some("vti") => plain(read_vti(path)?),
         Some("npy") => plain(read_npy(path)?),
+        Some("tif" | "tiff") => crate::read_tiff(path),
+        Some("nrrd" | "nhdr") => crate::read_nrrd(path),
+        Some("mrc" | "map" | "rec") => crate::read_mrc(path),
         Some("raw") => Err(IoError::unsupported(
             path,
             "raw voxel data have no header: give their dimensions and type (read_raw with a RawSpec)",

@@ -170,7 +170,7 @@ pub fn read_vox_bytes_with(bytes: &[u8], path: &Path, options: &VoxOptions) -> R
     let volume = LabelVolume::from_x_fastest(dims, labels)
         .and_then(|v| v.with_origin(DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64) + 0.5))
         .map_err(|source| IoError::Volume { path: path.to_path_buf(), source })?;
-    Ok(LoadedVolume { volume, palette: Some(palette(&data)) })
+    Ok(LoadedVolume { volume, palette: Some(palette(&data)), units: None })
 }
 
 /// The positions, in each model's voxel list, of voxels of colour index 0 (empty in

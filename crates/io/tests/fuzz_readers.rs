@@ -16,8 +16,9 @@ use std::path::{Path, PathBuf};
 use flate2::write::{GzEncoder, ZlibEncoder};
 use flate2::Compression;
 use voxreg_io::{
-    read_longvol_bytes, read_nifti_bytes, read_npy_bytes, read_pgm3d_bytes, read_raw_bytes, read_vol_bytes,
-    read_vox_bytes, read_vti_bytes, DataType, Endian, IoError, RawSpec,
+    read_longvol_bytes, read_mrc_bytes, read_nifti_bytes, read_npy_bytes, read_nrrd_bytes, read_pgm3d_bytes,
+    read_raw_bytes, read_tiff_bytes, read_vol_bytes, read_vox_bytes, read_vti_bytes, DataType, Endian,
+    IoError, RawSpec,
 };
 
 fn data(name: &str) -> Vec<u8> {
@@ -38,6 +39,9 @@ fn readers() -> Vec<(&'static str, Reader)> {
         ("nifti", |b| read_nifti_bytes(b, Path::new(PATH)).map(drop)),
         ("vti", |b| read_vti_bytes(b, Path::new(PATH)).map(drop)),
         ("npy", |b| read_npy_bytes(b, Path::new(PATH)).map(drop)),
+        ("tiff", |b| read_tiff_bytes(b, Path::new(PATH)).map(drop)),
+        ("nrrd", |b| read_nrrd_bytes(b, Path::new(PATH)).map(drop)),
+        ("mrc", |b| read_mrc_bytes(b, Path::new(PATH)).map(drop)),
         ("raw", |b| {
             read_raw_bytes(b, Path::new(PATH), &RawSpec { dtype: DataType::U16, ..RawSpec::new([4, 3, 2]) })
                 .map(drop)
@@ -277,6 +281,9 @@ fn seeds(reader: &str) -> Vec<Vec<u8>> {
         "nifti" => vec![nifti(), gzip(&nifti())],
         "vti" => vtis(),
         "npy" => vec![npy()],
+        "mrc" => vec![data("formats/mode1.mrc"), data("formats/mode6.mrc")],
+        "nrrd" => vec![data("formats/labels.nrrd"), data("formats/organs.seg.nrrd")],
+        "tiff" => vec![data("formats/stack_imagej.tif"), data("formats/stack.ome.tif")],
         "raw" => vec![(0..48).collect(), [0u8; 48].to_vec()],
         _ => unreachable!(),
     }

@@ -12,14 +12,20 @@
 //!   reader; the same surface written as OBJ and counted.
 //! - **Failed writes** leave nothing behind: missing directory, a directory as target,
 //!   unknown extension, an invalid mesh (and an existing file is kept unchanged).
+//! - [`formats`]: TIFF, NRRD and MRC samples written by the formats' own Python
+//!   tools read as the same labels, spacing and units; round trips.
 //! - [`fuzz_readers`]: mutated files never make a reader panic; replayed regressions.
 //! - [`hostile`]: small files declaring huge sizes or exploding scene graphs are refused
 //!   before allocating; contradictory data (overlapping pieces, bad palettes) too.
 //! - [`materials`]: colours and materials from .vox palettes to glTF, OBJ/MTL and PLY.
+//! - [`mesh_formats`]: STL (closed solids of the right volume) and VTK PolyData, parsed
+//!   back by independent minimal readers.
 
+mod formats;
 mod fuzz_readers;
 mod hostile;
 mod materials;
+mod mesh_formats;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};
@@ -51,7 +57,7 @@ fn bundled_vol_files() {
         ("Al.100.vol", 100, Some(&[0, 1])),
     ];
     for (name, n, expected) in cases {
-        let LoadedVolume { volume, palette } = read_volume(&data(name)).unwrap();
+        let LoadedVolume { volume, palette, .. } = read_volume(&data(name)).unwrap();
         assert_eq!(volume.dims(), [n; 3], "{name}");
         assert_eq!(palette, None);
         assert_eq!(volume.background(), Some(0));
@@ -76,7 +82,7 @@ fn bunny_32_is_grey_levels_that_threshold_to_one_solid() {
 #[test]
 fn bundled_vox_files() {
     for (name, dims, colours) in [("chr_army1.vox", [8, 7, 12], 8), ("veh_fire.vox", [24, 58, 20], 17)] {
-        let LoadedVolume { volume, palette } = read_volume(&data(name)).unwrap();
+        let LoadedVolume { volume, palette, .. } = read_volume(&data(name)).unwrap();
         assert_eq!(volume.dims(), dims, "{name}");
         let found = labels(&volume);
         assert!(found.contains(&0), "{name}: some voxels are empty");
@@ -117,7 +123,13 @@ fn wrong_format_for_the_extension() {
     assert!(matches!(read_volume(&vox), Err(IoError::Format { .. })));
     let err = read_volume(&data("README.md")).unwrap_err();
     assert!(matches!(err, IoError::UnsupportedExtension { .. }));
-    assert!(err.to_string().ends_with("README.md: unknown file extension (expected .vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti or .npy)"), "{err}");
+    assert!(
+        err.to_string().ends_with(
+            "README.md: unknown file extension (expected .vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, \
+             .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd, .nhdr, .mrc, .map or .rec)"
+        ),
+        "{err}"
+    );
 }
 
 // ---------------------------------------------------------------- snapshots
@@ -351,11 +363,12 @@ fn write_onto_a_directory_fails_cleanly() {
 #[test]
 fn unknown_extension_creates_nothing() {
     let dir = tempfile::tempdir().unwrap();
-    for name in ["mesh.stl", "mesh"] {
+    for name in ["mesh.off", "mesh"] {
         let err = write_mesh(&dir.path().join(name), &single_voxel_mesh()).unwrap_err();
         assert!(matches!(err, IoError::UnsupportedExtension { .. }), "{err:?}");
         assert!(
-            err.to_string().ends_with("unknown file extension (expected .obj, .ply, .glb or .gltf)"),
+            err.to_string()
+                .ends_with("unknown file extension (expected .obj, .ply, .glb, .gltf, .stl or .vtp)"),
             "{err}"
         );
     }
