@@ -15,7 +15,7 @@ fn load(args: &RegularizeArgs) -> Result<Loaded> {
     let preset = args.preset.unwrap_or(if voxel_art { Preset::VoxelArt } else { Preset::Default });
     let params = args.params(voxel_art)?;
     params.validate()?;
-    let (volume, palette) = input::read_input(&args.input)?;
+    let (volume, palette, _units) = input::read_input(&args.input)?;
     let path = &args.input.input;
     let name =
         path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());

@@ -249,7 +249,7 @@ fn the_default_radius_stays_within_3_to_12_voxels_whatever_the_unit() {
     assert!((radius(DVec3::splat(1000.0)) / 1000.0 - 3.0).abs() < 1e-9);
     // Anisotropic: at least 3 of the finest step, at most 12 of the coarsest.
     let r = radius(DVec3::new(0.001, 0.001, 0.005));
-    assert!(r >= 0.003 && r <= 0.06, "{r}");
+    assert!((0.003..=0.06).contains(&r), "{r}");
     // A volume smaller than the ball: the diagonal.
     let one = LabelVolume::from_fn([1, 1, 1], |_| 1).with_spacing(DVec3::splat(0.001)).unwrap();
     let surface = DigitalSurface::from_volume(&one).unwrap();
