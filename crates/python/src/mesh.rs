@@ -197,10 +197,13 @@ impl Surface {
 fn check_extension(path: &std::path::Path) -> Result<()> {
     let ext = path.extension().and_then(|e| e.to_str()).map(str::to_ascii_lowercase);
     match ext.as_deref() {
-        Some("obj" | "ply" | "glb" | "gltf") => Ok(()),
+        Some("obj" | "ply" | "glb" | "gltf" | "stl" | "vtp") => Ok(()),
         _ => Err(Error::new(
             crate::error::Kind::Io,
-            format!("{}: unsupported output format (expected .obj, .ply, .glb or .gltf)", path.display()),
+            format!(
+                "{}: unsupported output format (expected .obj, .ply, .glb, .gltf, .stl or .vtp)",
+                path.display()
+            ),
         )),
     }
 }

@@ -52,8 +52,11 @@ def test_io_errors(tmp_path, data):
     with pytest.raises(voxreg.IoError):
         voxreg.read(data / "not_a.vox")
     mesh = voxreg.regularize(ball_labels(8, 3))
-    with pytest.raises(voxreg.IoError, match=r"unsupported output format \(expected .obj, .ply, .glb or .gltf\)"):
-        mesh.save(tmp_path / "m.stl")
+    with pytest.raises(voxreg.IoError, match=r"unsupported output format \(expected .obj, .ply, .glb, .gltf, .stl or .vtp\)"):
+        mesh.save(tmp_path / "m.off")
+    mesh.save(tmp_path / "m.stl")
+    mesh.save(tmp_path / "m.vtp")
+    assert (tmp_path / "m.stl").stat().st_size == 84 + 50 * 2 * len(mesh.quads)
     with pytest.raises(voxreg.IoError):
         mesh.save(tmp_path / "no" / "such" / "dir" / "m.ply")
     with pytest.raises(voxreg.ParameterError, match="unknown data type"):

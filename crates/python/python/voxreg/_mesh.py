@@ -169,7 +169,8 @@ class Mesh:
         """Writes the mesh with voxreg's writers, chosen by extension: ``.obj`` (quads, one
         group per interface, an ``.mtl`` for coloured meshes), ``.ply`` (binary, face
         labels and colours), ``.glb`` or ``.gltf`` (glTF 2.0, triangulated, one material
-        per colour). The same bytes as the CLI's for the same mesh. A mesh built from
+        per colour), ``.stl`` (binary, triangulated) or ``.vtp`` (VTK PolyData, labels and
+        colours as cell data). The same bytes as the CLI's for the same mesh. A mesh built from
         arrays is written without interface groups, one material per distinct colour."""
         path = os.fspath(path)
         if self._surface is not None:
