@@ -246,7 +246,14 @@ impl Regularizer {
                 let within = (1.0 - 1.0 / (1.0 + p.iteration as f64 / 20.0)).clamp(0.0, 1.0);
                 progress(&Event { stage, fraction: base + within / stages_total, iteration: Some(p) });
             };
-            let (x, info) = solver.solve_with(&energy, &mut report)?;
+            // Refinement rounds start from the last solution: the minimizer moves little
+            // when the normals and targets do, so CG needs fewer iterations to the same
+            // tolerance.
+            let (x, info) = if round > 0 {
+                solver.solve_from(&energy, &positions, &mut report)?
+            } else {
+                solver.solve_with(&energy, &mut report)?
+            };
             if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {
                 let h = surface.spacing();
                 return Err(RegularizeError::NotFinite(format!(
