@@ -122,15 +122,54 @@ pub(crate) fn trusted_drift(
     if trusted.is_empty() || trusted.iter().all(|&t| t) {
         return smoothed_displacements(surface, drift, sigma);
     }
-    // Three channels for the masked drift, and the trust indicator in a fourth pass.
-    let masked: Vec<DVec3> =
-        drift.iter().zip(trusted).map(|(d, &t)| if t { *d } else { DVec3::ZERO }).collect();
-    let weight: Vec<DVec3> = trusted.iter().map(|&t| DVec3::splat(if t { 1.0 } else { 0.0 })).collect();
-    let plain = smoothed_displacements(surface, drift, sigma);
-    let num = smoothed_displacements(surface, &masked, sigma);
-    let den = smoothed_displacements(surface, &weight, sigma);
+    // The plain drift, the masked drift and the trust indicator diffused together: one
+    // pass over the neighbour lists per step instead of three, each channel summed in the
+    // same order as `smoothed_displacements` does (identical results).
+    let steps = (4.0 * sigma * sigma).round() as usize;
+    let mut u: Vec<Channels> = drift
+        .iter()
+        .zip(trusted)
+        .map(|(d, &t)| Channels {
+            plain: *d,
+            masked: if t { *d } else { DVec3::ZERO },
+            weight: if t { 1.0 } else { 0.0 },
+        })
+        .collect();
+    let mut next = u.clone();
+    for _ in 0..steps {
+        next.par_iter_mut().enumerate().for_each(|(v, out)| {
+            let nb = surface.vertex_neighbours(VertexId(v as u32));
+            let c = u[v];
+            *out = if nb.is_empty() {
+                c
+            } else {
+                let (mut plain, mut masked, mut weight) = (DVec3::ZERO, DVec3::ZERO, 0.0);
+                for w in nb {
+                    let o = &u[w.index()];
+                    plain += o.plain;
+                    masked += o.masked;
+                    weight += o.weight;
+                }
+                let k = nb.len() as f64;
+                Channels {
+                    plain: 0.5 * (c.plain + plain / k),
+                    masked: 0.5 * (c.masked + masked / k),
+                    weight: 0.5 * (c.weight + weight / k),
+                }
+            };
+        });
+        std::mem::swap(&mut u, &mut next);
+    }
     const EPS: f64 = 1e-3;
-    num.iter().zip(&den).zip(&plain).map(|((n, w), p)| (*n + EPS * *p) / (w.x + EPS)).collect()
+    u.iter().map(|c| (c.masked + EPS * c.plain) / (c.weight + EPS)).collect()
+}
+
+/// The three quantities [`trusted_drift`] diffuses.
+#[derive(Copy, Clone)]
+struct Channels {
+    plain: DVec3,
+    masked: DVec3,
+    weight: f64,
 }
 
 /// Per vertex, the mean over its quads of the displacement of the quad's centre from
@@ -155,9 +194,27 @@ pub(crate) fn surfel_drift(surface: &DigitalSurface, positions: &[DVec3], input:
 
 #[cfg(test)]
 mod tests {
-    use voxreg_testkit::{digitize, Cuboid};
+    use voxreg_testkit::{digitize, Cuboid, Lcg, Sphere};
 
     use super::*;
+
+    #[test]
+    fn fused_trusted_drift_matches_three_separate_diffusions_bit_for_bit() {
+        let surface = DigitalSurface::from_volume(&digitize(&Sphere { radius: 7.4 }, 1.0)).unwrap();
+        let trusted = informative_vertices(&surface);
+        assert!(trusted.iter().any(|&t| t) && trusted.iter().any(|&t| !t));
+        let mut rng = Lcg::new(3);
+        let drift: Vec<DVec3> = (0..surface.num_vertices()).map(|_| rng.vec3(-0.2, 0.2)).collect();
+        let masked: Vec<DVec3> =
+            drift.iter().zip(&trusted).map(|(d, &t)| if t { *d } else { DVec3::ZERO }).collect();
+        let weight: Vec<DVec3> = trusted.iter().map(|&t| DVec3::splat(if t { 1.0 } else { 0.0 })).collect();
+        let plain = smoothed_displacements(&surface, &drift, 3.0);
+        let num = smoothed_displacements(&surface, &masked, 3.0);
+        let den = smoothed_displacements(&surface, &weight, 3.0);
+        let expected: Vec<DVec3> =
+            num.iter().zip(&den).zip(&plain).map(|((n, w), p)| (*n + 1e-3 * *p) / (w.x + 1e-3)).collect();
+        assert_eq!(trusted_drift(&surface, &drift, &trusted, 3.0), expected);
+    }
 
     #[test]
     fn plateau_interiors_are_not_informative() {

@@ -264,7 +264,14 @@ impl Regularizer {
                     input: Some(&targets),
                 });
             };
-            let (x, info) = solver.solve_with(&energy, &mut report)?;
+            // Refinement rounds start from the last solution: the minimizer moves little
+            // when the normals and targets do, so CG needs fewer iterations to the same
+            // tolerance.
+            let (x, info) = if round > 0 {
+                solver.solve_from(&energy, &positions, &mut report)?
+            } else {
+                solver.solve_with(&energy, &mut report)?
+            };
             if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {
                 let h = surface.spacing();
                 return Err(RegularizeError::NotFinite(format!(

@@ -240,6 +240,21 @@ impl Solver {
             Solver::Bounded(s) => s.solve_with(energy, progress).map(|(x, i)| (x, SolveInfo::Bounded(i))),
         }
     }
+
+    /// [`Solver::solve_with`], the conjugate gradient iterating from `start` (one
+    /// position per vertex; see [`CgSolver::solve_from`]). The direct and the bounded
+    /// solvers ignore `start`: the first is exact, the second starts inside its boxes.
+    pub fn solve_from(
+        &mut self,
+        energy: &Energy<'_>,
+        start: &[DVec3],
+        progress: &mut dyn FnMut(&Progress),
+    ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+        match self {
+            Solver::Cg(s) => s.solve_from(energy, start, progress).map(|(x, i)| (x, SolveInfo::Cg(i))),
+            _ => self.solve_with(energy, progress),
+        }
+    }
 }
 
 #[cfg(test)]

@@ -166,6 +166,40 @@ fn estimate_rule_meets_the_tolerance_on_larger_shapes() {
 }
 
 #[test]
+fn a_warm_start_meets_the_same_tolerance_in_fewer_iterations() {
+    // A refinement round's situation: solve with one normal field, then warm-start the
+    // solve with a slightly different one (normals moved by about 3 degrees) from that
+    // solution; both land within the
+    // tolerance of the exact minimizer, the warm one in fewer iterations than from cold.
+    let torus = Torus { major: 12.0, minor: 4.0 };
+    let s = DigitalSurface::from_volume(&digitize(&torus, 1.0)).unwrap();
+    let input = s.positions();
+    let second = NormalField::new(true_normals(&s, &torus));
+    let mut rng = Lcg::new(5);
+    let first = NormalField::new(second.as_slice().iter().map(|n| *n + 0.05 * rng.vec3(-1.0, 1.0)).collect());
+    let mut solver = CgSolver::for_surface(&s, CgParams::default()).unwrap();
+    let (x1, _) = solver.solve(&Energy::new(&s, &first, &input, EnergyParams::default()).unwrap()).unwrap();
+    let energy = Energy::new(&s, &second, &input, EnergyParams::default()).unwrap();
+    let x = exact(&energy);
+    let (cold, cold_info) = solver.solve(&energy).unwrap();
+    let (warm, warm_info) = solver.solve_from(&energy, &x1, &mut |_| {}).unwrap();
+    for (y, info) in [(&cold, &cold_info), (&warm, &warm_info)] {
+        let err = max_distance(&x, y);
+        assert!(err < 1e-3 && info.converged, "error {err} after {} iterations", info.iterations);
+    }
+    assert!(
+        warm_info.iterations < cold_info.iterations,
+        "warm {} vs cold {} iterations",
+        warm_info.iterations,
+        cold_info.iterations
+    );
+    // From the minimizer itself: no iteration needed.
+    let (y, info) = solver.solve_from(&energy, &x, &mut |_| {}).unwrap();
+    assert!(max_distance(&x, &y) < 1e-9 && info.iterations <= 1, "{} iterations", info.iterations);
+    assert!(solver.solve_from(&energy, &x[1..], &mut |_| {}).is_err());
+}
+
+#[test]
 fn descent_energy_decreases_monotonically() {
     let mut rng = Lcg::new(13);
     for (name, s) in cases() {
