@@ -100,6 +100,12 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         Regularizer::from_volume(&volume, &params.regions)
             .with_context(|| format!("{}: no surface to regularize", path.display()))
     })?;
+    let surfels = regularizer.surface().num_surfels();
+    voxreg_io::check_memory(
+        path,
+        &format!("the regularization of its {surfels} surfels"),
+        u128::from(regularizer.estimated_bytes()),
+    )?;
     let out = stages.pipeline(&params, |progress| {
         regularizer
             .run_with(&params, None, progress)

@@ -342,3 +342,17 @@ fn spacing_in_other_units_and_huge_radii_cost_no_more_than_bounded() {
         &["radius 400", "larger than the whole volume"],
     );
 }
+
+#[test]
+fn a_run_beyond_the_budget_is_refused_before_the_solve() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("m.ply");
+    let input = data("bunny-128.vol");
+    let start = Instant::now();
+    refused(
+        &["regularize", s(&input), "-o", s(&out), "--max-memory", "48M"],
+        &["bunny-128.vol: the regularization of its", "surfels", "memory limit"],
+    );
+    assert!(!out.exists());
+    assert!(start.elapsed().as_secs() < 20, "refused only after {:?}", start.elapsed());
+}

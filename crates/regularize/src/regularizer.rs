@@ -87,6 +87,10 @@ pub fn regularize(volume: &LabelVolume, params: &Params) -> Result<Output, Regul
     Regularizer::from_volume(volume, &params.regions)?.run(params)
 }
 
+/// Peak memory per surfel of a default run, with a margin: measured at 1,150 to 1,350
+/// bytes on label volumes of 0.8 to 1.5 million surfels (docs/performance.md).
+pub const BYTES_PER_SURFEL: u64 = 1_600;
+
 /// The front door's reusable form: keeps the digital surface, its solver (symbolic
 /// analysis, multigrid hierarchy) and the initial normal field across runs, for
 /// parameter sweeps and interactive use. A run whose solver settings or initial-normal
@@ -119,6 +123,14 @@ impl Regularizer {
         let mut r = Regularizer::new(surface);
         r.surface_seconds = t.elapsed().as_secs_f64();
         Ok(r)
+    }
+
+    /// An upper estimate of the memory a run of the default pipeline takes on this
+    /// surface, in bytes: [`BYTES_PER_SURFEL`] per surfel (the solver's operator,
+    /// hierarchy and vectors, the normals and the refinement's work arrays), so that a
+    /// caller can refuse a run that cannot fit before it starts.
+    pub fn estimated_bytes(&self) -> u64 {
+        self.surface.num_surfels() as u64 * BYTES_PER_SURFEL
     }
 
     /// The digital surface.
