@@ -495,7 +495,9 @@ impl Context {
         let spacing = surface.spacing();
         if !(radius.is_finite() && radius > 0.0) {
             return Err(NormalError::InvalidParameter(format!(
-                "integral invariant radius must be finite and positive, got {radius}"
+                "integral invariant radius must be finite and positive, got {radius} (voxel spacing {} {} {}: \
+                 too large or too small for double precision?)",
+                spacing.x, spacing.y, spacing.z
             )));
         }
         let diagonal = volume_diagonal(surface);
