@@ -495,8 +495,8 @@ impl Context {
         let spacing = surface.spacing();
         if !(radius.is_finite() && radius > 0.0) {
             return Err(NormalError::InvalidParameter(format!(
-                "integral invariant radius must be finite and positive, got {radius} (voxel spacing {} {} {}: \
-                 too large or too small for double precision?)",
+                "integral invariant radius must be finite and positive, got {radius} (a voxel spacing of \
+                 {} {} {} is out of range for double precision)",
                 spacing.x, spacing.y, spacing.z
             )));
         }
