@@ -13,7 +13,6 @@
 //! writes into the same directory removes entries whose process id is no longer running
 //! (where the system can tell: `/proc` on Linux).
 
-use std::ffi::OsStr;
 use std::path::{Path, PathBuf};
 use std::sync::{Mutex, MutexGuard, PoisonError};
 
@@ -127,7 +126,7 @@ fn is_running(pid: u32) -> bool {
     if !proc.join("self").exists() {
         return true;
     }
-    proc.join(OsStr::new(&pid.to_string())).exists()
+    proc.join(pid.to_string()).exists()
 }
 
 #[cfg(test)]

@@ -496,7 +496,7 @@ impl Context {
         if !(radius.is_finite() && radius > 0.0) {
             return Err(NormalError::InvalidParameter(format!(
                 "integral invariant radius must be finite and positive, got {radius} (a voxel spacing of \
-                 {} {} {} is out of range for double precision)",
+                 {:e} {:e} {:e} is out of range for double precision)",
                 spacing.x, spacing.y, spacing.z
             )));
         }

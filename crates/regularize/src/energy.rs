@@ -49,25 +49,15 @@ impl EnergyParams {
         let stiffest = self.beta.max(self.gamma);
         if stiffest > MAX_STIFFNESS_RATIO * self.alpha {
             return Err(RegularizeError::InvalidParams(format!(
-                "alpha {} is too small against beta {} and gamma {}: the system would be \
+                "alpha {:e} is too small against beta {:e} and gamma {:e}: the system would be \
                  numerically singular (alpha must be at least {:e} times the larger)",
-                Short(self.alpha),
-                Short(self.beta),
-                Short(self.gamma),
+                self.alpha,
+                self.beta,
+                self.gamma,
                 1.0 / MAX_STIFFNESS_RATIO
             )));
         }
         Ok(())
-    }
-}
-
-/// A number in the shorter of its plain and exponent forms, for messages.
-struct Short(f64);
-
-impl std::fmt::Display for Short {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        let (plain, exp) = (format!("{}", self.0), format!("{:e}", self.0));
-        f.write_str(if exp.len() < plain.len() { &exp } else { &plain })
     }
 }
 
