@@ -97,15 +97,18 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     let ((volume, palette, _units), read) = stages.run("read volume", || input::read_input(&args.input))?;
     output::check_volume(args, product, &volume)?;
     let (mut regularizer, _) = stages.run("digital surface", || {
+        // Refused before the surface is built: the count is one pass over the voxels.
+        let bytes = Regularizer::estimated_bytes_of(&volume, &params.regions)
+            .with_context(|| format!("{}: no surface to regularize", path.display()))?;
+        let surfels = bytes / voxreg_regularize::BYTES_PER_SURFEL;
+        voxreg_io::check_memory(
+            path,
+            &format!("the regularization of its {surfels} surfels"),
+            u128::from(bytes),
+        )?;
         Regularizer::from_volume(&volume, &params.regions)
             .with_context(|| format!("{}: no surface to regularize", path.display()))
     })?;
-    let surfels = regularizer.surface().num_surfels();
-    voxreg_io::check_memory(
-        path,
-        &format!("the regularization of its {surfels} surfels"),
-        u128::from(regularizer.estimated_bytes()),
-    )?;
     let out = stages.pipeline(&params, |progress| {
         regularizer
             .run_with(&params, None, progress)

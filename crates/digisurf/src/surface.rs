@@ -154,6 +154,13 @@ struct RawFace {
     labels: [u32; 2],
 }
 
+impl RawFace {
+    /// Whether the face becomes a surfel: not on an open border (no region outside).
+    fn is_inner(&self) -> bool {
+        self.regions[0] != NONE && self.regions[1] != NONE
+    }
+}
+
 /// Fills `rs`/`ls` with the regions and labels of voxel layer `z`, `x` fastest; the
 /// outside beyond the domain.
 fn fill_layer(
@@ -190,17 +197,52 @@ fn range_faces(
     outside: (u32, u32),
     range: std::ops::Range<usize>,
 ) -> Result<Vec<Vec<RawFace>>, SurfaceError> {
+    let mut out = Vec::with_capacity(range.len());
+    scan_slabs(volume, regions, outside, range, |prev, cur, k| {
+        let mut faces = Vec::new();
+        slab_faces(volume.dims(), outside, k, prev, cur, |f| {
+            if f.is_inner() {
+                faces.push(f);
+            }
+        });
+        out.push(faces);
+    })?;
+    Ok(out)
+}
+
+/// The number of faces in slabs `range`, without storing them.
+fn range_face_count(
+    volume: &LabelVolume,
+    regions: &Regions,
+    outside: (u32, u32),
+    range: std::ops::Range<usize>,
+) -> Result<u64, SurfaceError> {
+    let mut n = 0u64;
+    scan_slabs(volume, regions, outside, range, |prev, cur, k| {
+        slab_faces(volume.dims(), outside, k, prev, cur, |f| n += u64::from(f.is_inner()));
+    })?;
+    Ok(n)
+}
+
+/// Calls `visit(previous layer, current layer, k)` for each slab `k` of `range`, with
+/// rolling region/label layers.
+fn scan_slabs(
+    volume: &LabelVolume,
+    regions: &Regions,
+    outside: (u32, u32),
+    range: std::ops::Range<usize>,
+    mut visit: impl FnMut(&(Vec<u32>, Vec<u32>), &(Vec<u32>, Vec<u32>), usize),
+) -> Result<(), SurfaceError> {
     let [nx, ny, _] = volume.dims();
     let mut prev = (vec![0u32; nx * ny], vec![0u32; nx * ny]);
     let mut cur = (vec![0u32; nx * ny], vec![0u32; nx * ny]);
     fill_layer(volume, regions, outside, range.start as isize - 1, &mut prev.0, &mut prev.1)?;
-    let mut out = Vec::with_capacity(range.len());
     for k in range {
         fill_layer(volume, regions, outside, k as isize, &mut cur.0, &mut cur.1)?;
-        out.push(slab_faces(volume.dims(), outside, k, &prev, &cur));
+        visit(&prev, &cur, k);
         std::mem::swap(&mut prev, &mut cur);
     }
-    Ok(out)
+    Ok(())
 }
 
 /// The faces of slab `k`, in scan order: faces perpendicular to z between voxel layers
@@ -211,16 +253,16 @@ fn slab_faces(
     k: usize,
     (prev_r, prev_l): &(Vec<u32>, Vec<u32>),
     (cur_r, cur_l): &(Vec<u32>, Vec<u32>),
-) -> Vec<RawFace> {
+    mut emit: impl FnMut(RawFace),
+) {
     let [nx, ny, nz] = dims;
     let (or, ol) = outside;
     let kk = k as u32;
-    let mut out = Vec::new();
     for y in 0..ny {
         for x in 0..nx {
             let i = x + nx * y;
             if prev_r[i] != cur_r[i] {
-                out.push(RawFace {
+                emit(RawFace {
                     cell: [x as u32, y as u32, kk],
                     axis: 2,
                     regions: [prev_r[i], cur_r[i]],
@@ -230,19 +272,14 @@ fn slab_faces(
         }
     }
     if k == nz {
-        return out;
+        return;
     }
     for y in 0..ny {
         for x in 0..=nx {
             let (a, la) = if x > 0 { (cur_r[x - 1 + nx * y], cur_l[x - 1 + nx * y]) } else { (or, ol) };
             let (b, lb) = if x < nx { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { (or, ol) };
             if a != b {
-                out.push(RawFace {
-                    cell: [x as u32, y as u32, kk],
-                    axis: 0,
-                    regions: [a, b],
-                    labels: [la, lb],
-                });
+                emit(RawFace { cell: [x as u32, y as u32, kk], axis: 0, regions: [a, b], labels: [la, lb] });
             }
         }
     }
@@ -251,16 +288,10 @@ fn slab_faces(
             let (a, la) = if y > 0 { (cur_r[x + nx * (y - 1)], cur_l[x + nx * (y - 1)]) } else { (or, ol) };
             let (b, lb) = if y < ny { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { (or, ol) };
             if a != b {
-                out.push(RawFace {
-                    cell: [x as u32, y as u32, kk],
-                    axis: 1,
-                    regions: [a, b],
-                    labels: [la, lb],
-                });
+                emit(RawFace { cell: [x as u32, y as u32, kk], axis: 1, regions: [a, b], labels: [la, lb] });
             }
         }
     }
-    out
 }
 
 /// Sequential state of the scan: vertex numbering over two rolling corner layers.
@@ -443,6 +474,31 @@ impl DigitalSurface {
         surface.build_vertex_lists();
         surface.build_components();
         Ok(surface)
+    }
+
+    /// The number of surfels [`DigitalSurface::new`] would build from `volume` and `map`,
+    /// counted in one pass over the voxels without storing a face, so that a caller can
+    /// refuse a surface too large for its memory before building it.
+    pub fn count_surfels(volume: &LabelVolume, map: &RegionMap) -> Result<u64, SurfaceError> {
+        let regions = map.resolve(volume)?;
+        let nz = volume.dims()[2];
+        let outside = match (volume.background(), regions.background()) {
+            (Some(l), Some(r)) => (r.0, l),
+            _ => (NONE, NONE),
+        };
+        let tasks = rayon::current_num_threads().max(1);
+        let per_task = (nz + 1).div_ceil(tasks);
+        (0..tasks)
+            .into_par_iter()
+            .map(|t| {
+                range_face_count(
+                    volume,
+                    &regions,
+                    outside,
+                    (t * per_task).min(nz + 1)..((t + 1) * per_task).min(nz + 1),
+                )
+            })
+            .try_reduce(|| 0, |a, b| Ok(a + b))
     }
 
     /// Edges by sorting the surfels' `4F` vertex pairs (radix-like cost in practice,

@@ -229,10 +229,13 @@ proptest! {
     #[test]
     fn multi_label_volumes(vol in volume(4), open in any::<bool>()) {
         let vol = if open { vol.with_background(None) } else { vol };
+        let counted = DigitalSurface::count_surfels(&vol, &RegionMap::per_label()).unwrap();
         match DigitalSurface::from_volume(&vol) {
-            Err(SurfaceError::Empty) => {}
+            Err(SurfaceError::Empty) => prop_assert_eq!(counted, 0),
             Err(e) => panic!("{e}"),
             Ok(s) => {
+                // The counting pass agrees with the surface it predicts.
+                prop_assert_eq!(counted, s.num_surfels() as u64);
                 check_common(&vol, &s);
                 for (i, e) in s.edges().iter().enumerate() {
                     let k = s.edge_surfels(voxreg_digisurf::EdgeId(i as u32)).len();

@@ -133,6 +133,13 @@ impl Regularizer {
         self.surface.num_surfels() as u64 * BYTES_PER_SURFEL
     }
 
+    /// [`Regularizer::estimated_bytes`] of the regularizer [`Regularizer::from_volume`]
+    /// would build, found by counting the surfels in one pass over the voxels, before
+    /// any of the surface is built.
+    pub fn estimated_bytes_of(volume: &LabelVolume, regions: &RegionMap) -> Result<u64, RegularizeError> {
+        Ok(DigitalSurface::count_surfels(volume, regions)?.saturating_mul(BYTES_PER_SURFEL))
+    }
+
     /// The digital surface.
     pub fn surface(&self) -> &Arc<DigitalSurface> {
         &self.surface

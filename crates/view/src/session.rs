@@ -9,6 +9,7 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
+use voxreg_digisurf::{LabelVolume, RegionMap};
 use voxreg_io::{Palette, QuadMesh};
 use voxreg_regularize::{Output, Params, Regularizer};
 
@@ -161,7 +162,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                 s.busy = true;
                 s.stage = "digital surface".into();
             });
-            match Regularizer::from_volume(&loaded.volume, &params.regions) {
+            match build(&loaded.volume, &params.regions, &loaded.name) {
                 Ok(regularizer) => {
                     let regions = params.regions.clone();
                     *current = Some(Current { loaded, regularizer, regions });
@@ -172,8 +173,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                     }
                     solve(shared, c, tuning, params, t, job);
                 }
-                Err(e) => {
-                    let message = format!("{}: {e}", loaded.name);
+                Err(message) => {
                     shared.update(|s| {
                         s.busy = false;
                         s.error = Some(message.clone());
@@ -198,14 +198,13 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
             };
             if params.regions != c.regions {
                 // The preset groups labels differently: a new surface.
-                match Regularizer::from_volume(&c.loaded.volume, &params.regions) {
+                match build(&c.loaded.volume, &params.regions, &c.loaded.name) {
                     Ok(r) => {
                         c.regularizer = r;
                         c.regions = params.regions.clone();
                         publish_model(shared, c);
                     }
-                    Err(e) => {
-                        let message = format!("{}: {e}", c.loaded.name);
+                    Err(message) => {
                         shared.update(|s| s.error = Some(message));
                         return;
                     }
@@ -214,6 +213,20 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
             solve(shared, c, tuning, params, t, job);
         }
     }
+}
+
+/// The regularizer of `volume`, refused up front (as the CLI does) when its run would not
+/// fit the memory limit; the error is the page's one-line message.
+fn build(volume: &LabelVolume, regions: &RegionMap, name: &str) -> Result<Regularizer, String> {
+    let bytes = Regularizer::estimated_bytes_of(volume, regions).map_err(|e| format!("{name}: {e}"))?;
+    let surfels = bytes / voxreg_regularize::BYTES_PER_SURFEL;
+    voxreg_io::check_memory(
+        std::path::Path::new(name),
+        &format!("the regularization of its {surfels} surfels"),
+        u128::from(bytes),
+    )
+    .map_err(|e| e.to_string())?;
+    Regularizer::from_volume(volume, regions).map_err(|e| format!("{name}: {e}"))
 }
 
 fn publish_model(shared: &Shared, c: &Current) {
@@ -322,4 +335,20 @@ pub(crate) fn mesh_file(state: &State, ext: &str) -> Result<Vec<u8>, String> {
     let path = dir.path().join(format!("result.{ext}"));
     voxreg_io::write_mesh(&path, &mesh).map_err(|e| e.to_string())?;
     std::fs::read(&path).map_err(|e| format!("cannot read back {}: {e}", path.display()))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_surface_over_the_memory_limit_is_refused_before_it_is_built() {
+        let volume = LabelVolume::from_fn([8, 8, 8], |[x, y, z]| u32::from((x + y + z) % 2 == 0));
+        let regions = RegionMap::per_label();
+        let message =
+            voxreg_io::with_max_memory(1 << 20, || build(&volume, &regions, "noise.vox")).unwrap_err();
+        assert!(message.starts_with("noise.vox: the regularization of its"), "{message}");
+        assert!(message.contains("memory limit"), "{message}");
+        assert!(build(&volume, &regions, "noise.vox").is_ok());
+    }
 }
