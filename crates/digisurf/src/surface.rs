@@ -129,7 +129,7 @@ pub struct DigitalSurface {
     dims: [usize; 3],
     spacing: DVec3,
     origin: DVec3,
-    open_border: bool,
+    open_sides: [[bool; 2]; 3],
     regions: Regions,
     surfels: Vec<Surfel>,
     surfel_edges: Vec<[EdgeId; 4]>,
@@ -161,20 +161,34 @@ impl RawFace {
     }
 }
 
+/// The `(region, label)` beyond each side of the domain, `[axis][low, high]`: the
+/// background's, or [`NONE`] beyond an open side.
+type Outside = [[(u32, u32); 2]; 3];
+
+fn outside_of(volume: &LabelVolume, regions: &Regions) -> Outside {
+    let closed = match (volume.background(), regions.background()) {
+        (Some(l), Some(r)) => (r.0, l),
+        _ => (NONE, NONE),
+    };
+    let open = volume.open_sides();
+    [0, 1, 2].map(|k| [0, 1].map(|side| if open[k][side] { (NONE, NONE) } else { closed }))
+}
+
 /// Fills `rs`/`ls` with the regions and labels of voxel layer `z`, `x` fastest; the
 /// outside beyond the domain.
 fn fill_layer(
     volume: &LabelVolume,
     regions: &Regions,
-    outside: (u32, u32),
+    outside: &Outside,
     z: isize,
     rs: &mut [u32],
     ls: &mut [u32],
 ) -> Result<(), SurfaceError> {
     let nz = volume.dims()[2];
     if z < 0 || z as usize >= nz {
-        rs.fill(outside.0);
-        ls.fill(outside.1);
+        let (r, l) = outside[2][usize::from(z >= 0)];
+        rs.fill(r);
+        ls.fill(l);
         return Ok(());
     }
     // Transposed, the slab is [y, x]: logical order is x fastest, matching `x + nx * y`
@@ -194,7 +208,7 @@ fn fill_layer(
 fn range_faces(
     volume: &LabelVolume,
     regions: &Regions,
-    outside: (u32, u32),
+    outside: &Outside,
     range: std::ops::Range<usize>,
 ) -> Result<Vec<Vec<RawFace>>, SurfaceError> {
     let mut out = Vec::with_capacity(range.len());
@@ -214,7 +228,7 @@ fn range_faces(
 fn range_face_count(
     volume: &LabelVolume,
     regions: &Regions,
-    outside: (u32, u32),
+    outside: &Outside,
     range: std::ops::Range<usize>,
 ) -> Result<u64, SurfaceError> {
     let mut n = 0u64;
@@ -229,7 +243,7 @@ fn range_face_count(
 fn scan_slabs(
     volume: &LabelVolume,
     regions: &Regions,
-    outside: (u32, u32),
+    outside: &Outside,
     range: std::ops::Range<usize>,
     mut visit: impl FnMut(&(Vec<u32>, Vec<u32>), &(Vec<u32>, Vec<u32>), usize),
 ) -> Result<(), SurfaceError> {
@@ -249,14 +263,13 @@ fn scan_slabs(
 /// `k - 1` and `k`, then (for `k < nz`) faces perpendicular to x, then y, within layer `k`.
 fn slab_faces(
     dims: [usize; 3],
-    outside: (u32, u32),
+    outside: &Outside,
     k: usize,
     (prev_r, prev_l): &(Vec<u32>, Vec<u32>),
     (cur_r, cur_l): &(Vec<u32>, Vec<u32>),
     mut emit: impl FnMut(RawFace),
 ) {
     let [nx, ny, nz] = dims;
-    let (or, ol) = outside;
     let kk = k as u32;
     for y in 0..ny {
         for x in 0..nx {
@@ -276,8 +289,8 @@ fn slab_faces(
     }
     for y in 0..ny {
         for x in 0..=nx {
-            let (a, la) = if x > 0 { (cur_r[x - 1 + nx * y], cur_l[x - 1 + nx * y]) } else { (or, ol) };
-            let (b, lb) = if x < nx { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { (or, ol) };
+            let (a, la) = if x > 0 { (cur_r[x - 1 + nx * y], cur_l[x - 1 + nx * y]) } else { outside[0][0] };
+            let (b, lb) = if x < nx { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { outside[0][1] };
             if a != b {
                 emit(RawFace { cell: [x as u32, y as u32, kk], axis: 0, regions: [a, b], labels: [la, lb] });
             }
@@ -285,8 +298,9 @@ fn slab_faces(
     }
     for y in 0..=ny {
         for x in 0..nx {
-            let (a, la) = if y > 0 { (cur_r[x + nx * (y - 1)], cur_l[x + nx * (y - 1)]) } else { (or, ol) };
-            let (b, lb) = if y < ny { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { (or, ol) };
+            let (a, la) =
+                if y > 0 { (cur_r[x + nx * (y - 1)], cur_l[x + nx * (y - 1)]) } else { outside[1][0] };
+            let (b, lb) = if y < ny { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { outside[1][1] };
             if a != b {
                 emit(RawFace { cell: [x as u32, y as u32, kk], axis: 1, regions: [a, b], labels: [la, lb] });
             }
@@ -392,10 +406,7 @@ impl DigitalSurface {
         if nx.max(ny).max(nz) >= (u32::MAX as usize) - 1 {
             return Err(SurfaceError::TooLarge(format!("dimensions {nx}x{ny}x{nz}")));
         }
-        let (outside_region, outside_label) = match (volume.background(), regions.background()) {
-            (Some(l), Some(r)) => (r.0, l),
-            _ => (NONE, NONE),
-        };
+        let outside = outside_of(volume, &regions);
         let layer = (nx + 1) * (ny + 1);
         let mut scan = Scan {
             nx,
@@ -408,7 +419,6 @@ impl DigitalSurface {
         };
         // Faces are found in parallel over ranges of slabs (voxel-proportional work), then
         // numbered sequentially in slab order (surfel-proportional work).
-        let outside = (outside_region, outside_label);
         let tasks = rayon::current_num_threads().max(1);
         let per_task = (nz + 1).div_ceil(tasks);
         let found: Vec<Vec<Vec<RawFace>>> = (0..tasks)
@@ -417,7 +427,7 @@ impl DigitalSurface {
                 range_faces(
                     volume,
                     &regions,
-                    outside,
+                    &outside,
                     (t * per_task).min(nz + 1)..((t + 1) * per_task).min(nz + 1),
                 )
             })
@@ -450,12 +460,12 @@ impl DigitalSurface {
             interfaces[s.interface.index()].surfels.push(SurfelId(i as u32));
         }
 
-        let open_border = volume.background().is_none();
+        let open_sides = volume.open_sides();
         let mut surface = DigitalSurface {
             dims: [nx, ny, nz],
             spacing: volume.spacing(),
             origin: volume.origin(),
-            open_border,
+            open_sides,
             regions,
             surfel_edges: Vec::new(),
             vertex_surfels: Lists::default(),
@@ -482,10 +492,7 @@ impl DigitalSurface {
     pub fn count_surfels(volume: &LabelVolume, map: &RegionMap) -> Result<u64, SurfaceError> {
         let regions = map.resolve(volume)?;
         let nz = volume.dims()[2];
-        let outside = match (volume.background(), regions.background()) {
-            (Some(l), Some(r)) => (r.0, l),
-            _ => (NONE, NONE),
-        };
+        let outside = outside_of(volume, &regions);
         let tasks = rayon::current_num_threads().max(1);
         let per_task = (nz + 1).div_ceil(tasks);
         (0..tasks)
@@ -494,7 +501,7 @@ impl DigitalSurface {
                 range_face_count(
                     volume,
                     &regions,
-                    outside,
+                    &outside,
                     (t * per_task).min(nz + 1)..((t + 1) * per_task).min(nz + 1),
                 )
             })
@@ -539,12 +546,13 @@ impl DigitalSurface {
     }
 
     fn edge_kind(&self, corner: [u32; 3], axis: usize, incident: &[SurfelId]) -> EdgeKind {
-        if self.open_border {
-            let on_border =
-                (0..3).any(|u| u != axis && (corner[u] == 0 || corner[u] as usize == self.dims[u]));
-            if on_border {
-                return EdgeKind::Boundary;
-            }
+        let open = &self.open_sides;
+        let on_open_side = (0..3).any(|u| {
+            u != axis
+                && ((open[u][0] && corner[u] == 0) || (open[u][1] && corner[u] as usize == self.dims[u]))
+        });
+        if on_open_side {
+            return EdgeKind::Boundary;
         }
         match incident.len() {
             0..=2 => EdgeKind::Regular,
@@ -676,10 +684,16 @@ impl DigitalSurface {
         &self.regions
     }
 
-    /// Whether the domain border is open (the volume has no background), so surfaces
-    /// may end there.
+    /// Whether some side of the domain is open (the volume has no background, or was
+    /// cut out of a larger one), so surfaces may end there.
     pub fn has_open_border(&self) -> bool {
-        self.open_border
+        self.open_sides.iter().flatten().any(|&o| o)
+    }
+
+    /// The open sides of the domain, `[axis][low, high]`: every side when the volume has
+    /// no background, else those of [`LabelVolume::with_open_sides`].
+    pub fn open_sides(&self) -> [[bool; 2]; 3] {
+        self.open_sides
     }
 
     /// All surfels, indexed by [`SurfelId`].

@@ -25,18 +25,34 @@ pub type Voxel = [i64; 3];
 /// still get closed surfaces. A volume with no background ([`LabelVolume::with_background`]
 /// with `None`) treats every label as a material; then the domain border carries no
 /// surfels and interfaces end there as open surfaces.
+///
+/// **Open sides.** A volume cut out of a larger one (a chunk with its halo) marks the
+/// sides where it was cut open ([`LabelVolume::with_open_sides`]): those carry no surfels,
+/// as the whole border of a volume without background, while the other sides stay closed
+/// by the background. Beyond a cut lies unknown data, not empty space, so no surface is
+/// invented there.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LabelVolume {
     labels: Array3<u32>,
     spacing: DVec3,
     origin: DVec3,
     background: Option<u32>,
+    open_sides: [[bool; 2]; 3],
 }
+
+/// No open side.
+const CLOSED: [[bool; 2]; 3] = [[false; 2]; 3];
 
 impl LabelVolume {
     /// A volume over `labels` with unit spacing, origin `0` and background label `0`.
     pub fn new(labels: Array3<u32>) -> Self {
-        LabelVolume { labels, spacing: DVec3::ONE, origin: DVec3::ZERO, background: Some(0) }
+        LabelVolume {
+            labels,
+            spacing: DVec3::ONE,
+            origin: DVec3::ZERO,
+            background: Some(0),
+            open_sides: CLOSED,
+        }
     }
 
     /// A volume of dimensions `dims` whose label at `[x, y, z]` is `f([x, y, z])`.
@@ -91,6 +107,23 @@ impl LabelVolume {
         self
     }
 
+    /// Opens the sides `open[axis][low, high]` of the domain (default: none): no surfel
+    /// lies on an open side, and the interfaces that reach it end there as open surfaces.
+    pub fn with_open_sides(mut self, open: [[bool; 2]; 3]) -> Self {
+        self.open_sides = open;
+        self
+    }
+
+    /// The open sides of the domain, `[axis][low, high]`: every side of a volume without
+    /// background, else those set by [`LabelVolume::with_open_sides`].
+    pub fn open_sides(&self) -> [[bool; 2]; 3] {
+        if self.background.is_none() {
+            [[true; 2]; 3]
+        } else {
+            self.open_sides
+        }
+    }
+
     /// Number of voxels along x, y and z.
     pub fn dims(&self) -> [usize; 3] {
         let d = self.labels.dim();
@@ -133,11 +166,17 @@ impl LabelVolume {
     }
 
     /// The label of voxel `v`: the background label outside the domain, or `None`
-    /// outside the domain of a volume without background.
+    /// beyond an open side (every side of a volume without background).
     pub fn label(&self, v: Voxel) -> Option<u32> {
         let d = self.dims();
         if (0..3).all(|k| v[k] >= 0 && (v[k] as u64) < d[k] as u64) {
-            Some(self.labels[[v[0] as usize, v[1] as usize, v[2] as usize]])
+            return Some(self.labels[[v[0] as usize, v[1] as usize, v[2] as usize]]);
+        }
+        let open = self.open_sides();
+        let beyond_open = (0..3)
+            .any(|k| (v[k] < 0 && open[k][0]) || (v[k] >= 0 && v[k] as u64 >= d[k] as u64 && open[k][1]));
+        if beyond_open {
+            None
         } else {
             self.background
         }
@@ -195,6 +234,7 @@ impl LabelVolume {
             spacing: self.spacing,
             origin: self.origin,
             background: Some(0),
+            open_sides: self.open_sides,
         }
     }
 }

@@ -27,8 +27,11 @@ pub(crate) const VOID: u32 = u32::MAX - 1;
 #[derive(Clone, Debug)]
 pub(crate) struct RegionRuns {
     dims: [i64; 3],
-    /// Region of the voxels outside the domain: the background's, or [`VOID`].
+    /// Region of the voxels outside the domain beyond a closed side: the background's, or
+    /// [`VOID`] when the volume has none.
     outside: u32,
+    /// The open sides `[axis][low, high]`, beyond which lies [`VOID`].
+    open: [[bool; 2]; 3],
     /// Line `y + ny z` owns runs `offsets[line]..offsets[line + 1]`.
     offsets: Vec<usize>,
     /// The runs, line after line.
@@ -134,11 +137,30 @@ impl RegionRuns {
                 visit(l + ny);
             }
         }
+        let open = surface.open_sides();
         let outside = match surface.regions().background() {
-            Some(r) if !surface.has_open_border() => r.0,
+            Some(r) if open.iter().flatten().any(|&o| !o) => r.0,
             _ => VOID,
         };
-        RegionRuns { dims: [nx as i64, ny as i64, nz as i64], outside, offsets, runs }
+        RegionRuns { dims: [nx as i64, ny as i64, nz as i64], outside, open, offsets, runs }
+    }
+
+    /// The region beyond the domain at line `(y, z)`, below it in x (`Some(0)`), above it
+    /// (`Some(1)`) or within its x range (`None`): [`VOID`] beyond an open side.
+    #[inline]
+    fn beyond(&self, y: i64, z: i64, x_side: Option<usize>) -> u32 {
+        let [_, ny, nz] = self.dims;
+        let open = &self.open;
+        let crossed = x_side.is_some_and(|s| open[0][s])
+            || (y < 0 && open[1][0])
+            || (y >= ny && open[1][1])
+            || (z < 0 && open[2][0])
+            || (z >= nz && open[2][1]);
+        if crossed {
+            VOID
+        } else {
+            self.outside
+        }
     }
 
     /// The runs of line `(y, z)`; `None` when the line lies outside the domain.
@@ -157,9 +179,22 @@ impl RegionRuns {
     #[inline]
     pub(crate) fn uniform(&self, y: i64, z: i64, a: i64, b: i64) -> Option<u32> {
         let nx = self.dims[0];
-        let Some(runs) = self.line(y, z) else { return Some(self.outside) };
-        if b < 0 || a >= nx {
-            return Some(self.outside);
+        let Some(runs) = self.line(y, z) else {
+            // A line beyond the domain: one region unless the range also crosses an open
+            // side in x that the line's own side does not share.
+            let mut region = None;
+            let mut uniform = true;
+            self.beyond_line(y, z, a, b, |_, _, r| {
+                uniform = region.is_none();
+                region = Some(r);
+            });
+            return region.filter(|_| uniform);
+        };
+        if b < 0 {
+            return Some(self.beyond(y, z, Some(0)));
+        }
+        if a >= nx {
+            return Some(self.beyond(y, z, Some(1)));
         }
         if a < 0 || b >= nx {
             return None;
@@ -179,10 +214,11 @@ impl RegionRuns {
         let nx = self.dims[0];
         let runs = match self.line(y, z) {
             Some(runs) if b >= 0 && a < nx => runs,
-            _ => return f(a, b, self.outside),
+            Some(_) => return f(a, b, self.beyond(y, z, Some(usize::from(a >= nx)))),
+            None => return self.beyond_line(y, z, a, b, f),
         };
         if a < 0 {
-            f(a, -1, self.outside);
+            f(a, -1, self.beyond(y, z, Some(0)));
         }
         let (lo, hi) = (a.max(0), b.min(nx - 1));
         // The run holding `lo`: the last one starting at or before it.
@@ -198,7 +234,35 @@ impl RegionRuns {
             from = i64::from(runs[i].start);
         }
         if b >= nx {
-            f(nx, b, self.outside);
+            f(nx, b, self.beyond(y, z, Some(1)));
+        }
+    }
+
+    /// [`RegionRuns::for_each_run`] on a line beyond the domain: up to three pieces
+    /// (below, within and above the domain's x range), merged where they agree.
+    fn beyond_line(&self, y: i64, z: i64, a: i64, b: i64, mut f: impl FnMut(i64, i64, u32)) {
+        let nx = self.dims[0];
+        let pieces = [
+            (a, b.min(-1), self.beyond(y, z, Some(0))),
+            (a.max(0), b.min(nx - 1), self.beyond(y, z, None)),
+            (a.max(nx), b, self.beyond(y, z, Some(1))),
+        ];
+        let mut current: Option<(i64, i64, u32)> = None;
+        for (lo, hi, r) in pieces {
+            if lo > hi {
+                continue;
+            }
+            current = match current {
+                Some((clo, _, cr)) if cr == r => Some((clo, hi, r)),
+                Some(c) => {
+                    f(c.0, c.1, c.2);
+                    Some((lo, hi, r))
+                }
+                None => Some((lo, hi, r)),
+            };
+        }
+        if let Some(c) = current {
+            f(c.0, c.1, c.2);
         }
     }
 
@@ -262,6 +326,12 @@ mod tests {
             let open = volume.clone().with_background(None);
             if DigitalSurface::from_volume(&open).is_ok() {
                 check(&open, &RegionMap::per_label());
+            }
+            // Some sides cut open (a chunk of a larger volume), the others closed.
+            let sides = [0, 1, 2].map(|_| [0, 1].map(|_| rng.below(2) == 1));
+            let cut = volume.clone().with_open_sides(sides);
+            if DigitalSurface::from_volume(&cut).is_ok() {
+                check(&cut, &RegionMap::per_label());
             }
         }
     }
