@@ -7,7 +7,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
-use crate::boxqp::{minimize_in_boxes, place, BoxProblem, Boxes, Place};
+use crate::boxqp::{active_set, minimize_in_boxes, place, BoxProblem, Boxes, Place};
 use crate::cg::check_tolerance;
 use crate::clamping::clamp_boxes;
 use crate::info::BoundedInfo;
@@ -57,6 +57,15 @@ pub struct BoundedParams {
     /// counts the bounded iterations only, [`BoundedInfo::operator_applications`](crate::BoundedInfo::operator_applications) all.
     /// `false`: plain projected descent. Default: `true`.
     pub conjugate: bool,
+    /// When clamping with [`BoundedParams::conjugate`]: at most this many rounds of the
+    /// primal-dual active-set iteration between the unconstrained minimizer and MPRGP.
+    /// Each round holds the coordinates that cross their bounds (or are pushed onto them)
+    /// and solves for the others by the unconstrained solver's own preconditioned CG; a
+    /// few rounds find the binding coordinates at the cost of a few unconstrained solves,
+    /// where MPRGP alone discovers them a step at a time. MPRGP then finishes from the
+    /// result projected into the boxes, so the guarantees are MPRGP's. `0`: MPRGP from
+    /// the projected unconstrained minimizer. Default: `10`.
+    pub active_set_rounds: usize,
 }
 
 impl Default for BoundedParams {
@@ -69,6 +78,7 @@ impl Default for BoundedParams {
             preconditioner: Preconditioner::Multigrid,
             multigrid: MultigridParams::default(),
             conjugate: true,
+            active_set_rounds: 30,
         }
     }
 }
@@ -233,6 +243,19 @@ impl BoundedSolver {
         let unbounded = Boxes::unbounded(s.u.len());
         let free = minimize_in_boxes(problem, prepared, &unbounded, &mut s.u, &mut s.r, &mut |_| {});
         s.applications += free.applications;
+        let rounds = self.params.active_set_rounds;
+        let mut face_iterations = 0;
+        if rounds > 0 {
+            let st = active_set(problem, prepared, w, rounds, &mut s.u, &mut s.r);
+            tracing::debug!(
+                rounds = st.rounds,
+                iterations = st.iterations,
+                settled = st.settled,
+                "active set"
+            );
+            s.applications += st.applications;
+            face_iterations = st.iterations;
+        }
         w.project(&mut s.u);
         let start = energy.terms(&input.iter().zip(&s.u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
         if start <= s.energy {
@@ -246,7 +269,7 @@ impl BoundedSolver {
         s.applications += 1;
         let bounded = BoxProblem { energy0: s.energy, ..*problem };
         let stats = minimize_in_boxes(&bounded, prepared, w, &mut s.u, &mut s.r, progress);
-        s.iterations = stats.iterations;
+        s.iterations = face_iterations + stats.iterations;
         s.applications += stats.applications;
         s.estimate = stats.estimate;
         s.energy += stats.energy_change;
