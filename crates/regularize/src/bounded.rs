@@ -63,8 +63,10 @@ pub struct BoundedParams {
     /// and solves for the others by the unconstrained solver's own preconditioned CG; a
     /// few rounds find the binding coordinates at the cost of a few unconstrained solves,
     /// where MPRGP alone discovers them a step at a time. MPRGP then finishes from the
-    /// result projected into the boxes, so the guarantees are MPRGP's. `0`: MPRGP from
-    /// the projected unconstrained minimizer. Default: `10`.
+    /// result projected into the boxes, so the guarantees are MPRGP's. The rounds count in
+    /// [`BoundedInfo::operator_applications`](crate::BoundedInfo::operator_applications),
+    /// not in its iterations, and report no progress (their iterates may leave the
+    /// boxes). `0`: MPRGP from the projected unconstrained minimizer. Default: `30`.
     pub active_set_rounds: usize,
 }
 
@@ -226,10 +228,10 @@ impl BoundedSolver {
         ))
     }
 
-    /// MPRGP inside the boxes of half-width `w`, warm-started from the unconstrained
-    /// minimizer (the same iteration without bounds, i.e. PCG) projected into the boxes
-    /// when that lowers the energy, so that it starts with nearly the right set of clamped
-    /// coordinates.
+    /// MPRGP inside the boxes `w`, warm-started from the unconstrained minimizer (the same
+    /// iteration without bounds, i.e. PCG) improved by the active-set rounds
+    /// ([`BoundedParams::active_set_rounds`]) and projected into the boxes when that lowers
+    /// the energy, so that it starts with nearly the right set of clamped coordinates.
     fn mprgp(
         &self,
         energy: &Energy<'_>,
@@ -244,7 +246,6 @@ impl BoundedSolver {
         let free = minimize_in_boxes(problem, prepared, &unbounded, &mut s.u, &mut s.r, &mut |_| {});
         s.applications += free.applications;
         let rounds = self.params.active_set_rounds;
-        let mut face_iterations = 0;
         if rounds > 0 {
             let st = active_set(problem, prepared, w, rounds, &mut s.u, &mut s.r);
             tracing::debug!(
@@ -254,7 +255,6 @@ impl BoundedSolver {
                 "active set"
             );
             s.applications += st.applications;
-            face_iterations = st.iterations;
         }
         w.project(&mut s.u);
         let start = energy.terms(&input.iter().zip(&s.u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
@@ -269,7 +269,7 @@ impl BoundedSolver {
         s.applications += 1;
         let bounded = BoxProblem { energy0: s.energy, ..*problem };
         let stats = minimize_in_boxes(&bounded, prepared, w, &mut s.u, &mut s.r, progress);
-        s.iterations = face_iterations + stats.iterations;
+        s.iterations = stats.iterations;
         s.applications += stats.applications;
         s.estimate = stats.estimate;
         s.energy += stats.energy_change;
