@@ -279,7 +279,7 @@ fn the_active_set_rounds_reach_mprgps_minimizer() {
         params.fold_free = false;
         let mut r = Regularizer::from_volume(&volume, &params.regions).unwrap();
         let fast = r.run(&params).unwrap();
-        let mut old = params;
+        let mut old = params.clone();
         old.solver.bounded.active_set_rounds = 0;
         let slow = r.run(&old).unwrap();
         let far =
