@@ -379,10 +379,12 @@ pub(crate) struct ActiveSetStats {
 /// `max_rounds` rounds.
 ///
 /// Each round holds a set of coordinates on their bounds and minimizes over the others
-/// exactly as the unconstrained solve does: preconditioned CG (with the multigrid cycle of the face's
-/// operator, [`Pre::apply_on_face`](crate::iterative::Pre::apply_on_face)) warm-started from the previous round, stopped by the same estimate
-/// rule (at `100 tol` while the holds change, then at `tol`). Then every free coordinate outside its interval is held on the bound it
-/// crossed, and every held coordinate whose gradient pulls it back inside is freed. When
+/// as the unconstrained solve does: preconditioned CG (with the multigrid cycle of the
+/// face's operator, [`Pre::apply_on_face`](crate::iterative::Pre::apply_on_face)),
+/// warm-started from the previous round and stopped by the same estimate rule (at
+/// `100 tol` while the holds change, then at `tol`). Then every free coordinate outside
+/// its interval is held on the bound it crossed, and every held coordinate whose gradient
+/// pulls it back inside is freed. When
 /// no hold changes, the iterate satisfies the optimality conditions of the box problem.
 /// Unlike MPRGP, whose CG restarts each time a step meets a bound (once every two
 /// iterations on voxel art, where thousands of coordinates bind), a round changes many
