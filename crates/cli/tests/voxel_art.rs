@@ -263,3 +263,33 @@ fn every_model_of_a_file_without_a_scene_graph_opens() {
         stderr(&out)
     );
 }
+
+/// The clamped solve's active-set rounds reach the minimizer that MPRGP alone reaches
+/// from the projected unconstrained minimizer, on bundled models: positions within the
+/// solvers' tolerance of each other (both stop at an estimated 1e-3 voxel), the same
+/// energy, and every vertex in its box.
+#[test]
+fn the_active_set_rounds_reach_mprgps_minimizer() {
+    use voxreg_regularize::{Energy, Params, Regularizer};
+    for name in ["chr_army1.vox", "veh_fire.vox", "extended.vox"] {
+        let loaded = read_voxels(&data(name)).unwrap();
+        let Voxels::Labels(volume) = loaded.voxels else { panic!("{name}: .vox models are labels") };
+        let mut params = Params::voxel_art();
+        // The minimizers themselves, before the fold-free pass.
+        params.fold_free = false;
+        let mut r = Regularizer::from_volume(&volume, &params.regions).unwrap();
+        let fast = r.run(&params).unwrap();
+        let mut old = params.clone();
+        old.solver.bounded.active_set_rounds = 0;
+        let slow = r.run(&old).unwrap();
+        let far =
+            fast.positions.iter().zip(&slow.positions).map(|(a, b)| (*a - *b).length()).fold(0.0, f64::max);
+        assert!(far <= 4e-3, "{name}: the two minimizers are {far} voxel apart");
+        let energy = Energy::new(r.surface(), &fast.normals, &fast.targets, params.energy).unwrap();
+        let (ef, es) = (energy.terms(&fast.positions).total, energy.terms(&slow.positions).total);
+        assert!((ef - es).abs() <= 1e-5 * es, "{name}: energies {ef} and {es}");
+        let half = 0.5 * (1.0 - params.solver.bounded.clamp.unwrap()) + 1e-12;
+        let input = r.surface().positions();
+        assert!(fast.positions.iter().zip(&input).all(|(p, q)| (*p - *q).abs().max_element() <= half));
+    }
+}

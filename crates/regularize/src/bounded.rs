@@ -7,7 +7,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
-use crate::boxqp::{minimize_in_boxes, place, BoxProblem, Boxes, Place};
+use crate::boxqp::{active_set, minimize_in_boxes, place, BoxProblem, Boxes, Place};
 use crate::cg::check_tolerance;
 use crate::clamping::clamp_boxes;
 use crate::info::BoundedInfo;
@@ -57,6 +57,17 @@ pub struct BoundedParams {
     /// counts the bounded iterations only, [`BoundedInfo::operator_applications`](crate::BoundedInfo::operator_applications) all.
     /// `false`: plain projected descent. Default: `true`.
     pub conjugate: bool,
+    /// When clamping with [`BoundedParams::conjugate`]: at most this many rounds of the
+    /// primal-dual active-set iteration between the unconstrained minimizer and MPRGP.
+    /// Each round holds the coordinates that cross their bounds (or are pushed onto them)
+    /// and solves for the others by the unconstrained solver's own preconditioned CG; a
+    /// few rounds find the binding coordinates at the cost of a few unconstrained solves,
+    /// where MPRGP alone discovers them a step at a time. MPRGP then finishes from the
+    /// result projected into the boxes, so the guarantees are MPRGP's. The rounds count in
+    /// [`BoundedInfo::operator_applications`](crate::BoundedInfo::operator_applications),
+    /// not in its iterations, and report no progress (their iterates may leave the
+    /// boxes). `0`: MPRGP from the projected unconstrained minimizer. Default: `30`.
+    pub active_set_rounds: usize,
 }
 
 impl Default for BoundedParams {
@@ -69,6 +80,7 @@ impl Default for BoundedParams {
             preconditioner: Preconditioner::Multigrid,
             multigrid: MultigridParams::default(),
             conjugate: true,
+            active_set_rounds: 30,
         }
     }
 }
@@ -216,10 +228,10 @@ impl BoundedSolver {
         ))
     }
 
-    /// MPRGP inside the boxes of half-width `w`, warm-started from the unconstrained
-    /// minimizer (the same iteration without bounds, i.e. PCG) projected into the boxes
-    /// when that lowers the energy, so that it starts with nearly the right set of clamped
-    /// coordinates.
+    /// MPRGP inside the boxes `w`, warm-started from the unconstrained minimizer (the same
+    /// iteration without bounds, i.e. PCG) improved by the active-set rounds
+    /// ([`BoundedParams::active_set_rounds`]) and projected into the boxes when that lowers
+    /// the energy, so that it starts with nearly the right set of clamped coordinates.
     fn mprgp(
         &self,
         energy: &Energy<'_>,
@@ -233,6 +245,17 @@ impl BoundedSolver {
         let unbounded = Boxes::unbounded(s.u.len());
         let free = minimize_in_boxes(problem, prepared, &unbounded, &mut s.u, &mut s.r, &mut |_| {});
         s.applications += free.applications;
+        let rounds = self.params.active_set_rounds;
+        if rounds > 0 {
+            let st = active_set(problem, prepared, w, rounds, &mut s.u, &mut s.r);
+            tracing::debug!(
+                rounds = st.rounds,
+                iterations = st.iterations,
+                settled = st.settled,
+                "active set"
+            );
+            s.applications += st.applications;
+        }
         w.project(&mut s.u);
         let start = energy.terms(&input.iter().zip(&s.u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
         if start <= s.energy {

@@ -3,7 +3,7 @@
 
 use std::time::Instant;
 
-use glam::DVec3;
+use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 
 use crate::multigrid::{Hierarchy, MultigridParams, Vcycle};
@@ -197,6 +197,28 @@ impl Pre {
             }
             Pre::Multigrid(v) => v.apply(stencil, r, z),
         }
+    }
+
+    /// Prepares [`Pre::apply_on_face`] for a new face.
+    pub(crate) fn set_face(&mut self, face: &[Vec3A]) {
+        if let Pre::Multigrid(v) = self {
+            v.set_face(face);
+        }
+    }
+
+    /// `z = M_F^-1 r` on the face where `face` is 1 (0 on the held coordinates): the
+    /// multigrid cycle of the face's operator ([`Vcycle::apply_on_face`]); the others
+    /// are diagonal, so restricting them is masking.
+    pub(crate) fn apply_on_face(&mut self, stencil: &Stencil, r: &[DVec3], z: &mut [DVec3], face: &[Vec3A]) {
+        match self {
+            Pre::Multigrid(v) => v.apply_on_face(stencil, r, z, Some(face)),
+            _ => self.apply(stencil, r, z),
+        }
+        z.par_chunks_mut(CHUNK).zip(face.par_chunks(CHUNK)).for_each(|(z, f)| {
+            for (z, f) in z.iter_mut().zip(f) {
+                *z *= f.as_dvec3();
+            }
+        });
     }
 
     fn memory_bytes(&self) -> usize {

@@ -207,6 +207,9 @@ impl Hierarchy {
                 .par_iter()
                 .map(|d| block(&scale6(&sym_inverse(d), self.params.damping)))
                 .collect(),
+            face_smoother: Vec::new(),
+            majorant: fine_smoother,
+            damping: self.params.damping,
             levels,
             aggregations: self.aggregations.clone(),
             coarsest,
@@ -672,6 +675,11 @@ struct Work {
 pub(crate) struct Vcycle {
     fine: FineNumbers,
     fine_smoother: Vec<Block>,
+    /// The smoother of the face operator ([`Vcycle::set_face`]).
+    face_smoother: Vec<Block>,
+    /// The fine majorant's blocks, for the face smoothers.
+    majorant: Vec<[f64; 6]>,
+    damping: f64,
     levels: Vec<Level>,
     aggregations: Vec<Aggregation>,
     coarsest: Option<Coarsest>,
@@ -689,6 +697,15 @@ fn smooth(m: &[Block], r: &[Vec3A], x: &mut [Vec3A], add: bool) {
             x[i] = if add { x[i] + d } else { d };
         }
     });
+}
+
+/// `v *= face` coordinate-wise (nothing without a face).
+fn mask(face: Option<&[Vec3A]>, v: &mut [Vec3A]) {
+    if let Some(f) = face {
+        v.par_chunks_mut(CHUNK).zip(f.par_chunks(CHUNK)).for_each(|(v, f)| {
+            v.iter_mut().zip(f).for_each(|(v, f)| *v *= *f);
+        });
+    }
 }
 
 fn restrict(agg: &Aggregation, fine: &[Vec3A], coarse: &mut [Vec3A]) {
@@ -716,7 +733,12 @@ impl Vcycle {
         let works: usize =
             self.works.iter().map(|w| 16 * (w.r.len() + w.x.len() + w.t.len() + w.b.len())).sum();
         let coarsest = self.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len());
-        48 * self.fine_smoother.len() + self.fine.bytes() + agg + levels + works + coarsest
+        48 * (self.fine_smoother.len() + self.face_smoother.len() + self.majorant.len())
+            + self.fine.bytes()
+            + agg
+            + levels
+            + works
+            + coarsest
     }
 
     /// Bytes moved by one cycle (`connectivity`: bytes of the stencil's connectivity).
@@ -734,6 +756,52 @@ impl Vcycle {
 
     /// `z = V(r)`: one symmetric V-cycle, in `f32`.
     pub(crate) fn apply(&mut self, stencil: &Stencil, r: &[DVec3], z: &mut [DVec3]) {
+        self.apply_on_face(stencil, r, z, None);
+    }
+
+    /// Prepares [`Vcycle::apply_on_face`] for `face`: the fine smoother of the face's
+    /// operator, each vertex's majorant block with the held coordinates' rows and columns
+    /// replaced by the identity, inverted. (The whole block's inverse, masked, would be
+    /// the face block of `M^-1`, larger than `M_FF^-1`: no longer a convergent smoother.)
+    pub(crate) fn set_face(&mut self, face: &[Vec3A]) {
+        let damping = self.damping;
+        self.face_smoother = self
+            .majorant
+            .par_iter()
+            .zip(face.par_iter())
+            .map(|(m, f)| {
+                let keep = [f.x != 0.0, f.y != 0.0, f.z != 0.0];
+                // [xx, yy, zz, xy, xz, yz]
+                let pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)];
+                let mut b = [0.0; 6];
+                for (k, &(i, j)) in pairs.iter().enumerate() {
+                    b[k] = if keep[i] && keep[j] {
+                        m[k]
+                    } else if i == j {
+                        1.0
+                    } else {
+                        0.0
+                    };
+                }
+                block(&scale6(&sym_inverse(&b), damping))
+            })
+            .collect();
+    }
+
+    /// [`Vcycle::apply`] for the operator restricted to a face (the coordinates where
+    /// `face` is 1; it is 0 on the others, held fixed): every fine-level smoothing,
+    /// residual, restriction and prolongation is masked, so the fine level smooths the
+    /// face's own operator `D H D` (`D = diag(face)`) and the coarse correction only moves
+    /// free coordinates. Symmetric positive definite on the face, like the V-cycle; a much
+    /// better preconditioner there than the whole operator's cycle masked afterwards,
+    /// whose smoother moves held coordinates that the mask then discards.
+    pub(crate) fn apply_on_face(
+        &mut self,
+        stencil: &Stencil,
+        r: &[DVec3],
+        z: &mut [DVec3],
+        face: Option<&[Vec3A]>,
+    ) {
         let steps = self.steps;
         let mut works = std::mem::take(&mut self.works);
         let (fine, rest) = works.split_at_mut(1);
@@ -744,22 +812,36 @@ impl Vcycle {
             }
         });
         // Fine level: pre-smooth from zero, restrict the residual.
-        smooth(&self.fine_smoother, &w.b, &mut w.x, false);
+        let face_smoother = std::mem::take(&mut self.face_smoother);
+        let smoother = if face.is_some() && face_smoother.len() == w.b.len() {
+            &face_smoother
+        } else {
+            &self.fine_smoother
+        };
+        mask(face, &mut w.b);
+        smooth(smoother, &w.b, &mut w.x, false);
+        mask(face, &mut w.x);
         if !self.levels.is_empty() {
             for s in 0..steps {
                 self.fine.residual(stencil, &w.x, &w.b, &mut w.r, &mut w.t);
+                mask(face, &mut w.r);
                 if s + 1 < steps {
-                    smooth(&self.fine_smoother, &w.r, &mut w.x, true);
+                    smooth(smoother, &w.r, &mut w.x, true);
+                    mask(face, &mut w.x);
                 }
             }
             restrict(&self.aggregations[0], &w.r, &mut rest[0].r);
             self.coarse_cycle(0, rest);
             prolong_add(&self.aggregations[0].parent, &rest[0].x, &mut w.x);
+            mask(face, &mut w.x);
             for _ in 0..steps {
                 self.fine.residual(stencil, &w.x, &w.b, &mut w.r, &mut w.t);
-                smooth(&self.fine_smoother, &w.r, &mut w.x, true);
+                mask(face, &mut w.r);
+                smooth(smoother, &w.r, &mut w.x, true);
+                mask(face, &mut w.x);
             }
         }
+        self.face_smoother = face_smoother;
         z.par_chunks_mut(CHUNK).zip(w.x.par_chunks(CHUNK)).for_each(|(z, x)| {
             for (z, x) in z.iter_mut().zip(x) {
                 *z = x.as_dvec3();
