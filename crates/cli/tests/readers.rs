@@ -364,7 +364,6 @@ fn info_snapshots_of_scientific_formats() {
         "labels_v2.zarr",
         "labels_v3.zarr",
         "image.ome.zarr",
-        "image_v3.ome.zarr/1",
     ] {
         let path = root.join(name);
         let text = info(&[path.to_str().unwrap()]).replace(root.to_str().unwrap(), "data/formats");

@@ -227,8 +227,8 @@ fn ome_zarr_images() {
     }
 }
 
-/// A packed in-memory store: OME-Zarr 0.4 metadata around one uint8 chunk, with
-/// `multiscales` edited by `edit`.
+/// An in-memory OME-Zarr 0.4 image of one level, `0`, of `shape` (no chunks: all fill
+/// value), with the given axes, transformations and dataset path.
 fn ome_store(shape: &str, axes: &str, transforms: &str, dataset: &str) -> Result<LoadedVoxels, IoError> {
     let zarray = format!(
         r#"{{"zarr_format": 2, "shape": {shape}, "chunks": {shape}, "dtype": "|u1", "compressor": null,
