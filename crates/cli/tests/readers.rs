@@ -349,17 +349,25 @@ fn every_bundled_format_reads_through_the_cli() {
 }
 
 /// `voxreg info` of the samples of `data/formats/` (written by tifffile, pynrrd,
-/// mrcfile: see `data/formats/make.py`): dimensions, spacing with its unit, segment
+/// mrcfile, zarr: see `data/formats/make.py`): dimensions, spacing with its unit, segment
 /// names.
 #[test]
 fn info_snapshots_of_scientific_formats() {
     let root = data("formats");
-    for name in
-        ["stack_imagej.tif", "stack.ome.tif", "slices", "organs.seg.nrrd", "detached.nhdr", "mode6.mrc"]
-    {
+    for name in [
+        "stack_imagej.tif",
+        "stack.ome.tif",
+        "slices",
+        "organs.seg.nrrd",
+        "detached.nhdr",
+        "mode6.mrc",
+        "labels_v2.zarr",
+        "labels_v3.zarr",
+        "image.ome.zarr",
+    ] {
         let path = root.join(name);
         let text = info(&[path.to_str().unwrap()]).replace(root.to_str().unwrap(), "data/formats");
-        insta::assert_snapshot!(format!("info_{}", name.replace('.', "_")), text);
+        insta::assert_snapshot!(format!("info_{}", name.replace(['.', '/'], "_")), text);
     }
 }
 
@@ -375,10 +383,16 @@ fn broken_scientific_files_fail_with_one_line() {
             "truncated data",
         ),
         ("bad.mrc", b"short", "bad.mrc: not an MRC file"),
+        ("bad.zarr", b"{\"zarr_format\": 2, \"shape\": [2, 2]", "bad.zarr: .zarray: EOF"),
     ];
     for (name, bytes, expected) in cases {
         let path = dir.path().join(name);
-        std::fs::write(&path, bytes).unwrap();
+        if name.ends_with(".zarr") {
+            std::fs::create_dir(&path).unwrap();
+            std::fs::write(path.join(".zarray"), bytes).unwrap();
+        } else {
+            std::fs::write(&path, bytes).unwrap();
+        }
         let out =
             voxreg(&["regularize", path.to_str().unwrap(), "-o", dir.path().join("m.stl").to_str().unwrap()]);
         assert_eq!(out.status.code(), Some(1), "{name}");

@@ -30,6 +30,10 @@
 //!   `space units`; segment names and colours as the palette.
 //! - MRC/CCP4 `.mrc`, `.map`, `.rec`: [`read_mrc`], [`read_mrc_bytes`]; modes 0, 1, 2
 //!   and 6, voxel size in ångström from the cell.
+//! - Zarr v2 and v3 arrays `.zarr` (directories) and OME-Zarr images (NGFF 0.4, 0.5;
+//!   level 0, or a level named by its path, `image.ome.zarr/0`), through `zarrs`:
+//!   [`read_zarr`], [`read_zarr_entries`]; blosc, gzip, zstd, sharding; spacing, origin
+//!   and units from the OME metadata.
 //! - Raw data, whose layout ([`RawSpec`]: dimensions, [`DataType`], [`Endian`],
 //!   spacing) the caller gives: [`read_raw`], [`read_raw_bytes`].
 //!
@@ -106,6 +110,7 @@ mod vox;
 mod vti;
 mod vtp;
 mod write_volume;
+mod zarr;
 
 pub use error::IoError;
 pub use gltf::write_gltf;
@@ -143,3 +148,4 @@ pub use vox::{
 pub use vti::{read_vti, read_vti_bytes};
 pub use vtp::write_vtp;
 pub use write_volume::{write_vol, write_volume, write_vox, VOX_MAX_MODEL};
+pub use zarr::{is_zarr, read_zarr, read_zarr_entries};

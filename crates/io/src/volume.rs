@@ -56,7 +56,7 @@ pub struct LoadedVoxels {
 
 /// The extensions [`read_voxels`] knows, for error messages.
 const KNOWN_EXTENSIONS: &str =
-    ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd, .nhdr, .mrc, .map or .rec";
+    ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd, .nhdr, .mrc, .map, .rec or a .zarr directory";
 
 /// Reads the voxels of a file, labels or grey levels, choosing the format by the
 /// file's extension (case insensitive):
@@ -72,7 +72,10 @@ const KNOWN_EXTENSIONS: &str =
 ///   file name with `*` or `?`: the TIFF slices it holds or matches, stacked in name order
 ///   (see [`tiff_slices`](crate::tiff_slices));
 /// - `.nrrd`, `.nhdr` (and `.seg.nrrd`): NRRD, see [`read_nrrd`](crate::read_nrrd);
-/// - `.mrc`, `.map`, `.rec`: MRC/CCP4 maps, see [`read_mrc`](crate::read_mrc).
+/// - `.mrc`, `.map`, `.rec`: MRC/CCP4 maps, see [`read_mrc`](crate::read_mrc);
+/// - a `.zarr` directory, or any directory holding Zarr metadata (`zarr.json`, `.zarray`,
+///   `.zgroup`, such as a level `image.ome.zarr/0`): a Zarr array or OME-Zarr image, see
+///   [`read_zarr`](crate::read_zarr).
 ///
 /// Fails with [`IoError::UnsupportedExtension`] for any other name, and with
 /// [`IoError::Unsupported`] for `.raw` (which has no header: see
@@ -92,6 +95,9 @@ pub struct ReadOptions {
 pub fn read_voxels_with(path: &Path, options: &ReadOptions) -> Result<LoadedVoxels, IoError> {
     let plain = |voxels| Ok(LoadedVoxels { voxels, palette: None, units: None });
     let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+    if lowercase_extension(path).as_deref() == Some("zarr") || crate::is_zarr(path) {
+        return crate::read_zarr(path);
+    }
     if path.is_dir() || name.contains(['*', '?']) {
         return crate::read_tiff_slices(&crate::tiff_slices(path)?, path);
     }

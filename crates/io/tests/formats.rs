@@ -1,5 +1,5 @@
 //! Volumes written by the formats' own tools (`data/formats/`, made by
-//! `data/formats/make.py`: tifffile, pynrrd, mrcfile): each reads as the same
+//! `data/formats/make.py`: tifffile, pynrrd, mrcfile, zarr): each reads as the same
 //! labels with the spacing and units its metadata give; and round trips.
 
 use std::path::{Path, PathBuf};
@@ -195,4 +195,148 @@ fn mrc_axis_map_and_errors() {
     assert!(err.to_string().starts_with("t.mrc: truncated voxel data"), "{err}");
     let err = voxreg_io::read_mrc_bytes(&bytes[..100], path).unwrap_err();
     assert!(err.to_string().starts_with("t.mrc: not an MRC file"), "{err}");
+}
+
+#[test]
+fn zarr_arrays() {
+    // v2 blosc, v3 zstd, v3 sharded gzip: no OME metadata, so unit spacing.
+    for name in ["labels_v2.zarr", "labels_v3.zarr", "labels_sharded.zarr"] {
+        let loaded = read_sample(name);
+        assert_spacing(&loaded, [1.0; 3], None, name);
+        assert_eq!(loaded.voxels.origin(), DVec3::ZERO, "{name}");
+    }
+}
+
+#[test]
+fn ome_zarr_images() {
+    // The image reads as its level 0; the level, named by its path, the same.
+    for name in ["image.ome.zarr", "image.ome.zarr/0", "image_v3.ome.zarr", "image_v3.ome.zarr/0"] {
+        let loaded = read_sample(name);
+        assert_spacing(&loaded, [0.5, 0.5, 2.0], Some("µm"), name);
+    }
+    // Level 1, every second voxel, at twice the spacing.
+    for name in ["image.ome.zarr/1", "image_v3.ome.zarr/1"] {
+        let loaded = read_voxels(&sample(name)).unwrap();
+        let Voxels::Labels(v) = &loaded.voxels else { panic!("{name}: grey") };
+        let full = expected();
+        assert_eq!(v.dims(), [3, 3, 2], "{name}");
+        for [x, y, z] in [[0, 0, 0], [1, 1, 0], [2, 1, 1], [1, 1, 1]] {
+            assert_eq!(v.label([x, y, z]), full.label([2 * x, 2 * y, 2 * z]), "{name} {x} {y} {z}");
+        }
+        assert_spacing(&loaded, [1.0, 1.0, 4.0], Some("µm"), name);
+    }
+}
+
+/// An in-memory OME-Zarr 0.4 image of one level, `0`, of `shape` (no chunks: all fill
+/// value), with the given axes, transformations and dataset path.
+fn ome_store(shape: &str, axes: &str, transforms: &str, dataset: &str) -> Result<LoadedVoxels, IoError> {
+    let zarray = format!(
+        r#"{{"zarr_format": 2, "shape": {shape}, "chunks": {shape}, "dtype": "|u1", "compressor": null,
+            "fill_value": 0, "order": "C", "filters": null}}"#
+    );
+    let zattrs = format!(
+        r#"{{"multiscales": [{{"version": "0.4", "axes": {axes},
+            "datasets": [{{"path": "{dataset}", "coordinateTransformations": {transforms}}}]}}]}}"#
+    );
+    let entries = [
+        (".zgroup", &br#"{"zarr_format": 2}"#[..]),
+        (".zattrs", zattrs.as_bytes()),
+        ("0/.zarray", zarray.as_bytes()),
+    ];
+    voxreg_io::read_zarr_entries(&entries, Path::new("mem.zarr"))
+}
+
+/// OME-Zarr placements: time and channel axes of extent 1 are dropped, scale and
+/// translation compose; and the errors, each naming the store.
+#[test]
+fn ome_zarr_metadata_and_errors() {
+    let space = |n: &str| format!(r#"{{"name": "{n}", "type": "space", "unit": "nanometer"}}"#);
+    let tczyx = format!(
+        r#"[{{"name": "t", "type": "time"}}, {{"name": "c", "type": "channel"}}, {}, {}, {}]"#,
+        space("z"),
+        space("y"),
+        space("x")
+    );
+    let transforms = r#"[{"type": "scale", "scale": [1, 1, 3, 2, 1]},
+                         {"type": "translation", "translation": [0, 0, 30, 20, 10]}]"#;
+    let loaded = ome_store("[1, 1, 2, 3, 4]", &tczyx, transforms, "0").unwrap();
+    assert_eq!(loaded.voxels.dims(), [4, 3, 2]);
+    assert_eq!(loaded.voxels.spacing(), DVec3::new(1.0, 2.0, 3.0));
+    assert_eq!(loaded.voxels.origin(), DVec3::new(10.0, 20.0, 30.0));
+    assert_eq!(loaded.units.as_deref(), Some("nm"));
+
+    let zyx = format!("[{}, {}, {}]", space("z"), space("y"), space("x"));
+    let scale = r#"[{"type": "scale", "scale": [1, 1, 1]}]"#;
+    let five = r#"[{"type": "scale", "scale": [1, 1, 1, 1, 1]}]"#;
+    let message = |r: Result<LoadedVoxels, IoError>| r.unwrap_err().to_string();
+    for (result, expected) in [
+        (ome_store("[2, 3, 4]", &zyx, scale, "../x"), "mem.zarr: OME-Zarr multiscales: dataset path '../x'"),
+        (
+            ome_store("[2, 3, 4]", &zyx, r#"[{"type": "scale", "scale": [1, 1]}]"#, "0"),
+            "needs 3 finite numbers",
+        ),
+        (ome_store("[2, 3, 4]", &zyx, r#"[{"type": "scale", "path": "s"}]"#, "0"), "without inline values"),
+        (ome_store("[2, 3, 4]", &zyx, scale, "1"), "mem.zarr: OME-Zarr dataset 1: array metadata is missing"),
+        (ome_store("[2, 2, 3, 4]", &tczyx, five, "0"), "OME-Zarr metadata for 5 axes, the array has 4"),
+        (ome_store("[2, 3, 4]", "[]", "[]", "0"), "OME-Zarr metadata for 0 axes"),
+    ] {
+        let m = message(result);
+        assert!(m.starts_with("mem.zarr: ") && m.contains(expected) && !m.contains('\n'), "{m}");
+    }
+    let tzyx =
+        format!(r#"[{{"name": "t", "type": "time"}}, {}, {}, {}]"#, space("z"), space("y"), space("x"));
+    let four = r#"[{"type": "scale", "scale": [1, 1, 1, 1]}]"#;
+    let m = message(ome_store("[2, 2, 3, 4]", &tzyx, four, "0"));
+    assert!(m.contains("axis 0 (before z, y, x) has extent 2"), "{m}");
+}
+
+/// Absurd shapes and chunks are refused from the metadata alone, before any chunk is
+/// decoded; a group that is not an image, and a directory that is no store, name the path.
+#[test]
+fn zarr_bad_input() {
+    let array = |shape: &str, chunks: &str| {
+        let zarray = format!(
+            r#"{{"zarr_format": 2, "shape": {shape}, "chunks": {chunks}, "dtype": "<u2", "compressor": null,
+                "fill_value": 0, "order": "C", "filters": null}}"#
+        );
+        voxreg_io::read_zarr_entries(&[(".zarray", zarray.as_bytes())], Path::new("big.zarr"))
+    };
+    let err = array("[100000, 100000, 100000]", "[64, 64, 64]").unwrap_err();
+    assert!(matches!(err, IoError::TooLarge { .. }), "{err}");
+    let err =
+        voxreg_io::with_max_memory(1 << 30, || array("[4, 4, 4]", "[100000, 100000, 100000]")).unwrap_err();
+    assert!(matches!(err, IoError::OverBudget { .. }), "{err}");
+    assert!(
+        err.to_string().starts_with("big.zarr: a chunk of [100000, 100000, 100000] elements needs"),
+        "{err}"
+    );
+    let err = array("[4, 4]", "[4, 4]").unwrap_err();
+    assert_eq!(err.to_string(), "big.zarr: unsupported: a 2-dimensional array (3 are read)");
+    let err = array("[4, 4, 4]", "[4, 4]").unwrap_err();
+    assert!(matches!(err, IoError::Format { .. }) && !err.to_string().contains('\n'), "{err}");
+
+    let group = [(".zgroup", &br#"{"zarr_format": 2}"#[..])];
+    let err = voxreg_io::read_zarr_entries(&group, Path::new("g.zarr")).unwrap_err();
+    assert!(
+        err.to_string().starts_with("g.zarr: unsupported: a Zarr group without OME-Zarr multiscales"),
+        "{err}"
+    );
+
+    let dir = tempfile::tempdir().unwrap();
+    let empty = dir.path().join("empty.zarr");
+    std::fs::create_dir(&empty).unwrap();
+    let err = read_voxels(&empty).unwrap_err();
+    assert_eq!(
+        err.to_string(),
+        format!("{}: not a Zarr store: no zarr.json, .zarray or .zgroup", empty.display())
+    );
+    let missing = dir.path().join("missing.zarr");
+    let err = read_voxels(&missing).unwrap_err();
+    assert!(err.to_string().starts_with(&format!("{}: ", missing.display())), "{err}");
+    // A chunk that does not decode.
+    let zarray = br#"{"zarr_format": 2, "shape": [2, 2, 2], "chunks": [2, 2, 2], "dtype": "|u1",
+                      "compressor": {"id": "zlib", "level": 1}, "fill_value": 0, "order": "C", "filters": null}"#;
+    let entries = [(".zarray", &zarray[..]), ("0.0.0", &b"not zlib"[..])];
+    let err = voxreg_io::read_zarr_entries(&entries, Path::new("bad.zarr")).unwrap_err();
+    assert!(err.to_string().starts_with("bad.zarr: ") && !err.to_string().contains('\n'), "{err}");
 }

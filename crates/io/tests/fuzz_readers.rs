@@ -17,8 +17,8 @@ use flate2::write::{GzEncoder, ZlibEncoder};
 use flate2::Compression;
 use voxreg_io::{
     read_longvol_bytes, read_mrc_bytes, read_nifti_bytes, read_npy_bytes, read_nrrd_bytes, read_pgm3d_bytes,
-    read_raw_bytes, read_tiff_bytes, read_vol_bytes, read_vox_bytes, read_vti_bytes, DataType, Endian,
-    IoError, RawSpec,
+    read_raw_bytes, read_tiff_bytes, read_vol_bytes, read_vox_bytes, read_vti_bytes, read_zarr_entries,
+    DataType, Endian, IoError, RawSpec,
 };
 
 fn data(name: &str) -> Vec<u8> {
@@ -42,6 +42,7 @@ fn readers() -> Vec<(&'static str, Reader)> {
         ("tiff", |b| read_tiff_bytes(b, Path::new(PATH)).map(drop)),
         ("nrrd", |b| read_nrrd_bytes(b, Path::new(PATH)).map(drop)),
         ("mrc", |b| read_mrc_bytes(b, Path::new(PATH)).map(drop)),
+        ("zarr", |b| read_zarr_entries(&unpack_store(b), Path::new(PATH)).map(drop)),
         ("raw", |b| {
             read_raw_bytes(b, Path::new(PATH), &RawSpec { dtype: DataType::U16, ..RawSpec::new([4, 3, 2]) })
                 .map(drop)
@@ -285,8 +286,57 @@ fn seeds(reader: &str) -> Vec<Vec<u8>> {
         "nrrd" => vec![data("formats/labels.nrrd"), data("formats/organs.seg.nrrd")],
         "tiff" => vec![data("formats/stack_imagej.tif"), data("formats/stack.ome.tif")],
         "raw" => vec![(0..48).collect(), [0u8; 48].to_vec()],
+        "zarr" => ["labels_v2.zarr", "labels_v3.zarr", "labels_sharded.zarr", "image.ome.zarr"]
+            .iter()
+            .map(|name| {
+                pack_store(&Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../data/formats")).join(name))
+            })
+            .collect(),
         _ => unreachable!(),
     }
+}
+
+/// The separator of a packed Zarr store (what the `zarr` fuzz target reads): entries
+/// `key\n<bytes>` joined by it.
+const STORE_SEPARATOR: &[u8] = b"\n%%\n";
+
+/// A packed store's entries, as the `zarr` fuzz target splits them.
+fn unpack_store(bytes: &[u8]) -> Vec<(&str, &[u8])> {
+    let mut entries = Vec::new();
+    let mut rest = bytes;
+    loop {
+        let end = rest.windows(STORE_SEPARATOR.len()).position(|w| w == STORE_SEPARATOR);
+        let entry = &rest[..end.unwrap_or(rest.len())];
+        let key_end = entry.iter().position(|&b| b == b'\n').unwrap_or(entry.len());
+        if let Ok(key) = std::str::from_utf8(&entry[..key_end]) {
+            entries.push((key, entry.get(key_end + 1..).unwrap_or(&[])));
+        }
+        match end {
+            Some(e) => rest = &rest[e + STORE_SEPARATOR.len()..],
+            None => return entries,
+        }
+    }
+}
+
+/// The files of the Zarr directory `dir`, packed (keys relative to it, in name order).
+fn pack_store(dir: &Path) -> Vec<u8> {
+    fn walk(dir: &Path, prefix: &str, out: &mut Vec<(String, Vec<u8>)>) {
+        let mut entries: Vec<_> = std::fs::read_dir(dir).unwrap().map(|e| e.unwrap().path()).collect();
+        entries.sort();
+        for path in entries {
+            let key = format!("{prefix}{}", path.file_name().unwrap().to_str().unwrap());
+            if path.is_dir() {
+                walk(&path, &format!("{key}/"), out);
+            } else {
+                out.push((key, std::fs::read(&path).unwrap()));
+            }
+        }
+    }
+    let mut files = Vec::new();
+    walk(dir, "", &mut files);
+    let packed: Vec<Vec<u8>> =
+        files.into_iter().map(|(key, bytes)| [key.as_bytes(), b"\n", &bytes].concat()).collect();
+    packed.join(STORE_SEPARATOR)
 }
 
 /// Runs `read` on `bytes`; on a panic, saves the input and fails.

@@ -126,7 +126,7 @@ fn wrong_format_for_the_extension() {
     assert!(
         err.to_string().ends_with(
             "README.md: unknown file extension (expected .vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, \
-             .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd, .nhdr, .mrc, .map or .rec)"
+             .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd, .nhdr, .mrc, .map, .rec or a .zarr directory)"
         ),
         "{err}"
     );

@@ -223,8 +223,9 @@ def read(
     """Reads a voxel file as the ``voxreg`` command does.
 
     Formats by extension: .vol, .longvol, .pgm3d (DGtal), .vox (MagicaVoxel), .nii,
-    .nii.gz (NIfTI-1), .vti (VTK image data), .npy (NumPy, shape (X, Y, Z)), or raw data
-    with ``dims``.
+    .nii.gz (NIfTI-1), .vti (VTK image data), .npy (NumPy, shape (X, Y, Z)), .tif/.tiff
+    stacks, .nrrd/.nhdr, .mrc/.map/.rec, a .zarr directory (Zarr v2/v3, OME-Zarr level 0
+    or a level such as ``image.ome.zarr/1``; arrays [z, y, x]), or raw data with ``dims``.
 
     Parameters
     ----------
