@@ -695,6 +695,8 @@ impl<'m> Propagation<'m> {
 pub(crate) mod tests {
     use glam::DVec3;
 
+    use crate::SurfacePoint;
+
     use super::*;
 
     /// A grid of `n x n` quads over `[0, 1]^2` lifted by `height`, corners jittered in
@@ -820,5 +822,164 @@ pub(crate) mod tests {
         let (d, _) = exact_distances(&mesh, &[0]).unwrap();
         assert!(d[n as usize].is_infinite() && d[15].is_finite());
         assert_eq!(exact_distances(&mesh, &[]).unwrap_err(), GeodesicError::NoSource);
+    }
+
+    /// The triangles of `positions`/`triangles` split 1-to-4 at their sides' midpoints:
+    /// the same polyhedral surface, so the same geodesic distances, on another mesh.
+    fn subdivided(positions: &[DVec3], triangles: &[[u32; 3]]) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+        let mut positions = positions.to_vec();
+        let mut midpoints = std::collections::HashMap::new();
+        let mut mid = |a: u32, b: u32, positions: &mut Vec<DVec3>| -> u32 {
+            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                positions.push(0.5 * (positions[a as usize] + positions[b as usize]));
+                (positions.len() - 1) as u32
+            })
+        };
+        let mut out = Vec::new();
+        for &[a, b, c] in triangles {
+            let (ab, bc, ca) =
+                (mid(a, b, &mut positions), mid(b, c, &mut positions), mid(c, a, &mut positions));
+            out.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
+        }
+        (positions, out)
+    }
+
+    /// Two computations of one quantity: the distances at the coarse vertices must not
+    /// change when every triangle is split (new vertices are flat, so nearly every one
+    /// is a candidate for the flat-vertex and pruning rules), on a surface with saddles
+    /// and on a convex polyhedron.
+    #[test]
+    fn subdividing_the_triangles_keeps_the_distances() {
+        let (positions, quads) = grid(10, |x, y| 0.3 * (5.0 * x).sin() * (4.0 * y).cos());
+        let bumpy = GeodesicMesh::new(&positions, &quads).unwrap();
+        // A convex polyhedron: an octahedron with unequal axes and a tilted top.
+        let octahedron = vec![
+            DVec3::new(1.3, 0.0, 0.0),
+            DVec3::new(-1.0, 0.1, 0.0),
+            DVec3::new(0.0, 0.9, 0.0),
+            DVec3::new(0.1, -1.1, 0.0),
+            DVec3::new(0.2, 0.1, 1.2),
+            DVec3::new(-0.1, 0.0, -0.8),
+        ];
+        let faces: Vec<[u32; 3]> =
+            vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+        let convex = GeodesicMesh::new(&octahedron, &faces).unwrap();
+        for (name, mesh, source) in [("bumpy grid", bumpy, 14u32), ("octahedron", convex, 4)] {
+            let coarse_positions: Vec<DVec3> =
+                (0..mesh.num_vertices() as u32).map(|v| mesh.position(v)).collect();
+            let (mut fine_positions, mut fine) = (coarse_positions.clone(), mesh.triangles().to_vec());
+            for _ in 0..2 {
+                (fine_positions, fine) = subdivided(&fine_positions, &fine);
+            }
+            let fine_mesh = GeodesicMesh::new(&fine_positions, &fine).unwrap();
+            let (coarse_d, _) = exact_distances(&mesh, &[source]).unwrap();
+            let (fine_d, _) = exact_distances(&fine_mesh, &[source]).unwrap();
+            for v in 0..coarse_d.len() {
+                assert!(
+                    (coarse_d[v] - fine_d[v]).abs() < 1e-9,
+                    "{name}, vertex {v}: {} coarse, {} subdivided",
+                    coarse_d[v],
+                    fine_d[v]
+                );
+            }
+            // Every fine vertex also agrees with the fine mesh's own source on the
+            // other side of the symmetry d(a, b) = d(b, a).
+            let far = (0..fine_d.len()).max_by(|&a, &b| fine_d[a].total_cmp(&fine_d[b])).unwrap() as u32;
+            let (back, _) = exact_distances(&fine_mesh, &[far]).unwrap();
+            assert!((back[source as usize] - fine_d[far as usize]).abs() < 1e-9, "{name}: symmetry");
+        }
+    }
+
+    /// A developable surface that closes on itself: the side of a prism over a 7-gon
+    /// unrolls onto a plane strip, where the distance is the Euclidean one, the least
+    /// over the strip's copies shifted by the perimeter.
+    #[test]
+    fn prism_sides_unroll_to_the_plane() {
+        let (sides, rows) = (7usize, 9usize);
+        let radius = [1.0, 1.3, 0.8, 1.1, 0.9, 1.2, 1.0];
+        let corner = |i: usize| {
+            let i = i % sides;
+            let a = 2.0 * PI * i as f64 / sides as f64 + 0.1 * (i % 3) as f64;
+            DVec3::new(radius[i] * a.cos(), radius[i] * a.sin(), 0.0)
+        };
+        // Arc length along the polygon to corner i.
+        let mut arc = vec![0.0];
+        for i in 0..sides {
+            arc.push(arc[i] + corner(i).distance(corner(i + 1)));
+        }
+        let perimeter = arc[sides];
+        let mut positions = Vec::new();
+        let mut unrolled = Vec::new();
+        for r in 0..=rows {
+            let z = 0.25 * r as f64;
+            for i in 0..sides {
+                positions.push(corner(i) + DVec3::new(0.0, 0.0, z));
+                unrolled.push(DVec2::new(arc[i], z));
+            }
+        }
+        let id = |i: usize, r: usize| (r * sides + i % sides) as u32;
+        let quads: Vec<[u32; 4]> = (0..rows)
+            .flat_map(|r| (0..sides).map(move |i| [id(i, r), id(i + 1, r), id(i + 1, r + 1), id(i, r + 1)]))
+            .collect();
+        let mesh = GeodesicMesh::new(&positions, &quads).unwrap();
+        let truth = |p: DVec2, q: DVec2| {
+            [-perimeter, 0.0, perimeter]
+                .iter()
+                .map(|&shift| p.distance(q + DVec2::new(shift, 0.0)))
+                .fold(f64::INFINITY, f64::min)
+        };
+        for source in [id(0, 0), id(3, 4), id(5, 9)] {
+            let (d, _) = exact_distances(&mesh, &[source]).unwrap();
+            for v in 0..positions.len() {
+                let t = truth(unrolled[v], unrolled[source as usize]);
+                assert!((d[v] - t).abs() < 1e-9, "source {source}, vertex {v}: {} vs {t}", d[v]);
+            }
+        }
+    }
+
+    #[test]
+    fn a_source_inside_a_face_of_a_plane_gives_euclidean_distances() {
+        let (positions, quads) = grid(9, |_, _| 0.0);
+        let mesh = GeodesicMesh::new(&positions, &quads).unwrap();
+        for point in [DVec3::new(0.437, 0.512, 0.0), DVec3::new(0.05, 0.93, 0.0), DVec3::new(0.5, 0.0, 0.0)] {
+            let p = mesh.nearest_point(point + DVec3::new(0.0, 0.0, 0.3)).unwrap();
+            assert!(
+                mesh.point_position(p).distance(point) < 1e-12,
+                "{point}: placed at {}",
+                mesh.point_position(p)
+            );
+            let (d, _) = exact_distances_from(&mesh, &[p]).unwrap();
+            for (v, q) in positions.iter().enumerate() {
+                let truth = q.distance(point);
+                assert!((d[v] - truth).abs() < 1e-9, "{point}, vertex {v}: {} vs {truth}", d[v]);
+            }
+        }
+        // A point at a vertex is that vertex's source.
+        let at_vertex = mesh.nearest_point(positions[40]).unwrap();
+        assert_eq!(
+            exact_distances_from(&mesh, &[at_vertex]).unwrap().0,
+            exact_distances(&mesh, &[40]).unwrap().0
+        );
+        let bad = SurfacePoint { triangle: u32::MAX, barycentric: [1.0, 0.0, 0.0] };
+        assert!(matches!(exact_distances_from(&mesh, &[bad]), Err(GeodesicError::InvalidSource(_))));
+    }
+
+    #[test]
+    fn a_face_source_on_a_folded_sheet_unfolds() {
+        let n = 8;
+        let flat: Vec<DVec3> = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| DVec3::new(i as f64, j as f64, 0.0) / n as f64))
+            .collect();
+        let (_, quads) = grid(n, |_, _| 0.0);
+        let fold = |p: DVec3| if p.x <= 0.5 { p } else { DVec3::new(0.5, p.y, p.x - 0.5) };
+        let folded: Vec<DVec3> = flat.iter().map(|&p| fold(p)).collect();
+        let mesh = GeodesicMesh::new(&folded, &quads).unwrap();
+        let source = DVec3::new(0.2, 0.33, 0.0);
+        let p = mesh.nearest_point(source).unwrap();
+        let (d, _) = exact_distances_from(&mesh, &[p]).unwrap();
+        for v in 0..flat.len() {
+            let truth = flat[v].distance(source);
+            assert!((d[v] - truth).abs() < 1e-9, "vertex {v}: {} vs {truth}", d[v]);
+        }
     }
 }
