@@ -1,8 +1,6 @@
 //! Exact polyhedral geodesics by window propagation: the improved Chen-Han algorithm
 //! (Xin and Wang 2009), on the triangles of a [`GeodesicMesh`].
 
-use std::cmp::Ordering;
-use std::collections::BinaryHeap;
 use std::f64::consts::PI;
 
 use glam::DVec2;
@@ -86,28 +84,46 @@ impl Window {
     }
 }
 
-/// A queue entry: a window's id, or [`VERTEX`] and a vertex, by increasing key.
-#[derive(Copy, Clone)]
-struct Entry {
-    key: f64,
-    id: u64,
+/// The queue of windows (by id) and vertex events ([`VERTEX`] and the vertex), least key
+/// first: a radix heap (Ahuja, Mehlhorn, Orlin and Tarjan 1990) on the keys' bits, which
+/// order as the keys do for keys `>= 0`. It needs the keys pushed to be no less than the
+/// last popped, as here, where a window's children and a vertex's windows lie farther
+/// than it (a key lower by rounding is raised to the last one). Each entry moves down
+/// the 65 buckets at most once per bit, through sequential memory, where a binary heap
+/// of millions of entries misses the cache at every level.
+struct Queue {
+    buckets: Vec<Vec<(u64, u64)>>,
+    last: u64,
 }
 
-impl PartialEq for Entry {
-    fn eq(&self, other: &Self) -> bool {
-        self.key.total_cmp(&other.key) == Ordering::Equal
+impl Queue {
+    fn new() -> Self {
+        Queue { buckets: vec![Vec::new(); 65], last: 0 }
     }
-}
-impl Eq for Entry {}
-impl PartialOrd for Entry {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
+
+    fn bucket(x: u64) -> usize {
+        (64 - x.leading_zeros()) as usize
     }
-}
-impl Ord for Entry {
-    // Reversed: the max-heap pops the least key first.
-    fn cmp(&self, other: &Self) -> Ordering {
-        other.key.total_cmp(&self.key)
+
+    fn push(&mut self, key: f64, id: u64) {
+        let bits = (key + 0.0).to_bits().max(self.last);
+        self.buckets[Self::bucket(bits ^ self.last)].push((bits, id));
+    }
+
+    fn pop(&mut self) -> Option<(f64, u64)> {
+        if self.buckets[0].is_empty() {
+            let i = (1..self.buckets.len()).find(|&i| !self.buckets[i].is_empty())?;
+            let mut items = std::mem::take(&mut self.buckets[i]);
+            self.last = items.iter().map(|e| e.0).min().expect("a non-empty bucket");
+            // Every entry shares the bits above `i` with the new least key: each goes
+            // to a lower bucket.
+            for &e in &items {
+                self.buckets[Self::bucket(e.0 ^ self.last)].push(e);
+            }
+            items.clear();
+            self.buckets[i] = items;
+        }
+        self.buckets[0].pop().map(|(bits, id)| (f64::from_bits(bits), id))
     }
 }
 
@@ -164,7 +180,7 @@ struct Propagation<'m> {
     dist: Vec<f64>,
     arrival: Vec<Option<Arrival>>,
     split: Vec<Option<Split>>,
-    queue: BinaryHeap<Entry>,
+    queue: Queue,
     info: ExactInfo,
     /// Intervals shorter than this (relative to the mesh scale) are dropped.
     tiny: f64,
@@ -293,7 +309,7 @@ impl<'m> Propagation<'m> {
             dist: vec![f64::INFINITY; n],
             arrival: vec![None; n],
             split: vec![None; n],
-            queue: BinaryHeap::new(),
+            queue: Queue::new(),
             info: ExactInfo::default(),
             tiny: 1e-12 * mesh.mean_edge_length().max(f64::MIN_POSITIVE),
             covered: Vec::new(),
@@ -305,7 +321,7 @@ impl<'m> Propagation<'m> {
     fn start_vertex(&mut self, v: u32) {
         self.dist[v as usize] = 0.0;
         self.arrival[v as usize] = None;
-        self.queue.push(Entry { key: 0.0, id: VERTEX | u64::from(v) });
+        self.queue.push(0.0, VERTEX | u64::from(v));
     }
 
     /// A source at `point` on triangle `t`: its corners directly, and a window across
@@ -340,10 +356,12 @@ impl<'m> Propagation<'m> {
     fn run(&mut self) {
         let n = self.mesh.num_vertices();
         let mut expanded = vec![false; n];
-        while let Some(Entry { key, id }) = self.queue.pop() {
+        while let Some((_, id)) = self.queue.pop() {
             if id & VERTEX != 0 {
+                // The first of a vertex's events popped is its least distance's (the
+                // queue's keys were raised by at most rounding).
                 let v = (id & !VERTEX) as u32;
-                if expanded[v as usize] || key > self.dist[v as usize] {
+                if expanded[v as usize] {
                     continue;
                 }
                 expanded[v as usize] = true;
@@ -366,7 +384,7 @@ impl<'m> Propagation<'m> {
         if d < self.dist[v as usize] {
             self.dist[v as usize] = d;
             if self.mesh.bends[v as usize] {
-                self.queue.push(Entry { key: d, id: VERTEX | u64::from(v) });
+                self.queue.push(d, VERTEX | u64::from(v));
             }
             true
         } else {
@@ -582,7 +600,7 @@ impl<'m> Propagation<'m> {
             self.dead.push(false);
             self.kept[side].push((piece, id));
             self.info.windows += 1;
-            self.queue.push(Entry { key: piece.key(), id: u64::from(id) });
+            self.queue.push(piece.key(), u64::from(id));
         }
     }
 
@@ -726,12 +744,12 @@ pub(crate) mod tests {
     /// Shortest paths along the edges (an upper bound of the geodesic distance).
     fn dijkstra(mesh: &GeodesicMesh, sources: &[u32]) -> Vec<f64> {
         let mut d = vec![f64::INFINITY; mesh.num_vertices()];
-        let mut heap = BinaryHeap::new();
+        let mut heap = Queue::new();
         for &s in sources {
             d[s as usize] = 0.0;
-            heap.push(Entry { key: 0.0, id: u64::from(s) });
+            heap.push(0.0, u64::from(s));
         }
-        while let Some(Entry { key, id }) = heap.pop() {
+        while let Some((key, id)) = heap.pop() {
             let v = id as u32;
             if key > d[v as usize] {
                 continue;
@@ -741,7 +759,7 @@ pub(crate) mod tests {
                     let du = key + mesh.pos(v).distance(mesh.pos(u));
                     if du < d[u as usize] {
                         d[u as usize] = du;
-                        heap.push(Entry { key: du, id: u64::from(u) });
+                        heap.push(du, u64::from(u));
                     }
                 }
             }
