@@ -422,7 +422,7 @@ impl<'m> Propagation<'m> {
             }
             let (t0, t1) = if restricted {
                 let (lo, hi) = self.open[i];
-                if !(hi >= lo) {
+                if lo.is_nan() || hi < lo {
                     continue;
                 }
                 let corner = (-apex).angle_to(DVec2::new(len, 0.0) - apex).abs();

@@ -119,7 +119,7 @@ impl HeatSolver {
             u[s as usize] = 1.0;
         }
         let components: Vec<u32> = sources.iter().map(|&s| self.mesh.component[s as usize]).collect();
-        Ok(self.from_heat(u, &components))
+        Ok(self.distances_of_heat(u, &components))
     }
 
     /// [`HeatSolver::distances`] from points anywhere on the surface: each point's unit
@@ -137,11 +137,11 @@ impl HeatSolver {
             }
             components.push(mesh.component[tri[0] as usize]);
         }
-        Ok(self.from_heat(u, &components))
+        Ok(self.distances_of_heat(u, &components))
     }
 
     /// The distances from the initial heat `u`, on the components listed.
-    fn from_heat(&self, mut u: Vec<f64>, components: &[u32]) -> Vec<f64> {
+    fn distances_of_heat(&self, mut u: Vec<f64>, components: &[u32]) -> Vec<f64> {
         let mesh = &self.mesh;
         let n = mesh.num_vertices();
         self.heat.solve_in_place(MatMut::from_column_major_slice_mut(&mut u, n, 1));

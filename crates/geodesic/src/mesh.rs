@@ -51,7 +51,7 @@ fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
         return [0.0, 1.0 - w, w];
     }
     let denom = va + vb + vc;
-    if !(denom.abs() > 0.0) {
+    if denom.is_nan() || denom == 0.0 {
         // A degenerate triangle: its nearest corner.
         let d = [a, b, c].map(|q| q.distance_squared(p));
         let i = (0..3).min_by(|&i, &j| d[i].total_cmp(&d[j])).unwrap_or(0);
