@@ -1,6 +1,7 @@
 //! Times the exact geodesic distances on a mesh file from the vertex nearest a point:
 //! `cargo run --release -p voxreg-geodesic --example exact_timing -- MESH.obj [X,Y,Z] [RUNS]`.
-//! Prints the best time, the run's counts and the largest distance.
+//! Prints the best time, the run's counts and the largest distance. With `REFERENCE=FILE`
+//! it writes the distances to FILE if that is missing or empty, else compares with them.
 
 use std::time::Instant;
 
