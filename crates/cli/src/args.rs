@@ -91,8 +91,9 @@ pub(crate) struct GeodesicArgs {
 #[derive(Args, Debug, PartialEq)]
 pub(crate) struct GeodesicOptions {
     /// A source point, in the output's coordinates (the volume's, with its spacing and
-    /// origin); the nearest vertex of the surface measured on is the source. Repeat for
-    /// several sources: each vertex gets the distance to the nearest.
+    /// origin); the nearest point of the surface measured on (on a face, an edge or a
+    /// vertex) is the source. Repeat for several sources: each vertex gets the distance
+    /// to the nearest.
     #[arg(long = "from", value_name = "X,Y,Z", required = true, value_parser = parse_point, allow_hyphen_values = true)]
     pub(crate) from: Vec<glam::DVec3>,
     /// exact (polyhedral geodesics, window propagation) or heat (the heat method: faster

@@ -4,7 +4,7 @@
 use anyhow::{Context, Result};
 use glam::DVec3;
 use voxreg_digisurf::DigitalSurface;
-use voxreg_geodesic::{distances, GeodesicMesh};
+use voxreg_geodesic::{distances_from, GeodesicMesh};
 use voxreg_io::{scalar_ramp, write_ply_with_vertex_field, QuadMesh};
 
 use crate::args::{GeodesicOptions, RegularizeArgs, SurfaceKind};
@@ -29,8 +29,8 @@ pub(crate) fn write_distances(
     let metric = QuadMesh::from_surface(surface, pick(opts.metric));
     let mesh = GeodesicMesh::new(&metric.positions, &metric.quads)
         .with_context(|| format!("{input}: cannot measure distances on this surface"))?;
-    let sources: Vec<u32> = opts.from.iter().filter_map(|&p| mesh.nearest_vertex(p)).collect();
-    let d = distances(&mesh, &sources, opts.method.method())
+    let sources: Vec<_> = opts.from.iter().filter_map(|&p| mesh.nearest_point(p)).collect();
+    let d = distances_from(&mesh, &sources, opts.method.method())
         .with_context(|| format!("{input}: cannot compute geodesic distances"))?;
     let largest = d.iter().copied().filter(|x| x.is_finite()).fold(0.0, f64::max);
     let spacing = opts.iso.unwrap_or(if largest > 0.0 { largest / 10.0 } else { 1.0 });

@@ -590,9 +590,11 @@ fn geodesic_writes_distances_on_the_proxy_and_the_digital_surface() {
     let (heat, _) = run("heat.ply", &["--method", "heat"]);
     let (on_digital, digital) = run("on-digital.ply", &["--on", "digital"]);
     let (staircase, _) = run("digital.ply", &["--metric", "digital", "--on", "digital"]);
-    // One source vertex at distance 0; the same distances on either mesh, whose
+    // The source is the surface point nearest the origin (on a face, or a vertex at
+    // distance 0): within a voxel of a vertex; the same distances on either mesh, whose
     // vertices differ; heat within a few percent of exact; the staircase metric longer.
-    assert_eq!(exact.iter().filter(|&&d| d == 0.0).count(), 1);
+    let least = exact.iter().copied().fold(f32::INFINITY, f32::min);
+    assert!(exact.iter().filter(|&&d| d == 0.0).count() <= 1 && least < 1.0, "least {least}");
     assert!(exact.iter().all(|&d| d >= 0.0));
     assert_eq!(exact, on_digital);
     assert_ne!(proxy, digital);

@@ -1,12 +1,11 @@
 //! Exact polyhedral geodesics by window propagation: the improved Chen-Han algorithm
 //! (Xin and Wang 2009), on the triangles of a [`GeodesicMesh`].
 
-use std::cmp::Ordering;
-use std::collections::BinaryHeap;
+use std::f64::consts::PI;
 
 use glam::DVec2;
 
-use crate::{GeodesicError, GeodesicMesh};
+use crate::{GeodesicError, GeodesicMesh, SurfacePoint};
 
 /// What one exact run did.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
@@ -18,6 +17,11 @@ pub struct ExactInfo {
     /// Pseudo-sources expanded (sources, and saddle or boundary vertices).
     pub pseudo_sources: usize,
 }
+
+/// The flag of a vertex event's id on the queue.
+const VERTEX: u64 = 1 << 63;
+/// Slack, in radians, of the angle tests around a pseudo-source.
+const ANGLE_SLACK: f64 = 1e-9;
 
 /// A window: an interval `[b0, b1]` of side `k` of triangle `tri`, seen straight from a
 /// (pseudo-)source unfolded into the side's frame, about to be propagated into `tri`.
@@ -41,57 +45,7 @@ impl Window {
         let x = self.s.x.clamp(self.b0, self.b1);
         self.sigma + self.s.distance(DVec2::new(x, 0.0))
     }
-}
 
-enum Event {
-    Window(Window),
-    Vertex(u32),
-}
-
-struct Queued {
-    key: f64,
-    event: Event,
-}
-
-impl PartialEq for Queued {
-    fn eq(&self, other: &Self) -> bool {
-        self.key.total_cmp(&other.key) == Ordering::Equal
-    }
-}
-impl Eq for Queued {}
-impl PartialOrd for Queued {
-    fn partial_cmp(&self, other: &Self) -> Option<Ordering> {
-        Some(self.cmp(other))
-    }
-}
-impl Ord for Queued {
-    // Reversed: the max-heap pops the least key first.
-    fn cmp(&self, other: &Self) -> Ordering {
-        other.key.total_cmp(&self.key)
-    }
-}
-
-/// The window through which a vertex got its distance: the side it was seen through and
-/// where the shortest path crossed that side (for the one-angle-one-split rule).
-#[derive(Copy, Clone)]
-struct Occupant {
-    tri: u32,
-    k: u8,
-    crossing: f64,
-    /// The window's source, in the frame of side `k` of `tri`.
-    source: DVec2,
-}
-
-/// A window kept on its side, for trimming later windows there.
-#[derive(Copy, Clone)]
-struct Kept {
-    b0: f64,
-    b1: f64,
-    s: DVec2,
-    sigma: f64,
-}
-
-impl Kept {
     fn at(&self, x: f64) -> f64 {
         self.sigma + self.s.distance(DVec2::new(x, 0.0))
     }
@@ -100,7 +54,7 @@ impl Kept {
     /// windows on the same side). Where they are equal, `sigma1 + |s1 x| = sigma2 +
     /// |s2 x|`, squaring twice leaves a quadratic in `x`: shorter at both ends and no
     /// root between means shorter throughout.
-    fn shorter(&self, other: &Kept, lo: f64, hi: f64) -> bool {
+    fn shorter(&self, other: &Window, lo: f64, hi: f64) -> bool {
         let margin = 1e-12 * (1.0 + self.sigma.max(other.sigma));
         let ends_shorter = other.at(lo) - self.at(lo) > margin && other.at(hi) - self.at(hi) > margin;
         if !ends_shorter {
@@ -130,16 +84,111 @@ impl Kept {
     }
 }
 
+/// The queue of windows (by id) and vertex events ([`VERTEX`] and the vertex), least key
+/// first: a radix heap (Ahuja, Mehlhorn, Orlin and Tarjan 1990) on the keys' bits, which
+/// order as the keys do for keys `>= 0`. It needs the keys pushed to be no less than the
+/// last popped, as here, where a window's children and a vertex's windows lie farther
+/// than it (a key lower by rounding is raised to the last one). Each entry moves down
+/// the 65 buckets at most once per bit, through sequential memory, where a binary heap
+/// of millions of entries misses the cache at every level.
+struct Queue {
+    buckets: Vec<Vec<(u64, u64)>>,
+    last: u64,
+}
+
+impl Queue {
+    fn new() -> Self {
+        Queue { buckets: vec![Vec::new(); 65], last: 0 }
+    }
+
+    fn bucket(x: u64) -> usize {
+        (64 - x.leading_zeros()) as usize
+    }
+
+    fn push(&mut self, key: f64, id: u64) {
+        let bits = (key + 0.0).to_bits().max(self.last);
+        self.buckets[Self::bucket(bits ^ self.last)].push((bits, id));
+    }
+
+    fn pop(&mut self) -> Option<(f64, u64)> {
+        if self.buckets[0].is_empty() {
+            let i = (1..self.buckets.len()).find(|&i| !self.buckets[i].is_empty())?;
+            let mut items = std::mem::take(&mut self.buckets[i]);
+            self.last = items.iter().map(|e| e.0).min().expect("a non-empty bucket");
+            // Every entry shares the bits above `i` with the new least key: each goes
+            // to a lower bucket.
+            for &e in &items {
+                self.buckets[Self::bucket(e.0 ^ self.last)].push(e);
+            }
+            items.clear();
+            self.buckets[i] = items;
+        }
+        self.buckets[0].pop().map(|(bits, id)| (f64::from_bits(bits), id))
+    }
+}
+
+/// A triangle side's frame: its length and the third corner (`y >= 0`).
+#[derive(Copy, Clone)]
+struct Frame {
+    len: f64,
+    apex: DVec2,
+}
+
+/// Another triangle on a side's edge: its side `k` there, and whether that side runs
+/// the same way (from the same corner).
+#[derive(Copy, Clone)]
+struct Link {
+    tri: u32,
+    k: u8,
+    forward: bool,
+}
+
+/// The direction back along the shortest path found to a vertex: corner `corner` of
+/// triangle `tri` is the vertex, and the direction makes `angle` with the side towards
+/// corner `corner + 1`, counted towards corner `corner + 2` (outside `[0, corner
+/// angle]` when the path arrives through another triangle of the fan).
+#[derive(Copy, Clone)]
+struct Arrival {
+    tri: u32,
+    corner: u8,
+    angle: f64,
+}
+
+/// Where the shortest path found to a vertex crossed the side (`3 tri + k`) of the
+/// window that found it, the vertex being that triangle's apex.
+#[derive(Copy, Clone)]
+struct Split {
+    side: u32,
+    crossing: f64,
+}
+
 struct Propagation<'m> {
     mesh: &'m GeodesicMesh,
-    /// Windows queued so far on each triangle side (`3 * tri + k`).
-    kept: Vec<Vec<Kept>>,
+    /// Per triangle side (`3 tri + k`).
+    frames: Vec<Frame>,
+    /// The other triangles on each side's edge: `links[link_offsets[side]..link_offsets[side + 1]]`.
+    link_offsets: Vec<u32>,
+    links: Vec<Link>,
+    /// Every window queued, in one arena.
+    windows: Vec<Window>,
+    /// Per side, copies of the windows kept there with their ids, for trimming later
+    /// windows (contiguous: scanning them is most of the work on large meshes).
+    kept: Vec<Vec<(Window, u32)>>,
+    /// Windows found longer, over all their interval, than a later one on their side:
+    /// skipped when popped.
+    dead: Vec<bool>,
     dist: Vec<f64>,
-    occupant: Vec<Option<Occupant>>,
-    queue: BinaryHeap<Queued>,
+    arrival: Vec<Option<Arrival>>,
+    split: Vec<Option<Split>>,
+    queue: Queue,
     info: ExactInfo,
     /// Intervals shorter than this (relative to the mesh scale) are dropped.
     tiny: f64,
+    /// Scratch: parts of a new window covered by kept ones, and what is left.
+    covered: Vec<(f64, f64)>,
+    pieces: Vec<(f64, f64)>,
+    /// Scratch: per triangle around a pseudo-source, the angles it is open over.
+    open: Vec<(f64, f64)>,
 }
 
 /// Exact geodesic distance on the polyhedral surface of `mesh` from the nearest of
@@ -153,48 +202,51 @@ struct Propagation<'m> {
 /// vertex that an earlier window reached by a shorter path through the same side keeps
 /// only its child on its own side of that path (one angle, one split). As in
 /// Mitchell-Mount-Papadimitriou, a new window loses the parts of its interval where a
-/// window already on the same side is shorter. Saddle vertices
-/// (angle sum at least `2 pi`) and vertices on boundary or non-manifold edges become
-/// pseudo-sources once final, a saddle reached by a window only into its shadow (where a
-/// shortest path through it turns by at least `pi` on both sides). Every rule only drops windows that another path dominates,
-/// so the distances are exact up to rounding.
+/// window already on the same side is shorter, and a window it is shorter than
+/// everywhere is dropped. Saddle vertices (angle sum above `2 pi`, see
+/// [`GeodesicMesh`]) and vertices on boundary or non-manifold edges become
+/// pseudo-sources once final; a shortest path through a vertex turns by at least `pi`
+/// on both sides, so a saddle sends windows only into its shadow, the directions within
+/// `[pi, Theta - pi]` of the one its shortest path arrives from (`Theta` its angle sum).
+/// Every rule only drops windows that another path dominates, so the distances are exact
+/// up to rounding.
 pub fn exact_distances(mesh: &GeodesicMesh, sources: &[u32]) -> Result<(Vec<f64>, ExactInfo), GeodesicError> {
     mesh.check_sources(sources)?;
-    let n = mesh.num_vertices();
-    let mut run = Propagation {
-        mesh,
-        kept: vec![Vec::new(); 3 * mesh.triangles.len()],
-        dist: vec![f64::INFINITY; n],
-        occupant: vec![None; n],
-        queue: BinaryHeap::new(),
-        info: ExactInfo::default(),
-        tiny: 1e-12 * mesh.mean_edge_length().max(f64::MIN_POSITIVE),
-    };
+    let mut run = Propagation::new(mesh);
     for &s in sources {
-        run.dist[s as usize] = 0.0;
-        run.queue.push(Queued { key: 0.0, event: Event::Vertex(s) });
+        run.start_vertex(s);
     }
-    let mut expanded = vec![false; n];
-    while let Some(Queued { key, event }) = run.queue.pop() {
-        match event {
-            Event::Vertex(v) => {
-                if expanded[v as usize] || key > run.dist[v as usize] {
-                    continue;
+    run.run();
+    Ok((run.dist, run.info))
+}
+
+/// [`exact_distances`] from points anywhere on the surface (on a triangle, an edge or
+/// a vertex), such as [`GeodesicMesh::nearest_point`] gives.
+pub fn exact_distances_from(
+    mesh: &GeodesicMesh,
+    sources: &[SurfacePoint],
+) -> Result<(Vec<f64>, ExactInfo), GeodesicError> {
+    mesh.check_points(sources)?;
+    let mut run = Propagation::new(mesh);
+    for &p in sources {
+        match mesh.snap(p) {
+            Snapped::Vertex(v) => run.start_vertex(v),
+            Snapped::Point(tris, point) => {
+                for t in tris {
+                    run.start_in_triangle(t, point);
                 }
-                expanded[v as usize] = true;
-                run.info.pseudo_sources += 1;
-                run.expand_vertex(v);
-            }
-            Event::Window(w) => {
-                if run.dominated(&w) {
-                    continue;
-                }
-                run.info.propagated += 1;
-                run.propagate(&w);
             }
         }
     }
+    run.run();
     Ok((run.dist, run.info))
+}
+
+/// A source point, placed: a vertex, or a position on the triangles listed (one, or
+/// those on the edge it lies on).
+pub(crate) enum Snapped {
+    Vertex(u32),
+    Point(Vec<u32>, glam::DVec3),
 }
 
 /// Corner `k`, `k + 1`, `k + 2` of `tri`.
@@ -202,15 +254,137 @@ fn corners(tri: [u32; 3], k: usize) -> [u32; 3] {
     [tri[k], tri[(k + 1) % 3], tri[(k + 2) % 3]]
 }
 
-impl Propagation<'_> {
-    /// Lowers the distance of `v` to `d` if shorter; a lowered bend vertex is queued as a
-    /// pseudo-source.
-    fn relax(&mut self, v: u32, d: f64, occupant: Option<Occupant>) -> bool {
+/// The point where the ray from `from` at `angle` (radians, counterclockwise from the
+/// direction to the origin) meets the x axis, as a parameter in `[0, len]`.
+fn ray_hit(from: DVec2, angle: f64, len: f64) -> f64 {
+    let u = (-from).normalize_or_zero();
+    let (sin, cos) = angle.sin_cos();
+    let d = DVec2::new(u.x * cos - u.y * sin, u.x * sin + u.y * cos);
+    if d.y >= 0.0 {
+        return len;
+    }
+    (from.x - from.y / d.y * d.x).clamp(0.0, len)
+}
+
+impl<'m> Propagation<'m> {
+    fn new(mesh: &'m GeodesicMesh) -> Self {
+        let sides = 3 * mesh.triangles.len();
+        let mut frames = Vec::with_capacity(sides);
+        let mut link_offsets = Vec::with_capacity(sides + 1);
+        let mut links = Vec::with_capacity(sides);
+        link_offsets.push(0);
+        for (t, &tri) in mesh.triangles.iter().enumerate() {
+            for k in 0..3 {
+                let [a, b, c] = corners(tri, k);
+                let (pa, pb, pc) = (mesh.pos(a), mesh.pos(b), mesh.pos(c));
+                let len = pa.distance(pb);
+                let (l1, l2) = (pa.distance(pc), pb.distance(pc));
+                let x = if len > 0.0 { (len * len + l1 * l1 - l2 * l2) / (2.0 * len) } else { 0.0 };
+                let y = (l1 * l1 - x * x).max(0.0).sqrt();
+                frames.push(Frame { len, apex: DVec2::new(x, y) });
+                for &t2 in mesh.edge_tris(mesh.triangle_edges[t][k]) {
+                    if t2 as usize == t {
+                        continue;
+                    }
+                    let other = mesh.triangles[t2 as usize];
+                    if let Some(k2) = (0..3).find(|&i| {
+                        let (p, q) = (other[i], other[(i + 1) % 3]);
+                        (p == a && q == b) || (p == b && q == a)
+                    }) {
+                        links.push(Link { tri: t2, k: k2 as u8, forward: other[k2] == a });
+                    }
+                }
+                link_offsets.push(links.len() as u32);
+            }
+        }
+        let n = mesh.num_vertices();
+        Propagation {
+            mesh,
+            frames,
+            link_offsets,
+            links,
+            windows: Vec::new(),
+            kept: vec![Vec::new(); sides],
+            dead: Vec::new(),
+            dist: vec![f64::INFINITY; n],
+            arrival: vec![None; n],
+            split: vec![None; n],
+            queue: Queue::new(),
+            info: ExactInfo::default(),
+            tiny: 1e-12 * mesh.mean_edge_length().max(f64::MIN_POSITIVE),
+            covered: Vec::new(),
+            pieces: Vec::new(),
+            open: Vec::new(),
+        }
+    }
+
+    fn start_vertex(&mut self, v: u32) {
+        self.dist[v as usize] = 0.0;
+        self.arrival[v as usize] = None;
+        self.queue.push(0.0, VERTEX | u64::from(v));
+    }
+
+    /// A source at `point` on triangle `t`: its corners directly, and a window across
+    /// each side that does not hold the point.
+    fn start_in_triangle(&mut self, t: u32, point: glam::DVec3) {
+        let mesh = self.mesh;
+        let tri = mesh.triangles[t as usize];
+        for k in 0..3 {
+            let [a, b, _] = corners(tri, k);
+            let (pa, pb) = (mesh.pos(a), mesh.pos(b));
+            // Corner k, the path arriving from the point.
+            if self.lower(a, pa.distance(point)) {
+                let angle = (pb - pa).angle_between(point - pa);
+                self.arrival[a as usize] = Some(Arrival { tri: t, corner: k as u8, angle });
+                self.split[a as usize] = None;
+            }
+            let frame = self.frames[3 * t as usize + k];
+            if frame.len <= 0.0 {
+                continue;
+            }
+            let u = (pb - pa) / frame.len;
+            let x = (point - pa).dot(u);
+            let y = (point - pa - x * u).length();
+            if y <= self.tiny {
+                continue;
+            }
+            let ends = [DVec2::ZERO, DVec2::new(frame.len, 0.0)];
+            self.cross_side(3 * t as usize + k, ends, frame.apex, 0.0, frame.len, DVec2::new(x, y), 0.0);
+        }
+    }
+
+    fn run(&mut self) {
+        let n = self.mesh.num_vertices();
+        let mut expanded = vec![false; n];
+        while let Some((_, id)) = self.queue.pop() {
+            if id & VERTEX != 0 {
+                // The first of a vertex's events popped is its least distance's (the
+                // queue's keys were raised by at most rounding).
+                let v = (id & !VERTEX) as u32;
+                if expanded[v as usize] {
+                    continue;
+                }
+                expanded[v as usize] = true;
+                self.info.pseudo_sources += 1;
+                self.expand_vertex(v);
+            } else {
+                let w = self.windows[id as usize];
+                if self.dead[id as usize] || self.dominated(&w) {
+                    continue;
+                }
+                self.info.propagated += 1;
+                self.propagate(&w);
+            }
+        }
+    }
+
+    /// Lowers the distance of `v` to `d` if shorter (the caller then records how it
+    /// arrived); a lowered bend vertex is queued as a pseudo-source.
+    fn lower(&mut self, v: u32, d: f64) -> bool {
         if d < self.dist[v as usize] {
             self.dist[v as usize] = d;
-            self.occupant[v as usize] = occupant;
             if self.mesh.bends[v as usize] {
-                self.queue.push(Queued { key: d, event: Event::Vertex(v) });
+                self.queue.push(d, VERTEX | u64::from(v));
             }
             true
         } else {
@@ -218,96 +392,139 @@ impl Propagation<'_> {
         }
     }
 
-    /// The 2D position, in the frame of side `k` of `tri`, of its third corner.
-    fn apex(&self, tri: u32, k: usize) -> (f64, DVec2) {
-        let [a, b, c] = corners(self.mesh.triangles[tri as usize], k);
-        let (pa, pb, pc) = (self.mesh.pos(a), self.mesh.pos(b), self.mesh.pos(c));
-        let len = pa.distance(pb);
-        let (l1, l2) = (pa.distance(pc), pb.distance(pc));
-        let x = (len * len + l1 * l1 - l2 * l2) / (2.0 * len);
-        let y = (l1 * l1 - x * x).max(0.0).sqrt();
-        (len, DVec2::new(x, y))
+    fn frame(&self, tri: u32, k: usize) -> Frame {
+        self.frames[3 * tri as usize + k]
     }
 
-    /// A pseudo-source at `v`: its neighbours directly, and a full window on the far side
-    /// of every triangle around it that a shortest path through `v` can enter.
+    /// A pseudo-source at `v`: its neighbours directly, and a window over the part of
+    /// the far side of every triangle around it that a shortest path through `v` can
+    /// enter (its shadow).
     fn expand_vertex(&mut self, v: u32) {
         let mesh = self.mesh;
         let dv = self.dist[v as usize];
-        let shadow = self.shadow(v);
+        let restricted = self.shadow(v);
         for (i, &t) in mesh.vertex_tris(v).iter().enumerate() {
             let tri = mesh.triangles[t as usize];
             let j = tri.iter().position(|&x| x == v).expect("vertex of its triangle");
             // The side opposite v: corners j+1, j+2 (side k = j + 1 of t).
             let k = (j + 1) % 3;
-            let (len, apex) = self.apex(t, k);
+            let Frame { len, apex } = self.frame(t, k);
             let [a, b, _] = corners(tri, k);
-            self.relax(a, dv + apex.length(), None);
-            self.relax(b, dv + apex.distance(DVec2::new(len, 0.0)), None);
-            if shadow.as_ref().is_some_and(|open| !open[i]) {
-                continue;
+            // Corner k (a) sees v at its corner angle, corner k + 1 (b) along its side.
+            if self.lower(a, dv + apex.length()) {
+                let angle = apex.y.atan2(apex.x);
+                self.arrival[a as usize] = Some(Arrival { tri: t, corner: k as u8, angle });
+                self.split[a as usize] = None;
             }
+            if self.lower(b, dv + apex.distance(DVec2::new(len, 0.0))) {
+                self.arrival[b as usize] = Some(Arrival { tri: t, corner: ((k + 1) % 3) as u8, angle: 0.0 });
+                self.split[b as usize] = None;
+            }
+            let (t0, t1) = if restricted {
+                let (lo, hi) = self.open[i];
+                if lo.is_nan() || hi < lo {
+                    continue;
+                }
+                let corner = (-apex).angle_to(DVec2::new(len, 0.0) - apex).abs();
+                let t0 = if lo <= 0.0 { 0.0 } else { ray_hit(apex, lo, len) };
+                let t1 = if hi >= corner { len } else { ray_hit(apex, hi, len) };
+                (t0, t1)
+            } else {
+                (0.0, len)
+            };
             // In the frame of side k of t the source is the apex; the window goes into
             // every other triangle on that side.
-            self.cross_side(t, k, [DVec2::ZERO, DVec2::new(len, 0.0)], apex, 0.0, len, apex, dv);
+            self.cross_side(3 * t as usize + k, [DVec2::ZERO, DVec2::new(len, 0.0)], apex, t0, t1, apex, dv);
         }
     }
 
-    /// Which triangles around `v` (in `vertex_tris` order) a shortest path through `v`
-    /// can continue into, or `None` for all of them.
+    /// Fills `open` with, per triangle around `v` (in `vertex_tris` order), the angles
+    /// at `v` (from its side towards the next corner after `v`, as in [`Arrival`]) a
+    /// shortest path through `v` can continue into (`(NAN, NAN)` for none); `false`
+    /// when every direction is open.
     ///
     /// A shortest path through a vertex turns by at least `pi` on both sides (otherwise
     /// it shortens around the vertex), so from the direction it arrives from, measured
     /// around `v` (total angle `Theta`), it leaves within `[pi, Theta - pi]`: only the
-    /// saddle's shadow. Known when `v` got its distance from a window (its occupant) and
-    /// its triangles form one fan of manifold edges; otherwise every triangle is open.
-    fn shadow(&self, v: u32) -> Option<Vec<bool>> {
-        let o = self.occupant[v as usize]?;
+    /// saddle's shadow. Known when the path's arrival at `v` is and `v`'s triangles form
+    /// one fan of manifold edges.
+    fn shadow(&mut self, v: u32) -> bool {
+        let Some(arrival) = self.arrival[v as usize] else {
+            return false;
+        };
         let mesh = self.mesh;
         let fan = mesh.vertex_tris(v);
-        let [a, b, _] = corners(mesh.triangles[o.tri as usize], o.k as usize);
-        let (_, pc) = self.apex(o.tri, o.k as usize);
-        // The arrival direction, as an angle from the side v-a towards v-b.
-        let arrival = (-pc).angle_to(o.source - pc).abs();
         let pv = mesh.pos(v);
-        let mut spans = vec![(f64::NAN, f64::NAN); fan.len()];
-        let (mut t, mut from, mut to, mut phi) = (o.tri, a, b, 0.0);
+        self.open.clear();
+        self.open.resize(fan.len(), (f64::NAN, f64::NAN));
+        // Per triangle of the fan: the walk's angle where it starts, its corner angle,
+        // and whether the walk crosses it against the corner order.
+        let mut spans = [(f64::NAN, 0.0, false); 32];
+        if fan.len() > spans.len() {
+            return false;
+        }
+        let start = mesh.triangles[arrival.tri as usize];
+        let j = arrival.corner as usize;
+        let (mut t, mut from, mut to, mut phi) = (arrival.tri, start[(j + 1) % 3], start[(j + 2) % 3], 0.0);
         for _ in 0..fan.len() {
-            let i = fan.iter().position(|&x| x == t)?;
+            let Some(i) = fan.iter().position(|&x| x == t) else {
+                return false;
+            };
+            let tri = mesh.triangles[t as usize];
+            let jt = tri.iter().position(|&x| x == v).expect("vertex of its triangle");
             let angle = (mesh.pos(from) - pv).angle_between(mesh.pos(to) - pv);
-            spans[i] = (phi, phi + angle);
+            spans[i] = (phi, angle, tri[(jt + 1) % 3] != from);
             phi += angle;
             // Across the side v-to into the next triangle of the fan.
-            let tri = mesh.triangles[t as usize];
-            let side = (0..3).find(|&s| {
+            let Some(side) = (0..3).find(|&s| {
                 let (p, q) = (tri[s], tri[(s + 1) % 3]);
                 (p == v && q == to) || (p == to && q == v)
-            })?;
-            let across = mesh.edge_tris(mesh.triangle_edges[t as usize][side]);
-            if across.len() != 2 {
-                return None;
+            }) else {
+                return false;
+            };
+            let side = 3 * t as usize + side;
+            let (l0, l1) = (self.link_offsets[side] as usize, self.link_offsets[side + 1] as usize);
+            if l1 - l0 != 1 {
+                return false;
             }
-            t = if across[0] == t { across[1] } else { across[0] };
+            t = self.links[l0].tri;
             let next = mesh.triangles[t as usize];
             from = to;
-            to = *next.iter().find(|&&x| x != v && x != from)?;
+            let Some(&x) = next.iter().find(|&&x| x != v && x != from) else {
+                return false;
+            };
+            to = x;
         }
-        if t != o.tri || from != a || spans.iter().any(|s| s.0.is_nan()) {
-            return None;
+        if t != arrival.tri || spans[..fan.len()].iter().any(|s| s.0.is_nan()) {
+            return false;
         }
-        let pi = std::f64::consts::PI;
-        let (lo, hi) = (arrival + pi - 1e-9, arrival + phi - pi + 1e-9);
-        Some(spans.iter().map(|&(p0, p1)| p1 >= lo && p0 <= hi).collect())
+        let theta = phi;
+        let back = arrival.angle.rem_euclid(theta);
+        let (lo, hi) = (back + PI - ANGLE_SLACK, back + theta - PI + ANGLE_SLACK);
+        for (i, &(p0, angle, reversed)) in spans[..fan.len()].iter().enumerate() {
+            let (mut a, mut b) = (f64::INFINITY, f64::NEG_INFINITY);
+            for shift in [0.0, theta] {
+                let (x, y) = ((lo - shift).max(p0), (hi - shift).min(p0 + angle));
+                if y >= x {
+                    a = a.min(x - p0);
+                    b = b.max(y - p0);
+                }
+            }
+            if b >= a {
+                self.open[i] = if reversed { (angle - b, angle - a) } else { (a, b) };
+            }
+        }
+        true
     }
 
     /// Queues the windows continuing interval `[t0, t1]` (from corner `k` towards corner
-    /// `k + 1` of `from`) into the other triangles on that side. `ends` are the side's
-    /// two corners and `other` the third corner of `from`, all in the frame `s` is in.
+    /// `k + 1` of the side `side = 3 tri + k`) into the other triangles on that side.
+    /// `ends` are the side's two corners and `other` the third corner of `tri`, all in
+    /// the frame `s` is in.
     #[allow(clippy::too_many_arguments)]
     fn cross_side(
         &mut self,
-        from: u32,
-        k: usize,
+        side: usize,
         ends: [DVec2; 2],
         other: DVec2,
         t0: f64,
@@ -318,22 +535,9 @@ impl Propagation<'_> {
         if t1 - t0 <= self.tiny {
             return;
         }
-        let mesh = self.mesh;
-        let e = mesh.triangle_edges[from as usize][k];
-        let (p, q) = (mesh.triangles[from as usize][k], mesh.triangles[from as usize][(k + 1) % 3]);
         let len = ends[0].distance(ends[1]);
-        for &t in mesh.edge_tris(e) {
-            if t == from {
-                continue;
-            }
-            let tri = mesh.triangles[t as usize];
-            let Some(k2) = (0..3).find(|&i| {
-                let (a, b) = (tri[i], tri[(i + 1) % 3]);
-                (a == p && b == q) || (a == q && b == p)
-            }) else {
-                continue;
-            };
-            let forward = tri[k2] == p;
+        for l in self.link_offsets[side]..self.link_offsets[side + 1] {
+            let Link { tri, k, forward } = self.links[l as usize];
             let (origin, end) = if forward { (ends[0], ends[1]) } else { (ends[1], ends[0]) };
             let u = (end - origin) / len;
             let mut v = u.perp();
@@ -346,43 +550,57 @@ impl Propagation<'_> {
             if s2.y > -self.tiny {
                 continue;
             }
-            let w = Window { tri: t, k: k2 as u8, b0: b0.max(0.0), b1: b1.min(len), s: s2, sigma };
-            self.push(w);
+            self.push(Window { tri, k, b0: b0.max(0.0), b1: b1.min(len), s: s2, sigma });
         }
     }
 
     /// Queues what is left of `w` once the parts where a window already on its side is
-    /// shorter are cut out (none of it if a vertex dominates it).
+    /// shorter are cut out (none of it if a vertex dominates it), and drops the windows
+    /// there that it is shorter than on all of their interval.
     fn push(&mut self, w: Window) {
         if w.b1 - w.b0 <= self.tiny || self.dominated(&w) {
             return;
         }
         let side = 3 * w.tri as usize + w.k as usize;
-        let new = Kept { b0: w.b0, b1: w.b1, s: w.s, sigma: w.sigma };
-        let mut covered: Vec<(f64, f64)> = Vec::new();
-        for old in &self.kept[side] {
+        self.covered.clear();
+        let mut i = 0;
+        while i < self.kept[side].len() {
+            let (old, id) = self.kept[side][i];
             let (lo, hi) = (old.b0.max(w.b0), old.b1.min(w.b1));
-            if hi - lo > self.tiny && old.shorter(&new, lo, hi) {
-                covered.push((lo, hi));
+            if hi - lo > self.tiny {
+                if old.shorter(&w, lo, hi) {
+                    self.covered.push((lo, hi));
+                } else if lo == old.b0 && hi == old.b1 && w.shorter(&old, lo, hi) {
+                    // `w` (or, where `w` is cut out, a window shorter still) is shorter
+                    // on all of it: no longer kept, and skipped if still queued.
+                    self.dead[id as usize] = true;
+                    self.kept[side].swap_remove(i);
+                    continue;
+                }
             }
+            i += 1;
         }
-        covered.sort_by(|a, b| a.0.total_cmp(&b.0));
-        let mut pieces = Vec::new();
+        self.covered.sort_unstable_by(|a, b| a.0.total_cmp(&b.0));
+        self.pieces.clear();
         let mut start = w.b0;
-        for (lo, hi) in covered {
+        for &(lo, hi) in &self.covered {
             if lo > start + self.tiny {
-                pieces.push((start, lo));
+                self.pieces.push((start, lo));
             }
             start = start.max(hi);
         }
         if w.b1 > start + self.tiny {
-            pieces.push((start, w.b1));
+            self.pieces.push((start, w.b1));
         }
-        for (b0, b1) in pieces {
+        for p in 0..self.pieces.len() {
+            let (b0, b1) = self.pieces[p];
             let piece = Window { b0, b1, ..w };
-            self.kept[side].push(Kept { b0, b1, ..new });
+            let id = self.windows.len() as u32;
+            self.windows.push(piece);
+            self.dead.push(false);
+            self.kept[side].push((piece, id));
             self.info.windows += 1;
-            self.queue.push(Queued { key: piece.key(), event: Event::Window(piece) });
+            self.queue.push(piece.key(), u64::from(id));
         }
     }
 
@@ -397,7 +615,7 @@ impl Propagation<'_> {
     /// ends of the interval in it put the whole interval in it.
     fn dominated(&self, w: &Window) -> bool {
         let [a, b, c] = corners(self.mesh.triangles[w.tri as usize], w.k as usize);
-        let (len, pc) = self.apex(w.tri, w.k as usize);
+        let Frame { len, apex: pc } = self.frame(w.tri, w.k as usize);
         let ends = [DVec2::new(w.b0, 0.0), DVec2::new(w.b1, 0.0)];
         let via_source = |x: DVec2| w.sigma + w.s.distance(x);
         let margin = 1e-12 * (1.0 + w.sigma);
@@ -419,32 +637,40 @@ impl Propagation<'_> {
         let tri = self.mesh.triangles[w.tri as usize];
         let k = w.k as usize;
         let [a, b, c] = corners(tri, k);
-        let (len, pc) = self.apex(w.tri, k);
+        let Frame { len, apex: pc } = self.frame(w.tri, k);
         let (pa, pb) = (DVec2::ZERO, DVec2::new(len, 0.0));
-        if w.b0 <= self.tiny {
-            self.relax(a, w.sigma + w.s.length(), None);
+        if w.b0 <= self.tiny && self.lower(a, w.sigma + w.s.length()) {
+            let angle = w.s.y.atan2(w.s.x);
+            self.arrival[a as usize] = Some(Arrival { tri: w.tri, corner: k as u8, angle });
+            self.split[a as usize] = None;
         }
-        if w.b1 >= len - self.tiny {
-            self.relax(b, w.sigma + w.s.distance(pb), None);
+        if w.b1 >= len - self.tiny && self.lower(b, w.sigma + w.s.distance(pb)) {
+            // Through the triangles behind side k (the window's), so in (angle at b,
+            // angle at b + pi), as the plane of the unfolding measures it.
+            let angle = (pc - pb).angle_to(w.s - pb).rem_euclid(2.0 * PI);
+            self.arrival[b as usize] = Some(Arrival { tri: w.tri, corner: ((k + 1) % 3) as u8, angle });
+            self.split[b as usize] = None;
         }
         // Where the ray from the source to the apex crosses the side.
         let dy = pc.y - w.s.y;
         let tc = if dy > 0.0 { w.s.x + (pc.x - w.s.x) * (-w.s.y) / dy } else { f64::NAN };
         let mut left = w.b0 < tc;
         let mut right = w.b1 > tc;
+        let side = (3 * w.tri as usize + k) as u32;
         if w.b0 <= tc && tc <= w.b1 {
-            let occupant = Occupant { tri: w.tri, k: w.k, crossing: tc, source: w.s };
-            if !self.relax(c, w.sigma + w.s.distance(pc), Some(occupant)) {
-                if let Some(o) = self.occupant[c as usize] {
-                    if o.tri == w.tri && o.k == w.k {
-                        // A shorter path to c crosses the side at o.crossing: this
-                        // window loses on the far side of it.
-                        if w.b0 >= o.crossing {
-                            left = false;
-                        }
-                        if w.b1 <= o.crossing {
-                            right = false;
-                        }
+            if self.lower(c, w.sigma + w.s.distance(pc)) {
+                let angle = (pa - pc).angle_to(w.s - pc);
+                self.arrival[c as usize] = Some(Arrival { tri: w.tri, corner: ((k + 2) % 3) as u8, angle });
+                self.split[c as usize] = Some(Split { side, crossing: tc });
+            } else if let Some(o) = self.split[c as usize] {
+                if o.side == side {
+                    // A shorter path to c crosses the side at o.crossing: this window
+                    // loses on the far side of it.
+                    if w.b0 >= o.crossing {
+                        left = false;
+                    }
+                    if w.b1 <= o.crossing {
+                        right = false;
                     }
                 }
             }
@@ -468,7 +694,8 @@ impl Propagation<'_> {
             let t0 = ray(w.b0, pa, pc);
             let t1 = if w.b1 >= tc { lac } else { ray(w.b1, pa, pc) };
             // Side k + 2 runs c -> a: parameters from c.
-            self.cross_side(w.tri, (k + 2) % 3, [pc, pa], pb, lac - t1, lac - t0, w.s, w.sigma);
+            let side = 3 * w.tri as usize + (k + 2) % 3;
+            self.cross_side(side, [pc, pa], pb, lac - t1, lac - t0, w.s, w.sigma);
         }
         if right {
             // On side (b, c), parameters from b.
@@ -476,15 +703,17 @@ impl Propagation<'_> {
             let t0 = ray(w.b1, pb, pc);
             let t1 = if w.b0 <= tc { lbc } else { ray(w.b0, pb, pc) };
             // Side k + 1 runs b -> c.
-            self.cross_side(w.tri, (k + 1) % 3, [pb, pc], pa, t0, t1, w.s, w.sigma);
+            let side = 3 * w.tri as usize + (k + 1) % 3;
+            self.cross_side(side, [pb, pc], pa, t0, t1, w.s, w.sigma);
         }
-        let _ = (a, b);
     }
 }
 
 #[cfg(test)]
 pub(crate) mod tests {
     use glam::DVec3;
+
+    use crate::SurfacePoint;
 
     use super::*;
 
@@ -515,12 +744,13 @@ pub(crate) mod tests {
     /// Shortest paths along the edges (an upper bound of the geodesic distance).
     fn dijkstra(mesh: &GeodesicMesh, sources: &[u32]) -> Vec<f64> {
         let mut d = vec![f64::INFINITY; mesh.num_vertices()];
-        let mut heap = BinaryHeap::new();
+        let mut heap = Queue::new();
         for &s in sources {
             d[s as usize] = 0.0;
-            heap.push(Queued { key: 0.0, event: Event::Vertex(s) });
+            heap.push(0.0, u64::from(s));
         }
-        while let Some(Queued { key, event: Event::Vertex(v) }) = heap.pop() {
+        while let Some((key, id)) = heap.pop() {
+            let v = id as u32;
             if key > d[v as usize] {
                 continue;
             }
@@ -529,7 +759,7 @@ pub(crate) mod tests {
                     let du = key + mesh.pos(v).distance(mesh.pos(u));
                     if du < d[u as usize] {
                         d[u as usize] = du;
-                        heap.push(Queued { key: du, event: Event::Vertex(u) });
+                        heap.push(du, u64::from(u));
                     }
                 }
             }
@@ -610,5 +840,164 @@ pub(crate) mod tests {
         let (d, _) = exact_distances(&mesh, &[0]).unwrap();
         assert!(d[n as usize].is_infinite() && d[15].is_finite());
         assert_eq!(exact_distances(&mesh, &[]).unwrap_err(), GeodesicError::NoSource);
+    }
+
+    /// The triangles of `positions`/`triangles` split 1-to-4 at their sides' midpoints:
+    /// the same polyhedral surface, so the same geodesic distances, on another mesh.
+    fn subdivided(positions: &[DVec3], triangles: &[[u32; 3]]) -> (Vec<DVec3>, Vec<[u32; 3]>) {
+        let mut positions = positions.to_vec();
+        let mut midpoints = std::collections::HashMap::new();
+        let mut mid = |a: u32, b: u32, positions: &mut Vec<DVec3>| -> u32 {
+            *midpoints.entry((a.min(b), a.max(b))).or_insert_with(|| {
+                positions.push(0.5 * (positions[a as usize] + positions[b as usize]));
+                (positions.len() - 1) as u32
+            })
+        };
+        let mut out = Vec::new();
+        for &[a, b, c] in triangles {
+            let (ab, bc, ca) =
+                (mid(a, b, &mut positions), mid(b, c, &mut positions), mid(c, a, &mut positions));
+            out.extend([[a, ab, ca], [ab, b, bc], [ca, bc, c], [ab, bc, ca]]);
+        }
+        (positions, out)
+    }
+
+    /// Two computations of one quantity: the distances at the coarse vertices must not
+    /// change when every triangle is split (new vertices are flat, so nearly every one
+    /// is a candidate for the flat-vertex and pruning rules), on a surface with saddles
+    /// and on a convex polyhedron.
+    #[test]
+    fn subdividing_the_triangles_keeps_the_distances() {
+        let (positions, quads) = grid(10, |x, y| 0.3 * (5.0 * x).sin() * (4.0 * y).cos());
+        let bumpy = GeodesicMesh::new(&positions, &quads).unwrap();
+        // A convex polyhedron: an octahedron with unequal axes and a tilted top.
+        let octahedron = vec![
+            DVec3::new(1.3, 0.0, 0.0),
+            DVec3::new(-1.0, 0.1, 0.0),
+            DVec3::new(0.0, 0.9, 0.0),
+            DVec3::new(0.1, -1.1, 0.0),
+            DVec3::new(0.2, 0.1, 1.2),
+            DVec3::new(-0.1, 0.0, -0.8),
+        ];
+        let faces: Vec<[u32; 3]> =
+            vec![[0, 2, 4], [2, 1, 4], [1, 3, 4], [3, 0, 4], [2, 0, 5], [1, 2, 5], [3, 1, 5], [0, 3, 5]];
+        let convex = GeodesicMesh::new(&octahedron, &faces).unwrap();
+        for (name, mesh, source) in [("bumpy grid", bumpy, 14u32), ("octahedron", convex, 4)] {
+            let coarse_positions: Vec<DVec3> =
+                (0..mesh.num_vertices() as u32).map(|v| mesh.position(v)).collect();
+            let (mut fine_positions, mut fine) = (coarse_positions.clone(), mesh.triangles().to_vec());
+            for _ in 0..2 {
+                (fine_positions, fine) = subdivided(&fine_positions, &fine);
+            }
+            let fine_mesh = GeodesicMesh::new(&fine_positions, &fine).unwrap();
+            let (coarse_d, _) = exact_distances(&mesh, &[source]).unwrap();
+            let (fine_d, _) = exact_distances(&fine_mesh, &[source]).unwrap();
+            for v in 0..coarse_d.len() {
+                assert!(
+                    (coarse_d[v] - fine_d[v]).abs() < 1e-9,
+                    "{name}, vertex {v}: {} coarse, {} subdivided",
+                    coarse_d[v],
+                    fine_d[v]
+                );
+            }
+            // Every fine vertex also agrees with the fine mesh's own source on the
+            // other side of the symmetry d(a, b) = d(b, a).
+            let far = (0..fine_d.len()).max_by(|&a, &b| fine_d[a].total_cmp(&fine_d[b])).unwrap() as u32;
+            let (back, _) = exact_distances(&fine_mesh, &[far]).unwrap();
+            assert!((back[source as usize] - fine_d[far as usize]).abs() < 1e-9, "{name}: symmetry");
+        }
+    }
+
+    /// A developable surface that closes on itself: the side of a prism over a 7-gon
+    /// unrolls onto a plane strip, where the distance is the Euclidean one, the least
+    /// over the strip's copies shifted by the perimeter.
+    #[test]
+    fn prism_sides_unroll_to_the_plane() {
+        let (sides, rows) = (7usize, 9usize);
+        let radius = [1.0, 1.3, 0.8, 1.1, 0.9, 1.2, 1.0];
+        let corner = |i: usize| {
+            let i = i % sides;
+            let a = 2.0 * PI * i as f64 / sides as f64 + 0.1 * (i % 3) as f64;
+            DVec3::new(radius[i] * a.cos(), radius[i] * a.sin(), 0.0)
+        };
+        // Arc length along the polygon to corner i.
+        let mut arc = vec![0.0];
+        for i in 0..sides {
+            arc.push(arc[i] + corner(i).distance(corner(i + 1)));
+        }
+        let perimeter = arc[sides];
+        let mut positions = Vec::new();
+        let mut unrolled = Vec::new();
+        for r in 0..=rows {
+            let z = 0.25 * r as f64;
+            for i in 0..sides {
+                positions.push(corner(i) + DVec3::new(0.0, 0.0, z));
+                unrolled.push(DVec2::new(arc[i], z));
+            }
+        }
+        let id = |i: usize, r: usize| (r * sides + i % sides) as u32;
+        let quads: Vec<[u32; 4]> = (0..rows)
+            .flat_map(|r| (0..sides).map(move |i| [id(i, r), id(i + 1, r), id(i + 1, r + 1), id(i, r + 1)]))
+            .collect();
+        let mesh = GeodesicMesh::new(&positions, &quads).unwrap();
+        let truth = |p: DVec2, q: DVec2| {
+            [-perimeter, 0.0, perimeter]
+                .iter()
+                .map(|&shift| p.distance(q + DVec2::new(shift, 0.0)))
+                .fold(f64::INFINITY, f64::min)
+        };
+        for source in [id(0, 0), id(3, 4), id(5, 9)] {
+            let (d, _) = exact_distances(&mesh, &[source]).unwrap();
+            for v in 0..positions.len() {
+                let t = truth(unrolled[v], unrolled[source as usize]);
+                assert!((d[v] - t).abs() < 1e-9, "source {source}, vertex {v}: {} vs {t}", d[v]);
+            }
+        }
+    }
+
+    #[test]
+    fn a_source_inside_a_face_of_a_plane_gives_euclidean_distances() {
+        let (positions, quads) = grid(9, |_, _| 0.0);
+        let mesh = GeodesicMesh::new(&positions, &quads).unwrap();
+        for point in [DVec3::new(0.437, 0.512, 0.0), DVec3::new(0.05, 0.93, 0.0), DVec3::new(0.5, 0.0, 0.0)] {
+            let p = mesh.nearest_point(point + DVec3::new(0.0, 0.0, 0.3)).unwrap();
+            assert!(
+                mesh.point_position(p).distance(point) < 1e-12,
+                "{point}: placed at {}",
+                mesh.point_position(p)
+            );
+            let (d, _) = exact_distances_from(&mesh, &[p]).unwrap();
+            for (v, q) in positions.iter().enumerate() {
+                let truth = q.distance(point);
+                assert!((d[v] - truth).abs() < 1e-9, "{point}, vertex {v}: {} vs {truth}", d[v]);
+            }
+        }
+        // A point at a vertex is that vertex's source.
+        let at_vertex = mesh.nearest_point(positions[40]).unwrap();
+        assert_eq!(
+            exact_distances_from(&mesh, &[at_vertex]).unwrap().0,
+            exact_distances(&mesh, &[40]).unwrap().0
+        );
+        let bad = SurfacePoint { triangle: u32::MAX, barycentric: [1.0, 0.0, 0.0] };
+        assert!(matches!(exact_distances_from(&mesh, &[bad]), Err(GeodesicError::InvalidSource(_))));
+    }
+
+    #[test]
+    fn a_face_source_on_a_folded_sheet_unfolds() {
+        let n = 8;
+        let flat: Vec<DVec3> = (0..=n)
+            .flat_map(|j| (0..=n).map(move |i| DVec3::new(i as f64, j as f64, 0.0) / n as f64))
+            .collect();
+        let (_, quads) = grid(n, |_, _| 0.0);
+        let fold = |p: DVec3| if p.x <= 0.5 { p } else { DVec3::new(0.5, p.y, p.x - 0.5) };
+        let folded: Vec<DVec3> = flat.iter().map(|&p| fold(p)).collect();
+        let mesh = GeodesicMesh::new(&folded, &quads).unwrap();
+        let source = DVec3::new(0.2, 0.33, 0.0);
+        let p = mesh.nearest_point(source).unwrap();
+        let (d, _) = exact_distances_from(&mesh, &[p]).unwrap();
+        for v in 0..flat.len() {
+            let truth = flat[v].distance(source);
+            assert!((d[v] - truth).abs() < 1e-9, "vertex {v}: {} vs {truth}", d[v]);
+        }
     }
 }

@@ -6,7 +6,7 @@ use faer::sparse::{linalg::solvers::Llt, SparseColMat, Triplet};
 use faer::{MatMut, Side};
 use glam::DVec3;
 
-use crate::{GeodesicError, GeodesicMesh};
+use crate::{GeodesicError, GeodesicMesh, SurfacePoint};
 
 /// Parameters of the heat method.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -113,13 +113,37 @@ impl HeatSolver {
     /// Approximate geodesic distance from the nearest of `sources` (vertex indices) at
     /// every vertex; `f64::INFINITY` on components without a source.
     pub fn distances(&self, sources: &[u32]) -> Result<Vec<f64>, GeodesicError> {
-        let mesh = &self.mesh;
-        mesh.check_sources(sources)?;
-        let n = mesh.num_vertices();
-        let mut u = vec![0.0; n];
+        self.mesh.check_sources(sources)?;
+        let mut u = vec![0.0; self.mesh.num_vertices()];
         for &s in sources {
             u[s as usize] = 1.0;
         }
+        let components: Vec<u32> = sources.iter().map(|&s| self.mesh.component[s as usize]).collect();
+        Ok(self.distances_of_heat(u, &components))
+    }
+
+    /// [`HeatSolver::distances`] from points anywhere on the surface: each point's unit
+    /// of heat is shared among its triangle's corners by its barycentric coordinates.
+    pub fn distances_from(&self, sources: &[SurfacePoint]) -> Result<Vec<f64>, GeodesicError> {
+        let mesh = &self.mesh;
+        mesh.check_points(sources)?;
+        let mut u = vec![0.0; mesh.num_vertices()];
+        let mut components = Vec::with_capacity(sources.len());
+        for p in sources {
+            let tri = mesh.triangles[p.triangle as usize];
+            let sum: f64 = p.barycentric.iter().sum();
+            for i in 0..3 {
+                u[tri[i] as usize] += p.barycentric[i].max(0.0) / sum;
+            }
+            components.push(mesh.component[tri[0] as usize]);
+        }
+        Ok(self.distances_of_heat(u, &components))
+    }
+
+    /// The distances from the initial heat `u`, on the components listed.
+    fn distances_of_heat(&self, mut u: Vec<f64>, components: &[u32]) -> Vec<f64> {
+        let mesh = &self.mesh;
+        let n = mesh.num_vertices();
         self.heat.solve_in_place(MatMut::from_column_major_slice_mut(&mut u, n, 1));
 
         // -div X, X the normalized negative gradient of u per triangle.
@@ -153,15 +177,14 @@ impl HeatSolver {
 
         let mut lowest = vec![f64::INFINITY; mesh.num_components];
         let mut has_source = vec![false; mesh.num_components];
-        for &s in sources {
-            has_source[mesh.component[s as usize] as usize] = true;
+        for &c in components {
+            has_source[c as usize] = true;
         }
         for (v, &phi) in rhs.iter().enumerate() {
             let c = mesh.component[v] as usize;
             lowest[c] = lowest[c].min(phi);
         }
-        Ok(rhs
-            .iter()
+        rhs.iter()
             .enumerate()
             .map(|(v, &phi)| {
                 let c = mesh.component[v] as usize;
@@ -171,7 +194,7 @@ impl HeatSolver {
                     f64::INFINITY
                 }
             })
-            .collect())
+            .collect()
     }
 }
 

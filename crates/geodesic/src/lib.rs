@@ -7,13 +7,16 @@
 //! polygons, not only voxreg's.
 //!
 //! - [`GeodesicMesh`]: the triangles of the polygons (quads split along their shorter
-//!   diagonal) and their connectivity; [`GeodesicMesh::nearest_vertex`] places a source,
+//!   diagonal) and their connectivity; [`GeodesicMesh::nearest_point`] places a source
+//!   on the surface ([`SurfacePoint`], on a triangle) and [`GeodesicMesh::nearest_vertex`]
+//!   at a vertex,
 //!   [`GeodesicMesh::polygon_values`] maps per-vertex distances onto the polygons.
 //! - [`exact_distances`]: exact polyhedral geodesics by window propagation (the improved
-//!   Chen-Han algorithm), from one or several source vertices.
+//!   Chen-Han algorithm), from one or several source vertices; [`exact_distances_from`]
+//!   from points anywhere on the surface.
 //! - [`HeatSolver`]: the heat method (cotan Laplacian, one backward Euler step, Poisson
 //!   solve), both sparse Cholesky factorizations kept for further sources.
-//! - [`distances`]: either method in one call ([`Method`]).
+//! - [`distances`], [`distances_from`]: either method in one call ([`Method`]).
 //!
 //! # Example
 //!
@@ -35,9 +38,9 @@ mod exact;
 mod heat;
 mod mesh;
 
-pub use exact::{exact_distances, ExactInfo};
+pub use exact::{exact_distances, exact_distances_from, ExactInfo};
 pub use heat::{HeatParams, HeatSolver};
-pub use mesh::GeodesicMesh;
+pub use mesh::{GeodesicMesh, SurfacePoint};
 
 /// How distances are computed.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
@@ -76,5 +79,19 @@ pub fn distances(mesh: &GeodesicMesh, sources: &[u32], method: Method) -> Result
     match method {
         Method::Exact => Ok(exact_distances(mesh, sources)?.0),
         Method::Heat => HeatSolver::new(mesh.clone(), &HeatParams::default())?.distances(sources),
+    }
+}
+
+/// Geodesic distance from the nearest of `sources` (points anywhere on the surface,
+/// such as [`GeodesicMesh::nearest_point`] gives) at every vertex of `mesh`, by
+/// `method`; `f64::INFINITY` on the components no source reaches.
+pub fn distances_from(
+    mesh: &GeodesicMesh,
+    sources: &[SurfacePoint],
+    method: Method,
+) -> Result<Vec<f64>, GeodesicError> {
+    match method {
+        Method::Exact => Ok(exact_distances_from(mesh, sources)?.0),
+        Method::Heat => HeatSolver::new(mesh.clone(), &HeatParams::default())?.distances_from(sources),
     }
 }

@@ -3,7 +3,65 @@
 
 use glam::DVec3;
 
+use crate::exact::Snapped;
 use crate::GeodesicError;
+
+/// A point on the surface: barycentric coordinates on one of [`GeodesicMesh::triangles`]
+/// (weights of its three corners, summing to 1).
+#[derive(Copy, Clone, Debug, PartialEq)]
+pub struct SurfacePoint {
+    /// Index into [`GeodesicMesh::triangles`].
+    pub triangle: u32,
+    /// Weights of the triangle's corners, in its corner order.
+    pub barycentric: [f64; 3],
+}
+
+/// Barycentric coordinates of the point of triangle `abc` nearest to `p` (Ericson,
+/// Real-Time Collision Detection, 5.1.5: the Voronoi regions of the corners, sides and
+/// face in turn).
+fn closest_on_triangle(p: DVec3, a: DVec3, b: DVec3, c: DVec3) -> [f64; 3] {
+    let (ab, ac, ap) = (b - a, c - a, p - a);
+    let (d1, d2) = (ab.dot(ap), ac.dot(ap));
+    if d1 <= 0.0 && d2 <= 0.0 {
+        return [1.0, 0.0, 0.0];
+    }
+    let bp = p - b;
+    let (d3, d4) = (ab.dot(bp), ac.dot(bp));
+    if d3 >= 0.0 && d4 <= d3 {
+        return [0.0, 1.0, 0.0];
+    }
+    let vc = d1 * d4 - d3 * d2;
+    if vc <= 0.0 && d1 >= 0.0 && d3 <= 0.0 {
+        let v = d1 / (d1 - d3);
+        return [1.0 - v, v, 0.0];
+    }
+    let cp = p - c;
+    let (d5, d6) = (ab.dot(cp), ac.dot(cp));
+    if d6 >= 0.0 && d5 <= d6 {
+        return [0.0, 0.0, 1.0];
+    }
+    let vb = d5 * d2 - d1 * d6;
+    if vb <= 0.0 && d2 >= 0.0 && d6 <= 0.0 {
+        let w = d2 / (d2 - d6);
+        return [1.0 - w, 0.0, w];
+    }
+    let va = d3 * d6 - d5 * d4;
+    if va <= 0.0 && d4 - d3 >= 0.0 && d5 - d6 >= 0.0 {
+        let w = (d4 - d3) / ((d4 - d3) + (d5 - d6));
+        return [0.0, 1.0 - w, w];
+    }
+    let denom = va + vb + vc;
+    if denom.is_nan() || denom == 0.0 {
+        // A degenerate triangle: its nearest corner.
+        let d = [a, b, c].map(|q| q.distance_squared(p));
+        let i = (0..3).min_by(|&i, &j| d[i].total_cmp(&d[j])).unwrap_or(0);
+        let mut out = [0.0; 3];
+        out[i] = 1.0;
+        return out;
+    }
+    let (v, w) = (vb / denom, vc / denom);
+    [1.0 - v - w, v, w]
+}
 
 /// A triangle mesh built from positions and polygons (triangles, quads, or any
 /// polygon), with the connectivity the geodesic methods need.
@@ -209,6 +267,22 @@ impl GeodesicMesh {
         best.map(|(_, v)| v)
     }
 
+    /// The point of the surface nearest to `point` (the first of equals), or `None` for
+    /// a mesh without triangles.
+    pub fn nearest_point(&self, point: DVec3) -> Option<SurfacePoint> {
+        let mut best: Option<(f64, SurfacePoint)> = None;
+        for (t, tri) in self.triangles.iter().enumerate() {
+            let [a, b, c] = tri.map(|v| self.pos(v));
+            let barycentric = closest_on_triangle(point, a, b, c);
+            let q = barycentric[0] * a + barycentric[1] * b + barycentric[2] * c;
+            let d = q.distance_squared(point);
+            if best.is_none_or(|(e, _)| d < e) {
+                best = Some((d, SurfacePoint { triangle: t as u32, barycentric }));
+            }
+        }
+        best.map(|(_, p)| p)
+    }
+
     /// Per-polygon values from per-vertex `distances`: the mean over each polygon's
     /// corners (infinite where a corner is unreached).
     pub fn polygon_values(&self, distances: &[f64]) -> Vec<f64> {
@@ -252,6 +326,57 @@ impl GeodesicMesh {
     pub(crate) fn vertex_tris(&self, v: u32) -> &[u32] {
         &self.vertex_triangles
             [self.vertex_offsets[v as usize] as usize..self.vertex_offsets[v as usize + 1] as usize]
+    }
+
+    /// The position of a surface point.
+    pub fn point_position(&self, p: SurfacePoint) -> DVec3 {
+        let tri = self.triangles[p.triangle as usize];
+        let sum: f64 = p.barycentric.iter().sum();
+        (0..3).map(|i| p.barycentric[i] / sum * self.pos(tri[i])).sum()
+    }
+
+    /// Checks `points` (at least one, on a triangle of the mesh, barycentric coordinates
+    /// finite, not negative, not all zero).
+    pub(crate) fn check_points(&self, points: &[SurfacePoint]) -> Result<(), GeodesicError> {
+        if points.is_empty() {
+            return Err(GeodesicError::NoSource);
+        }
+        for p in points {
+            if p.triangle as usize >= self.triangles.len() {
+                return Err(GeodesicError::InvalidSource(format!(
+                    "triangle {} of {}",
+                    p.triangle,
+                    self.triangles.len()
+                )));
+            }
+            let b = p.barycentric;
+            if b.iter().any(|x| !x.is_finite() || *x < -1e-9) || b.iter().sum::<f64>() <= 0.0 {
+                return Err(GeodesicError::InvalidSource(format!("barycentric coordinates {b:?}")));
+            }
+        }
+        Ok(())
+    }
+
+    /// Places a surface point: the vertex it is on, or the triangles it is on (its own,
+    /// or all those on the edge it lies on) and its position, within `1e-9` in
+    /// barycentric coordinates.
+    pub(crate) fn snap(&self, p: SurfacePoint) -> Snapped {
+        const SNAP: f64 = 1e-9;
+        let tri = self.triangles[p.triangle as usize];
+        let sum: f64 = p.barycentric.iter().sum();
+        let b = p.barycentric.map(|x| (x / sum).max(0.0));
+        if let Some(i) = (0..3).find(|&i| b[i] >= 1.0 - SNAP) {
+            return Snapped::Vertex(tri[i]);
+        }
+        if let Some(i) = (0..3).find(|&i| b[i] <= SNAP) {
+            // On the side from corner i + 1 to corner i + 2 (side i + 1).
+            let (j, k) = ((i + 1) % 3, (i + 2) % 3);
+            let w = b[j] / (b[j] + b[k]);
+            let point = w * self.pos(tri[j]) + (1.0 - w) * self.pos(tri[k]);
+            let edge = self.triangle_edges[p.triangle as usize][j];
+            return Snapped::Point(self.edge_tris(edge).to_vec(), point);
+        }
+        Snapped::Point(vec![p.triangle], (0..3).map(|i| b[i] * self.pos(tri[i])).sum())
     }
 
     /// Checks `sources` (vertex indices, at least one, in range).

@@ -133,19 +133,21 @@ fn the_proxy_error_shrinks_as_the_grid_refines() {
     assert!(means[1] < means[0] && means[2] < means[1], "{means:?}");
 }
 
-/// Speed on bunny-128 (55k quads): the heat method within 0.3 s once factored, and the
-/// exact distances' time and window count printed (see docs/performance.md); the heat
-/// distances within 3% of the exact ones. Ignored by default (timings on a loaded CI
-/// machine are noise); run with `cargo test --release -p voxreg-geodesic -- --ignored
-/// --nocapture` (`VOXREG_BUNNY=bunny-64.vol` for a smaller bunny).
+/// Speed on bunny-128 (55k quads): the exact distances from one source within 2 s, the
+/// heat method within 0.3 s once factored (best of 3 each; see docs/performance.md); the
+/// heat distances within 3% of the exact ones. Ignored by default (timings on a loaded
+/// CI machine are noise, and debug builds are far slower); run on an idle machine with
+/// `cargo test --release -p voxreg-geodesic -- --ignored --nocapture`
+/// (`VOXREG_BUNNY=bunny-64.vol` for a smaller bunny: timings printed, the budgets, set
+/// for bunny-128, not asserted).
 #[test]
 #[ignore]
 fn bunny_128_speed() {
     let name = std::env::var("VOXREG_BUNNY").unwrap_or_else(|_| "bunny-128.vol".into());
-    bunny_speed(&name);
+    bunny_speed(&name, name == "bunny-128.vol");
 }
 
-fn bunny_speed(name: &str) {
+fn bunny_speed(name: &str, budgets: bool) {
     use std::time::Instant;
     let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data").join(name);
     let loaded = voxreg_io::read_volume(&path).unwrap();
@@ -183,7 +185,11 @@ fn bunny_speed(name: &str) {
         100.0 * mean
     );
     let best = |v: &[f64]| v.iter().copied().fold(f64::INFINITY, f64::min);
-    assert!(best(&heat_s) <= 0.3 && mean < 0.03, "heat {heat_s:?} s, {mean}");
+    assert!(mean < 0.03, "heat against exact: {mean}");
+    if budgets {
+        assert!(best(&heat_s) <= 0.3, "heat {heat_s:?} s");
+        assert!(best(&exact_s) <= 2.0, "exact {exact_s:?} s");
+    }
 }
 
 #[test]
