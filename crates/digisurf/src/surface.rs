@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use crate::csr::Lists;
 use crate::data::VertexData;
 use crate::{
-    EdgeId, InterfaceId, LabelVolume, RegionId, RegionMap, Regions, SurfaceError, SurfelId, VertexId, Voxel,
+    EdgeId, InterfaceId, LabelStorage, LabelView, LabelVolume, RegionId, RegionMap, Regions, SurfaceError, SurfelId, VertexId, Voxel,
 };
 
 const NONE: u32 = u32::MAX;
@@ -157,7 +157,7 @@ struct RawFace {
 /// Fills `rs`/`ls` with the regions and labels of voxel layer `z`, `x` fastest; the
 /// outside beyond the domain.
 fn fill_layer(
-    volume: &LabelVolume,
+    volume: &LabelView<'_>,
     regions: &Regions,
     outside: (u32, u32),
     z: isize,
@@ -185,7 +185,7 @@ fn fill_layer(
 
 /// The faces of slabs `range`, one list per slab (see [`slab_faces`]), with rolling layers.
 fn range_faces(
-    volume: &LabelVolume,
+    volume: &LabelView<'_>,
     regions: &Regions,
     outside: (u32, u32),
     range: std::ops::Range<usize>,
@@ -346,7 +346,7 @@ impl Scan {
 
 impl DigitalSurface {
     /// The digital surface of `volume` with every label its own region.
-    pub fn from_volume(volume: &LabelVolume) -> Result<Self, SurfaceError> {
+    pub fn from_volume<S: LabelStorage>(volume: &LabelVolume<S>) -> Result<Self, SurfaceError> {
         Self::new(volume, &RegionMap::per_label())
     }
 
@@ -354,8 +354,14 @@ impl DigitalSurface {
     ///
     /// Cost: one pass over the voxels (linear), memory for the slab being scanned plus
     /// the complex itself (proportional to the number of surfels). Fails with
-    /// [`SurfaceError::Empty`] when no surfel separates two regions.
-    pub fn new(volume: &LabelVolume, map: &RegionMap) -> Result<Self, SurfaceError> {
+    /// [`SurfaceError::Empty`] when no surfel separates two regions. The volume may own
+    /// or borrow its labels (a [`LabelView`](crate::LabelView)); either is read in place.
+    pub fn new<S: LabelStorage>(volume: &LabelVolume<S>, map: &RegionMap) -> Result<Self, SurfaceError> {
+        Self::of_view(&volume.view(), map)
+    }
+
+    /// [`DigitalSurface::new`], compiled once for every storage.
+    fn of_view(volume: &LabelView<'_>, map: &RegionMap) -> Result<Self, SurfaceError> {
         let regions = map.resolve(volume)?;
         let [nx, ny, nz] = volume.dims();
         if nx.max(ny).max(nz) >= (u32::MAX as usize) - 1 {
