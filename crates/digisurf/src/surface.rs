@@ -8,7 +8,8 @@ use rayon::prelude::*;
 use crate::csr::Lists;
 use crate::data::VertexData;
 use crate::{
-    EdgeId, InterfaceId, LabelStorage, LabelView, LabelVolume, RegionId, RegionMap, Regions, SurfaceError, SurfelId, VertexId, Voxel,
+    EdgeId, InterfaceId, LabelStorage, LabelView, LabelVolume, RegionId, RegionMap, Regions, SurfaceError,
+    SurfelId, VertexId, Voxel,
 };
 
 const NONE: u32 = u32::MAX;

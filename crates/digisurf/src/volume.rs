@@ -1,7 +1,9 @@
 //! Labeled voxel volumes.
 
 use glam::DVec3;
-use ndarray::{Array3, ArrayBase, ArrayView3, Data, Ix3, OwnedRepr, RawData, RawDataClone, ShapeBuilder, ViewRepr};
+use ndarray::{
+    Array3, ArrayBase, ArrayView3, Data, Ix3, OwnedRepr, RawData, RawDataClone, ShapeBuilder, ViewRepr,
+};
 
 use crate::SurfaceError;
 
@@ -327,8 +329,13 @@ mod tests {
         // The same labels in C order, and inside a larger array read through a strided view.
         let c_order = owned.labels().as_standard_layout().into_owned();
         let mut padded = Array3::from_elem((14, 6, 10), 9u32);
-        padded.slice_mut(ndarray::s![..;2, .., ..;2]).assign(&c_order);
-        let strided = padded.slice(ndarray::s![..;2, .., ..;2]);
+        let every_other = ndarray::Slice::new(0, None, 2);
+        let mut holes = padded.slice_axis_mut(ndarray::Axis(0), every_other);
+        holes.slice_axis_inplace(ndarray::Axis(2), every_other);
+        holes.assign(&c_order);
+        let mut strided = padded.view();
+        strided.slice_axis_inplace(ndarray::Axis(0), every_other);
+        strided.slice_axis_inplace(ndarray::Axis(2), every_other);
         assert!(strided.as_slice_memory_order().is_none());
         let map = RegionMap::per_label();
         let reference = DigitalSurface::new(&owned, &map).unwrap();

@@ -198,7 +198,8 @@ mod tests {
         assert_eq!(plain.volume.background(), Some(0));
 
         // Kept labels: the others become the given background, which the volume then has.
-        let o = InputOptions { keep_labels: Some(&[3]), background: Background::Label(7), ..Default::default() };
+        let o =
+            InputOptions { keep_labels: Some(&[3]), background: Background::Label(7), ..Default::default() };
         let kept = read(&labels, o).unwrap().volume;
         assert_eq!(kept.labels().iter().copied().collect::<Vec<_>>(), [7, 3, 7, 3]);
         assert_eq!(kept.background(), Some(7));
@@ -221,7 +222,10 @@ mod tests {
 
         // Spacing overrides the file's; a bad one names the file.
         let s = DVec3::new(1.0, 2.0, 3.0);
-        assert_eq!(read(&labels, InputOptions { spacing: Some(s), ..Default::default() }).unwrap().volume.spacing(), s);
+        assert_eq!(
+            read(&labels, InputOptions { spacing: Some(s), ..Default::default() }).unwrap().volume.spacing(),
+            s
+        );
         let bad = read(&labels, InputOptions { spacing: Some(DVec3::ZERO), ..Default::default() });
         assert!(matches!(&bad, Err(InputError::Spacing { path, .. }) if path == &labels), "{bad:?}");
 
@@ -235,6 +239,9 @@ mod tests {
             read(&labels, InputOptions { vox_model: Some(0), ..Default::default() }),
             Err(InputError::ModelNeedsVox(_))
         ));
-        assert!(matches!(read(&dir.path().join("missing.npy"), InputOptions::default()), Err(InputError::Io(_))));
+        assert!(matches!(
+            read(&dir.path().join("missing.npy"), InputOptions::default()),
+            Err(InputError::Io(_))
+        ));
     }
 }

@@ -86,8 +86,8 @@
 mod error;
 mod gltf;
 mod grey;
-mod input;
 pub mod inflight;
+mod input;
 mod limits;
 mod longvol;
 mod material;

@@ -137,7 +137,9 @@ impl Options {
         }
         if let Some(s) = self.smoothness {
             if self.clamp.is_some() {
-                return Err(Error::parameter("smoothness and clamp exclude each other (smoothness sets the boxes)"));
+                return Err(Error::parameter(
+                    "smoothness and clamp exclude each other (smoothness sets the boxes)",
+                ));
             }
             p = p
                 .with_smoothness(s)

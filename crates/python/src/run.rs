@@ -165,7 +165,6 @@ pub(crate) fn regularize<'py>(
     let limit = max_memory_arg(max_memory)?;
     // Borrowed (uint32) or converted with the GIL held.
     let labels = volume::labels_of(labels, limit)?;
-    let copied = labels.copied();
     let volume = volume::volume(labels.view(), spacing, origin, background)?;
 
     let mut callback_error: Option<PyErr> = None;
@@ -212,18 +211,19 @@ pub(crate) fn regularize<'py>(
     if let Some(callback) = &progress {
         callback.bind(py).call1(("done", 1.0))?;
     }
-    drop(volume);
     drop(labels);
-    let dict = finish(py, out, palette)?;
-    dict.set_item("labels_copied", copied)?;
-    Ok(dict)
+    finish(py, out, palette)
 }
 
 /// `max_memory=`: bytes, a size such as `"4G"`, or `None` for the library's budget (half
 /// the physical memory).
 fn max_memory_arg(max_memory: Option<&Bound<'_, PyAny>>) -> Result<u64> {
     let Some(m) = max_memory else { return Ok(voxreg_io::max_memory()) };
-    let bad = || Error::parameter(format!("max_memory must be a positive number of bytes or a size such as '4G', got {m}"));
+    let bad = || {
+        Error::parameter(format!(
+            "max_memory must be a positive number of bytes or a size such as '4G', got {m}"
+        ))
+    };
     if let Ok(s) = m.cast::<PyString>() {
         return voxreg_io::parse_size(&s.to_string()).ok_or_else(bad);
     }

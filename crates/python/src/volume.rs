@@ -31,11 +31,6 @@ impl Labels<'_> {
             Labels::Converted(a) => a.view(),
         }
     }
-
-    /// Whether the labels were copied (converted from another dtype).
-    pub(crate) fn copied(&self) -> bool {
-        matches!(self, Labels::Converted(_))
-    }
 }
 
 /// Refuses an allocation of `bytes` for `what` over `limit`, before it is made.

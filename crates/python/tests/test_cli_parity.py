@@ -60,7 +60,7 @@ def test_split_regions_match_cli(cli, tmp_path):
     a, info = voxreg.read(tmp_path / "v.npy")
     mesh = voxreg.regularize(a, **info)
     for label in (1, 2, 3):
-        mesh.region(label).save(tmp_path / f"py_{label}.ply")
+        mesh.region(label, manifold=False).save(tmp_path / f"py_{label}.ply")
         assert same_files(tmp_path / "split" / f"region_{label}.ply", tmp_path / f"py_{label}.ply")
 
 
@@ -85,13 +85,15 @@ def test_smoothness_matches_cli(cli, data, tmp_path):
     labels, info = voxreg.read(data / "chr_army1.vox")
     plain = voxreg.regularize(labels, **info)
     for s in (0.3, 1.0):
-        out = tmp_path / f"cli_{s}.obj"
+        # Same file names in two directories: an OBJ names its .mtl.
+        (tmp_path / f"cli{s}").mkdir(), (tmp_path / f"py{s}").mkdir()
+        out = tmp_path / f"cli{s}" / "mesh.obj"
         assert cli("regularize", data / "chr_army1.vox", "-o", out, "-q", "--smoothness", s).returncode == 0
         mesh = voxreg.regularize(labels, **info, smoothness=s)
         v = [line.split()[1:] for line in out.read_text().splitlines() if line.startswith("v ")]
         assert np.array_equal(np.array(v, dtype=np.float64), mesh.vertices)
-        mesh.save(tmp_path / f"py_{s}.obj")
-        assert same_files(out, tmp_path / f"py_{s}.obj")
+        mesh.save(tmp_path / f"py{s}" / "mesh.obj")
+        assert same_files(out, tmp_path / f"py{s}" / "mesh.obj")
     # Blockier: every vertex nearer its lattice corner than the preset lets it go.
     def from_corners(m):
         c = (m.vertices - np.asarray(info["origin"])) / np.asarray(info["spacing"]) + 0.5

@@ -83,7 +83,10 @@ pub struct Output {
 
 /// Regularizes the digital surface of `volume` with `params`: the one-shot form of
 /// [`Regularizer`].
-pub fn regularize<S: LabelStorage>(volume: &LabelVolume<S>, params: &Params) -> Result<Output, RegularizeError> {
+pub fn regularize<S: LabelStorage>(
+    volume: &LabelVolume<S>,
+    params: &Params,
+) -> Result<Output, RegularizeError> {
     Regularizer::from_volume(volume, &params.regions)?.run(params)
 }
 
