@@ -9,18 +9,23 @@ import pytest
 import voxreg
 from conftest import ball_labels
 
-# Peak RSS growth of one run over a 224^3 volume (a small ball in it), in a fresh process.
+# Peak resident memory growth of one run over a 224^3 volume (a small ball in it), in a
+# fresh process.
 PEAK = r"""
-import resource, sys
+import sys
 import numpy as np, voxreg
+
+def peak():  # this process's own high-water mark (ru_maxrss also counts the parent's at fork)
+    line = next(l for l in open("/proc/self/status") if l.startswith("VmHWM:"))
+    return int(line.split()[1]) * 1024
+
 dtype, order = sys.argv[1], sys.argv[2]
 labels = np.full((224, 224, 224), 0, dtype=dtype, order=order)
 labels[104:120, 104:120, 104:120] = 1
 voxreg.regularize(np.pad(np.ones((4, 4, 4), dtype=dtype), 2), preset="papers")  # warm up
-before = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
+before = peak()
 voxreg.regularize(labels, preset="papers", threads=1)
-after = resource.getrusage(resource.RUSAGE_SELF).ru_maxrss
-print((after - before) * 1024)
+print(peak() - before)
 """
 
 
@@ -30,16 +35,16 @@ def peak_growth(dtype, order):
     return int(r.stdout.split()[-1])
 
 
-@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="ru_maxrss in kB is Linux's")
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="reads /proc/self/status")
 def test_uint32_labels_are_not_copied():
     copy = 224**3 * 4  # 43 MiB: what a uint32 copy of the labels takes
     grown = {order: peak_growth("uint32", order) for order in ("C", "F")}
-    # The run's own work grows the peak too (about 2 bytes per voxel), but by less than a
+    # The run's own work grows the peak too (about 15 MiB here), but by less than a
     # copy of the labels would.
-    assert max(grown.values()) < copy, grown
+    assert max(grown.values()) < copy, (grown, copy)
     # The control: a uint16 volume is converted, and the copy shows on top of that work.
     converted = peak_growth("uint16", "C")
-    assert converted - grown["C"] > 0.9 * copy, (converted, grown)
+    assert converted - max(grown.values()) > copy / 2, (converted, grown)
 
 
 def test_strided_uint32_view_same_mesh():
