@@ -4,70 +4,49 @@ use std::fmt::Write as _;
 
 use anyhow::{bail, Context, Result};
 use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
-use voxreg_io::{
-    is_voxel_art, read_raw, read_voxels_with, vox_model_sizes, DataType, Palette, RawSpec, ReadOptions,
-    Voxels,
-};
+use voxreg_io::{is_voxel_art, vox_model_sizes, Background, InputError, InputOptions, Palette};
 
 use crate::args::{InputArgs, Preset};
 use crate::print_stdout;
 
 /// Reads INPUT (raw with `--dims`, else by extension), applies `--spacing`, then
-/// `--threshold` (or checks that grey levels are labels), `--labels` and the background.
+/// `--threshold` (or checks that grey levels are labels), `--labels` and the background
+/// (`voxreg_io::read_input`), with the errors in the options' names.
 /// Also returns the palette and the unit of the spacing, where the file has them.
 pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palette>, Option<String>)> {
-    let path = &args.input;
-    let is_raw = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("raw"));
-    let (voxels, palette, units) = match args.dims {
-        Some(dims) => {
-            let spec = RawSpec {
-                dims,
-                dtype: args.dtype.unwrap_or(DataType::U8),
-                endian: args.endian.unwrap_or_default(),
-                spacing: args.spacing.unwrap_or(glam::DVec3::ONE),
-            };
-            (read_raw(path, &spec)?, None, None)
-        }
-        None if is_raw => bail!("{}: raw data have no header: give --dims X,Y,Z and --dtype", path.display()),
-        None => {
-            if args.model.is_some() && !is_voxel_art(path) {
-                bail!("{}: --model applies to MagicaVoxel .vox files", path.display());
-            }
-            let loaded = read_voxels_with(path, &ReadOptions { vox_model: args.model })?;
-            (loaded.voxels, loaded.palette, loaded.units)
-        }
-    };
-    // A unit the file gives no longer applies to spacing given on the command line.
-    let units = if args.spacing.is_some() { None } else { units };
-    let voxels = match args.spacing {
-        Some(s) => voxels.with_spacing(s).with_context(|| format!("{}: --spacing", path.display()))?,
-        None => voxels,
-    };
-    let mut volume = match (args.threshold, voxels) {
-        (Some(t), _) if t.is_nan() => bail!("--threshold: NaN is not a threshold"),
-        (Some(t), voxels) => voxels.threshold(t),
-        (None, Voxels::Labels(volume)) => volume,
-        (None, Voxels::Grey(grey)) => match grey.to_labels() {
-            Ok(volume) => volume,
-            Err(e) => {
-                let (lo, hi) = grey.range().unwrap_or_default();
-                bail!(
-                    "{}: grey-level data needs --threshold T (values range from {lo} to {hi}; {e})",
-                    path.display()
-                )
-            }
+    let options = InputOptions {
+        dims: args.dims,
+        dtype: args.dtype,
+        endian: args.endian,
+        vox_model: args.model,
+        spacing: args.spacing,
+        threshold: args.threshold,
+        keep_labels: args.labels.as_deref(),
+        background: match (args.no_background, args.background) {
+            (true, _) => Background::None,
+            (false, Some(b)) => Background::Label(b),
+            (false, None) => Background::File,
         },
     };
-    if let Some(keep) = &args.labels {
-        let background = args.background.or(volume.background()).unwrap_or(0);
-        volume.labels_mut().mapv_inplace(|l| if keep.contains(&l) { l } else { background });
+    let path = &args.input;
+    match voxreg_io::read_input(path, &options) {
+        Ok(input) => Ok((input.volume, input.palette, input.units)),
+        Err(InputError::RawNeedsDims(_)) => {
+            bail!("{}: raw data have no header: give --dims X,Y,Z and --dtype", path.display())
+        }
+        Err(InputError::ModelNeedsVox(_)) => {
+            bail!("{}: --model applies to MagicaVoxel .vox files", path.display())
+        }
+        Err(InputError::Spacing { source, .. }) => {
+            Err(anyhow::Error::new(source).context(format!("{}: --spacing", path.display())))
+        }
+        Err(InputError::NanThreshold) => bail!("--threshold: NaN is not a threshold"),
+        Err(InputError::GreyNeedsThreshold { lo, hi, reason, .. }) => bail!(
+            "{}: grey-level data needs --threshold T (values range from {lo} to {hi}; {reason})",
+            path.display()
+        ),
+        Err(InputError::Io(e)) => Err(e.into()),
     }
-    if args.no_background {
-        volume = volume.with_background(None);
-    } else if let Some(b) = args.background {
-        volume = volume.with_background(Some(b));
-    }
-    Ok((volume, palette, units))
 }
 
 /// Whether INPUT is voxel art (the voxel-art preset's input).

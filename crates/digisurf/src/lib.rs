@@ -1,6 +1,7 @@
 //! The digital surface of a labeled voxel volume, as a cellular complex.
 //!
-//! A [`LabelVolume`] holds one label per voxel, a voxel spacing and an origin. Labels
+//! A [`LabelVolume`] holds one label per voxel, a voxel spacing and an origin (its labels
+//! owned, or borrowed without a copy as a [`LabelView`]). Labels
 //! are grouped into regions by a [`RegionMap`] (by default every label is its own
 //! region). The [`DigitalSurface`] is the complex of every voxel face (*surfel*)
 //! between two face-adjacent voxels of different regions, with
@@ -65,4 +66,4 @@ pub use ids::{EdgeId, InterfaceId, RegionId, SurfelId, VertexId};
 pub use patch::{Patch, PatchParams};
 pub use regions::{RegionMap, Regions};
 pub use surface::{DigitalSurface, Edge, EdgeKind, Interface, SurfaceCounts, Surfel};
-pub use volume::{LabelVolume, Voxel};
+pub use volume::{LabelStorage, LabelView, LabelVolume, Voxel};

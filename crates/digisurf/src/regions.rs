@@ -1,6 +1,6 @@
 //! Regions: sets of labels that count as one material.
 
-use crate::{LabelVolume, RegionId, SurfaceError};
+use crate::{LabelStorage, LabelVolume, RegionId, SurfaceError};
 
 /// How labels are grouped into regions.
 ///
@@ -65,7 +65,7 @@ impl RegionMap {
     }
 
     /// Resolves the map against the labels present in `volume`.
-    pub fn resolve(&self, volume: &LabelVolume) -> Result<Regions, SurfaceError> {
+    pub fn resolve<S: LabelStorage>(&self, volume: &LabelVolume<S>) -> Result<Regions, SurfaceError> {
         let present: Vec<u32> = volume.label_counts().into_iter().map(|(l, _)| l).collect();
         let background = volume.background();
         // Each region is a sorted list of labels; build them, then order them.

@@ -8,7 +8,8 @@ use rayon::prelude::*;
 use crate::csr::Lists;
 use crate::data::VertexData;
 use crate::{
-    EdgeId, InterfaceId, LabelVolume, RegionId, RegionMap, Regions, SurfaceError, SurfelId, VertexId, Voxel,
+    EdgeId, InterfaceId, LabelStorage, LabelView, LabelVolume, RegionId, RegionMap, Regions, SurfaceError,
+    SurfelId, VertexId, Voxel,
 };
 
 const NONE: u32 = u32::MAX;
@@ -165,7 +166,7 @@ impl RawFace {
 /// background's, or [`NONE`] beyond an open side.
 type Outside = [[(u32, u32); 2]; 3];
 
-fn outside_of(volume: &LabelVolume, regions: &Regions) -> Outside {
+fn outside_of(volume: &LabelView<'_>, regions: &Regions) -> Outside {
     let closed = match (volume.background(), regions.background()) {
         (Some(l), Some(r)) => (r.0, l),
         _ => (NONE, NONE),
@@ -177,7 +178,7 @@ fn outside_of(volume: &LabelVolume, regions: &Regions) -> Outside {
 /// Fills `rs`/`ls` with the regions and labels of voxel layer `z`, `x` fastest; the
 /// outside beyond the domain.
 fn fill_layer(
-    volume: &LabelVolume,
+    volume: &LabelView<'_>,
     regions: &Regions,
     outside: &Outside,
     z: isize,
@@ -206,7 +207,7 @@ fn fill_layer(
 
 /// The faces of slabs `range`, one list per slab (see [`slab_faces`]), with rolling layers.
 fn range_faces(
-    volume: &LabelVolume,
+    volume: &LabelView<'_>,
     regions: &Regions,
     outside: &Outside,
     range: std::ops::Range<usize>,
@@ -226,7 +227,7 @@ fn range_faces(
 
 /// The number of faces in slabs `range`, without storing them.
 fn range_face_count(
-    volume: &LabelVolume,
+    volume: &LabelView<'_>,
     regions: &Regions,
     outside: &Outside,
     range: std::ops::Range<usize>,
@@ -241,7 +242,7 @@ fn range_face_count(
 /// Calls `visit(previous layer, current layer, k)` for each slab `k` of `range`, with
 /// rolling region/label layers.
 fn scan_slabs(
-    volume: &LabelVolume,
+    volume: &LabelView<'_>,
     regions: &Regions,
     outside: &Outside,
     range: std::ops::Range<usize>,
@@ -391,7 +392,7 @@ impl Scan {
 
 impl DigitalSurface {
     /// The digital surface of `volume` with every label its own region.
-    pub fn from_volume(volume: &LabelVolume) -> Result<Self, SurfaceError> {
+    pub fn from_volume<S: LabelStorage>(volume: &LabelVolume<S>) -> Result<Self, SurfaceError> {
         Self::new(volume, &RegionMap::per_label())
     }
 
@@ -399,8 +400,14 @@ impl DigitalSurface {
     ///
     /// Cost: one pass over the voxels (linear), memory for the slab being scanned plus
     /// the complex itself (proportional to the number of surfels). Fails with
-    /// [`SurfaceError::Empty`] when no surfel separates two regions.
-    pub fn new(volume: &LabelVolume, map: &RegionMap) -> Result<Self, SurfaceError> {
+    /// [`SurfaceError::Empty`] when no surfel separates two regions. The volume may own
+    /// or borrow its labels (a [`LabelView`](crate::LabelView)); either is read in place.
+    pub fn new<S: LabelStorage>(volume: &LabelVolume<S>, map: &RegionMap) -> Result<Self, SurfaceError> {
+        Self::of_view(&volume.view(), map)
+    }
+
+    /// [`DigitalSurface::new`], compiled once for every storage.
+    fn of_view(volume: &LabelView<'_>, map: &RegionMap) -> Result<Self, SurfaceError> {
         let regions = map.resolve(volume)?;
         let [nx, ny, nz] = volume.dims();
         if nx.max(ny).max(nz) >= (u32::MAX as usize) - 1 {
@@ -489,7 +496,11 @@ impl DigitalSurface {
     /// The number of surfels [`DigitalSurface::new`] would build from `volume` and `map`,
     /// counted in one pass over the voxels without storing a face, so that a caller can
     /// refuse a surface too large for its memory before building it.
-    pub fn count_surfels(volume: &LabelVolume, map: &RegionMap) -> Result<u64, SurfaceError> {
+    pub fn count_surfels<S: LabelStorage>(
+        volume: &LabelVolume<S>,
+        map: &RegionMap,
+    ) -> Result<u64, SurfaceError> {
+        let volume = &volume.view();
         let regions = map.resolve(volume)?;
         let nz = volume.dims()[2];
         let outside = outside_of(volume, &regions);

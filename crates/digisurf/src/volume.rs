@@ -1,7 +1,9 @@
 //! Labeled voxel volumes.
 
 use glam::DVec3;
-use ndarray::{Array3, ShapeBuilder};
+use ndarray::{
+    Array3, ArrayBase, ArrayView3, Data, Ix3, OwnedRepr, RawData, RawDataClone, ShapeBuilder, ViewRepr,
+};
 
 use crate::SurfaceError;
 
@@ -15,6 +17,11 @@ pub type Voxel = [i64; 3];
 /// array (any memory layout is accepted; volumes read from files use `x`
 /// fastest).
 ///
+/// **Storage.** `S` is the array's storage: owned (`LabelVolume`, the default) or
+/// borrowed ([`LabelView`], over labels someone else owns, e.g. a numpy array), so a
+/// caller holding labels need not copy them to build a surface. Every read-only method
+/// is available on both; [`LabelVolume::view`] borrows any volume as a [`LabelView`].
+///
 /// **Embedding.** The centre of voxel `[x, y, z]` lies at
 /// `origin + [x * sx, y * sy, z * sz]` (the convention of NIfTI, DGtal and VTK
 /// point data), so the lattice corner `c` (integer, `0..=dims`) of the
@@ -26,14 +33,15 @@ pub type Voxel = [i64; 3];
 /// with `None`) treats every label as a material; then the domain border carries no
 /// surfels and interfaces end there as open surfaces.
 ///
-/// **Open sides.** A volume cut out of a larger one (a chunk with its halo) marks the
-/// sides where it was cut open ([`LabelVolume::with_open_sides`]): those carry no surfels,
-/// as the whole border of a volume without background, while the other sides stay closed
-/// by the background. Beyond a cut lies unknown data, not empty space, so no surface is
-/// invented there.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LabelVolume {
-    labels: Array3<u32>,
+/// **Open sides.** A crop of a larger volume can mark the sides where it was cut open
+/// ([`LabelVolume::with_open_sides`]): those carry no surfels, as the whole border of a
+/// volume without background, while the other sides stay closed by the background.
+/// Beyond a cut lies unknown data, not empty space, so no surface is invented there.
+pub struct LabelVolume<S = OwnedRepr<u32>>
+where
+    S: RawData<Elem = u32>,
+{
+    labels: ArrayBase<S, Ix3>,
     spacing: DVec3,
     origin: DVec3,
     background: Option<u32>,
@@ -42,6 +50,63 @@ pub struct LabelVolume {
 
 /// No open side.
 const CLOSED: [[bool; 2]; 3] = [[false; 2]; 3];
+
+/// A [`LabelVolume`] over borrowed labels (any strides): what building a surface reads.
+pub type LabelView<'a> = LabelVolume<ViewRepr<&'a u32>>;
+
+/// The storages a [`LabelVolume`]'s labels can have, owned or borrowed (ndarray's
+/// `Data<Elem = u32>`): what functions generic over volumes ask for.
+pub trait LabelStorage: Data<Elem = u32> {}
+
+impl<S: Data<Elem = u32>> LabelStorage for S {}
+
+impl<S: RawDataClone<Elem = u32>> Clone for LabelVolume<S> {
+    fn clone(&self) -> Self {
+        LabelVolume {
+            labels: self.labels.clone(),
+            spacing: self.spacing,
+            origin: self.origin,
+            background: self.background,
+            open_sides: self.open_sides,
+        }
+    }
+}
+
+impl<S: Data<Elem = u32>> std::fmt::Debug for LabelVolume<S> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("LabelVolume")
+            .field("labels", &self.labels)
+            .field("spacing", &self.spacing)
+            .field("origin", &self.origin)
+            .field("background", &self.background)
+            .field("open_sides", &self.open_sides)
+            .finish()
+    }
+}
+
+impl<S: Data<Elem = u32>, T: Data<Elem = u32>> PartialEq<LabelVolume<T>> for LabelVolume<S> {
+    fn eq(&self, other: &LabelVolume<T>) -> bool {
+        self.labels == other.labels
+            && self.spacing == other.spacing
+            && self.origin == other.origin
+            && self.background == other.background
+            && self.open_sides == other.open_sides
+    }
+}
+
+impl<'a> LabelView<'a> {
+    /// A volume over borrowed `labels` (any memory layout, no copy) with unit spacing,
+    /// origin `0` and background label `0`.
+    pub fn from_view(labels: ArrayView3<'a, u32>) -> Self {
+        LabelVolume {
+            labels,
+            spacing: DVec3::ONE,
+            origin: DVec3::ZERO,
+            background: Some(0),
+            open_sides: CLOSED,
+        }
+    }
+}
 
 impl LabelVolume {
     /// A volume over `labels` with unit spacing, origin `0` and background label `0`.
@@ -80,6 +145,13 @@ impl LabelVolume {
         Ok(Self::new(labels))
     }
 
+    /// Mutable access to the label array, indexed `[x, y, z]`.
+    pub fn labels_mut(&mut self) -> &mut Array3<u32> {
+        &mut self.labels
+    }
+}
+
+impl<S: Data<Elem = u32>> LabelVolume<S> {
     /// Sets the physical size of a voxel along x, y and z (default `1, 1, 1`).
     /// Each component must be finite and positive.
     pub fn with_spacing(mut self, spacing: DVec3) -> Result<Self, SurfaceError> {
@@ -156,13 +228,31 @@ impl LabelVolume {
     }
 
     /// The label array, indexed `[x, y, z]`.
-    pub fn labels(&self) -> &Array3<u32> {
+    pub fn labels(&self) -> &ArrayBase<S, Ix3> {
         &self.labels
     }
 
-    /// Mutable access to the label array, indexed `[x, y, z]`.
-    pub fn labels_mut(&mut self) -> &mut Array3<u32> {
-        &mut self.labels
+    /// The volume borrowed: the same labels (no copy) and embedding.
+    pub fn view(&self) -> LabelView<'_> {
+        LabelVolume {
+            labels: self.labels.view(),
+            spacing: self.spacing,
+            origin: self.origin,
+            background: self.background,
+            open_sides: self.open_sides,
+        }
+    }
+
+    /// An owned copy of the volume (its labels in the same memory order where they are
+    /// contiguous).
+    pub fn to_owned(&self) -> LabelVolume {
+        LabelVolume {
+            labels: self.labels.to_owned(),
+            spacing: self.spacing,
+            origin: self.origin,
+            background: self.background,
+            open_sides: self.open_sides,
+        }
     }
 
     /// The label of voxel `v`: the background label outside the domain, or `None`
@@ -273,5 +363,40 @@ mod tests {
         assert_eq!(v.label_counts(), vec![(0, 1), (5, 2)]);
         let big = LabelVolume::from_fn([2, 1, 1], |p| [u32::MAX, 7][p[0]]);
         assert_eq!(big.label_counts(), vec![(7, 1), (u32::MAX, 1)]);
+    }
+
+    #[test]
+    fn borrowed_labels_make_the_owned_surface() {
+        use crate::{DigitalSurface, RegionMap};
+        // Two labels in a ball-ish blob, stored x fastest.
+        let owned = LabelVolume::from_fn([7, 6, 5], |[x, y, z]| {
+            let d = (x as i64 - 3).pow(2) + (y as i64 - 3).pow(2) + (z as i64 - 2).pow(2);
+            u32::from(d <= 6) * (1 + u32::from(x > 3))
+        })
+        .with_spacing(DVec3::new(1.0, 2.0, 0.5))
+        .unwrap()
+        .with_background(Some(0));
+        // The same labels in C order, and inside a larger array read through a strided view.
+        let c_order = owned.labels().as_standard_layout().into_owned();
+        let mut padded = Array3::from_elem((14, 6, 10), 9u32);
+        let every_other = ndarray::Slice::new(0, None, 2);
+        let mut holes = padded.slice_axis_mut(ndarray::Axis(0), every_other);
+        holes.slice_axis_inplace(ndarray::Axis(2), every_other);
+        holes.assign(&c_order);
+        let mut strided = padded.view();
+        strided.slice_axis_inplace(ndarray::Axis(0), every_other);
+        strided.slice_axis_inplace(ndarray::Axis(2), every_other);
+        assert!(strided.as_slice_memory_order().is_none());
+        let map = RegionMap::per_label();
+        let reference = DigitalSurface::new(&owned, &map).unwrap();
+        for view in [c_order.view(), strided] {
+            let v = LabelView::from_view(view).with_spacing(owned.spacing()).unwrap();
+            assert_eq!(v, owned);
+            assert_eq!(v.label_counts(), owned.label_counts());
+            let s = DigitalSurface::new(&v, &map).unwrap();
+            assert_eq!(s.surfels(), reference.surfels());
+            assert_eq!(s.counts(), reference.counts());
+        }
+        assert_eq!(owned.view().to_owned(), owned);
     }
 }

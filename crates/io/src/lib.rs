@@ -37,6 +37,10 @@
 //! - Raw data, whose layout ([`RawSpec`]: dimensions, [`DataType`], [`Endian`],
 //!   spacing) the caller gives: [`read_raw`], [`read_raw_bytes`].
 //!
+//! [`read_input`] reads a volume as a front end's options describe it
+//! ([`InputOptions`]: raw layout, spacing, threshold, labels kept, [`Background`]) into
+//! an [`Input`]; the CLI and the Python package both read through it.
+//!
 //! Readers never panic on malformed input: truncated data, bad headers, dimensions that
 //! do not match the data, unsupported types and NaN grey levels are [`IoError`]s naming
 //! the file, and volumes of more than [`MAX_VOXELS`] voxels, or needing more memory than
@@ -87,6 +91,7 @@ mod error;
 mod gltf;
 mod grey;
 pub mod inflight;
+mod input;
 mod limits;
 mod longvol;
 mod material;
@@ -115,6 +120,7 @@ mod zarr;
 pub use error::IoError;
 pub use gltf::write_gltf;
 pub use grey::{GreyVolume, NotALabel, Voxels};
+pub use input::{read_input, Background, Input, InputError, InputOptions};
 pub use limits::{
     check_memory, default_max_memory, format_size, max_memory, parse_size, set_max_memory, with_max_memory,
     FALLBACK_MAX_MEMORY,

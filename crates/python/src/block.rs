@@ -58,11 +58,13 @@ pub(crate) fn regularize_block<'py>(
         texture_aware,
         solver,
         clamp: clamp_arg(clamp)?,
+        smoothness: None,
         tolerance,
     };
     let params = options.params()?;
     let threads = threads_arg(threads)?;
-    let volume = volume::volume(volume::labels_of(labels)?, spacing, origin, background)?;
+    let labels = volume::labels_of(labels, voxreg_io::max_memory())?;
+    let volume = volume::volume(labels.view(), spacing, origin, background)?;
     let block = Block { global_dims, start, owned };
     let mesh = py.detach(|| {
         on_pool(threads, || {

@@ -19,10 +19,12 @@ use crate::error::{no_panic, Error, Result};
 pub(crate) enum Part {
     /// Every quad, in surfel order.
     All,
-    /// One interface, oriented from its lower region to its higher one.
-    Interface(u32),
-    /// One region's surface, oriented outward.
-    Region(u32),
+    /// One interface, oriented from its lower region to its higher one; with `true`,
+    /// split at pinches so it is 2-manifold.
+    Interface(u32, bool),
+    /// One region's surface, oriented outward; with `true`, split at pinches so it is
+    /// 2-manifold (closed regions become watertight).
+    Region(u32, bool),
 }
 
 /// A mesh's arrays before they become numpy arrays (built without the GIL).
@@ -73,6 +75,9 @@ impl Arrays {
     }
 }
 
+/// A part as Python names it: `("interface" | "region", index, manifold)`.
+type PartSpec = (String, u32, bool);
+
 /// An interface as Python sees it: its file name, its regions' smallest labels, its regions.
 type InterfaceEntry = (String, (u32, u32), (u32, u32));
 
@@ -87,12 +92,12 @@ pub(crate) struct Surface {
 }
 
 impl Surface {
-    fn part(kind: Option<(String, u32)>) -> Result<Part> {
+    fn part(kind: Option<PartSpec>) -> Result<Part> {
         Ok(match kind {
             None => Part::All,
-            Some((k, i)) if k == "interface" => Part::Interface(i),
-            Some((k, i)) if k == "region" => Part::Region(i),
-            Some((k, _)) => {
+            Some((k, i, m)) if k == "interface" => Part::Interface(i, m),
+            Some((k, i, m)) if k == "region" => Part::Region(i, m),
+            Some((k, _, _)) => {
                 return Err(Error::parameter(format!("unknown part '{k}' (interface or region)")))
             }
         })
@@ -101,15 +106,18 @@ impl Surface {
     /// The quad mesh of `part`, coloured from the palette as the CLI colours it.
     pub(crate) fn quad_mesh(&self, part: Part) -> QuadMesh {
         let s = &self.surface;
-        let params = PatchParams { manifold: false };
         let mut mesh = match part {
             Part::All => QuadMesh::from_surface(s, &self.positions),
-            Part::Interface(i) => {
-                QuadMesh::from_patch(s, &s.interface_patch(InterfaceId(i), &params), &self.positions)
-            }
-            Part::Region(r) => {
-                QuadMesh::from_patch(s, &s.region_patch(RegionId(r), &params), &self.positions)
-            }
+            Part::Interface(i, manifold) => QuadMesh::from_patch(
+                s,
+                &s.interface_patch(InterfaceId(i), &PatchParams { manifold }),
+                &self.positions,
+            ),
+            Part::Region(r, manifold) => QuadMesh::from_patch(
+                s,
+                &s.region_patch(RegionId(r), &PatchParams { manifold }),
+                &self.positions,
+            ),
         };
         if let Some(palette) = &self.palette {
             // Colour transfer: each quad takes the colour and material of its solid voxel.
@@ -125,8 +133,8 @@ impl Surface {
     fn check_part(&self, part: Part) -> Result<()> {
         let (what, i, n) = match part {
             Part::All => return Ok(()),
-            Part::Interface(i) => ("interface", i, self.surface.interfaces().len()),
-            Part::Region(r) => ("region", r, self.surface.regions().len()),
+            Part::Interface(i, _) => ("interface", i, self.surface.interfaces().len()),
+            Part::Region(r, _) => ("region", r, self.surface.regions().len()),
         };
         if i as usize >= n {
             return Err(Error::parameter(format!("{what} {i} out of range (the surface has {n})")));
@@ -142,10 +150,10 @@ impl Surface {
 
 #[pymethods]
 impl Surface {
-    /// The arrays of the whole mesh (`part=None`), of `("interface", i)` or of
-    /// `("region", r)`: see `Arrays::into_dict`.
+    /// The arrays of the whole mesh (`part=None`), of `("interface", i, manifold)` or of
+    /// `("region", r, manifold)`: see `Arrays::into_dict`.
     #[pyo3(signature = (part=None))]
-    fn mesh<'py>(&self, py: Python<'py>, part: Option<(String, u32)>) -> PyResult<Bound<'py, PyDict>> {
+    fn mesh<'py>(&self, py: Python<'py>, part: Option<PartSpec>) -> PyResult<Bound<'py, PyDict>> {
         let part = Self::part(part)?;
         self.check_part(part)?;
         let arrays = py.detach(|| no_panic(|| Ok(self.arrays(part))))?;
@@ -154,7 +162,7 @@ impl Surface {
 
     /// Writes the part to `path` (.obj, .ply, .glb or .gltf) with the library's writers.
     #[pyo3(signature = (path, part=None))]
-    fn save(&self, py: Python<'_>, path: PathBuf, part: Option<(String, u32)>) -> PyResult<()> {
+    fn save(&self, py: Python<'_>, path: PathBuf, part: Option<PartSpec>) -> PyResult<()> {
         let part = Self::part(part)?;
         self.check_part(part)?;
         check_extension(&path)?;

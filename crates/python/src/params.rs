@@ -40,6 +40,7 @@ pub(crate) struct Options {
     pub(crate) texture_aware: Option<bool>,
     pub(crate) solver: Option<String>,
     pub(crate) clamp: Option<Clamp>,
+    pub(crate) smoothness: Option<f64>,
     pub(crate) tolerance: Option<f64>,
 }
 
@@ -133,6 +134,16 @@ impl Options {
         }
         if let Some(t) = positive("tolerance", self.tolerance)? {
             p.solver = p.solver.with_tolerance(t);
+        }
+        if let Some(s) = self.smoothness {
+            if self.clamp.is_some() {
+                return Err(Error::parameter(
+                    "smoothness and clamp exclude each other (smoothness sets the boxes)",
+                ));
+            }
+            p = p
+                .with_smoothness(s)
+                .map_err(|_| Error::parameter(format!("smoothness must be in (0, 1], got {s}")))?;
         }
         let solver = match &self.solver {
             None => None,

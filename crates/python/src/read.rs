@@ -8,7 +8,7 @@ use numpy::ndarray::Array2;
 use numpy::IntoPyArray;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
-use voxreg_io::{is_voxel_art, read_raw, read_voxels, DataType, Endian, Palette, RawSpec, Voxels};
+use voxreg_io::{is_voxel_art, read_input, Background, DataType, Endian, InputError, InputOptions, Palette};
 
 use crate::error::{no_panic, Error, Result};
 
@@ -18,68 +18,25 @@ struct Loaded {
     palette: Option<Palette>,
 }
 
-#[allow(clippy::too_many_arguments)]
-fn load(
-    path: &std::path::Path,
-    threshold: Option<f64>,
-    dims: Option<[u64; 3]>,
-    dtype: Option<DataType>,
-    endian: Option<Endian>,
-    spacing: Option<DVec3>,
-    keep: Option<&[u32]>,
-    background: Option<u32>,
-) -> Result<Loaded> {
-    let is_raw = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("raw"));
-    let (voxels, palette) = match dims {
-        Some(dims) => {
-            let spec = RawSpec {
-                dims,
-                dtype: dtype.unwrap_or(DataType::U8),
-                endian: endian.unwrap_or_default(),
-                spacing: spacing.unwrap_or(DVec3::ONE),
-            };
-            (read_raw(path, &spec).map_err(|e| Error::io(&e))?, None)
+/// Reads as the CLI reads (`voxreg_io::read_input`), with the errors in the keywords' names.
+fn load(path: &std::path::Path, options: &InputOptions<'_>) -> Result<Loaded> {
+    match read_input(path, options) {
+        Ok(input) => Ok(Loaded { volume: input.volume, palette: input.palette }),
+        Err(InputError::RawNeedsDims(_)) => Err(Error::input(format!(
+            "{}: raw data have no header: give dims=(X, Y, Z) and dtype",
+            path.display()
+        ))),
+        Err(InputError::Spacing { source, .. }) => {
+            Err(Error::parameter(format!("{}: spacing: {source}", path.display())))
         }
-        None if is_raw => {
-            return Err(Error::input(format!(
-                "{}: raw data have no header: give dims=(X, Y, Z) and dtype",
-                path.display()
-            )))
-        }
-        None => {
-            let loaded = read_voxels(path).map_err(|e| Error::io(&e))?;
-            (loaded.voxels, loaded.palette)
-        }
-    };
-    let voxels = match spacing {
-        Some(s) => voxels
-            .with_spacing(s)
-            .map_err(|e| Error::parameter(format!("{}: spacing: {e}", path.display())))?,
-        None => voxels,
-    };
-    let mut volume = match (threshold, voxels) {
-        (Some(t), _) if t.is_nan() => return Err(Error::parameter("threshold: NaN is not a threshold")),
-        (Some(t), voxels) => voxels.threshold(t),
-        (None, Voxels::Labels(volume)) => volume,
-        (None, Voxels::Grey(grey)) => match grey.to_labels() {
-            Ok(volume) => volume,
-            Err(e) => {
-                let (lo, hi) = grey.range().unwrap_or_default();
-                return Err(Error::input(format!(
-                    "{}: grey-level data needs threshold=T (values range from {lo} to {hi}; {e})",
-                    path.display()
-                )));
-            }
-        },
-    };
-    if let Some(keep) = keep {
-        let bg = background.or(volume.background()).unwrap_or(0);
-        volume.labels_mut().mapv_inplace(|l| if keep.contains(&l) { l } else { bg });
+        Err(InputError::NanThreshold) => Err(Error::parameter("threshold: NaN is not a threshold")),
+        Err(InputError::GreyNeedsThreshold { lo, hi, reason, .. }) => Err(Error::input(format!(
+            "{}: grey-level data needs threshold=T (values range from {lo} to {hi}; {reason})",
+            path.display()
+        ))),
+        Err(InputError::Io(e)) => Err(Error::io(&e)),
+        Err(e @ InputError::ModelNeedsVox(_)) => Err(Error::parameter(e.to_string())),
     }
-    if let Some(b) = background {
-        volume = volume.with_background(Some(b));
-    }
-    Ok(Loaded { volume, palette })
 }
 
 /// The palette as `{"colors": (n, 4) uint8, "materials": [dict]}`.
@@ -141,9 +98,17 @@ pub(crate) fn read<'py>(
         }
         s => s,
     };
-    let loaded = py.detach(|| {
-        no_panic(|| load(&path, threshold, dims, dtype, endian, spacing, keep_labels.as_deref(), background))
-    })?;
+    let options = InputOptions {
+        dims,
+        dtype,
+        endian,
+        vox_model: None,
+        spacing,
+        threshold,
+        keep_labels: keep_labels.as_deref(),
+        background: background.map_or(Background::File, Background::Label),
+    };
+    let loaded = py.detach(|| no_panic(|| load(&path, &options)))?;
     let mut loaded = loaded;
     let v = &loaded.volume;
     let info = PyDict::new(py);

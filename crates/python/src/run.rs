@@ -113,8 +113,8 @@ pub(crate) fn on_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> 
 #[pyfunction]
 #[pyo3(signature = (
     labels, spacing, origin, background, regions, preset, normals, radius, alpha, beta, gamma,
-    refine, preserve_size, texture_aware, solver, clamp, tolerance, threads, progress,
-    palette_colors, palette_materials
+    refine, preserve_size, texture_aware, solver, clamp, smoothness, tolerance, threads, progress,
+    palette_colors, palette_materials, max_memory
 ))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn regularize<'py>(
@@ -135,11 +135,13 @@ pub(crate) fn regularize<'py>(
     texture_aware: Option<bool>,
     solver: Option<String>,
     clamp: Option<&Bound<'py, PyAny>>,
+    smoothness: Option<f64>,
     tolerance: Option<f64>,
     threads: i64,
     progress: Option<Py<PyAny>>,
     palette_colors: Option<PyReadonlyArray2<'py, u8>>,
     palette_materials: Option<Vec<MaterialTuple>>,
+    max_memory: Option<&Bound<'py, PyAny>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let options = Options {
         preset,
@@ -154,13 +156,16 @@ pub(crate) fn regularize<'py>(
         texture_aware,
         solver,
         clamp: clamp_arg(clamp)?,
+        smoothness,
         tolerance,
     };
     let params = options.params()?;
     let threads = threads_arg(threads)?;
     let palette = palette_arg(palette_colors, palette_materials)?;
-    // The one copy, with the GIL held (numpy arrays may be written by other threads).
-    let volume = volume::volume(volume::labels_of(labels)?, spacing, origin, background)?;
+    let limit = max_memory_arg(max_memory)?;
+    // Borrowed (uint32) or converted with the GIL held.
+    let labels = volume::labels_of(labels, limit)?;
+    let volume = volume::volume(labels.view(), spacing, origin, background)?;
 
     let mut callback_error: Option<PyErr> = None;
     let outcome = {
@@ -185,6 +190,15 @@ pub(crate) fn regularize<'py>(
         py.detach(move || {
             on_pool(threads, move || {
                 catch_unwind(AssertUnwindSafe(|| -> Result<Output> {
+                    // Refused before the surface is built, as the CLI refuses it.
+                    let bytes = Regularizer::estimated_bytes_of(volume, &params.regions)
+                        .map_err(|e| Error::regularize("labels: no surface to regularize: ", &e))?;
+                    let surfels = bytes / voxreg_regularize::BYTES_PER_SURFEL;
+                    volume::check_budget(
+                        &format!("the regularization of its {surfels} surfels"),
+                        u128::from(bytes),
+                        limit,
+                    )?;
                     let mut regularizer = Regularizer::from_volume(volume, &params.regions)
                         .map_err(|e| Error::regularize("labels: no surface to regularize: ", &e))?;
                     regularizer.run_with(params, None, &mut report).map_err(|e| Error::regularize("", &e))
@@ -199,8 +213,26 @@ pub(crate) fn regularize<'py>(
     if let Some(callback) = &progress {
         callback.bind(py).call1(("done", 1.0))?;
     }
-    drop(volume);
+    drop(labels);
     finish(py, out, palette)
+}
+
+/// `max_memory=`: bytes, a size such as `"4G"`, or `None` for the library's budget (half
+/// the physical memory).
+fn max_memory_arg(max_memory: Option<&Bound<'_, PyAny>>) -> Result<u64> {
+    let Some(m) = max_memory else { return Ok(voxreg_io::max_memory()) };
+    let bad = || {
+        Error::parameter(format!(
+            "max_memory must be a positive number of bytes or a size such as '4G', got {m}"
+        ))
+    };
+    if let Ok(s) = m.cast::<PyString>() {
+        return voxreg_io::parse_size(&s.to_string()).ok_or_else(bad);
+    }
+    match m.extract::<u64>() {
+        Ok(n) if n > 0 => Ok(n),
+        _ => Err(bad()),
+    }
 }
 
 /// The error of a run that unwound: the callback's exception, or a panic's `VoxregError`.

@@ -1,19 +1,53 @@
-//! numpy label arrays into the library's `LabelVolume`, and back.
+//! numpy label arrays into the library's volume, and back.
 //!
-//! **Copies.** The library's volume owns an `Array3<u32>`, so a numpy array is copied
-//! exactly once, into that array: a plain `memcpy` for C- or Fortran-contiguous `uint32`
-//! input, a checked conversion for every other integer dtype, and for non-contiguous views
-//! a gather in logical order. The memory order is kept (C stays C, Fortran stays Fortran),
-//! so no transposition happens either.
+//! **Copies.** A `uint32` array, whatever its strides (C, Fortran, a sliced or transposed
+//! view), is borrowed: the library reads it in place as a `LabelView`. Every other
+//! integer dtype is converted once into an owned `uint32` array by a checked conversion
+//! (memory order kept, so no transposition), after the copy's size has been checked
+//! against the memory budget.
 
 use glam::DVec3;
 use ndarray::{Array3, ShapeBuilder};
 use numpy::ndarray::ArrayView3;
-use numpy::{PyArray3, PyArrayMethods, PyUntypedArray, PyUntypedArrayMethods};
+use numpy::{PyArray3, PyArrayMethods, PyReadonlyArray3, PyUntypedArray, PyUntypedArrayMethods};
 use pyo3::prelude::*;
-use voxreg_digisurf::LabelVolume;
+use voxreg_digisurf::LabelView;
+use voxreg_io::MAX_VOXELS;
 
-use crate::error::{Error, Result};
+use crate::error::{Error, Kind, Result};
+
+/// The labels of a numpy array as the library reads them: borrowed, or converted.
+pub(crate) enum Labels<'py> {
+    /// A `uint32` array, read in place (numpy's borrow flag held against Rust writers).
+    Borrowed(PyReadonlyArray3<'py, u32>),
+    /// Any other dtype, converted into `uint32`.
+    Converted(Array3<u32>),
+}
+
+impl Labels<'_> {
+    pub(crate) fn view(&self) -> ArrayView3<'_, u32> {
+        match self {
+            Labels::Borrowed(a) => a.as_array(),
+            Labels::Converted(a) => a.view(),
+        }
+    }
+}
+
+/// Refuses an allocation of `bytes` for `what` over `limit`, before it is made.
+pub(crate) fn check_budget(what: &str, bytes: u128, limit: u64) -> Result<()> {
+    if bytes > u128::from(limit) {
+        let bytes = u64::try_from(bytes).unwrap_or(u64::MAX);
+        return Err(Error::new(
+            Kind::Voxreg,
+            format!(
+                "labels: {what} needs {}, over the memory limit of {} (raise it with max_memory=)",
+                voxreg_io::format_size(bytes),
+                voxreg_io::format_size(limit)
+            ),
+        ));
+    }
+    Ok(())
+}
 
 /// An integer type a label can come from.
 trait ToLabel: numpy::Element + Copy + std::fmt::Display {
@@ -40,8 +74,9 @@ impl ToLabel for bool {
 }
 
 /// The labels of `array` (a numpy array of any integer or bool dtype, shape `(X, Y, Z)`
-/// indexed `[x, y, z]`) as the library's array, copied once.
-pub(crate) fn labels_of(array: &Bound<'_, PyAny>) -> Result<Array3<u32>> {
+/// indexed `[x, y, z]`): borrowed if `uint32`, else converted within `limit` bytes. At
+/// most [`MAX_VOXELS`] voxels, as the file readers accept.
+pub(crate) fn labels_of<'py>(array: &Bound<'py, PyAny>, limit: u64) -> Result<Labels<'py>> {
     let untyped = array
         .cast::<PyUntypedArray>()
         .map_err(|_| Error::input("labels must be a numpy array (numpy.asarray accepts nested lists)"))?;
@@ -51,15 +86,28 @@ pub(crate) fn labels_of(array: &Bound<'_, PyAny>) -> Result<Array3<u32>> {
             untyped.shape().iter().map(|d| d.to_string()).collect::<Vec<_>>().join(", ")
         )));
     }
+    let shape = untyped.shape();
+    let voxels = shape.iter().map(|&d| d as u128).product::<u128>();
+    if voxels > u128::from(MAX_VOXELS) {
+        return Err(Error::input(format!(
+            "labels: volume of {}x{}x{} voxels exceeds the limit of {MAX_VOXELS} voxels",
+            shape[0], shape[1], shape[2]
+        )));
+    }
+    if let Ok(a) = array.cast::<PyArray3<u32>>() {
+        return Ok(Labels::Borrowed(a.try_readonly().map_err(|e| Error::input(format!("labels: {e}")))?));
+    }
     macro_rules! try_dtype {
         ($($t:ty),*) => {$(
             if let Ok(a) = array.cast::<PyArray3<$t>>() {
                 let ro = a.try_readonly().map_err(|e| Error::input(format!("labels: {e}")))?;
-                return convert::<$t>(ro.as_array());
+                let what = format!("a uint32 copy of its {voxels} {} labels", untyped.dtype());
+                check_budget(&what, voxels * 4, limit)?;
+                return convert::<$t>(ro.as_array()).map(Labels::Converted);
             }
         )*};
     }
-    try_dtype!(u32, u8, u16, u64, i32, i8, i16, i64, bool);
+    try_dtype!(u8, u16, u64, i32, i8, i16, i64, bool);
     let dtype = untyped.dtype().to_string();
     Err(Error::input(format!(
         "labels must be an integer array, got dtype {dtype} (grey levels: threshold them first, e.g. labels = grey > t)"
@@ -95,14 +143,14 @@ fn convert<T: ToLabel>(view: ArrayView3<'_, T>) -> Result<Array3<u32>> {
     }
 }
 
-/// A volume over `labels` with its embedding and background.
-pub(crate) fn volume(
-    labels: Array3<u32>,
+/// A volume over `labels` (borrowed) with its embedding and background.
+pub(crate) fn volume<'a>(
+    labels: ArrayView3<'a, u32>,
     spacing: [f64; 3],
     origin: [f64; 3],
     background: Option<u32>,
-) -> Result<LabelVolume> {
-    LabelVolume::new(labels)
+) -> Result<LabelView<'a>> {
+    LabelView::from_view(labels)
         .with_spacing(DVec3::from_array(spacing))
         .map_err(|e| Error::parameter(format!("spacing: {e}")))?
         .with_origin(DVec3::from_array(origin))

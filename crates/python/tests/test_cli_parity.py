@@ -60,7 +60,7 @@ def test_split_regions_match_cli(cli, tmp_path):
     a, info = voxreg.read(tmp_path / "v.npy")
     mesh = voxreg.regularize(a, **info)
     for label in (1, 2, 3):
-        mesh.region(label).save(tmp_path / f"py_{label}.ply")
+        mesh.region(label, manifold=False).save(tmp_path / f"py_{label}.ply")
         assert same_files(tmp_path / "split" / f"region_{label}.ply", tmp_path / f"py_{label}.ply")
 
 
@@ -79,3 +79,37 @@ def test_cli_report_equals_python_report(cli, data, tmp_path):
     for when in ("before", "after"):
         assert run["energy"][when] == pytest.approx(report["energy"][when], rel=1e-12)
     assert len(run["solves"]) == len(report["solves"])
+
+
+def test_smoothness_matches_cli(cli, data, tmp_path):
+    labels, info = voxreg.read(data / "chr_army1.vox")
+    plain = voxreg.regularize(labels, **info)
+    for s in (0.3, 1.0):
+        # Same file names in two directories: an OBJ names its .mtl.
+        (tmp_path / f"cli{s}").mkdir(), (tmp_path / f"py{s}").mkdir()
+        out = tmp_path / f"cli{s}" / "mesh.obj"
+        assert cli("regularize", data / "chr_army1.vox", "-o", out, "-q", "--smoothness", s).returncode == 0
+        mesh = voxreg.regularize(labels, **info, smoothness=s)
+        v = [line.split()[1:] for line in out.read_text().splitlines() if line.startswith("v ")]
+        assert np.array_equal(np.array(v, dtype=np.float64), mesh.vertices)
+        mesh.save(tmp_path / f"py{s}" / "mesh.obj")
+        assert same_files(out, tmp_path / f"py{s}" / "mesh.obj")
+    # Blockier: every vertex nearer its lattice corner than the preset lets it go.
+    def from_corners(m):
+        c = (m.vertices - np.asarray(info["origin"])) / np.asarray(info["spacing"]) + 0.5
+        return np.abs(c - np.round(c)).max()
+
+    low = voxreg.regularize(labels, **info, smoothness=0.3)
+    assert from_corners(low) < from_corners(plain)
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    ({"smoothness": 0.0}, r"smoothness must be in \(0, 1\], got 0"),
+    ({"smoothness": 1.5}, r"smoothness must be in \(0, 1\], got 1.5"),
+    ({"smoothness": 0.5, "clamp": True}, "smoothness and clamp exclude each other"),
+])
+def test_smoothness_errors(kwargs, message):
+    from conftest import ball_labels
+
+    with pytest.raises(voxreg.ParameterError, match=message):
+        voxreg.regularize(ball_labels(), **kwargs)

@@ -11,7 +11,7 @@
 //! the halo width).
 
 use glam::DVec3;
-use voxreg_digisurf::{DigitalSurface, LabelVolume, SurfaceError};
+use voxreg_digisurf::{DigitalSurface, LabelStorage, LabelVolume, SurfaceError};
 
 use crate::{Params, RegularizeError, Regularizer, Report};
 
@@ -109,8 +109,8 @@ impl Block {
 /// its origin, spacing and background those of the whole volume's part) with `params`,
 /// and returns the quads and vertices `block` owns. Deterministic; a sub-volume without
 /// a surface gives an empty mesh.
-pub fn regularize_block(
-    sub: &LabelVolume,
+pub fn regularize_block<S: LabelStorage>(
+    sub: &LabelVolume<S>,
     block: &Block,
     params: &Params,
 ) -> Result<BlockMesh, RegularizeError> {

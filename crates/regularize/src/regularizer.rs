@@ -4,7 +4,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::DVec3;
-use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap, VertexData};
+use voxreg_digisurf::{DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
 use voxreg_normals::{FeatureField, NormalEstimator, NormalField, Refined};
 
 use crate::pipeline::{crease_weights, informative_vertices, surfel_drift, trusted_drift};
@@ -83,7 +83,10 @@ pub struct Output {
 
 /// Regularizes the digital surface of `volume` with `params`: the one-shot form of
 /// [`Regularizer`].
-pub fn regularize(volume: &LabelVolume, params: &Params) -> Result<Output, RegularizeError> {
+pub fn regularize<S: LabelStorage>(
+    volume: &LabelVolume<S>,
+    params: &Params,
+) -> Result<Output, RegularizeError> {
     Regularizer::from_volume(volume, &params.regions)?.run(params)
 }
 
@@ -116,8 +119,13 @@ impl Regularizer {
         }
     }
 
-    /// A regularizer of `volume`'s digital surface, its labels grouped by `regions`.
-    pub fn from_volume(volume: &LabelVolume, regions: &RegionMap) -> Result<Self, RegularizeError> {
+    /// A regularizer of `volume`'s digital surface, its labels grouped by `regions`. The
+    /// volume may own its labels or borrow them ([`voxreg_digisurf::LabelView`]): they are
+    /// read in place, never copied.
+    pub fn from_volume<S: LabelStorage>(
+        volume: &LabelVolume<S>,
+        regions: &RegionMap,
+    ) -> Result<Self, RegularizeError> {
         let t = Instant::now();
         let surface = DigitalSurface::new(volume, regions)?;
         let mut r = Regularizer::new(surface);
@@ -136,7 +144,10 @@ impl Regularizer {
     /// [`Regularizer::estimated_bytes`] of the regularizer [`Regularizer::from_volume`]
     /// would build, found by counting the surfels in one pass over the voxels, before
     /// any of the surface is built.
-    pub fn estimated_bytes_of(volume: &LabelVolume, regions: &RegionMap) -> Result<u64, RegularizeError> {
+    pub fn estimated_bytes_of<S: LabelStorage>(
+        volume: &LabelVolume<S>,
+        regions: &RegionMap,
+    ) -> Result<u64, RegularizeError> {
         Ok(DigitalSurface::count_surfels(volume, regions)?.saturating_mul(BYTES_PER_SURFEL))
     }
 

@@ -103,10 +103,12 @@ def regularize(
     texture_aware: Optional[bool] = None,
     solver: Optional[str] = None,
     clamp: Union[None, bool, float] = None,
+    smoothness: Optional[float] = None,
     tolerance: Optional[float] = None,
     threads: int = 0,
     progress: Optional[Callable[[str, float], Any]] = None,
     palette: Any = None,
+    max_memory: Union[None, int, str] = None,
 ) -> Mesh:
     """Regularizes the surfaces between the labels of a volume into a quad mesh.
 
@@ -119,9 +121,10 @@ def regularize(
         The label of each voxel, indexed ``[x, y, z]``: any integer or bool dtype (uint8,
         uint16, uint32, uint64, int8 ... int64), C or Fortran order, or a strided view.
         Values must fit an unsigned 32-bit integer; negative labels are refused
-        (``InputError``). Copied once into the library's uint32 volume, with the GIL
-        held: a memcpy for contiguous uint32 input, a checked conversion otherwise; the
-        memory order is kept.
+        (``InputError``). A uint32 array (any order or strides) is read in place, not
+        copied: do not write to it from another thread while the call runs. Other
+        dtypes are converted once into uint32 (a checked conversion, with the GIL held,
+        memory order kept). At most 2^31 voxels.
     spacing : three floats, default (1, 1, 1)
         Size of a voxel along x, y and z, in physical units (finite, positive).
     origin : three floats, default (0, 0, 0)
@@ -166,6 +169,11 @@ def regularize(
         Keep every vertex within (1 - eps) voxel of its input, which rules out
         self-intersections. A float is eps in voxels, in (0, 1); True is 0.01; False
         turns the preset's clamping off. Implies solver="bounded".
+    smoothness : float in (0, 1], default None (off)
+        Voxel art: how rounded, from blocky (near 0: edges only softened) to rounded (1):
+        each vertex moves at most ``smoothness`` times half a voxel from its voxel
+        corner; thin parts keep their thickness and no face folds. The CLI's
+        ``--smoothness``; excludes ``clamp``; implies solver="bounded".
     tolerance : float > 0, default None (preset: 1e-3)
         Iterative solvers stop when every vertex is estimated within this many voxels of
         the exact minimizer.
@@ -186,6 +194,11 @@ def regularize(
     palette : dict or (n, 3 | 4) uint8 array, default None
         Colours (and materials) indexed by label, as ``read`` returns them: the mesh's
         ``colors`` and the materials of saved files.
+    max_memory : int or str, default None (half the physical memory)
+        Memory budget in bytes, or a size such as "4G" or "512M" (the CLI's
+        ``--max-memory``). A conversion of the labels to uint32, or a run whose estimated
+        peak (about 1.6 kB per surfel) exceeds it, is refused with ``VoxregError``
+        before anything is allocated for it.
 
     Returns
     -------
@@ -195,17 +208,18 @@ def regularize(
     Raises
     ------
     InputError
-        Labels of the wrong shape or dtype, a negative or too large label, no surface.
+        Labels of the wrong shape or dtype, a negative or too large label, more than
+        2^31 voxels, no surface.
     ParameterError
         A parameter out of range or unknown.
     VoxregError
-        The computation failed.
+        Over the memory budget (``max_memory``), or the computation failed.
     """
     colors, materials = _palette(palette)
     d = _voxreg.regularize(
         _labels(labels), _triple("spacing", spacing), _triple("origin", origin), background, regions,
         preset, normals, radius, alpha, beta, gamma, refine, preserve_size, texture_aware,
-        solver, clamp, tolerance, threads, progress, colors, materials,
+        solver, clamp, smoothness, tolerance, threads, progress, colors, materials, max_memory,
     )
     return Mesh._from_core(d, _report(d), d["surface"], None, d["summary"])
 

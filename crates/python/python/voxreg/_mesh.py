@@ -44,7 +44,7 @@ class Mesh:
         report: Optional[Dict[str, Any]] = None,
         *,
         _surface: Any = None,
-        _part: Optional[Tuple[str, int]] = None,
+        _part: Optional[Tuple[str, int, bool]] = None,
         _groups: Optional[List[Tuple[str, np.ndarray]]] = None,
         _summary: Optional[str] = None,
     ) -> None:
@@ -60,7 +60,7 @@ class Mesh:
 
     @classmethod
     def _from_core(cls, d: Dict[str, Any], report: Dict[str, Any], surface: Any,
-                   part: Optional[Tuple[str, int]], summary: Optional[str] = None) -> "Mesh":
+                   part: Optional[Tuple[str, int, bool]], summary: Optional[str] = None) -> "Mesh":
         return cls(d["vertices"], d["quads"], d["labels"], d["colors"], report,
                    _surface=surface, _part=part, _groups=d["groups"], _summary=summary)
 
@@ -97,27 +97,41 @@ class Mesh:
         _, first = np.unique(self.labels, axis=0, return_index=True)
         return [tuple(int(x) for x in self.labels[i]) for i in sorted(first)]
 
-    def interface(self, a: int, b: int) -> "Mesh":
+    def interface(self, a: int, b: int, manifold: bool = False) -> "Mesh":
         """The interface between the regions of labels ``a`` and ``b`` (either order), as
         a mesh of its own, oriented from its lower region to its higher one (see
         ``labels``). Its vertices copy the whole mesh's bit for bit, so interfaces and
-        regions meet exactly along junctions."""
+        regions meet exactly along junctions.
+
+        ``manifold=True`` duplicates the vertices and edges where the interface pinches
+        (two voxels touching only along an edge or at a corner), so the mesh is 2-manifold
+        (``voxreg regularize --split interfaces --manifold``); the copies keep their
+        position bit for bit."""
         s = self._need_surface("interface()")
         ra, rb = s.region_of(int(a)), s.region_of(int(b))
         for i, (_, _, regions) in enumerate(s.interfaces()):
             if ra is not None and rb is not None and set(regions) == {ra, rb}:
-                return Mesh._from_core(s.mesh(("interface", i)), self.report, s, ("interface", i))
+                part = ("interface", i, bool(manifold))
+                return Mesh._from_core(s.mesh(part), self.report, s, part)
         raise InputError(f"no interface between labels {a} and {b}")
 
-    def region(self, label: int) -> "Mesh":
+    def region(self, label: int, manifold: bool = True) -> "Mesh":
         """The surface of the region (material) holding ``label``, closed and oriented
         outward (open along the volume border when the volume has no background). Its
-        vertices copy the whole mesh's bit for bit."""
+        vertices copy the whole mesh's bit for bit.
+
+        ``manifold=True`` (the default) duplicates the vertices and edges where the region
+        pinches (two of its voxels touching only along an edge or at a corner), so every
+        edge has exactly two quads and a closed region is watertight for trimesh and
+        pyvista; the copies keep their position bit for bit. It is the mesh of
+        ``voxreg regularize --split regions --manifold``; ``manifold=False`` keeps the
+        pinches (``--split regions``)."""
         s = self._need_surface("region()")
         r = s.region_of(int(label))
         if r is None:
             raise InputError(f"no voxel has label {label}")
-        return Mesh._from_core(s.mesh(("region", r)), self.report, s, ("region", r))
+        part = ("region", r, bool(manifold))
+        return Mesh._from_core(s.mesh(part), self.report, s, part)
 
     def regions(self) -> List[int]:
         """The smallest label of every region but the background, in region order."""

@@ -1,12 +1,12 @@
 # The Rust core (crates/python/src). Private: use the voxreg package's functions.
-from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple
+from typing import Any, Callable, Dict, List, Optional, Sequence, Tuple, Union
 
 import numpy as np
 import numpy.typing as npt
 
 __version__: str
 
-_Part = Optional[Tuple[str, int]]
+_Part = Optional[Tuple[str, int, bool]]
 
 class Surface:
     def mesh(self, part: _Part = None) -> Dict[str, Any]: ...
@@ -33,11 +33,13 @@ def regularize(
     texture_aware: Optional[bool],
     solver: Optional[str],
     clamp: Any,
+    smoothness: Optional[float],
     tolerance: Optional[float],
     threads: int,
     progress: Optional[Callable[[str, float], Any]],
     palette_colors: Optional[npt.NDArray[np.uint8]],
     palette_materials: Optional[List[Tuple[str, Tuple[int, int, int, int], float, float, float, float]]],
+    max_memory: Union[None, int, str],
 ) -> Dict[str, Any]: ...
 def read(
     path: str,
