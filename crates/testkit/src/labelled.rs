@@ -185,7 +185,9 @@ impl LabelShape for SplitBall {
         match (a, b) {
             (0, 1) => sphere(self.below()),
             (0, 2) => sphere(self.below().flipped()),
-            (1, 2) => plane_patch(DVec3::Z, self.cut, DVec3::ZERO, self.radius, &[], p).map(|q| (q, DVec3::Z)),
+            (1, 2) => {
+                plane_patch(DVec3::Z, self.cut, DVec3::ZERO, self.radius, &[], p).map(|q| (q, DVec3::Z))
+            }
             _ => None,
         }
     }
@@ -256,7 +258,9 @@ impl LabelShape for QuarteredBall {
         match (with_background, quarters.len()) {
             // The two ends of the segment (three or four quarters at the background: the
             // digital point may miss one quarter).
-            (true, 3 | 4) => segment().and_then(|[a, b, _]| nearest_of(p, [a, b])).map(|q| (q, JunctionKind::Point)),
+            (true, 3 | 4) => {
+                segment().and_then(|[a, b, _]| nearest_of(p, [a, b])).map(|q| (q, JunctionKind::Point))
+            }
             (false, 4) => segment().map(|s| (s[2], JunctionKind::Curve)),
             (false, 3) => None,
             (true, 2) => {
@@ -339,16 +343,18 @@ impl LabelShape for TouchingBalls {
         match (a, b) {
             (0, 1) => Some((p.normalize_or(DVec3::Z) * self.outer, p.normalize_or(DVec3::Z))),
             (1, 2) => sphere_patch(self.a.0, self.a.1, &[side_a], p).map(|q| (q, (q - self.a.0) / self.a.1)),
-            (1, 3) => {
-                sphere_patch(self.b.0, self.b.1, &[side_a.flipped()], p).map(|q| (q, (q - self.b.0) / self.b.1))
-            }
+            (1, 3) => sphere_patch(self.b.0, self.b.1, &[side_a.flipped()], p)
+                .map(|q| (q, (q - self.b.0) / self.b.1)),
             (2, 3) => plane_patch(n, d, self.a.0, self.a.1, &[], p).map(|q| (q, n)),
             _ => None,
         }
     }
     fn junction(&self, labels: &[u32], p: DVec3) -> Option<(DVec3, JunctionKind)> {
         let (n, d) = self.radical();
-        (labels == [1, 2, 3]).then(|| arc(n, d, self.a.0, self.a.1, &[], p)).flatten().map(|q| (q, JunctionKind::Curve))
+        (labels == [1, 2, 3])
+            .then(|| arc(n, d, self.a.0, self.a.1, &[], p))
+            .flatten()
+            .map(|q| (q, JunctionKind::Curve))
     }
 }
 
@@ -444,8 +450,11 @@ pub fn vertex_labels(surface: &DigitalSurface) -> Vec<Vec<u32>> {
     (0..surface.num_vertices())
         .into_par_iter()
         .map(|v| {
-            let mut l: Vec<u32> =
-                surface.vertex_surfels(VertexId(v as u32)).iter().flat_map(|s| surface.surfel(*s).labels).collect();
+            let mut l: Vec<u32> = surface
+                .vertex_surfels(VertexId(v as u32))
+                .iter()
+                .flat_map(|s| surface.surfel(*s).labels)
+                .collect();
             l.sort_unstable();
             l.dedup();
             l
@@ -455,7 +464,11 @@ pub fn vertex_labels(surface: &DigitalSurface) -> Vec<Vec<u32>> {
 
 /// The fidelity of `positions` (one per vertex of `surface`, the digital surface of
 /// [`digitize_labels`]`(shape, ..)`) to `shape`.
-pub fn label_fidelity(surface: &DigitalSurface, positions: &[DVec3], shape: &dyn LabelShape) -> LabelFidelity {
+pub fn label_fidelity(
+    surface: &DigitalSurface,
+    positions: &[DVec3],
+    shape: &dyn LabelShape,
+) -> LabelFidelity {
     let unit = surface.spacing().min_element();
     let labels = vertex_labels(surface);
     let mut parts: [Vec<f64>; 4] = Default::default();
@@ -511,7 +524,11 @@ mod tests {
     fn shapes() -> Vec<Box<dyn LabelShape>> {
         vec![
             Box::new(SplitBall { radius: 6.0, cut: 0.5 }),
-            Box::new(QuarteredBall { radius: 6.0, centre: DVec3::new(0.5, 0.0, 0.5), cuts: glam::DVec2::splat(0.5) }),
+            Box::new(QuarteredBall {
+                radius: 6.0,
+                centre: DVec3::new(0.5, 0.0, 0.5),
+                cuts: glam::DVec2::splat(0.5),
+            }),
             Box::new(TouchingBalls::default()),
         ]
     }
@@ -552,7 +569,11 @@ mod tests {
                             // Off the surface, the query is no farther than this sample.
                             let off = s + DVec3::new(0.3, -0.2, 0.1);
                             let (q2, _) = shape.interface(a, b, off).unwrap();
-                            assert!(q2.distance(off) <= s.distance(off) + 1e-9, "{}: not nearest", shape.name());
+                            assert!(
+                                q2.distance(off) <= s.distance(off) + 1e-9,
+                                "{}: not nearest",
+                                shape.name()
+                            );
                             found += 1;
                         }
                         x += h;

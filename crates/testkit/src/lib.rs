@@ -26,8 +26,8 @@ mod labelled;
 mod rng;
 
 pub use labelled::{
-    digitize_labels, label_fidelity, vertex_labels, JunctionKind, LabelFidelity, LabelShape, QuarteredBall, Solid,
-    SplitBall, Stat, TouchingBalls,
+    digitize_labels, label_fidelity, vertex_labels, JunctionKind, LabelFidelity, LabelShape, QuarteredBall,
+    Solid, SplitBall, Stat, TouchingBalls,
 };
 pub use rng::Lcg;
 
