@@ -2,11 +2,10 @@
 
 use std::collections::VecDeque;
 
-use glam::{DMat3, DVec3};
+use glam::DVec3;
 use rayon::prelude::*;
-use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
+use voxreg_digisurf::{DigitalSurface, SurfelId};
 
-use crate::eigen::symmetric_eigen;
 use crate::{NormalError, NormalEstimator, NormalField};
 
 /// Normals re-estimated from positions of the surface's vertices (typically a
@@ -24,12 +23,7 @@ use crate::{NormalError, NormalEstimator, NormalField};
 /// rule: the two sides of a sharp edge, and interfaces meeting at an angle, never mix).
 /// Orientation follows `previous`. A quad with no such neighbour keeps its normal from
 /// `previous`.
-///
-/// Away from junctions the average is a first-order fit evaluated at `c_f` (the mean
-/// normal plus the fitted slope of the quad normals times `c_f - mean centre`), not the
-/// plain mean, which is the normal at the disc's weighted centre; next to a junction the
-/// plain mean is kept (the fit, extrapolated from quads bent by the other interfaces,
-/// feeds back through the rounds; see docs/design/junctions.md).
+
 ///
 /// Why: after one solve the quads follow the shape far better than the staircase, so
 /// their own normals, averaged over a small disc, are a better field than any estimate
@@ -109,22 +103,6 @@ fn interface_adjacency(surface: &DigitalSurface) -> (Vec<u32>, Vec<u32>) {
     (starts, adjacent)
 }
 
-/// Per surfel, whether one of its vertices is on a junction (its quads span three regions
-/// or more).
-fn junction_surfels(surface: &DigitalSurface) -> Vec<bool> {
-    let junction: Vec<bool> = (0..surface.num_vertices())
-        .into_par_iter()
-        .map(|v| {
-            let mut regions =
-                surface.vertex_surfels(VertexId(v as u32)).iter().flat_map(|s| surface.surfel(*s).regions);
-            let first = regions.next();
-            let second = regions.find(|r| Some(*r) != first);
-            second.is_some_and(|b| regions.any(|r| Some(r) != first && r != b))
-        })
-        .collect();
-    surface.surfels().par_iter().map(|s| s.vertices.iter().any(|v| junction[v.index()])).collect()
-}
-
 fn refined(
     surface: &DigitalSurface,
     positions: &[DVec3],
@@ -144,7 +122,6 @@ fn refined(
         .collect();
     let lengths: Vec<f64> = areas.par_iter().map(|a| a.length()).collect();
     let (starts, adjacent) = interface_adjacency(surface);
-    let at_junction = junction_surfels(surface);
     let surfels = surface.surfels();
     let normals = field.as_slice();
     let out: Vec<DVec3> = (0..n)
@@ -156,8 +133,6 @@ fn refined(
                 let nf = normals[f];
                 let cf = centres[f];
                 let mut sum = DVec3::ZERO;
-                let mut fit = FirstOrder::default();
-                let mut near_junction = false;
                 let regions_f = surfels[f].regions;
                 queue.push_back((f, 0.0));
                 seen[f] = true;
@@ -169,11 +144,7 @@ fn refined(
                     if dot.abs() < cos_max {
                         continue; // across a feature: neither counted nor crossed
                     }
-                    near_junction |= at_junction[g];
                     sum += (1.0 - d / r) * a * dot.signum();
-                    if len > 0.0 {
-                        fit.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf);
-                    }
                     for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
                         let k = k as usize;
                         if !seen[k] && surfels[k].regions.iter().any(|r| regions_f.contains(r)) {
@@ -187,7 +158,7 @@ fn refined(
                     }
                 }
                 touched.drain(..).for_each(|k| seen[k] = false);
-                let m = if near_junction { sum } else { fit.at_origin(r).unwrap_or(sum) }.normalize_or_zero();
+                let m = sum.normalize_or_zero();
                 if m == DVec3::ZERO {
                     nf
                 } else {
@@ -197,68 +168,6 @@ fn refined(
         )
         .collect();
     NormalField::new(out)
-}
-
-/// A weighted first-order fit of unit normals `u` against positions `c` (relative to the
-/// quad being estimated): `u(c) ~ u_mean + J (c - c_mean)`, evaluated at `c = 0`.
-///
-/// Why: the plain weighted mean is the normal at the disc's weighted centre, not at the
-/// quad's. Where the disc is one-sided (next to a junction curve, a feature, or an open
-/// rim, where only one side's quads count) the two are a voxel or more apart, and on a
-/// curved interface the mean is tilted by that distance over the radius of curvature
-/// (three degrees on a sphere of radius 20, which pulls a junction a tenth of a voxel off
-/// its curve). The first-order term removes that tilt; on a symmetric disc the centres
-/// nearly coincide and it changes little.
-#[derive(Default)]
-struct FirstOrder {
-    w: f64,
-    wu: DVec3,
-    wc: DVec3,
-    wcc: DMat3,
-    wuc: DMat3,
-}
-
-impl FirstOrder {
-    fn add(&mut self, w: f64, u: DVec3, c: DVec3) {
-        self.w += w;
-        self.wu += w * u;
-        self.wc += w * c;
-        self.wcc += outer(w * c, c);
-        self.wuc += outer(w * u, c);
-    }
-
-    /// The fitted normal at the origin (not normalized), `None` without weight. The
-    /// positions' covariance is inverted only along directions where the disc spans at
-    /// least a tenth of the radius `r` (so a thin strip of quads gives no slope across it),
-    /// and the correction is kept below a quarter of the mean normal.
-    fn at_origin(&self, r: f64) -> Option<DVec3> {
-        if self.w <= 0.0 {
-            return None;
-        }
-        let mean_u = self.wu / self.w;
-        let mean_c = self.wc / self.w;
-        let ccov = self.wcc / self.w - outer(mean_c, mean_c);
-        let ucov = self.wuc / self.w - outer(mean_u, mean_c);
-        let (values, vectors) = symmetric_eigen(ccov);
-        let floor = (0.1 * r).powi(2);
-        // J (0 - mean_c) = ucov C^+ (-mean_c).
-        let mut solved = DVec3::ZERO;
-        for (l, e) in values.iter().zip(vectors) {
-            if *l > floor {
-                solved += e * (e.dot(-mean_c) / l);
-            }
-        }
-        let mut correction = ucov * solved;
-        let cap = 0.25 * mean_u.length();
-        if correction.length() > cap {
-            correction *= cap / correction.length();
-        }
-        Some(mean_u + correction)
-    }
-}
-
-fn outer(a: DVec3, b: DVec3) -> DMat3 {
-    DMat3::from_cols(a * b.x, a * b.y, a * b.z)
 }
 
 #[cfg(test)]
@@ -285,15 +194,12 @@ mod tests {
             .iter()
             .map(|s| s.vertices.iter().map(|v| positions[v.index()]).sum::<DVec3>() / 4.0)
             .collect();
-        let at_junction = junction_surfels(surface);
         let mut seen = vec![false; n];
         (0..n)
             .map(|f| {
                 let nf = field.as_slice()[f];
                 let regions = surface.surfels()[f].regions;
                 let mut sum = DVec3::ZERO;
-                let mut fit = FirstOrder::default();
-                let mut near_junction = false;
                 let mut queue = VecDeque::from([f]);
                 let mut touched = vec![f];
                 seen[f] = true;
@@ -305,11 +211,7 @@ mod tests {
                     if dot.abs() < cos_max {
                         continue;
                     }
-                    near_junction |= at_junction[g];
                     sum += (1.0 - d / r) * a * dot.signum();
-                    if len > 0.0 {
-                        fit.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - centres[f]);
-                    }
                     for e in surface.surfel_edges(SurfelId(g as u32)) {
                         for &k in surface.edge_surfels(e) {
                             let k = k.index();
@@ -327,7 +229,7 @@ mod tests {
                     }
                 }
                 touched.into_iter().for_each(|k| seen[k] = false);
-                let m = if near_junction { sum } else { fit.at_origin(r).unwrap_or(sum) }.normalize_or_zero();
+                let m = sum.normalize_or_zero();
                 if m == DVec3::ZERO {
                     nf
                 } else {
