@@ -36,7 +36,7 @@ pub(crate) fn label_cases() -> Vec<LabelCase> {
     vec![
         c(Box::new(SplitBall { radius: 20.0, cut: 0.5 }), DVec3::ONE, "split ball r=20, cut z=0.5"),
         c(Box::new(quartered_ball()), DVec3::ONE, "quartered ball r=20"),
-        c(Box::new(TouchingBalls::default()), DVec3::ONE, "touching balls in a ball r=19"),
+        c(Box::<TouchingBalls>::default(), DVec3::ONE, "touching balls in a ball r=19"),
         c(Box::new(Solid(&SPHERE_20)), DVec3::new(1.0, 1.0, 2.5), "sphere r=20, spacing (1, 1, 2.5)"),
         c(Box::new(Solid(&SPHERE_20)), DVec3::new(1.0, 1.0, 5.0), "sphere r=20, spacing (1, 1, 5)"),
         c(Box::new(Solid(&TORUS)), DVec3::new(1.0, 1.0, 2.5), "torus 12/5, spacing (1, 1, 2.5)"),

@@ -23,7 +23,6 @@ use crate::{NormalError, NormalEstimator, NormalField};
 /// rule: the two sides of a sharp edge, and interfaces meeting at an angle, never mix).
 /// Orientation follows `previous`. A quad with no such neighbour keeps its normal from
 /// `previous`.
-
 ///
 /// Why: after one solve the quads follow the shape far better than the staircase, so
 /// their own normals, averaged over a small disc, are a better field than any estimate
