@@ -463,8 +463,16 @@ Shrouds: see voxreg-baselines (eps 0.05, damping 0.5, at most 200 sweeps).\n";
 
 /// Runs the comparison; `args`: `[--quick] [--out DIR]`.
 pub(crate) fn compare(args: &[String]) -> Result<()> {
-    let (quick, out) = crate::quick_and_out("compare", args)?;
+    let labels_only = args.iter().any(|a| a == "--labels");
+    let args: Vec<String> = args.iter().filter(|a| *a != "--labels").cloned().collect();
+    let (quick, out) = crate::quick_and_out("compare", &args)?;
     let start = Instant::now();
+    let labelled = crate::labelled::label_tables()?;
+    std::fs::write(out.join("labels.md"), &labelled)?;
+    println!("{labelled}");
+    if labels_only {
+        return Ok(());
+    }
     let mut all = Vec::new();
     let mut md =
         format!("# Comparison of meshing methods{}\n\n{LEGEND}\n", if quick { " (quick set)" } else { "" });

@@ -4,7 +4,7 @@
 //!   normals, assemble, solve, refine, write; the input's preset, as the CLI runs it) on
 //!   the given volumes (default: the bundled bunny-128 and cat10) and prints a Markdown
 //!   table of medians.
-//! - `compare [--quick] [--out DIR]`: every meshing method (voxreg with each normal
+//! - `compare [--quick] [--labels] [--out DIR]`: every meshing method (voxreg with each normal
 //!   estimator, marching cubes, smoothed MC, dual contouring, shrouds) against every
 //!   metric of `voxreg-baselines` on analytic shapes; Markdown and CSV tables in
 //!   `target/xtask/compare/` (see `compare.rs`).
@@ -23,6 +23,7 @@
 
 mod compare;
 mod figures;
+mod labelled;
 mod synth;
 mod table1;
 mod voxart;
@@ -46,7 +47,7 @@ fn main() -> Result<()> {
         Some("gallery") => voxart::gallery(&args[1..]),
         _ => {
             eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
-            eprintln!("       cargo xtask compare [--quick] [--out DIR]");
+            eprintln!("       cargo xtask compare [--quick] [--labels] [--out DIR]");
             eprintln!("       cargo xtask table1 [--runs N] [FILE...]");
             eprintln!("       cargo xtask synth-labels [--dims X,Y,Z] [--out FILE.npy]");
             eprintln!("       cargo xtask figures [--quick] [--out DIR]");

@@ -16,11 +16,13 @@ use crate::{NormalError, NormalEstimator, NormalField};
 /// n'_f = normalize( sum_g (1 - |c_g - c_f| / r) a_g ),
 /// ```
 ///
-/// over the quads `g` of `f`'s interface (same region pair) reached from `f` through
-/// edge-adjacent quads whose centres `c_g` stay within `radius` voxels of `c_f` and whose
-/// normal is within `feature_angle_deg` of `previous`'s normal at `f` (the feature rule:
-/// the two sides of a sharp edge never mix). Orientation follows `previous`. A quad with
-/// no such neighbour keeps its normal from `previous`.
+/// over the quads `g` of the interfaces that share a region with `f`'s (its own, and
+/// those that continue it across a junction curve) reached from `f` through edge-adjacent
+/// quads of such interfaces whose centres `c_g` stay within `radius` voxels of `c_f` and
+/// whose normal is within `feature_angle_deg` of `previous`'s normal at `f` (the feature
+/// rule: the two sides of a sharp edge, and interfaces meeting at an angle, never mix).
+/// Orientation follows `previous`. A quad with no such neighbour keeps its normal from
+/// `previous`.
 ///
 /// Why: after one solve the quads follow the shape far better than the staircase, so
 /// their own normals, averaged over a small disc, are a better field than any estimate
@@ -77,11 +79,12 @@ fn interface_adjacency(surface: &DigitalSurface) -> (Vec<u32>, Vec<u32>) {
     let lists: Vec<Vec<u32>> = (0..surface.num_surfels())
         .into_par_iter()
         .map(|g| {
-            let iface = surface.surfels()[g].interface;
+            let regions = surface.surfels()[g].regions;
             let mut list = Vec::with_capacity(4);
             for e in surface.surfel_edges(SurfelId(g as u32)) {
                 for &k in surface.edge_surfels(e) {
-                    if k.index() != g && surface.surfels()[k.index()].interface == iface {
+                    let other = surface.surfels()[k.index()].regions;
+                    if k.index() != g && regions.iter().any(|r| other.contains(r)) {
                         list.push(k.0);
                     }
                 }
@@ -118,6 +121,7 @@ fn refined(
         .collect();
     let lengths: Vec<f64> = areas.par_iter().map(|a| a.length()).collect();
     let (starts, adjacent) = interface_adjacency(surface);
+    let surfels = surface.surfels();
     let normals = field.as_slice();
     let out: Vec<DVec3> = (0..n)
         .into_par_iter()
@@ -128,6 +132,7 @@ fn refined(
                 let nf = normals[f];
                 let cf = centres[f];
                 let mut sum = DVec3::ZERO;
+                let regions_f = surfels[f].regions;
                 queue.push_back((f, 0.0));
                 seen[f] = true;
                 touched.push(f);
@@ -141,7 +146,7 @@ fn refined(
                     sum += (1.0 - d / r) * a * dot.signum();
                     for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
                         let k = k as usize;
-                        if !seen[k] {
+                        if !seen[k] && surfels[k].regions.iter().any(|r| regions_f.contains(r)) {
                             let dk = centres[k].distance(cf);
                             if dk < r {
                                 seen[k] = true;
@@ -192,7 +197,7 @@ mod tests {
         (0..n)
             .map(|f| {
                 let nf = field.as_slice()[f];
-                let iface = surface.surfels()[f].interface;
+                let regions = surface.surfels()[f].regions;
                 let mut sum = DVec3::ZERO;
                 let mut queue = VecDeque::from([f]);
                 let mut touched = vec![f];
@@ -209,8 +214,10 @@ mod tests {
                     for e in surface.surfel_edges(SurfelId(g as u32)) {
                         for &k in surface.edge_surfels(e) {
                             let k = k.index();
+                            let other = surface.surfels()[k].regions;
                             if !seen[k]
-                                && surface.surfels()[k].interface == iface
+                                && surface.surfels()[g].regions.iter().any(|r| other.contains(r))
+                                && other.iter().any(|r| regions.contains(r))
                                 && centres[k].distance(centres[f]) < r
                             {
                                 seen[k] = true;

@@ -95,7 +95,7 @@ pub use regularizer::{regularize, Event, Output, Regularizer, Stage, BYTES_PER_S
 pub use report::{EnergyReport, NormalsReport, Report, StageTimes};
 pub use solver::{estimate_factor_nnz, ClampOverride, OverrideError, Solver, SolverChoice, SolverParams};
 pub use stencil::MatrixFreeOperator;
-pub use weights::{colour_discontinuities, FairnessMask, Weights};
+pub use weights::{colour_discontinuities, junction_vertices, FairnessMask, Weights};
 
 use glam::DVec3;
 use voxreg_digisurf::SurfaceError;

@@ -176,6 +176,10 @@ pub struct Params {
     /// Texture-aware fairness (paper, sec. 4.5): barycentres leave out the neighbours
     /// across a region boundary, so quad edges follow colour boundaries. Default: `false`.
     pub texture_aware: bool,
+    /// Fairness along junction curves ([`crate::FairnessMask::junction_curves`]): the
+    /// vertices where three regions or more meet take the barycenter of their neighbours
+    /// along the junction only. Default: `true`.
+    pub junction_fairness: bool,
     /// The solver and its boxes. Default: [`SolverParams::default`] (exact factorization
     /// for small surfaces, else multigrid CG, to `1e-3` voxel; no clamping).
     pub solver: SolverParams,
@@ -292,6 +296,7 @@ impl Default for Params {
             crease_angle_deg: 20.0,
             crease_dilation: 1,
             texture_aware: false,
+            junction_fairness: true,
             solver: SolverParams::default(),
             fold_free: false,
         }

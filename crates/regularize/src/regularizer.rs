@@ -220,10 +220,15 @@ impl Regularizer {
             self.trusted = Some(informative_vertices(&surface));
         }
         let trusted = if recentre { self.trusted.as_deref().unwrap_or(&[]) } else { &[] };
-        let weights = Weights {
-            fairness: params.texture_aware.then(|| FairnessMask::texture_aware(&surface)),
-            ..Default::default()
+        let texture = params.texture_aware.then(|| FairnessMask::texture_aware(&surface));
+        let junction = (params.junction_fairness && surface.interfaces().len() > 1)
+            .then(|| FairnessMask::junction_curves(&surface))
+            .filter(|m| m.num_affected_vertices() > 0);
+        let fairness = match (texture, junction) {
+            (Some(t), Some(j)) => Some(t.and(&j)),
+            (t, j) => t.or(j),
         };
+        let weights = Weights { fairness, ..Default::default() };
         let weights = (weights != Weights::default()).then_some(weights);
 
         let input = surface.positions();

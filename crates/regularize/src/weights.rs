@@ -122,6 +122,31 @@ impl FairnessMask {
         Self::from_cut_edges(surface, &colour_discontinuities(surface)).expect("one flag per edge")
     }
 
+    /// Fairness along junction curves: cuts every edge between a junction vertex (one
+    /// whose quads span three regions or more, [`junction_vertices`]) and a vertex that
+    /// is not, so that a junction vertex's barycenter is that of its neighbours along the
+    /// junction (a one-dimensional fairness along the curve), and its surfaces' vertices
+    /// next to it are faired among themselves.
+    ///
+    /// Why: the barycenter of all the neighbours of a vertex where three interfaces meet
+    /// lies inside the angle they make (on the split ball, a third of a voxel from the
+    /// circle towards the cut disc), and pulls the junction off the curve.
+    pub fn junction_curves(surface: &DigitalSurface) -> Self {
+        let junction = junction_vertices(surface);
+        let cut: Vec<bool> = surface
+            .edges()
+            .iter()
+            .map(|e| junction[e.vertices[0].index()] != junction[e.vertices[1].index()])
+            .collect();
+        Self::from_cut_edges(surface, &cut).expect("one flag per edge")
+    }
+
+    /// The union of two masks' cuts: a neighbour is kept when both keep it.
+    pub fn and(mut self, other: &FairnessMask) -> Self {
+        self.keep.iter_mut().zip(&other.keep).for_each(|(k, o)| *k &= *o);
+        self
+    }
+
     /// Whether the `slot`-th neighbour of `v` (in [`DigitalSurface::vertex_neighbours`]
     /// order) enters `v`'s barycenter.
     #[inline]
@@ -143,6 +168,23 @@ impl FairnessMask {
         let keep = &self.keep[self.offsets[v.index()]..self.offsets[v.index() + 1]];
         surface.vertex_neighbours(v).iter().zip(keep).filter(|(_, &k)| k).map(|(w, _)| *w)
     }
+}
+
+/// Per vertex, whether its quads span three regions or more (a vertex of a junction curve
+/// or point).
+pub fn junction_vertices(surface: &DigitalSurface) -> Vec<bool> {
+    (0..surface.num_vertices())
+        .map(|v| {
+            let mut regions: Vec<_> = surface
+                .vertex_surfels(VertexId(v as u32))
+                .iter()
+                .flat_map(|s| surface.surfel(*s).regions)
+                .collect();
+            regions.sort_unstable();
+            regions.dedup();
+            regions.len() >= 3
+        })
+        .collect()
 }
 
 /// Per edge, whether it separates colours: its incident surfels do not all have the same

@@ -22,8 +22,13 @@
 //! assert_eq!(normals.len(), surface.num_surfels());
 //! ```
 
+mod labelled;
 mod rng;
 
+pub use labelled::{
+    digitize_labels, label_fidelity, vertex_labels, JunctionKind, LabelFidelity, LabelShape, QuarteredBall,
+    Solid, SplitBall, Stat, TouchingBalls,
+};
 pub use rng::Lcg;
 
 use glam::DVec3;
