@@ -21,7 +21,7 @@ def test_read_zarr_as_zarr_python_does(data, name):
 def test_read_ome_zarr_image_is_level_0(data):
     image, info = voxreg.read(data / "formats" / "image.ome.zarr")
     level0, info0 = voxreg.read(data / "formats" / "image.ome.zarr" / "0")
-    assert np.array_equal(image, level0) and info["spacing"] == info0["spacing"] == (0.5, 0.5, 2.0)
+    assert np.array_equal(image, level0) and tuple(info["spacing"]) == tuple(info0["spacing"]) == (0.5, 0.5, 2.0)
     with pytest.raises(voxreg.IoError, match="missing.zarr"):
         voxreg.read(data / "formats" / "missing.zarr")
 
