@@ -212,10 +212,16 @@ fn read_store<S: ReadableStorageTraits + ?Sized + 'static>(
     // zarrs decodes chunks in parallel: about as many at once as there are threads.
     let threads = std::thread::available_parallelism().map_or(1, usize::from) as u128;
     crate::check_memory(path, &what, chunk_elements * size as u128 * threads + (count * (size + 4)) as u128)?;
-    let bytes = array
-        .retrieve_array_subset(&array.subset_all())
-        .and_then(|b| b.into_fixed().map(|b| b.into_owned()).map_err(Into::into))
-        .map_err(|e| IoError::format(path, one_line(e)))?;
+    // zarrs can panic on a corrupt shard index (a byte range past the chunk's end): that
+    // is the file's fault, so it becomes the same one-line error as any other corruption.
+    let retrieved = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
+        array
+            .retrieve_array_subset(&array.subset_all())
+            .and_then(|b| b.into_fixed().map(|b| b.into_owned()).map_err(Into::into))
+            .map_err(|e| IoError::format(path, one_line(e)))
+    }));
+    let bytes = retrieved
+        .unwrap_or_else(|_| Err(IoError::format(path, "corrupt chunk data (the decoder failed)")))?;
     let usize_dims = dims.map(|d| d as usize);
     let endian = if cfg!(target_endian = "big") { Endian::Big } else { Endian::Little };
     let layout = Layout { dims: usize_dims, dtype, endian, order: Order::XFastest };
