@@ -94,10 +94,9 @@ impl<S: Data<Elem = u32>, T: Data<Elem = u32>> PartialEq<LabelVolume<T>> for Lab
     }
 }
 
-impl<'a> LabelView<'a> {
-    /// A volume over borrowed `labels` (any memory layout, no copy) with unit spacing,
-    /// origin `0` and background label `0`.
-    pub fn from_view(labels: ArrayView3<'a, u32>) -> Self {
+impl<S: RawData<Elem = u32>> LabelVolume<S> {
+    /// Unit spacing, origin `0`, background label `0`, no open side.
+    fn with_defaults(labels: ArrayBase<S, Ix3>) -> Self {
         LabelVolume {
             labels,
             spacing: DVec3::ONE,
@@ -108,16 +107,18 @@ impl<'a> LabelView<'a> {
     }
 }
 
+impl<'a> LabelView<'a> {
+    /// A volume over borrowed `labels` (any memory layout, no copy) with unit spacing,
+    /// origin `0` and background label `0`.
+    pub fn from_view(labels: ArrayView3<'a, u32>) -> Self {
+        LabelVolume::with_defaults(labels)
+    }
+}
+
 impl LabelVolume {
     /// A volume over `labels` with unit spacing, origin `0` and background label `0`.
     pub fn new(labels: Array3<u32>) -> Self {
-        LabelVolume {
-            labels,
-            spacing: DVec3::ONE,
-            origin: DVec3::ZERO,
-            background: Some(0),
-            open_sides: CLOSED,
-        }
+        LabelVolume::with_defaults(labels)
     }
 
     /// A volume of dimensions `dims` whose label at `[x, y, z]` is `f([x, y, z])`.

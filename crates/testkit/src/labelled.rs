@@ -385,24 +385,7 @@ impl LabelShape for Solid<'_> {
 /// Gauss digitization of `shape` with voxel `spacing`: voxel `p` (integer coordinates)
 /// takes the label at `spacing * p`; background 0 with a margin of one voxel.
 pub fn digitize_labels(shape: &dyn LabelShape, spacing: DVec3) -> LabelVolume {
-    let (lo, hi) = shape.bounds();
-    let pmin = (lo / spacing).floor() - 1.0;
-    let pmax = (hi / spacing).ceil() + 1.0;
-    let dims = (pmax - pmin + 1.0).as_uvec3();
-    let dims = [dims.x as usize, dims.y as usize, dims.z as usize];
-    let labels: Vec<u32> = (0..dims[0] * dims[1] * dims[2])
-        .into_par_iter()
-        .map(|i| {
-            let (x, y, z) = (i % dims[0], (i / dims[0]) % dims[1], i / (dims[0] * dims[1]));
-            shape.label((pmin + DVec3::new(x as f64, y as f64, z as f64)) * spacing)
-        })
-        .collect();
-    LabelVolume::from_x_fastest(dims, labels)
-        .expect("dimensions match")
-        .with_spacing(spacing)
-        .expect("positive spacing")
-        .with_origin(pmin * spacing)
-        .expect("finite origin")
+    crate::sample_grid(shape.bounds(), spacing, |p| shape.label(p))
 }
 
 /// Mean, maximum and number of a set of errors.

@@ -244,24 +244,34 @@ implicit_from_shape!(deref &dyn Shape, Box<dyn Shape>);
 /// Gauss digitization of `shape` at grid step `h`: voxel `p` is inside (label 1) iff
 /// `f(h p) <= 0`; background 0 with a margin of one voxel; spacing `h`, voxel centres at `h p`.
 pub fn digitize(shape: &dyn Shape, h: f64) -> LabelVolume {
-    let (lo, hi) = shape.bounds();
-    let pmin = (lo / h).floor() - 1.0;
-    let pmax = (hi / h).ceil() + 1.0;
+    sample_grid(shape.bounds(), DVec3::splat(h), |p| u32::from(shape.value(p) <= 0.0))
+}
+
+/// The volume of the labels `label(spacing * p)` at the integer points `p` covering
+/// `bounds` with a margin of one voxel (background 0); spacing `spacing`, voxel centres at
+/// `spacing * p`.
+pub(crate) fn sample_grid(
+    bounds: (DVec3, DVec3),
+    spacing: DVec3,
+    label: impl Fn(DVec3) -> u32 + Sync,
+) -> LabelVolume {
+    let (lo, hi) = bounds;
+    let pmin = (lo / spacing).floor() - 1.0;
+    let pmax = (hi / spacing).ceil() + 1.0;
     let dims = (pmax - pmin + 1.0).as_uvec3();
     let dims = [dims.x as usize, dims.y as usize, dims.z as usize];
     let labels: Vec<u32> = (0..dims[0] * dims[1] * dims[2])
         .into_par_iter()
         .map(|i| {
             let (x, y, z) = (i % dims[0], (i / dims[0]) % dims[1], i / (dims[0] * dims[1]));
-            let p = (pmin + DVec3::new(x as f64, y as f64, z as f64)) * h;
-            u32::from(shape.value(p) <= 0.0)
+            label((pmin + DVec3::new(x as f64, y as f64, z as f64)) * spacing)
         })
         .collect();
     LabelVolume::from_x_fastest(dims, labels)
         .expect("dimensions match")
-        .with_spacing(DVec3::splat(h))
-        .expect("positive step")
-        .with_origin(pmin * h)
+        .with_spacing(spacing)
+        .expect("positive spacing")
+        .with_origin(pmin * spacing)
         .expect("finite origin")
 }
 
