@@ -29,17 +29,22 @@ fn main() -> std::process::ExitCode {
         Err(e) => return usage_error(&e),
     };
     signals::install();
+    quiet_panics();
     if let Some(bytes) = cli.max_memory {
         voxreg_io::set_max_memory(bytes);
     }
-    let result = match cli.command {
+    let result = std::panic::catch_unwind(|| match cli.command {
         Command::Info(args) => input::info(&args),
         Command::Regularize(args) => regularize(&args, Product::Mesh),
         Command::Upscale(args) => regularize(&args.regularize, Product::Volume { factor: args.factor }),
         Command::Geodesic(args) => regularize(&args.regularize, Product::Geodesic(&args.geodesic)),
         Command::Check(args) => check(&args),
         Command::View(args) => view::view(&args),
-    };
+    })
+    .unwrap_or_else(|_| {
+        let what = LAST_PANIC.lock().ok().and_then(|p| p.clone()).unwrap_or_else(|| "a panic".into());
+        Err(anyhow::anyhow!("internal error (a bug in voxreg; please report it): {what}"))
+    });
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
@@ -47,6 +52,33 @@ fn main() -> std::process::ExitCode {
             std::process::ExitCode::FAILURE
         }
     }
+}
+
+/// The message and location of the last panic, for the one-line report of a panic that
+/// reaches `main`.
+static LAST_PANIC: std::sync::Mutex<Option<String>> = std::sync::Mutex::new(None);
+
+/// Replaces the default panic hook, which prints several lines to standard error, by one
+/// that only records the panic: a panic caught on purpose (a third-party decoder failing
+/// on a corrupt file, which the reader turns into an error) prints nothing, and one that
+/// reaches `main` becomes a single error line. `RUST_BACKTRACE` set keeps the default
+/// hook, for debugging.
+fn quiet_panics() {
+    if std::env::var_os("RUST_BACKTRACE").is_some() {
+        return;
+    }
+    std::panic::set_hook(Box::new(|info| {
+        let message = info
+            .payload()
+            .downcast_ref::<&str>()
+            .map(|s| s.to_string())
+            .or_else(|| info.payload().downcast_ref::<String>().cloned())
+            .unwrap_or_else(|| "a panic".into());
+        let at = info.location().map(|l| format!(" at {}:{}", l.file(), l.line())).unwrap_or_default();
+        if let Ok(mut last) = LAST_PANIC.lock() {
+            *last = Some(format!("{}{at}", message.lines().next().unwrap_or("")));
+        }
+    }));
 }
 
 /// One line: the error and those of its causes that it does not already quote.

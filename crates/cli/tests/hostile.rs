@@ -270,11 +270,12 @@ fn wait_code(child: &mut std::process::Child, secs: u64) -> Option<i32> {
 #[test]
 fn sigint_and_sigterm_exit_with_nothing_left_behind() {
     let dir = tempfile::tempdir().unwrap();
-    // 300k surfels: several seconds of work, so the signal lands mid-run.
+    // Two balls of radius 60 (about 140k surfels): seconds of work on an idle machine, so
+    // the signal, sent 300 ms after the start, lands mid-run.
     let input = dir.path().join("balls.npy");
-    write_npy_u32(&input, [120, 120, 120], |x, y, z| {
-        let d = |c: f64| (x as f64 - c).powi(2) + (y as f64 - 60.0).powi(2) + (z as f64 - 60.0).powi(2);
-        u32::from(d(40.0) < 900.0) + 2 * u32::from(d(80.0) < 900.0)
+    write_npy_u32(&input, [240, 130, 130], |x, y, z| {
+        let d = |c: f64| (x as f64 - c).powi(2) + (y as f64 - 65.0).powi(2) + (z as f64 - 65.0).powi(2);
+        u32::from(d(61.0) < 3600.0) + 2 * u32::from(d(179.0) < 3600.0)
     });
     for (signal, code) in [("INT", 130), ("TERM", 143)] {
         let out_dir = dir.path().join(format!("out-{signal}"));
@@ -284,7 +285,7 @@ fn sigint_and_sigterm_exit_with_nothing_left_behind() {
             .stderr(std::process::Stdio::piped())
             .spawn()
             .unwrap();
-        std::thread::sleep(std::time::Duration::from_millis(600));
+        std::thread::sleep(std::time::Duration::from_millis(300));
         let killed = std::process::Command::new("kill")
             .args([format!("-{signal}"), child.id().to_string()])
             .status()
@@ -355,4 +356,32 @@ fn a_run_beyond_the_budget_is_refused_before_the_solve() {
     );
     assert!(!out.exists());
     assert!(start.elapsed().as_secs() < 20, "refused only after {:?}", start.elapsed());
+}
+
+#[test]
+fn a_decoder_panic_on_a_corrupt_zarr_store_is_one_error_line() {
+    // The fuzz regression whose corrupt shard index made the zarrs decoder panic (on a
+    // store in memory; read from files, its byte range fails first): one error line, no
+    // panic message. The seed packs the store's files as `key\n<bytes>` joined by `\n%%\n`.
+    let seed =
+        concat!(env!("CARGO_MANIFEST_DIR"), "/../../fuzz/seeds/zarr/regression_shard_index_range.pack");
+    let packed = std::fs::read(seed).unwrap();
+    let dir = tempfile::tempdir().unwrap();
+    let store = dir.path().join("corrupt.zarr");
+    let mut rest = &packed[..];
+    loop {
+        let end = rest.windows(4).position(|w| w == b"\n%%\n");
+        let entry = &rest[..end.unwrap_or(rest.len())];
+        let key_end = entry.iter().position(|&b| b == b'\n').unwrap_or(entry.len());
+        let path = store.join(std::str::from_utf8(&entry[..key_end]).unwrap());
+        std::fs::create_dir_all(path.parent().unwrap()).unwrap();
+        std::fs::write(&path, entry.get(key_end + 1..).unwrap_or(&[])).unwrap();
+        match end {
+            Some(e) => rest = &rest[e + 4..],
+            None => break,
+        }
+    }
+    let err = refused(&["info", s(&store)], &["corrupt.zarr"]);
+    assert!(!err.contains("panicked"), "{err}");
+    assert_eq!(err.lines().count(), 1, "{err}");
 }

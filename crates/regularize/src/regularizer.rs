@@ -90,9 +90,11 @@ pub fn regularize<S: LabelStorage>(
     Regularizer::from_volume(volume, &params.regions)?.run(params)
 }
 
-/// Peak memory per surfel of a default run, with a margin: measured at 1,150 to 1,350
-/// bytes on label volumes of 0.8 to 1.5 million surfels (docs/performance.md).
-pub const BYTES_PER_SURFEL: u64 = 1_600;
+/// Peak memory per surfel of a run, with a margin: the resident memory a run adds
+/// measured at 1,150 to 1,550 bytes per surfel with every preset and estimator, on one-
+/// and multi-label surfaces of 60k to 1.5 million surfels (`tests/memory.rs` keeps the
+/// estimate above the measured peak).
+pub const BYTES_PER_SURFEL: u64 = 2_000;
 
 /// The front door's reusable form: keeps the digital surface, its solver (symbolic
 /// analysis, multigrid hierarchy) and the initial normal field across runs, for
