@@ -4,7 +4,8 @@
 //!
 //! Every vertex of a digital surface is a lattice corner, so stitching is exact by
 //! identity: a quad is owned by the one block whose owned voxel range holds its face, a
-//! vertex by the one block whose owned corner range holds its corner. The energy is local
+//! vertex by the block that owns the first of the vertex's quads (in the global order of
+//! their faces), which every block using the vertex sees in its halo. The energy is local
 //! (the attachment term pins every vertex), so inside the owned range a block's solution
 //! approaches the whole-volume one as the halo grows; the halo's outer boundary, where the
 //! sub-volume is cut, is where the two differ (see docs/scale.md for the deviation against
@@ -27,8 +28,9 @@ pub struct Block {
     pub owned: [[usize; 2]; 3],
 }
 
-/// The narrowest halo a block accepts: with 2 voxels every quad touching an owned corner
-/// lies inside the sub-volume, so every vertex has an owner that computed it.
+/// The narrowest halo a block accepts: with 2 voxels every quad touching a vertex of an
+/// owned quad lies inside the sub-volume, away from its cut sides, so the blocks using a
+/// vertex agree on its owner.
 pub const MIN_HALO: usize = 2;
 
 /// What a block owns of the regularized surface.
@@ -38,8 +40,9 @@ pub struct BlockMesh {
     pub vertex_ids: Vec<u64>,
     /// Their regularized positions, in physical units.
     pub positions: Vec<DVec3>,
-    /// Whether the block owns each vertex (its corner is in the owned corner range): the
-    /// position to keep when stitching, every vertex being owned by exactly one block.
+    /// Whether the block owns each vertex (it owns the vertex's first quad, in the global
+    /// order of the quads' faces): the position to keep when stitching, every vertex
+    /// being owned by exactly one block, one of those whose quads use it.
     pub owns_vertex: Vec<bool>,
     /// The owned quads, as indices into the vertex arrays, counter-clockwise seen from
     /// the tip of the normal (which points from `labels[0]` into `labels[1]`).
@@ -91,16 +94,6 @@ impl Block {
             let [lo, hi] = self.owned[k];
             let c = cell[k];
             (lo <= c && c < hi) || (k == axis && c == hi && hi == self.global_dims[k])
-        })
-    }
-
-    /// Whether the global lattice corner `corner` is the block's (the corners at the
-    /// volume's far border belong to the last block).
-    fn owns_corner(&self, corner: [usize; 3]) -> bool {
-        (0..3).all(|k| {
-            let [lo, hi] = self.owned[k];
-            let c = corner[k];
-            (lo <= c && c < hi) || (c == hi && hi == self.global_dims[k])
         })
     }
 }
@@ -161,7 +154,20 @@ fn owned_part(
                 *slot = mesh.vertex_ids.len() as u32;
                 mesh.vertex_ids.push(lattice_id(corner, block.global_dims));
                 mesh.positions.push(positions[v.index()]);
-                mesh.owns_vertex.push(block.owns_corner(corner));
+                // A corner's owner by the corner's position alone would miss the vertices
+                // whose quads all lie in the neighbouring blocks (a voxel touching a
+                // block's corner from outside): the owner of the vertex's first quad
+                // emits it.
+                let (first_cell, first_axis) = surface
+                    .vertex_surfels(v)
+                    .iter()
+                    .map(|&f| {
+                        let f = surface.surfel(f);
+                        (global(f.cell), f.axis)
+                    })
+                    .min()
+                    .expect("a vertex of a quad has a quad");
+                mesh.owns_vertex.push(block.owns_face(first_cell, usize::from(first_axis)));
             }
             *slot
         });
@@ -198,9 +204,44 @@ mod tests {
 
     #[test]
     fn blocks_own_every_quad_once_and_every_vertex_once() {
-        let volume = volume();
+        assert_blocks_partition(&volume(), [[0, 5, 12], [0, 4, 10], [0, 3, 9]]);
+        // A voxel touching the blocks' common corner from one block only: its vertex at
+        // that corner is used by none of the quads the corner's own block owns.
+        let corner = LabelVolume::from_fn([8, 8, 8], |p| u32::from(p == [3, 3, 3]));
+        assert_blocks_partition(&corner, [[0, 4, 8], [0, 4, 8], [0, 4, 8]]);
+    }
+
+    proptest::proptest! {
+        #![proptest_config(proptest::prelude::ProptestConfig::with_cases(48))]
+        /// Random labels in 2 x 2 x 2 blocks cut anywhere: every quad and every vertex
+        /// has exactly one owner.
+        #[test]
+        fn random_volumes_partition_into_blocks(
+            dims in proptest::array::uniform3(3usize..9),
+            seed in 0u64..1 << 32,
+            fractions in proptest::array::uniform3(0.1f64..0.9),
+        ) {
+            let mut rng = voxreg_testkit::Lcg::new(seed);
+            let volume = LabelVolume::from_fn(dims, |_| {
+                let r = rng.next_f64();
+                if r < 0.6 { 0 } else { 1 + u32::from(r > 0.8) }
+            });
+            let cuts = [0, 1, 2].map(|k| {
+                let c = ((dims[k] as f64 * fractions[k]).round() as usize).clamp(1, dims[k] - 1);
+                [0, c, dims[k]]
+            });
+            if DigitalSurface::from_volume(&volume).is_ok() {
+                assert_blocks_partition(&volume, cuts);
+            }
+        }
+    }
+
+    /// Splits `volume` at `cuts` (per axis: 0, the cut, the size) into 2 x 2 x 2 blocks of
+    /// halo [`MIN_HALO`] and checks that their owned parts are the whole surface: each
+    /// quad once, each vertex owned once, by a block that uses it.
+    fn assert_blocks_partition(volume: &LabelVolume, cuts: [[usize; 3]; 3]) {
         let dims = volume.dims();
-        let whole = DigitalSurface::from_volume(&volume).unwrap();
+        let whole = DigitalSurface::from_volume(volume).unwrap();
         let positions = whole.positions();
         let mut whole_position: BTreeMap<u64, DVec3> = BTreeMap::new();
         for s in whole.surfels() {
@@ -222,7 +263,6 @@ mod tests {
             })
             .collect();
         expected.sort_unstable();
-        let cuts: [[usize; 3]; 3] = [[0, 5, 12], [0, 4, 10], [0, 3, 9]];
         let mut got = Vec::new();
         let mut owners: BTreeMap<u64, usize> = BTreeMap::new();
         for i in 0..2 {
@@ -236,7 +276,7 @@ mod tests {
                     let start = [0, 1, 2].map(|a| owned[a][0].saturating_sub(MIN_HALO));
                     let end = [0, 1, 2].map(|a| (owned[a][1] + MIN_HALO).min(dims[a]));
                     let block = Block { global_dims: dims, start, owned };
-                    let s = sub(&volume, start, end);
+                    let s = sub(volume, start, end);
                     // The digital surface's own positions: ownership alone is under test.
                     let part = match DigitalSurface::from_volume(&s) {
                         Ok(surface) => owned_part(&surface, surface.positions().as_slice(), &block, None),

@@ -2,7 +2,7 @@
 
 Each chunk is regularized with a halo of voxels around it and returns only what it owns:
 the quads whose voxel face lies in the chunk (half-open ranges; the volume's far border
-belongs to the last chunk) and the vertices at its lattice corners. Every vertex of a
+belongs to the last chunk) and the vertices whose first quad it owns. Every vertex of a
 digital surface is a lattice corner, so the chunks' meshes glue into the whole-volume mesh
 by vertex id, exactly: the same quads, the same vertices, no gap and no duplicate. Inside
 a chunk, positions match the whole-volume solve to within a tolerance that shrinks with
