@@ -209,15 +209,17 @@ struct Propagation<'m> {
 /// on both sides, so a saddle sends windows only into its shadow, the directions within
 /// `[pi, Theta - pi]` of the one its shortest path arrives from (`Theta` its angle sum).
 /// Every rule only drops windows that another path dominates, so the distances are exact
-/// up to rounding.
+/// up to rounding. The run works on a copy of the mesh renumbered along a space-filling
+/// curve (for the cache); the result is in `mesh`'s numbering.
 pub fn exact_distances(mesh: &GeodesicMesh, sources: &[u32]) -> Result<(Vec<f64>, ExactInfo), GeodesicError> {
     mesh.check_sources(sources)?;
-    let mut run = Propagation::new(mesh);
+    let (local, vertex_ids, _) = mesh.spatially_ordered()?;
+    let mut run = Propagation::new(&local);
     for &s in sources {
-        run.start_vertex(s);
+        run.start_vertex(vertex_ids[s as usize]);
     }
     run.run();
-    Ok((run.dist, run.info))
+    Ok((vertex_ids.iter().map(|&v| run.dist[v as usize]).collect(), run.info))
 }
 
 /// [`exact_distances`] from points anywhere on the surface (on a triangle, an edge or
@@ -227,9 +229,11 @@ pub fn exact_distances_from(
     sources: &[SurfacePoint],
 ) -> Result<(Vec<f64>, ExactInfo), GeodesicError> {
     mesh.check_points(sources)?;
-    let mut run = Propagation::new(mesh);
+    let (local, vertex_ids, triangle_ids) = mesh.spatially_ordered()?;
+    let mut run = Propagation::new(&local);
     for &p in sources {
-        match mesh.snap(p) {
+        let p = SurfacePoint { triangle: triangle_ids[p.triangle as usize], ..p };
+        match local.snap(p) {
             Snapped::Vertex(v) => run.start_vertex(v),
             Snapped::Point(tris, point) => {
                 for t in tris {
@@ -239,7 +243,7 @@ pub fn exact_distances_from(
         }
     }
     run.run();
-    Ok((run.dist, run.info))
+    Ok((vertex_ids.iter().map(|&v| run.dist[v as usize]).collect(), run.info))
 }
 
 /// A source point, placed: a vertex, or a position on the triangles listed (one, or
@@ -822,6 +826,36 @@ pub(crate) mod tests {
             strictly_shorter += usize::from(a[v] < edges[v] - 1e-6);
         }
         assert!(strictly_shorter > positions.len() / 2);
+    }
+
+    /// Two computations of one quantity: the run on the renumbered copy (what
+    /// [`exact_distances`] does) and a run on the input numbering, on the same triangles.
+    #[test]
+    fn the_renumbered_copy_is_the_same_surface_with_the_same_distances() {
+        let (positions, quads) = grid(12, |x, y| 0.3 * (5.0 * x).sin() * (4.0 * y).cos());
+        let mesh = GeodesicMesh::new(&positions, &quads).unwrap();
+        let (local, vertex_ids, triangle_ids) = mesh.spatially_ordered().unwrap();
+        for ids in [&vertex_ids, &triangle_ids] {
+            let mut sorted = ids.clone();
+            sorted.sort_unstable();
+            assert!(sorted.iter().enumerate().all(|(i, &x)| x as usize == i), "a permutation");
+        }
+        assert!(vertex_ids.iter().enumerate().any(|(i, &x)| x as usize != i), "renumbered");
+        for v in 0..mesh.num_vertices() {
+            assert_eq!(local.position(vertex_ids[v]), mesh.position(v as u32));
+        }
+        for (t, tri) in mesh.triangles().iter().enumerate() {
+            assert_eq!(local.triangles()[triangle_ids[t] as usize], tri.map(|v| vertex_ids[v as usize]));
+        }
+        for source in [0u32, 30, 97] {
+            let mut direct = Propagation::new(&mesh);
+            direct.start_vertex(source);
+            direct.run();
+            let (d, _) = exact_distances(&mesh, &[source]).unwrap();
+            for v in 0..d.len() {
+                assert!((d[v] - direct.dist[v]).abs() < 1e-12, "source {source}, vertex {v}");
+            }
+        }
     }
 
     #[test]
