@@ -18,8 +18,8 @@ pub struct ExactInfo {
     pub pseudo_sources: usize,
 }
 
-/// The flag of a vertex event's id on the queue.
-const VERTEX: u64 = 1 << 63;
+/// The id of a vertex event on the queue (its `tri` is the vertex).
+const VERTEX: u32 = u32::MAX;
 /// Slack, in radians, of the angle tests around a pseudo-source.
 const ANGLE_SLACK: f64 = 1e-9;
 
@@ -28,10 +28,11 @@ const ANGLE_SLACK: f64 = 1e-9;
 ///
 /// Frame: corner `k` of `tri` at the origin, corner `k + 1` at `(len, 0)`, the third
 /// corner at positive `y`; the source at `s` (`s.y < 0`), at geodesic distance `sigma`
-/// from the nearest real source.
+/// from the nearest real source. `id` numbers the windows in creation order.
 #[derive(Copy, Clone, Debug)]
 struct Window {
     tri: u32,
+    id: u32,
     k: u8,
     b0: f64,
     b1: f64,
@@ -84,19 +85,20 @@ impl Window {
     }
 }
 
-/// The queue of windows (by id) and vertex events ([`VERTEX`] and the vertex), least key
-/// first: a radix heap (Ahuja, Mehlhorn, Orlin and Tarjan 1990) on the keys' bits, which
+/// The queue of windows and vertex events (windows with the id [`VERTEX`]), by value,
+/// least key first: a radix heap (Ahuja, Mehlhorn, Orlin and Tarjan 1990) on the keys' bits, which
 /// order as the keys do for keys `>= 0`. It needs the keys pushed to be no less than the
 /// last popped, as here, where a window's children and a vertex's windows lie farther
 /// than it (a key lower by rounding is raised to the last one). Each entry moves down
 /// the 65 buckets at most once per bit, through sequential memory, where a binary heap
-/// of millions of entries misses the cache at every level.
-struct Queue {
-    buckets: Vec<Vec<(u64, u64)>>,
+/// of millions of entries misses the cache at every level. Entries are carried by
+/// value: popped in key order, a window looked up by id in an arena missed the cache.
+struct Queue<T> {
+    buckets: Vec<Vec<(u64, T)>>,
     last: u64,
 }
 
-impl Queue {
+impl<T: Copy> Queue<T> {
     fn new() -> Self {
         Queue { buckets: vec![Vec::new(); 65], last: 0 }
     }
@@ -105,12 +107,12 @@ impl Queue {
         (64 - x.leading_zeros()) as usize
     }
 
-    fn push(&mut self, key: f64, id: u64) {
+    fn push(&mut self, key: f64, id: T) {
         let bits = (key + 0.0).to_bits().max(self.last);
         self.buckets[Self::bucket(bits ^ self.last)].push((bits, id));
     }
 
-    fn pop(&mut self) -> Option<(f64, u64)> {
+    fn pop(&mut self) -> Option<(f64, T)> {
         if self.buckets[0].is_empty() {
             let i = (1..self.buckets.len()).find(|&i| !self.buckets[i].is_empty())?;
             let mut items = std::mem::take(&mut self.buckets[i]);
@@ -169,18 +171,16 @@ struct Propagation<'m> {
     /// The other triangles on each side's edge: `links[link_offsets[side]..link_offsets[side + 1]]`.
     link_offsets: Vec<u32>,
     links: Vec<Link>,
-    /// Every window queued, in one arena.
-    windows: Vec<Window>,
-    /// Per side, copies of the windows kept there with their ids, for trimming later
-    /// windows (contiguous: scanning them is most of the work on large meshes).
-    kept: Vec<Vec<(Window, u32)>>,
-    /// Windows found longer, over all their interval, than a later one on their side:
-    /// skipped when popped.
-    dead: Vec<bool>,
+    /// Per side, copies of the windows kept there, for trimming later windows
+    /// (contiguous: scanning them is most of the work on large meshes).
+    kept: Vec<Vec<Window>>,
+    /// Bits by window id: windows found longer, over all their interval, than a later
+    /// one on their side, skipped when popped.
+    dead: Vec<u64>,
     dist: Vec<f64>,
     arrival: Vec<Option<Arrival>>,
     split: Vec<Option<Split>>,
-    queue: Queue,
+    queue: Queue<Window>,
     info: ExactInfo,
     /// Intervals shorter than this (relative to the mesh scale) are dropped.
     tiny: f64,
@@ -209,15 +209,17 @@ struct Propagation<'m> {
 /// on both sides, so a saddle sends windows only into its shadow, the directions within
 /// `[pi, Theta - pi]` of the one its shortest path arrives from (`Theta` its angle sum).
 /// Every rule only drops windows that another path dominates, so the distances are exact
-/// up to rounding.
+/// up to rounding. The run works on a copy of the mesh renumbered along a space-filling
+/// curve (for the cache); the result is in `mesh`'s numbering.
 pub fn exact_distances(mesh: &GeodesicMesh, sources: &[u32]) -> Result<(Vec<f64>, ExactInfo), GeodesicError> {
     mesh.check_sources(sources)?;
-    let mut run = Propagation::new(mesh);
+    let (local, vertex_ids, _) = mesh.spatially_ordered()?;
+    let mut run = Propagation::new(&local);
     for &s in sources {
-        run.start_vertex(s);
+        run.start_vertex(vertex_ids[s as usize]);
     }
     run.run();
-    Ok((run.dist, run.info))
+    Ok((vertex_ids.iter().map(|&v| run.dist[v as usize]).collect(), run.info))
 }
 
 /// [`exact_distances`] from points anywhere on the surface (on a triangle, an edge or
@@ -227,9 +229,11 @@ pub fn exact_distances_from(
     sources: &[SurfacePoint],
 ) -> Result<(Vec<f64>, ExactInfo), GeodesicError> {
     mesh.check_points(sources)?;
-    let mut run = Propagation::new(mesh);
+    let (local, vertex_ids, triangle_ids) = mesh.spatially_ordered()?;
+    let mut run = Propagation::new(&local);
     for &p in sources {
-        match mesh.snap(p) {
+        let p = SurfacePoint { triangle: triangle_ids[p.triangle as usize], ..p };
+        match local.snap(p) {
             Snapped::Vertex(v) => run.start_vertex(v),
             Snapped::Point(tris, point) => {
                 for t in tris {
@@ -239,7 +243,7 @@ pub fn exact_distances_from(
         }
     }
     run.run();
-    Ok((run.dist, run.info))
+    Ok((vertex_ids.iter().map(|&v| run.dist[v as usize]).collect(), run.info))
 }
 
 /// A source point, placed: a vertex, or a position on the triangles listed (one, or
@@ -303,7 +307,6 @@ impl<'m> Propagation<'m> {
             frames,
             link_offsets,
             links,
-            windows: Vec::new(),
             kept: vec![Vec::new(); sides],
             dead: Vec::new(),
             dist: vec![f64::INFINITY; n],
@@ -321,7 +324,11 @@ impl<'m> Propagation<'m> {
     fn start_vertex(&mut self, v: u32) {
         self.dist[v as usize] = 0.0;
         self.arrival[v as usize] = None;
-        self.queue.push(0.0, VERTEX | u64::from(v));
+        self.queue.push(0.0, Self::vertex_event(v));
+    }
+
+    fn vertex_event(v: u32) -> Window {
+        Window { tri: v, id: VERTEX, k: 0, b0: 0.0, b1: 0.0, s: DVec2::ZERO, sigma: 0.0 }
     }
 
     /// A source at `point` on triangle `t`: its corners directly, and a window across
@@ -356,11 +363,11 @@ impl<'m> Propagation<'m> {
     fn run(&mut self) {
         let n = self.mesh.num_vertices();
         let mut expanded = vec![false; n];
-        while let Some((_, id)) = self.queue.pop() {
-            if id & VERTEX != 0 {
+        while let Some((_, w)) = self.queue.pop() {
+            if w.id == VERTEX {
                 // The first of a vertex's events popped is its least distance's (the
                 // queue's keys were raised by at most rounding).
-                let v = (id & !VERTEX) as u32;
+                let v = w.tri;
                 if expanded[v as usize] {
                     continue;
                 }
@@ -368,8 +375,7 @@ impl<'m> Propagation<'m> {
                 self.info.pseudo_sources += 1;
                 self.expand_vertex(v);
             } else {
-                let w = self.windows[id as usize];
-                if self.dead[id as usize] || self.dominated(&w) {
+                if self.dead[w.id as usize / 64] >> (w.id % 64) & 1 != 0 || self.dominated(&w) {
                     continue;
                 }
                 self.info.propagated += 1;
@@ -384,7 +390,7 @@ impl<'m> Propagation<'m> {
         if d < self.dist[v as usize] {
             self.dist[v as usize] = d;
             if self.mesh.bends[v as usize] {
-                self.queue.push(d, VERTEX | u64::from(v));
+                self.queue.push(d, Self::vertex_event(v));
             }
             true
         } else {
@@ -550,7 +556,7 @@ impl<'m> Propagation<'m> {
             if s2.y > -self.tiny {
                 continue;
             }
-            self.push(Window { tri, k, b0: b0.max(0.0), b1: b1.min(len), s: s2, sigma });
+            self.push(Window { tri, id: 0, k, b0: b0.max(0.0), b1: b1.min(len), s: s2, sigma });
         }
     }
 
@@ -565,7 +571,7 @@ impl<'m> Propagation<'m> {
         self.covered.clear();
         let mut i = 0;
         while i < self.kept[side].len() {
-            let (old, id) = self.kept[side][i];
+            let old = self.kept[side][i];
             let (lo, hi) = (old.b0.max(w.b0), old.b1.min(w.b1));
             if hi - lo > self.tiny {
                 if old.shorter(&w, lo, hi) {
@@ -573,7 +579,7 @@ impl<'m> Propagation<'m> {
                 } else if lo == old.b0 && hi == old.b1 && w.shorter(&old, lo, hi) {
                     // `w` (or, where `w` is cut out, a window shorter still) is shorter
                     // on all of it: no longer kept, and skipped if still queued.
-                    self.dead[id as usize] = true;
+                    self.dead[old.id as usize / 64] |= 1 << (old.id % 64);
                     self.kept[side].swap_remove(i);
                     continue;
                 }
@@ -594,13 +600,17 @@ impl<'m> Propagation<'m> {
         }
         for p in 0..self.pieces.len() {
             let (b0, b1) = self.pieces[p];
-            let piece = Window { b0, b1, ..w };
-            let id = self.windows.len() as u32;
-            self.windows.push(piece);
-            self.dead.push(false);
-            self.kept[side].push((piece, id));
+            let id = u32::try_from(self.info.windows)
+                .ok()
+                .filter(|&id| id != VERTEX)
+                .expect("fewer than 2^32 - 1 windows");
+            let piece = Window { b0, b1, id, ..w };
+            if id % 64 == 0 {
+                self.dead.push(0);
+            }
+            self.kept[side].push(piece);
             self.info.windows += 1;
-            self.queue.push(piece.key(), u64::from(id));
+            self.queue.push(piece.key(), piece);
         }
     }
 
@@ -816,6 +826,36 @@ pub(crate) mod tests {
             strictly_shorter += usize::from(a[v] < edges[v] - 1e-6);
         }
         assert!(strictly_shorter > positions.len() / 2);
+    }
+
+    /// Two computations of one quantity: the run on the renumbered copy (what
+    /// [`exact_distances`] does) and a run on the input numbering, on the same triangles.
+    #[test]
+    fn the_renumbered_copy_is_the_same_surface_with_the_same_distances() {
+        let (positions, quads) = grid(12, |x, y| 0.3 * (5.0 * x).sin() * (4.0 * y).cos());
+        let mesh = GeodesicMesh::new(&positions, &quads).unwrap();
+        let (local, vertex_ids, triangle_ids) = mesh.spatially_ordered().unwrap();
+        for ids in [&vertex_ids, &triangle_ids] {
+            let mut sorted = ids.clone();
+            sorted.sort_unstable();
+            assert!(sorted.iter().enumerate().all(|(i, &x)| x as usize == i), "a permutation");
+        }
+        assert!(vertex_ids.iter().enumerate().any(|(i, &x)| x as usize != i), "renumbered");
+        for v in 0..mesh.num_vertices() {
+            assert_eq!(local.position(vertex_ids[v]), mesh.position(v as u32));
+        }
+        for (t, tri) in mesh.triangles().iter().enumerate() {
+            assert_eq!(local.triangles()[triangle_ids[t] as usize], tri.map(|v| vertex_ids[v as usize]));
+        }
+        for source in [0u32, 30, 97] {
+            let mut direct = Propagation::new(&mesh);
+            direct.start_vertex(source);
+            direct.run();
+            let (d, _) = exact_distances(&mesh, &[source]).unwrap();
+            for v in 0..d.len() {
+                assert!((d[v] - direct.dist[v]).abs() < 1e-12, "source {source}, vertex {v}");
+            }
+        }
     }
 
     #[test]

@@ -309,6 +309,52 @@ impl GeodesicMesh {
         }
     }
 
+    /// The same triangles with vertices and triangles renumbered along a Morton
+    /// (Z-order) curve of their positions (centroids for triangles), ties in input
+    /// order, and the maps from this mesh's vertex and triangle indices to the copy's.
+    ///
+    /// Why: window propagation visits the surface front by front, and in this order the
+    /// data of nearby triangles and vertices share cache lines and pages, where the
+    /// input order (a voxel scan) scatters every front over the whole mesh.
+    pub(crate) fn spatially_ordered(&self) -> Result<(GeodesicMesh, Vec<u32>, Vec<u32>), GeodesicError> {
+        let (lo, hi) = self
+            .positions
+            .iter()
+            .fold((DVec3::splat(f64::INFINITY), DVec3::splat(f64::NEG_INFINITY)), |(a, b), &p| {
+                (a.min(p), b.max(p))
+            });
+        let scale = (hi - lo).max(DVec3::splat(f64::MIN_POSITIVE));
+        // 16 bits per axis, interleaved.
+        let morton = |p: DVec3| -> u64 {
+            let u = ((p - lo) / scale * 65535.0).clamp(DVec3::ZERO, DVec3::splat(65535.0)).as_uvec3();
+            let mut key = 0u64;
+            for bit in 0..16 {
+                for (axis, c) in [u.x, u.y, u.z].into_iter().enumerate() {
+                    key |= u64::from((c >> bit) & 1) << (3 * bit + axis);
+                }
+            }
+            key
+        };
+        let mut order: Vec<u32> = (0..self.positions.len() as u32).collect();
+        order.sort_by_cached_key(|&v| morton(self.pos(v)));
+        let mut vertex_ids = vec![0u32; order.len()];
+        for (new, &v) in order.iter().enumerate() {
+            vertex_ids[v as usize] = new as u32;
+        }
+        let positions: Vec<DVec3> = order.iter().map(|&v| self.pos(v)).collect();
+        let mut tri_order: Vec<u32> = (0..self.triangles.len() as u32).collect();
+        tri_order.sort_by_cached_key(|&t| {
+            morton(self.triangles[t as usize].iter().map(|&v| self.pos(v)).sum::<DVec3>() / 3.0)
+        });
+        let mut triangle_ids = vec![0u32; tri_order.len()];
+        for (new, &t) in tri_order.iter().enumerate() {
+            triangle_ids[t as usize] = new as u32;
+        }
+        let triangles: Vec<[u32; 3]> =
+            tri_order.iter().map(|&t| self.triangles[t as usize].map(|v| vertex_ids[v as usize])).collect();
+        Ok((GeodesicMesh::new(&positions, &triangles)?, vertex_ids, triangle_ids))
+    }
+
     /// The position of vertex `v`.
     pub fn position(&self, v: u32) -> DVec3 {
         self.positions[v as usize]
