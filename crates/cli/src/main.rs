@@ -133,11 +133,15 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         let bytes = Regularizer::estimated_bytes_of(&volume, &params.regions)
             .with_context(|| format!("{}: no surface to regularize", path.display()))?;
         let surfels = bytes / voxreg_regularize::BYTES_PER_SURFEL;
-        voxreg_io::check_memory(
-            path,
-            &format!("the regularization of its {surfels} surfels"),
-            u128::from(bytes),
-        )?;
+        let (what, bytes) = match product {
+            // Exact geodesics' windows outgrow the surface: refused here too, not hours later.
+            Product::Geodesic(opts) if opts.method == args::GeodesicMethod::Exact => (
+                format!("the regularization of its {surfels} surfels and their exact geodesics (--method heat needs less)"),
+                bytes.saturating_add(voxreg_geodesic::exact_estimated_bytes(2 * surfels as usize)),
+            ),
+            _ => (format!("the regularization of its {surfels} surfels"), bytes),
+        };
+        voxreg_io::check_memory(path, &what, u128::from(bytes))?;
         Regularizer::from_volume(&volume, &params.regions)
             .with_context(|| format!("{}: no surface to regularize", path.display()))
     })?;

@@ -359,6 +359,21 @@ fn a_run_beyond_the_budget_is_refused_before_the_solve() {
 }
 
 #[test]
+fn exact_geodesics_beyond_the_budget_are_refused_before_the_solve() {
+    // bunny-128: about 110 MB for the regularization, several hundred for the windows.
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("d.ply");
+    let input = data("bunny-128.vol");
+    let start = Instant::now();
+    refused(
+        &["geodesic", s(&input), "--from", "0,0,0", "-o", s(&out), "--max-memory", "300M"],
+        &["bunny-128.vol:", "exact geodesics", "--method heat", "memory limit"],
+    );
+    assert!(!out.exists());
+    assert!(start.elapsed().as_secs() < 20, "refused only after {:?}", start.elapsed());
+}
+
+#[test]
 fn a_decoder_panic_on_a_corrupt_zarr_store_is_one_error_line() {
     // The fuzz regression whose corrupt shard index made the zarrs decoder panic (on a
     // store in memory; read from files, its byte range fails first): one error line, no

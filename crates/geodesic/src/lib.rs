@@ -38,7 +38,7 @@ mod exact;
 mod heat;
 mod mesh;
 
-pub use exact::{exact_distances, exact_distances_from, ExactInfo};
+pub use exact::{exact_distances, exact_distances_from, exact_estimated_bytes, ExactInfo};
 pub use heat::{HeatParams, HeatSolver};
 pub use mesh::{GeodesicMesh, SurfacePoint};
 

@@ -5,7 +5,7 @@
 
 use glam::DVec3;
 use voxreg_digisurf::LabelVolume;
-use voxreg_geodesic::{exact_distances, GeodesicMesh, HeatParams, HeatSolver};
+use voxreg_geodesic::{exact_distances, exact_estimated_bytes, GeodesicMesh, HeatParams, HeatSolver};
 use voxreg_regularize::{regularize, Params};
 use voxreg_testkit::{digitize, Shape, Sphere, Torus};
 
@@ -40,6 +40,17 @@ fn great_circle(positions: &[DVec3], source: u32, radius: f64) -> Vec<f64> {
     positions.iter().map(|p| radius * pole.angle_between(*p)).collect()
 }
 
+/// The windows a run created fit in the memory estimate's share for them (128 bytes
+/// each), with the estimate's model of their count.
+fn assert_within_estimate(mesh: &GeodesicMesh, windows: usize) {
+    let estimate = exact_estimated_bytes(mesh.triangles().len());
+    let per_triangle = windows as f64 / mesh.triangles().len() as f64;
+    assert!(
+        (windows as u64) * 128 <= estimate,
+        "{windows} windows ({per_triangle:.1} per triangle) against {estimate} B"
+    );
+}
+
 fn positions(mesh: &GeodesicMesh, volume_positions: impl Fn(u32) -> DVec3) -> Vec<DVec3> {
     (0..mesh.num_vertices() as u32).map(volume_positions).collect()
 }
@@ -55,7 +66,8 @@ fn sphere_proxy_geodesics_match_great_circles_and_beat_the_digital_metric() {
     let truth = great_circle(&pp, source, radius);
     let near = 3.0;
 
-    let (exact, _) = exact_distances(&proxy, &[source]).unwrap();
+    let (exact, info) = exact_distances(&proxy, &[source]).unwrap();
+    assert_within_estimate(&proxy, info.windows);
     let (mean, max) = relative_errors(&exact, &truth, near);
     let heat = HeatSolver::new(proxy.clone(), &HeatParams::default()).unwrap().distances(&[source]).unwrap();
     let (heat_mean, heat_max) = relative_errors(&heat, &truth, near);
@@ -84,7 +96,8 @@ fn torus_meridian_distances_and_heat_agree_with_exact() {
     let (_, proxy) = meshes(&volume);
     // Source on the outer equator at angle 0.
     let source = proxy.nearest_vertex(DVec3::new(torus.major + torus.minor, 0.0, 0.0)).unwrap();
-    let (exact, _) = exact_distances(&proxy, &[source]).unwrap();
+    let (exact, info) = exact_distances(&proxy, &[source]).unwrap();
+    assert_within_estimate(&proxy, info.windows);
     // On the source's meridian (y near 0, x > 0) the distance is the arc of the tube
     // circle, r * theta, with r the proxy's mean tube radius (the regularized tube is
     // a little thinner than the digitized one).
