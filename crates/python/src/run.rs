@@ -90,7 +90,7 @@ fn palette_arg(
                     transparency,
                 })
                 .collect();
-            Palette { colors, materials }
+            Palette { colors, materials, names: Default::default() }
         }
     }))
 }
