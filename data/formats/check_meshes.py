@@ -39,6 +39,14 @@ def main(voxreg):
         print(f"vtp: {vtp.n_points} points, {vtp.n_cells} quads; stl: {len(tris)} triangles, "
               f"volume {solid.volume:.1f}, closed: {solid.is_manifold}")
         assert solid.is_manifold
+        # Label names (a .seg.nrrd's segments) as VTP field data.
+        subprocess.run([voxreg, "regularize", "data/formats/organs.seg.nrrd", "-o", f"{d}/organs.vtp"],
+                       check=True, capture_output=True)
+        named = pv.read(f"{d}/organs.vtp")
+        assert list(named.field_data["label_names"]) == ["liver", "spleen"], named.field_data
+        assert list(named.field_data["label_values"]) == [1, 2]
+        assert named.field_data["label_colors"].shape == (2, 4)
+        print(f"organs.vtp field data: {dict(zip(named.field_data['label_values'], named.field_data['label_names']))}")
 
 
 if __name__ == "__main__":

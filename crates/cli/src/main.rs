@@ -193,6 +193,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         let full = CliReport {
             input: path.display().to_string(),
             output: args.output.display().to_string(),
+            labels: report::named_labels(&volume, palette.as_ref()),
             io,
             run: r,
         };

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::{bail, Result};
 use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId};
-use voxreg_io::{interface_name, region_name, write_mesh, MeshBatch, Palette, QuadMesh};
+use voxreg_io::{named_interface_name, named_region_name, write_mesh, MeshBatch, Palette, QuadMesh};
 
 use crate::args::{GeodesicOptions, RegularizeArgs, Split};
 
@@ -221,11 +221,13 @@ fn check_extension(path: &Path, product: Product<'_>) -> Result<()> {
 }
 
 /// The meshes of `--split interfaces|regions` as `(file name, mesh)`, in interface or
-/// region order; each vertex copies its position from `positions` bit for bit.
+/// region order, named after the labels' names where `palette` has them; each vertex
+/// copies its position from `positions` bit for bit.
 fn split_meshes(
     args: &RegularizeArgs,
     surface: &DigitalSurface,
     positions: &[glam::DVec3],
+    palette: Option<&Palette>,
 ) -> Vec<(String, QuadMesh)> {
     let params = PatchParams { manifold: args.manifold };
     let ext = args.split_format.extension();
@@ -234,7 +236,7 @@ fn split_meshes(
         Split::Interfaces => (0..surface.interfaces().len() as u32)
             .map(|i| {
                 let patch = surface.interface_patch(InterfaceId(i), &params);
-                let name = format!("{}.{ext}", interface_name(surface, InterfaceId(i)));
+                let name = format!("{}.{ext}", named_interface_name(surface, InterfaceId(i), palette));
                 (name, QuadMesh::from_patch(surface, &patch, positions))
             })
             .collect(),
@@ -244,7 +246,7 @@ fn split_meshes(
             .map(|r| {
                 let patch = surface.region_patch(r, &params);
                 (
-                    format!("{}.{ext}", region_name(surface, r)),
+                    format!("{}.{ext}", named_region_name(surface, r, palette)),
                     QuadMesh::from_patch(surface, &patch, positions),
                 )
             })
@@ -273,7 +275,7 @@ pub(crate) fn write_meshes(
         return Ok(args.output.display().to_string());
     }
     let mut batch = MeshBatch::new(&args.output)?;
-    for (name, mesh) in split_meshes(args, surface, positions) {
+    for (name, mesh) in split_meshes(args, surface, positions, palette) {
         batch.write(&name, &colour(mesh))?;
     }
     let files = batch.commit()?;

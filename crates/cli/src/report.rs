@@ -5,6 +5,8 @@ use std::path::Path;
 
 use anyhow::{Context, Result};
 use serde::Serialize;
+use voxreg_digisurf::LabelVolume;
+use voxreg_io::Palette;
 use voxreg_regularize::Report;
 
 /// Seconds of the command's own stages.
@@ -19,11 +21,35 @@ pub(crate) struct IoTimes {
     pub(crate) write: f64,
 }
 
+/// A label the input names (`.seg.nrrd` segments, named `.vox` materials).
+#[derive(Clone, Debug, Serialize)]
+pub(crate) struct LabelEntry {
+    /// The label value.
+    pub(crate) value: u32,
+    /// Its name, as the file writes it.
+    pub(crate) name: String,
+    /// Its colour, sRGB and alpha bytes.
+    pub(crate) color: [u8; 4],
+}
+
+/// The labels of `volume` that `palette` names, in increasing order.
+pub(crate) fn named_labels(volume: &LabelVolume, palette: Option<&Palette>) -> Vec<LabelEntry> {
+    let Some(palette) = palette.filter(|p| !p.names.is_empty()) else { return Vec::new() };
+    palette
+        .named_labels(volume.label_counts().into_iter().map(|(l, _)| l))
+        .into_iter()
+        .map(|l| LabelEntry { value: l.label, name: l.name, color: l.color })
+        .collect()
+}
+
 /// What `--report` writes.
 #[derive(Serialize)]
 pub(crate) struct CliReport<'a> {
     pub(crate) input: String,
     pub(crate) output: String,
+    /// The labels the input names, when it names any.
+    #[serde(skip_serializing_if = "Vec::is_empty")]
+    pub(crate) labels: Vec<LabelEntry>,
     pub(crate) io: IoTimes,
     #[serde(flatten)]
     pub(crate) run: &'a Report,

@@ -1,5 +1,5 @@
 //! End-to-end tests of `voxreg regularize --split interfaces|regions` and `--manifold`:
-//! file names, exact sharing of junction vertices between files, open interfaces that
+//! file names (with the labels' names where the input has them), exact sharing of junction vertices between files, open interfaces that
 //! end at the domain border, closed outward region surfaces, and manifoldness.
 //!
 //! Each file's vertices and quads are checked against the library's own patch of the
@@ -300,7 +300,7 @@ fn seg_nrrd_to_stl_solids_and_vtp() {
         .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
         .collect();
     names.sort();
-    assert_eq!(names, ["region_1.stl", "region_2.stl"]);
+    assert_eq!(names, ["region_1_liver.stl", "region_2_spleen.stl"]);
     for name in &names {
         let bytes = std::fs::read(out.join(name)).unwrap();
         let triangles = u32::from_le_bytes(bytes[80..84].try_into().unwrap()) as usize;
@@ -314,4 +314,111 @@ fn seg_nrrd_to_stl_solids_and_vtp() {
             && text.contains(r#"Name="inner_label""#)
             && text.contains(r#"Name="color""#)
     );
+}
+
+/// A `.seg.nrrd` (raw `uint8`, 9 x 3 x 3) with labels 1 to 7 in a row along x, in
+/// background 0, named with a space, a slash and a backslash, non-ASCII letters, a
+/// duplicate, nothing, and only dots.
+fn write_odd_names(path: &Path) {
+    let names = ["Left kidney", "a/b\\c", "肝臓 région", "liver", "liver", "", "../.."];
+    let mut text = String::from("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 9 3 3\nencoding: raw\n");
+    for (k, name) in names.iter().enumerate() {
+        text += &format!(
+            "Segment{k}_Name:={name}\nSegment{k}_LabelValue:={}\nSegment{k}_Layer:=0\nSegment{k}_Color:=0.{k} 0.5 1\n",
+            k + 1
+        );
+    }
+    text.push('\n');
+    let mut bytes = text.into_bytes();
+    for z in 0..3 {
+        for y in 0..3 {
+            for x in 0..9u8 {
+                bytes.push(if y == 1 && z == 1 && (1..=7).contains(&x) { x } else { 0 });
+            }
+        }
+    }
+    std::fs::write(path, bytes).unwrap();
+}
+
+fn file_names(dir: &Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .unwrap()
+        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// Label names become file names (sanitized, label numbers kept, so unique), and the
+/// report's `labels` table lists them as written.
+#[test]
+fn label_names_name_the_split_files_and_fill_the_report() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = dir.path().join("odd.seg.nrrd");
+    write_odd_names(&input);
+    let input = input.to_str().unwrap();
+    let regions = dir.path().join("regions");
+    let report = dir.path().join("report.json");
+    let fast = ["--normals", "trivial", "--refine", "0", "-q"];
+    run_ok(
+        &[
+            &["regularize", input, "--split", "regions", "-o", regions.to_str().unwrap()][..],
+            &["--report", report.to_str().unwrap()],
+            &fast,
+        ]
+        .concat(),
+    );
+    assert_eq!(
+        file_names(&regions),
+        [
+            "region_1_Left_kidney.ply",
+            "region_2_a_b_c.ply",
+            "region_3_肝臓_région.ply",
+            "region_4_liver.ply",
+            "region_5_liver.ply",
+            "region_6.ply",
+            "region_7.ply",
+        ]
+    );
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    insta::assert_snapshot!(serde_json::to_string_pretty(&r["labels"]).unwrap());
+
+    let interfaces = dir.path().join("interfaces");
+    run_ok(
+        &[&["regularize", input, "--split", "interfaces", "-o", interfaces.to_str().unwrap()][..], &fast]
+            .concat(),
+    );
+    assert_eq!(
+        file_names(&interfaces),
+        [
+            "interface_1_Left_kidney__0.ply",
+            "interface_1_Left_kidney__2_a_b_c.ply",
+            "interface_2_a_b_c__0.ply",
+            "interface_2_a_b_c__3_肝臓_région.ply",
+            "interface_3_肝臓_région__0.ply",
+            "interface_3_肝臓_région__4_liver.ply",
+            "interface_4_liver__0.ply",
+            "interface_4_liver__5_liver.ply",
+            "interface_5_liver__0.ply",
+            "interface_5_liver__6.ply",
+            "interface_6_0.ply",
+            "interface_6_7.ply",
+            "interface_7_0.ply",
+        ]
+    );
+    // A file with no names has no `labels` in its report.
+    let npy = dir.path().join("plain.npy");
+    write_npy(&npy, &LabelVolume::from_fn([3, 3, 3], |p| u32::from(p == [1, 1, 1])));
+    let plain = dir.path().join("plain.json");
+    let mesh = dir.path().join("plain.ply");
+    run_ok(
+        &[
+            &["regularize", npy.to_str().unwrap(), "-o", mesh.to_str().unwrap()][..],
+            &["--report", plain.to_str().unwrap()],
+            &fast,
+        ]
+        .concat(),
+    );
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&plain).unwrap()).unwrap();
+    assert!(r.get("labels").is_none(), "{r}");
 }

@@ -22,6 +22,12 @@ use crate::{IoError, Material, QuadMesh};
 /// vertex, over the whole mesh (so shading is continuous across materials). A mesh
 /// without materials gets one grey diffuse material.
 ///
+/// Scene: one node and mesh named `voxreg` holding every primitive; for a mesh whose
+/// labels have names ([`QuadMesh::named_labels`]), a node `voxreg` whose children are
+/// one node and mesh per primitive, named after the label of its faces' solid side
+/// (the name as the file writes it; the material's name where that label has none), so
+/// viewers list the segments by name.
+///
 /// Materials map to glTF's metallic-roughness model: base colour (sRGB converted to
 /// linear), metalness, roughness, emission (`emissiveFactor` = colour x emission), and
 /// transparency (`alphaMode: BLEND` when opacity < 1). Materials are double-sided, since
@@ -61,6 +67,8 @@ fn vertex_normals(mesh: &QuadMesh) -> Vec<Vec3> {
 /// One primitive's data: its vertices (indices into the mesh) and triangles.
 struct Part {
     material: usize,
+    /// The inner label its faces share, if they do.
+    label: Option<u32>,
     vertices: Vec<u32>,
     triangles: Vec<u32>,
 }
@@ -84,6 +92,8 @@ fn parts(mesh: &QuadMesh) -> Vec<Part> {
             }
             local[v as usize]
         };
+        let inner = |f: &usize| mesh.face_labels[*f][0];
+        let label = fs.first().map(inner).filter(|&l| fs.iter().all(|f| inner(f) == l));
         for f in fs {
             let [a, b, c, d] = mesh.quads[f].map(|v| id(v, &mut vertices));
             triangles.extend([a, b, c, a, c, d]);
@@ -91,7 +101,7 @@ fn parts(mesh: &QuadMesh) -> Vec<Part> {
         for &v in &vertices {
             local[v as usize] = u32::MAX;
         }
-        out.push(Part { material: m, vertices, triangles });
+        out.push(Part { material: m, label, vertices, triangles });
     }
     out
 }
@@ -227,14 +237,30 @@ fn encode_gltf(mesh: &QuadMesh, binary: bool, w: &mut dyn Write) -> io::Result<(
         extensions: None,
         extras: Default::default(),
     });
-    let mesh_id = root.push(gj::Mesh {
+    let new_mesh = |name: &str, primitives| gj::Mesh {
         extensions: None,
         extras: Default::default(),
-        name: Some("voxreg".into()),
+        name: Some(name.into()),
         primitives,
         weights: None,
-    });
-    let node = root.push(gj::Node { mesh: Some(mesh_id), name: Some("voxreg".into()), ..Default::default() });
+    };
+    let node = if mesh.named_labels.is_empty() {
+        let mesh_id = root.push(new_mesh("voxreg", primitives));
+        root.push(gj::Node { mesh: Some(mesh_id), name: Some("voxreg".into()), ..Default::default() })
+    } else {
+        let mut children = Vec::new();
+        for (part, primitive) in parts.iter().zip(primitives) {
+            let named = part.label.and_then(|l| mesh.named_labels.iter().find(|n| n.label == l));
+            let name = named.map_or(materials[part.material].name.as_str(), |n| n.name.as_str());
+            let mesh_id = root.push(new_mesh(name, vec![primitive]));
+            children.push(root.push(gj::Node {
+                mesh: Some(mesh_id),
+                name: Some(name.into()),
+                ..Default::default()
+            }));
+        }
+        root.push(gj::Node { children: Some(children), name: Some("voxreg".into()), ..Default::default() })
+    };
     let scene = root.push(gj::Scene {
         extensions: None,
         extras: Default::default(),

@@ -27,7 +27,8 @@
 //!   integer or float greyscale, spacing and units from OME-TIFF or ImageJ metadata.
 //! - NRRD `.nrrd`, `.nhdr` (detached), and 3D Slicer's `.seg.nrrd`: [`read_nrrd`],
 //!   [`read_nrrd_bytes`]; raw, gzip or ascii, `space directions`/`space origin`,
-//!   `space units`; segment names and colours as the palette.
+//!   `space units`; segment names and colours as the palette (names kept in
+//!   [`Palette::names`]).
 //! - MRC/CCP4 `.mrc`, `.map`, `.rec`: [`read_mrc`], [`read_mrc_bytes`]; modes 0, 1, 2
 //!   and 6, voxel size in ångström from the cell.
 //! - Zarr v2 and v3 arrays `.zarr` (directories) and OME-Zarr images (NGFF 0.4, 0.5;
@@ -61,6 +62,13 @@
 //! interface, one region's closed surface: a [`Patch`](voxreg_digisurf::Patch)) become
 //! meshes by [`QuadMesh::from_patch`], and [`MeshBatch`] writes many into a directory
 //! all or nothing.
+//!
+//! **Label names.** Where the input names its labels (`.seg.nrrd` segments, `.vox`
+//! materials with a `_name`), the [`Palette`] keeps the names ([`Palette::names`]);
+//! [`QuadMesh::assign_materials`] lists those of the mesh's labels
+//! ([`QuadMesh::named_labels`]), which every writer but STL carries (PLY and OBJ header
+//! comments, glTF node names, VTP field data), and [`named_region_name`] /
+//! [`named_interface_name`] make file names of them ([`file_name_part`]).
 //!
 //! # Example
 //!
@@ -126,9 +134,10 @@ pub use limits::{
     FALLBACK_MAX_MEMORY,
 };
 pub use longvol::{read_longvol, read_longvol_bytes};
-pub use material::{Material, Palette};
+pub use material::{material_name, Material, NamedLabel, Palette};
 pub use mesh::{
-    interface_name, region_name, write_file_atomically, write_mesh, FaceGroup, MeshBatch, QuadMesh,
+    file_name_part, interface_name, named_interface_name, named_region_name, region_name,
+    write_file_atomically, write_mesh, FaceGroup, MeshBatch, QuadMesh,
 };
 pub use mrc::{read_mrc, read_mrc_bytes};
 pub use nifti::{read_nifti, read_nifti_bytes};

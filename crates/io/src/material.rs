@@ -1,5 +1,7 @@
 //! Materials and palettes: how faces look, carried from voxel files to mesh files.
 
+use std::collections::BTreeMap;
+
 /// How a face looks: what glTF, OBJ/MTL and PLY colours can carry.
 #[derive(Clone, Debug, PartialEq)]
 pub struct Material {
@@ -44,25 +46,118 @@ impl Material {
 
 /// Colours and materials of a labeled volume, indexed by label (for MagicaVoxel files:
 /// 256 entries, label = palette index + 1, entry 0 the transparent background).
-#[derive(Clone, Debug, PartialEq)]
+#[derive(Clone, Debug, Default, PartialEq)]
 pub struct Palette {
     /// RGBA colour per label.
     pub colors: Vec<[u8; 4]>,
-    /// Material per label (same length as `colors`), named `color_{label}`.
+    /// Material per label (same length as `colors`), named `color_{label}` unless the
+    /// file names the label.
     pub materials: Vec<Material>,
+    /// The names the file gives its labels, as written there (3D Slicer segment names,
+    /// MagicaVoxel `_name` material properties), by label; never empty strings. Empty
+    /// for files without names.
+    pub names: BTreeMap<u32, String>,
+}
+
+/// A label the input names, with its colour: what the mesh writers list (PLY and OBJ
+/// comments, glTF node names, a VTP field-data array) and the JSON report's `labels`.
+#[derive(Clone, Debug, PartialEq, Eq)]
+pub struct NamedLabel {
+    /// The label value.
+    pub label: u32,
+    /// Its name as the file writes it: any non-empty string.
+    pub name: String,
+    /// Its colour (sRGB, alpha) from the palette.
+    pub color: [u8; 4],
+}
+
+impl NamedLabel {
+    /// The label as a header comment's text: `label {label} color {r} {g} {b} {a} name
+    /// {name}`, the name last (it may hold spaces), its control characters (and with
+    /// `ascii`, every non-ASCII one: PLY headers are ASCII) as `\u{hex}` and `\` as
+    /// `\\`, so the comment stays one line and reads back unambiguously.
+    pub(crate) fn comment(&self, ascii: bool) -> String {
+        let [r, g, b, a] = self.color;
+        let mut name = String::new();
+        for c in self.name.chars() {
+            match c {
+                '\\' => name.push_str("\\\\"),
+                c if c.is_control() || (ascii && !c.is_ascii()) => {
+                    name.push_str(&format!("\\u{{{:x}}}", u32::from(c)))
+                }
+                c => name.push(c),
+            }
+        }
+        format!("label {} color {r} {g} {b} {a} name {name}", self.label)
+    }
 }
 
 impl Palette {
-    /// A palette of diffuse materials from colours.
+    /// A palette of diffuse materials from colours, without names.
     pub fn from_colors(colors: Vec<[u8; 4]>) -> Self {
         let materials =
             colors.iter().enumerate().map(|(l, &c)| Material::diffuse(format!("color_{l}"), c)).collect();
-        Palette { colors, materials }
+        Palette { colors, materials, names: BTreeMap::new() }
     }
 
     /// The material of `label`, if the palette has one.
     pub fn material(&self, label: u32) -> Option<&Material> {
         self.materials.get(label as usize)
+    }
+
+    /// The name the file gives `label`, if any.
+    pub fn name(&self, label: u32) -> Option<&str> {
+        self.names.get(&label).map(String::as_str)
+    }
+
+    /// Names `label` (within the palette) `name`: recorded as written (trimmed; an empty
+    /// name records nothing), and the label's material renamed after it as
+    /// [`material_name`] makes it, with `_{label}` appended when a material (this
+    /// label's unnamed one included) has that name already: material names stay unique.
+    pub fn set_name(&mut self, label: u32, name: &str) {
+        let name = name.trim();
+        let index = label as usize;
+        if index >= self.materials.len() {
+            return;
+        }
+        let base = material_name(name, label);
+        let taken = self.materials.iter().any(|m| m.name == base);
+        self.materials[index].name = if taken { format!("{base}_{label}") } else { base };
+        if !name.is_empty() {
+            self.names.insert(label, name.to_string());
+        }
+    }
+
+    /// The named labels among `labels` (any order, repeats allowed), in increasing
+    /// label order, with their colours.
+    pub fn named_labels(&self, labels: impl IntoIterator<Item = u32>) -> Vec<NamedLabel> {
+        if self.names.is_empty() {
+            return Vec::new();
+        }
+        let mut labels: Vec<u32> = labels.into_iter().filter(|l| self.names.contains_key(l)).collect();
+        labels.sort_unstable();
+        labels.dedup();
+        labels
+            .into_iter()
+            .map(|label| NamedLabel {
+                label,
+                name: self.names[&label].clone(),
+                color: self.colors.get(label as usize).copied().unwrap_or([200, 200, 200, 255]),
+            })
+            .collect()
+    }
+}
+
+/// A label name as a material name (OBJ `usemtl` and MTL `newmtl` cannot hold
+/// whitespace): whitespace and control characters as `_`; `segment_{label}` for an
+/// empty name.
+pub fn material_name(name: &str, label: u32) -> String {
+    let name: String =
+        name.chars().map(|c| if c.is_whitespace() || c.is_control() { '_' } else { c }).collect();
+    if name.is_empty() {
+        format!("segment_{label}")
+    } else {
+        name
     }
 }
 

@@ -7,7 +7,7 @@ use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, InterfaceId, Patch, RegionId};
 
 use crate::volume::lowercase_extension;
-use crate::{write_gltf, write_obj, write_ply, write_stl, write_vtp, IoError, Material, Palette};
+use crate::{write_gltf, write_obj, write_ply, write_stl, write_vtp, IoError, Material, NamedLabel, Palette};
 
 /// A mesh of quads with two labels per face and named groups of faces: what the
 /// writers take.
@@ -31,6 +31,10 @@ pub struct QuadMesh {
     /// Per face, an index into `materials`; empty when the mesh has no materials,
     /// else the same length as `quads`.
     pub face_materials: Vec<u32>,
+    /// The labels of the faces that the input names, in increasing label order, with
+    /// their colours (empty: no names). Listed in PLY and OBJ header comments and a VTP
+    /// field-data array; the glTF writer names its nodes after them.
+    pub named_labels: Vec<NamedLabel>,
 }
 
 /// A named set of faces of a [`QuadMesh`], written as an OBJ group.
@@ -129,7 +133,8 @@ impl QuadMesh {
     /// face's inner label (its normal points out of the inner voxel; with a background,
     /// whose region comes last, the inner voxel is the solid one). One material per
     /// label in use, in increasing label order; labels beyond the palette get a grey
-    /// diffuse material.
+    /// diffuse material. Also lists the palette's names of the labels on either side
+    /// of the faces in [`QuadMesh::named_labels`].
     pub fn assign_materials(&mut self, palette: &Palette) {
         let mut used: Vec<u32> = self.face_labels.iter().map(|l| l[0]).collect();
         used.sort_unstable();
@@ -145,6 +150,7 @@ impl QuadMesh {
             .collect();
         self.face_materials =
             self.face_labels.iter().map(|l| used.binary_search(&l[0]).unwrap_or(0) as u32).collect();
+        self.named_labels = palette.named_labels(self.face_labels.iter().flatten().copied());
     }
 
     /// Number of faces.
@@ -234,6 +240,62 @@ pub fn interface_name(surface: &DigitalSurface, i: InterfaceId) -> String {
 /// The name of region `r` of `surface`: `region_{a}`, where `a` is its smallest label.
 pub fn region_name(surface: &DigitalSurface, r: RegionId) -> String {
     format!("region_{}", first_label(surface, r))
+}
+
+/// [`interface_name`] with the names `palette` gives the two labels, for inputs that
+/// name them (`.seg.nrrd` segments): `interface_{a}_{name a}__{b}_{name b}`, each name
+/// through [`file_name_part`] and left out (with its `_`) where the label has no name or
+/// nothing of it survives. Exactly [`interface_name`] when neither label has a name.
+/// Distinct interfaces have distinct names: the label numbers are kept. Used by
+/// `voxreg regularize --split interfaces` for file names.
+pub fn named_interface_name(surface: &DigitalSurface, i: InterfaceId, palette: Option<&Palette>) -> String {
+    let [a, b] = surface.interfaces()[i.index()].regions.map(|r| first_label(surface, r));
+    match [a, b].map(|l| label_part(palette, l)) {
+        [None, None] => format!("interface_{a}_{b}"),
+        [na, nb] => format!("interface_{a}{}__{b}{}", na.unwrap_or_default(), nb.unwrap_or_default()),
+    }
+}
+
+/// [`region_name`] with the name `palette` gives the region's smallest label:
+/// `region_{a}_{name}`, the name through [`file_name_part`]; exactly [`region_name`]
+/// when the label has no name or nothing of it survives. Used by `voxreg regularize
+/// --split regions` for file names.
+pub fn named_region_name(surface: &DigitalSurface, r: RegionId, palette: Option<&Palette>) -> String {
+    let a = first_label(surface, r);
+    format!("region_{a}{}", label_part(palette, a).unwrap_or_default())
+}
+
+/// `_{file name part}` of the name of `label`, if it has one that survives.
+fn label_part(palette: Option<&Palette>, label: u32) -> Option<String> {
+    let part = file_name_part(palette?.name(label)?);
+    (!part.is_empty()).then(|| format!("_{part}"))
+}
+
+/// The longest [`file_name_part`], in bytes: with two of them and two label numbers a
+/// file name stays far below the 255 bytes file systems allow.
+const NAME_PART_BYTES: usize = 64;
+
+/// A label name as part of a file name that every common file system (and a shell
+/// without quotes) takes: letters and digits (any script) and `-` kept, every other
+/// character (`/`, `\`, `.`, spaces, punctuation, controls) as `_`, runs of `_` as one
+/// (so `__` can separate two names), none at either end, at most 64 bytes (cut at a
+/// character boundary). Possibly empty.
+pub fn file_name_part(name: &str) -> String {
+    let mut out = String::new();
+    for c in name.chars() {
+        let c = if c.is_alphanumeric() || c == '-' { c } else { '_' };
+        if c == '_' && (out.is_empty() || out.ends_with('_')) {
+            continue;
+        }
+        if out.len() + c.len_utf8() > NAME_PART_BYTES {
+            break;
+        }
+        out.push(c);
+    }
+    while out.ends_with('_') {
+        out.pop();
+    }
+    out
 }
 
 fn first_label(surface: &DigitalSurface, r: RegionId) -> u32 {

@@ -12,7 +12,7 @@ use glam::{DMat3, DVec3};
 use crate::orient::place;
 use crate::samples::{decode, Layout, Order};
 use crate::volume::{checked_voxel_count, read_file};
-use crate::{DataType, Endian, IoError, LoadedVoxels, Material, Palette};
+use crate::{DataType, Endian, IoError, LoadedVoxels, Palette};
 
 /// The largest label value a `.seg.nrrd` segment may name (the palette is indexed by
 /// label).
@@ -382,7 +382,7 @@ fn segments(pairs: &[(String, String)], path: &Path) -> Result<Option<Palette>, 
         let key = format!("Segment{k}_{what}");
         pairs.iter().find(|(p, _)| *p == key).map(|(_, v)| v.trim())
     };
-    let mut found: Vec<(u32, String, [u8; 4])> = Vec::new();
+    let mut found: Vec<(u32, &str, [u8; 4])> = Vec::new();
     for k in 0.. {
         let Some(name) = get(k, "Name") else { break };
         if get(k, "Layer").is_some_and(|l| l != "0") {
@@ -402,28 +402,16 @@ fn segments(pairs: &[(String, String)], path: &Path) -> Result<Option<Palette>, 
                 let byte = |c: f64| (c.clamp(0.0, 1.0) * 255.0).round() as u8;
                 [byte(r), byte(g), byte(b), 255]
             });
-        found.push((label, material_name(name, label), color));
+        found.push((label, name, color));
     }
     let Some(max) = found.iter().map(|f| f.0).max() else { return Ok(None) };
     let mut palette = Palette::from_colors(vec![[200, 200, 200, 255]; max as usize + 1]);
     palette.colors[0][3] = 0;
     palette.materials[0].color[3] = 0;
     for (label, name, color) in found {
-        let taken = palette.materials.iter().any(|m| m.name == name);
-        let name = if taken { format!("{name}_{label}") } else { name };
         palette.colors[label as usize] = color;
-        palette.materials[label as usize] = Material::diffuse(name, color);
+        palette.materials[label as usize].color = color;
+        palette.set_name(label, name);
     }
     Ok(Some(palette))
-}
-
-/// A segment name as a material name: whitespace and control characters as `_`.
-fn material_name(name: &str, label: u32) -> String {
-    let name: String =
-        name.chars().map(|c| if c.is_whitespace() || c.is_control() { '_' } else { c }).collect();
-    if name.is_empty() {
-        format!("segment_{label}")
-    } else {
-        name
-    }
 }

@@ -8,7 +8,10 @@ use crate::{IoError, QuadMesh};
 
 /// Writes `mesh` to `path` as an ASCII Wavefront OBJ file.
 ///
-/// Layout: a `#` comment line, one `v x y z` line per vertex (each coordinate the
+/// Layout: a `#` comment line (followed, for a mesh whose labels have names, by one
+/// `# label 3 color 216 101 79 255 name left kidney` line per
+/// [`QuadMesh::named_labels`] entry: colour as sRGB and alpha, the name last with its
+/// control characters as `\u{hex}`), one `v x y z` line per vertex (each coordinate the
 /// shortest decimal that reads back as the same `f64`), then the faces as
 /// `f a b c d` lines with 1-based indices: first any faces in no group, in face order,
 /// then for each group a `g name` line and its faces in the group's order. Labels are
@@ -76,6 +79,9 @@ pub(crate) fn encode_obj(mesh: &QuadMesh, mtllib: Option<&str>, w: &mut dyn Writ
         mesh.quads.len(),
         mesh.groups.len()
     )?;
+    for label in &mesh.named_labels {
+        writeln!(w, "# {}", label.comment(false))?;
+    }
     if let Some(lib) = mtllib {
         writeln!(w, "mtllib {lib}")?;
     }

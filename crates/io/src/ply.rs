@@ -25,7 +25,12 @@ use crate::{IoError, QuadMesh};
 /// end_header
 /// ```
 ///
-/// then the vertices (positions rounded to `f32`) and the faces in face order, each
+/// A mesh whose labels have names ([`QuadMesh::named_labels`]) lists them after the
+/// first comment, one `comment label 3 color 216 101 79 255 name left kidney` line per
+/// label (colour as sRGB and alpha; the name last, non-ASCII and control characters
+/// as `\u{hex}`, a backslash doubled).
+///
+/// Then the vertices (positions rounded to `f32`) and the faces in face order, each
 /// with its 4 vertex indices (0-based) and `[inner, outer]` labels. A mesh with
 /// materials adds `property uchar red`, `green`, `blue`, `alpha` to the faces: the
 /// face's material colour (sRGB) and opacity. Groups are not
@@ -56,10 +61,13 @@ fn check_ply(mesh: &QuadMesh) -> Result<(), String> {
 
 /// Writes the PLY header and body of `mesh`, assumed checked, to `w`.
 pub(crate) fn encode_ply(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
+    write!(w, "ply\nformat binary_little_endian 1.0\ncomment voxreg quad mesh\n")?;
+    for label in &mesh.named_labels {
+        writeln!(w, "comment {}", label.comment(true))?;
+    }
     write!(
         w,
-        "ply\nformat binary_little_endian 1.0\ncomment voxreg quad mesh\n\
-         element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
+        "element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
          element face {}\nproperty list uchar int vertex_indices\n\
          property int inner_label\nproperty int outer_label\n",
         mesh.positions.len(),

@@ -34,6 +34,11 @@ pub fn read_vox(path: &Path) -> Result<LoadedVolume, IoError> {
 /// A colour index past the end of a short `RGBA` palette is an [`IoError::Format`]. The palette is returned as 256 RGBA
 /// entries indexed by label, entry `0` transparent black.
 ///
+/// **Names.** A `MATL` chunk with a `_name` property names its colour's label
+/// ([`Palette::names`]); MagicaVoxel itself writes none. Layer and node names are not
+/// label names (a layer holds models of many colours, a colour spans layers) and are
+/// not read.
+///
 /// **Space.** MagicaVoxel coordinates `x, y, z` (`z` up) are the volume's `[x, y, z]`,
 /// with spacing `1`, and the origin is chosen so that lattice corners fall on integer
 /// MagicaVoxel coordinates: voxel `[x, y, z]` fills the unit cube from `(x, y, z)` to
@@ -216,7 +221,7 @@ fn empty_voxels(bytes: &[u8], models: usize) -> Vec<Vec<usize>> {
 
 /// The palette as 256 RGBA entries indexed by label (`dot_vox`'s 0-based index + 1),
 /// with the `MATL` materials (whose ids are MagicaVoxel's 1-based colour indices, so
-/// they are labels too).
+/// they are labels too) and their `_name`s.
 fn palette(data: &DotVoxData) -> Palette {
     let mut colors = vec![[0u8; 4]; 256];
     for (entry, colour) in colors[1..].iter_mut().zip(&data.palette) {
@@ -228,6 +233,9 @@ fn palette(data: &DotVoxData) -> Palette {
             if m.id > 0 {
                 apply_vox_material(material, &m.properties);
             }
+        }
+        if let Some(name) = m.properties.get("_name").filter(|_| m.id > 0) {
+            palette.set_name(m.id, name);
         }
     }
     palette

@@ -17,6 +17,11 @@ use crate::{IoError, QuadMesh};
 /// byte count (`header_type="UInt64"`). Groups are not written: the labels carry the
 /// interfaces.
 ///
+/// A mesh whose labels have names ([`QuadMesh::named_labels`]) also gets field data
+/// (ParaView's *Information* panel, pyvista's `field_data`): `label_values` (`UInt32`),
+/// `label_names` (`String`, UTF-8) and `label_colors` (4 `UInt8` components), one
+/// tuple per named label, in ASCII.
+///
 /// Written to a temporary file renamed onto `path` when complete (see
 /// [`write_mesh`](crate::write_mesh)); an inconsistent mesh is refused with
 /// [`IoError::InvalidMesh`] before anything is created.
@@ -28,6 +33,36 @@ pub fn write_vtp(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
 struct Array {
     attributes: String,
     bytes: u64,
+}
+
+/// The named labels as `FieldData`: VTK's ASCII string arrays list each string's bytes
+/// as decimal numbers, each string ended by a 0.
+fn write_field_data(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
+    let n = mesh.named_labels.len();
+    let join = |items: Vec<String>| items.join(" ");
+    let values = join(mesh.named_labels.iter().map(|l| l.label.to_string()).collect());
+    let names = join(
+        mesh.named_labels
+            .iter()
+            .flat_map(|l| l.name.bytes().filter(|&b| b != 0).chain([0]))
+            .map(|b| b.to_string())
+            .collect(),
+    );
+    let colors = join(mesh.named_labels.iter().flat_map(|l| l.color).map(|c| c.to_string()).collect());
+    writeln!(w, "    <FieldData>")?;
+    writeln!(
+        w,
+        r#"      <DataArray type="UInt32" Name="label_values" NumberOfTuples="{n}" format="ascii">{values}</DataArray>"#
+    )?;
+    writeln!(
+        w,
+        r#"      <DataArray type="String" Name="label_names" NumberOfTuples="{n}" format="ascii">{names}</DataArray>"#
+    )?;
+    writeln!(
+        w,
+        r#"      <DataArray type="UInt8" Name="label_colors" NumberOfComponents="4" NumberOfTuples="{n}" format="ascii">{colors}</DataArray>"#
+    )?;
+    writeln!(w, "    </FieldData>")
 }
 
 fn encode_vtp(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
@@ -56,6 +91,9 @@ fn encode_vtp(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
     writeln!(w, r#"<?xml version="1.0"?>"#)?;
     writeln!(w, r#"<VTKFile type="PolyData" version="1.0" byte_order="LittleEndian" header_type="UInt64">"#)?;
     writeln!(w, "  <PolyData>")?;
+    if !mesh.named_labels.is_empty() {
+        write_field_data(mesh, w)?;
+    }
     writeln!(
         w,
         r#"    <Piece NumberOfPoints="{np}" NumberOfVerts="0" NumberOfLines="0" NumberOfStrips="0" NumberOfPolys="{nf}">"#

@@ -158,10 +158,17 @@ fn khronos_validator_accepts_our_gltf() {
     }
     let dir = tempfile::tempdir().unwrap();
     let mut files = Vec::new();
-    for name in ["chr_army1.vox", "veh_fire.vox", "metal-material.vox", "placeholder-with-materials.vox"] {
+    // organs.seg.nrrd: named labels, one node per label.
+    for name in [
+        "chr_army1.vox",
+        "veh_fire.vox",
+        "metal-material.vox",
+        "placeholder-with-materials.vox",
+        "formats/organs.seg.nrrd",
+    ] {
         let (mesh, _) = coloured_mesh(name);
         for ext in ["glb", "gltf"] {
-            let path = dir.path().join(format!("{name}.{ext}"));
+            let path = dir.path().join(format!("{}.{ext}", name.replace('/', "_")));
             write_mesh(&path, &mesh).unwrap();
             files.push(path);
         }

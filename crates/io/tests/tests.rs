@@ -20,12 +20,15 @@
 //! - [`materials`]: colours and materials from .vox palettes to glTF, OBJ/MTL and PLY.
 //! - [`mesh_formats`]: STL (closed solids of the right volume) and VTK PolyData, parsed
 //!   back by independent minimal readers.
+//! - [`names`]: label names (`.seg.nrrd` segments, `.vox` material names) in every
+//!   writer (snapshots), file names of awkward names, files without names unchanged.
 
 mod formats;
 mod fuzz_readers;
 mod hostile;
 mod materials;
 mod mesh_formats;
+mod names;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};

@@ -34,6 +34,7 @@ pub(crate) struct Arrays {
     labels: Vec<u32>,
     colors: Option<Vec<u8>>,
     groups: Vec<(String, Vec<i64>)>,
+    label_names: Vec<(u32, String)>,
 }
 
 impl Arrays {
@@ -50,12 +51,13 @@ impl Arrays {
                 .iter()
                 .map(|g| (g.name.clone(), g.faces.iter().map(|&f| i64::from(f)).collect()))
                 .collect(),
+            label_names: mesh.named_labels.iter().map(|l| (l.label, l.name.clone())).collect(),
         }
     }
 
     /// `{"vertices": (n, 3) float64, "quads": (m, 4) int64, "labels": (m, 2) uint32,
-    /// "colors": (m, 4) uint8 or None, "groups": [(name, faces int64)]}`, the vectors moved
-    /// into numpy without a copy.
+    /// "colors": (m, 4) uint8 or None, "groups": [(name, faces int64)], "label_names":
+    /// {label: name}}`, the vectors moved into numpy without a copy.
     pub(crate) fn into_dict(self, py: Python<'_>) -> PyResult<Bound<'_, PyDict>> {
         fn rows<T: numpy::Element>(py: Python<'_>, v: Vec<T>, width: usize) -> Bound<'_, PyAny> {
             let n = v.len() / width;
@@ -71,6 +73,11 @@ impl Arrays {
             groups.append((name, faces.into_pyarray(py)))?;
         }
         d.set_item("groups", groups)?;
+        let names = PyDict::new(py);
+        for (label, name) in self.label_names {
+            names.set_item(label, name)?;
+        }
+        d.set_item("label_names", names)?;
         Ok(d)
     }
 }

@@ -39,7 +39,7 @@ fn load(path: &std::path::Path, options: &InputOptions<'_>) -> Result<Loaded> {
     }
 }
 
-/// The palette as `{"colors": (n, 4) uint8, "materials": [dict]}`.
+/// The palette as `{"colors": (n, 4) uint8, "materials": [dict], "names": {label: name}}`.
 pub(crate) fn palette_dict<'py>(py: Python<'py>, palette: &Palette) -> PyResult<Bound<'py, PyDict>> {
     let d = PyDict::new(py);
     let flat: Vec<u8> = palette.colors.iter().flatten().copied().collect();
@@ -57,6 +57,11 @@ pub(crate) fn palette_dict<'py>(py: Python<'py>, palette: &Palette) -> PyResult<
         materials.append(md)?;
     }
     d.set_item("materials", materials)?;
+    let names = PyDict::new(py);
+    for (label, name) in &palette.names {
+        names.set_item(label, name)?;
+    }
+    d.set_item("names", names)?;
     Ok(d)
 }
 

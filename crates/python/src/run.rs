@@ -59,8 +59,11 @@ pub(crate) fn clamp_arg(clamp: Option<&Bound<'_, PyAny>>) -> Result<Option<Clamp
 fn palette_arg(
     colors: Option<PyReadonlyArray2<'_, u8>>,
     materials: Option<Vec<MaterialTuple>>,
+    names: Option<std::collections::BTreeMap<u32, String>>,
 ) -> Result<Option<Palette>> {
     let Some(colors) = colors else { return Ok(None) };
+    let names: std::collections::BTreeMap<u32, String> =
+        names.unwrap_or_default().into_iter().filter(|(_, n)| !n.trim().is_empty()).collect();
     let view = colors.as_array();
     if view.ncols() != 4 {
         return Err(Error::parameter(format!(
@@ -70,7 +73,14 @@ fn palette_arg(
     }
     let colors: Vec<[u8; 4]> = view.rows().into_iter().map(|r| [r[0], r[1], r[2], r[3]]).collect();
     Ok(Some(match materials {
-        None => Palette::from_colors(colors),
+        None => {
+            // Materials named after the labels, as the readers name them.
+            let mut palette = Palette::from_colors(colors);
+            for (&label, name) in &names {
+                palette.set_name(label, name);
+            }
+            palette
+        }
         Some(m) => {
             if m.len() != colors.len() {
                 return Err(Error::parameter(format!(
@@ -90,7 +100,7 @@ fn palette_arg(
                     transparency,
                 })
                 .collect();
-            Palette { colors, materials }
+            Palette { colors, materials, names }
         }
     }))
 }
@@ -114,7 +124,7 @@ pub(crate) fn on_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> 
 #[pyo3(signature = (
     labels, spacing, origin, background, regions, preset, normals, radius, alpha, beta, gamma,
     refine, preserve_size, texture_aware, solver, clamp, smoothness, tolerance, threads, progress,
-    palette_colors, palette_materials, max_memory
+    palette_colors, palette_materials, max_memory, palette_names=None
 ))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn regularize<'py>(
@@ -142,6 +152,7 @@ pub(crate) fn regularize<'py>(
     palette_colors: Option<PyReadonlyArray2<'py, u8>>,
     palette_materials: Option<Vec<MaterialTuple>>,
     max_memory: Option<&Bound<'py, PyAny>>,
+    palette_names: Option<std::collections::BTreeMap<u32, String>>,
 ) -> PyResult<Bound<'py, PyDict>> {
     let options = Options {
         preset,
@@ -161,7 +172,7 @@ pub(crate) fn regularize<'py>(
     };
     let params = options.params()?;
     let threads = threads_arg(threads)?;
-    let palette = palette_arg(palette_colors, palette_materials)?;
+    let palette = palette_arg(palette_colors, palette_materials, palette_names)?;
     let limit = max_memory_arg(max_memory)?;
     // Borrowed (uint32) or converted with the GIL held.
     let labels = volume::labels_of(labels, limit)?;

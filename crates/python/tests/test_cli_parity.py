@@ -10,7 +10,7 @@ def same_files(a, b):
     return a.read_bytes() == b.read_bytes()
 
 
-@pytest.mark.parametrize("name", ["cat10.vol", "chr_army1.vox"])
+@pytest.mark.parametrize("name", ["cat10.vol", "chr_army1.vox", "formats/organs.seg.nrrd"])
 @pytest.mark.parametrize("ext", ["obj", "ply", "glb"])
 def test_save_matches_cli(cli, data, tmp_path, name, ext):
     # Same file names in two directories: an OBJ names its .mtl.

@@ -130,3 +130,14 @@ def test_read_vox_palette_and_preset(data):
     mesh = voxreg.regularize(labels, **info)
     assert mesh.colors.shape == (len(mesh.quads), 4) and mesh.colors.dtype == np.uint8
     assert voxreg.check(mesh)["intersecting_pairs"] == 0  # clamped: never self-intersecting
+
+
+def test_seg_nrrd_label_names(data):
+    """3D Slicer segment names: in read's palette, on the mesh and its sub-meshes."""
+    labels, info = voxreg.read(data / "formats" / "organs.seg.nrrd")
+    assert info["palette"]["names"] == {1: "liver", 2: "spleen"}
+    mesh = voxreg.regularize(labels, **info)
+    assert mesh.label_names == {1: "liver", 2: "spleen"}
+    assert mesh.interface(1, 0).label_names == {1: "liver"}
+    assert mesh.region(1).label_names == {1: "liver", 2: "spleen"}  # it borders the spleen
+    assert voxreg.regularize(labels).label_names == {}

@@ -56,13 +56,16 @@ def _triple(name: str, value: Any) -> Tuple[float, float, float]:
     return t  # type: ignore[return-value]
 
 
-def _palette(palette: Any) -> Tuple[Optional[np.ndarray], Optional[list]]:
-    """The palette as the core takes it: (n, 4) uint8 colours and material tuples."""
+def _palette(palette: Any) -> Tuple[Optional[np.ndarray], Optional[list], Optional[Dict[int, str]]]:
+    """The palette as the core takes it: (n, 4) uint8 colours, material tuples, label names."""
     if palette is None:
-        return None, None
+        return None, None, None
     materials = None
+    names = None
     if isinstance(palette, dict):
         colors = palette["colors"]
+        if palette.get("names"):
+            names = {int(k): str(v) for k, v in palette["names"].items()}
         if palette.get("materials") is not None:
             materials = [
                 (str(m["name"]), tuple(int(c) for c in m["color"]), float(m["metallic"]),
@@ -76,7 +79,7 @@ def _palette(palette: Any) -> Tuple[Optional[np.ndarray], Optional[list]]:
         raise ParameterError(f"palette colours must be an (n, 3) or (n, 4) array, got shape {colors.shape}")
     if colors.shape[1] == 3:
         colors = np.hstack([colors, np.full((len(colors), 1), 255)])
-    return np.ascontiguousarray(colors, dtype=np.uint8), materials
+    return np.ascontiguousarray(colors, dtype=np.uint8), materials, names
 
 
 def _labels(labels: Any) -> np.ndarray:
@@ -192,8 +195,9 @@ def regularize(
                     bar.update(100 * fraction - bar.n)
                 mesh = voxreg.regularize(labels, progress=progress)
     palette : dict or (n, 3 | 4) uint8 array, default None
-        Colours (and materials) indexed by label, as ``read`` returns them: the mesh's
-        ``colors`` and the materials of saved files.
+        Colours (and materials, and label names) indexed by label, as ``read`` returns
+        them: the mesh's ``colors`` and ``label_names``, and the materials and names of
+        saved files.
     max_memory : int or str, default None (half the physical memory)
         Memory budget in bytes, or a size such as "4G" or "512M" (the CLI's
         ``--max-memory``). A conversion of the labels to uint32, or a run whose estimated
@@ -215,11 +219,12 @@ def regularize(
     VoxregError
         Over the memory budget (``max_memory``), or the computation failed.
     """
-    colors, materials = _palette(palette)
+    colors, materials, names = _palette(palette)
     d = _voxreg.regularize(
         _labels(labels), _triple("spacing", spacing), _triple("origin", origin), background, regions,
         preset, normals, radius, alpha, beta, gamma, refine, preserve_size, texture_aware,
         solver, clamp, smoothness, tolerance, threads, progress, colors, materials, max_memory,
+        palette_names=names,
     )
     return Mesh._from_core(d, _report(d), d["surface"], None, d["summary"])
 
@@ -265,7 +270,9 @@ def read(
     labels : ndarray of uint32, shape (X, Y, Z), Fortran order (moved, not copied)
     info : dict
         ``spacing``, ``origin`` (tuples, physical units), ``background`` (int or None),
-        ``palette`` (``{"colors": (n, 4) uint8, "materials": [dict]}`` or None) and
+        ``palette`` (``{"colors": (n, 4) uint8, "materials": [dict], "names": {label:
+        name}}`` or None; ``names`` holds the labels the file names, such as 3D Slicer
+        segments) and
         ``preset`` ("voxel_art" for .vox files, else "default"): the keyword arguments
         that make ``regularize(labels, **info)`` do what ``voxreg regularize`` does.
 

@@ -25,6 +25,7 @@ class Mesh:
     labels: npt.NDArray[np.uint32]
     colors: Optional[npt.NDArray[np.uint8]]
     report: Dict[str, Any]
+    label_names: Dict[int, str]
     def __init__(
         self,
         vertices: npt.ArrayLike,

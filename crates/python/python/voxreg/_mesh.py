@@ -29,6 +29,10 @@ class Mesh:
     colors : ndarray, (m, 4) uint8, or None
         Per quad, the RGBA colour of its solid voxel, when the input had a palette
         (MagicaVoxel files); else None.
+    label_names : dict of int to str
+        The names the input gives the labels of this mesh's quads (3D Slicer
+        ``.seg.nrrd`` segments, named ``.vox`` materials), as written in the file; empty
+        when it names none.
     report : dict
         What the run did (the CLI's ``--report`` JSON ``run`` object): parameters, cell
         counts, seconds per stage, energies before and after, every solve's report.
@@ -47,12 +51,14 @@ class Mesh:
         _part: Optional[Tuple[str, int, bool]] = None,
         _groups: Optional[List[Tuple[str, np.ndarray]]] = None,
         _summary: Optional[str] = None,
+        label_names: Optional[Dict[int, str]] = None,
     ) -> None:
         self.vertices = np.asarray(vertices, dtype=np.float64)
         self.quads = np.asarray(quads, dtype=np.int64)
         self.labels = np.asarray(labels, dtype=np.uint32)
         self.colors = None if colors is None else np.asarray(colors, dtype=np.uint8)
         self.report = {} if report is None else report
+        self.label_names: Dict[int, str] = dict(label_names or {})
         self._surface = _surface
         self._part = _part
         self._groups = _groups or []
@@ -62,7 +68,8 @@ class Mesh:
     def _from_core(cls, d: Dict[str, Any], report: Dict[str, Any], surface: Any,
                    part: Optional[Tuple[str, int, bool]], summary: Optional[str] = None) -> "Mesh":
         return cls(d["vertices"], d["quads"], d["labels"], d["colors"], report,
-                   _surface=surface, _part=part, _groups=d["groups"], _summary=summary)
+                   _surface=surface, _part=part, _groups=d["groups"], _summary=summary,
+                   label_names={int(k): str(v) for k, v in d.get("label_names", {}).items()})
 
     def __repr__(self) -> str:
         colored = ", colored" if self.colors is not None else ""

@@ -40,6 +40,7 @@ def regularize(
     palette_colors: Optional[npt.NDArray[np.uint8]],
     palette_materials: Optional[List[Tuple[str, Tuple[int, int, int, int], float, float, float, float]]],
     max_memory: Union[None, int, str],
+    palette_names: Optional[Dict[int, str]] = None,
 ) -> Dict[str, Any]: ...
 def read(
     path: str,
