@@ -178,7 +178,31 @@ impl Regularizer {
         initial: Option<&NormalField>,
         progress: &mut dyn FnMut(&Event),
     ) -> Result<Output, RegularizeError> {
+        self.run_warm(params, initial, None, progress)
+    }
+
+    /// [`Regularizer::run_with`], the first solve's iterations starting from `warm` (one
+    /// position per vertex) when given, instead of from the input: a re-run after a small
+    /// parameter change, from the previous run's positions, takes fewer iterations. The
+    /// minimizer is the same (the energy is convex), so the result matches a cold run's
+    /// within the solver's tolerance. Only the conjugate gradient uses `warm`
+    /// ([`Solver::solve_from`]); the direct solver is exact and the bounded one starts
+    /// inside its boxes. The refinement rounds start from the previous round, as always.
+    pub fn run_warm(
+        &mut self,
+        params: &Params,
+        initial: Option<&NormalField>,
+        warm: Option<&[DVec3]>,
+        progress: &mut dyn FnMut(&Event),
+    ) -> Result<Output, RegularizeError> {
         params.validate()?;
+        if let Some(w) = warm.filter(|w| w.len() != self.surface.num_vertices()) {
+            return Err(RegularizeError::SizeMismatch(format!(
+                "{} start positions for {} vertices",
+                w.len(),
+                self.surface.num_vertices()
+            )));
+        }
         let surface = Arc::clone(&self.surface);
         let stages_total = 1.0 + (params.refine as f64) * 2.0 + 1.0;
         let mut times = StageTimes { surface: self.surface_seconds, ..Default::default() };
@@ -302,10 +326,10 @@ impl Regularizer {
             // Refinement rounds start from the last solution: the minimizer moves little
             // when the normals and targets do, so CG needs fewer iterations to the same
             // tolerance.
-            let (x, info) = if round > 0 {
-                solver.solve_from(&energy, &positions, &mut report)?
-            } else {
-                solver.solve_with(&energy, &mut report)?
+            let (x, info) = match (round, warm) {
+                (0, None) => solver.solve_with(&energy, &mut report)?,
+                (0, Some(w)) => solver.solve_from(&energy, w, &mut report)?,
+                _ => solver.solve_from(&energy, &positions, &mut report)?,
             };
             if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {
                 let h = surface.spacing();
