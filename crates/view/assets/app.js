@@ -242,18 +242,41 @@ async function loadResult(s) {
     s.total_ms !== null ? `last solve on the page: ${(s.total_ms / 1000).toFixed(2)} s` : ''].join('\n');
 }
 
+// The voxel-art smoothness S is another view of the clamping margin (1 - 0.99 S, the
+// library's Params::with_smoothness): the slider and the margin follow each other, and
+// the slider's value is sent (the command line then says --smoothness) once it was moved.
+let smoothnessSet = false;
+function showSmoothness(s) {
+  $('smoothness').value = s; $('smoothness-value').textContent = (+s).toFixed(2);
+  $('smoothness-row').hidden = $('preset').value !== 'voxel-art';
+}
 function setTuning(t) {
   $('preset').value = t.preset; $('estimator').value = t.estimator;
   $('alpha').value = t.alpha; $('beta').value = t.beta; $('gamma').value = t.gamma; $('refine').value = t.refine;
   $('clamped').checked = t.clamp !== null; if (t.clamp !== null) $('clamp').value = t.clamp;
   $('texture-aware').checked = t.texture_aware;
+  smoothnessSet = t.smoothness != null;
+  showSmoothness(smoothnessSet ? t.smoothness : t.clamp !== null ? Math.min(Math.max((1 - t.clamp) / 0.99, 0.05), 1) : 1);
 }
 
 function tuning() {
+  const smoothness = smoothnessSet && $('clamped').checked ? parseFloat($('smoothness').value) : null;
   return { preset: $('preset').value, estimator: $('estimator').value, alpha: parseFloat($('alpha').value),
     beta: parseFloat($('beta').value), gamma: parseFloat($('gamma').value), refine: parseInt($('refine').value) || 0,
-    clamp: $('clamped').checked ? parseFloat($('clamp').value) : null, texture_aware: $('texture-aware').checked };
+    clamp: $('clamped').checked ? parseFloat($('clamp').value) : null, smoothness, texture_aware: $('texture-aware').checked };
 }
+$('smoothness').addEventListener('input', () => {
+  const s = parseFloat($('smoothness').value);
+  smoothnessSet = true;
+  $('clamped').checked = true;
+  $('clamp').value = +(1 - 0.99 * s).toFixed(4);
+  showSmoothness(s);
+});
+for (const id of ['clamp', 'clamped']) $(id).addEventListener('input', () => {
+  smoothnessSet = false;
+  const c = parseFloat($('clamp').value);
+  if (c > 0 && c < 1) showSmoothness(Math.min(Math.max((1 - c) / 0.99, 0.05), 1));
+});
 
 let tuned = -1;
 async function onState(s) {

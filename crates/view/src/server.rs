@@ -329,6 +329,8 @@ impl Viewer {
             "error": s.error,
             "first_frame_ms": s.first_frame_ms,
             "total_ms": s.total_ms,
+            "iterations": s.iterations,
+            "warm": s.warm,
             "summary": s.finished.as_ref().map(|f| f.summary.clone()),
             "has_features": s.finished.as_ref().is_some_and(|f| f.features.is_some()),
             "superseded": s.superseded,

@@ -61,6 +61,10 @@ pub(crate) struct State {
     /// Milliseconds from the job's arrival to its first streamed iterate, and to its end.
     pub(crate) first_frame_ms: Option<f64>,
     pub(crate) total_ms: Option<f64>,
+    /// The last finished run's solver iterations (all its solves), and whether it started
+    /// from the previous result.
+    pub(crate) iterations: Option<usize>,
+    pub(crate) warm: bool,
     pub(crate) finished: Option<Arc<Finished>>,
     /// Runs stopped because a newer job replaced them.
     pub(crate) superseded: u64,
@@ -112,6 +116,9 @@ struct Current {
     loaded: Loaded,
     regularizer: Regularizer,
     regions: voxreg_digisurf::RegionMap,
+    /// The last finished run's positions on this surface: the next run's starting guess
+    /// ([`Regularizer::run_warm`]); `None` on a new surface.
+    last: Option<Vec<DVec3>>,
 }
 
 /// Runs jobs until the channel closes; a panicking job becomes an error on the page.
@@ -165,7 +172,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
             match build(&loaded.volume, &params.regions, &loaded.name) {
                 Ok(regularizer) => {
                     let regions = params.regions.clone();
-                    *current = Some(Current { loaded, regularizer, regions });
+                    *current = Some(Current { loaded, regularizer, regions, last: None });
                     let c = current.as_mut().expect("set above");
                     publish_model(shared, c);
                     if let Some(reply) = reply {
@@ -202,6 +209,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                     Ok(r) => {
                         c.regularizer = r;
                         c.regions = params.regions.clone();
+                        c.last = None;
                         publish_model(shared, c);
                     }
                     Err(message) => {
@@ -257,7 +265,9 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
         s.total_ms = None;
     });
     let mut last: Option<Instant> = None;
-    let result = c.regularizer.run_with(&params, None, &mut |e| {
+    // The same surface: start from the last result (the same minimizer, fewer iterations).
+    let warm = c.last.clone();
+    let result = c.regularizer.run_warm(&params, None, warm.as_deref(), &mut |e| {
         if shared.superseded(job) {
             std::panic::resume_unwind(Box::new(Superseded));
         }
@@ -289,6 +299,8 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
     match result {
         Ok(out) => {
             let finished = Arc::new(finish(&out));
+            let iterations = out.report.solves.iter().map(|s| s.iterations()).sum();
+            c.last = Some(out.positions.to_vec());
             let bytes = Arc::new(f32_bytes(out.positions.iter().flat_map(|p| p.to_array())));
             shared.update(|s| {
                 s.positions = Some(bytes);
@@ -298,6 +310,8 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
                 s.iteration = None;
                 s.busy = false;
                 s.total_ms = Some(ms);
+                s.iterations = Some(iterations);
+                s.warm = warm.is_some();
                 s.finished = Some(finished);
             });
         }
