@@ -178,25 +178,27 @@ impl Regularizer {
         initial: Option<&NormalField>,
         progress: &mut dyn FnMut(&Event),
     ) -> Result<Output, RegularizeError> {
-        self.run_warm(params, initial, None, progress)
+        self.run_warm(params, initial, &[], progress)
     }
 
-    /// [`Regularizer::run_with`], the first solve's iterations starting from `warm` (one
-    /// position per vertex) when given, instead of from the input: a re-run after a small
-    /// parameter change, from the previous run's positions, takes fewer iterations. The
-    /// minimizer is the same (the energy is convex), so the result matches a cold run's
-    /// within the solver's tolerance. Only the conjugate gradient uses `warm`
-    /// ([`Solver::solve_from`]); the direct solver is exact and the bounded one starts
-    /// inside its boxes. The refinement rounds start from the previous round, as always.
+    /// [`Regularizer::run_with`], the iterations of solve round `k` starting from `warm[k]`
+    /// (one position per vertex) where given, instead of from the input (round 0) or the
+    /// previous round's result (the refinement rounds): a re-run after a small parameter
+    /// change, from the previous run's solutions (each round's last iterate,
+    /// [`Event::iterate`]), takes fewer iterations. The minimizers are the same (the
+    /// energy is convex), so the result matches a cold run's within the solver's
+    /// tolerance. Only the conjugate gradient uses the starts ([`Solver::solve_from`]);
+    /// the direct solver is exact and the bounded one starts inside its boxes. Rounds past
+    /// the end of `warm` start as without it.
     pub fn run_warm(
         &mut self,
         params: &Params,
         initial: Option<&NormalField>,
-        warm: Option<&[DVec3]>,
+        warm: &[Vec<DVec3>],
         progress: &mut dyn FnMut(&Event),
     ) -> Result<Output, RegularizeError> {
         params.validate()?;
-        if let Some(w) = warm.filter(|w| w.len() != self.surface.num_vertices()) {
+        if let Some(w) = warm.iter().find(|w| w.len() != self.surface.num_vertices()) {
             return Err(RegularizeError::SizeMismatch(format!(
                 "{} start positions for {} vertices",
                 w.len(),
@@ -326,10 +328,10 @@ impl Regularizer {
             // Refinement rounds start from the last solution: the minimizer moves little
             // when the normals and targets do, so CG needs fewer iterations to the same
             // tolerance.
-            let (x, info) = match (round, warm) {
-                (0, None) => solver.solve_with(&energy, &mut report)?,
-                (0, Some(w)) => solver.solve_from(&energy, w, &mut report)?,
-                _ => solver.solve_from(&energy, &positions, &mut report)?,
+            let (x, info) = match (warm.get(round), round) {
+                (Some(start), _) => solver.solve_from(&energy, start, &mut report)?,
+                (None, 0) => solver.solve_with(&energy, &mut report)?,
+                (None, _) => solver.solve_from(&energy, &positions, &mut report)?,
             };
             if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {
                 let h = surface.spacing();

@@ -5,7 +5,10 @@ import { OrbitControls } from '/three/OrbitControls.js';
 
 const $ = (id) => document.getElementById(id);
 // What the browser test reads.
-const view = (window.voxregView = { frames: 0, modelId: 0, state: null, solvePostedAt: null, solveLatencyMs: null, solveFrames: 0 });
+const view = (window.voxregView = { frames: 0, modelId: 0, state: null, solvePostedAt: null, solveLatencyMs: null, solveFrames: 0, marks: {} });
+// Milliseconds since navigation of the first time each step happened (the browser test prints them).
+const mark = (k) => { if (!(k in view.marks)) view.marks[k] = Math.round(performance.now()); };
+mark('module');
 
 const renderer = new THREE.WebGLRenderer({ canvas: $('canvas'), antialias: true, preserveDrawingBuffer: true });
 renderer.setPixelRatio(window.devicePixelRatio);
@@ -27,6 +30,13 @@ const mesh = new THREE.Mesh(geometry, material);
 const wire = new THREE.LineSegments(new THREE.BufferGeometry(), new THREE.LineBasicMaterial({ color: 0x202020, transparent: true, opacity: 0.5 }));
 const arrows = new THREE.LineSegments(new THREE.BufferGeometry(), new THREE.LineBasicMaterial({ color: 0x1060d0 }));
 scene.add(mesh, wire, arrows);
+// Compile the surface's shaders while the first state and arrays are on their way (with
+// KHR_parallel_shader_compile, off the page's thread): a placeholder triangle with the
+// attributes the surface will have, so the program is the one it draws with.
+if (!location.search.includes('nowarm')) {
+  for (const [name, n] of [['position', 3], ['normal', 3], ['color', 3]]) geometry.setAttribute(name, new THREE.BufferAttribute(new Float32Array(9), n));
+  renderer.compileAsync(mesh, camera, scene).then(() => mark('compiled'));
+}
 
 let model = null; // { quads, faceGroups, faceColors, stair, groups, colors, visible, lo, hi }
 let result = null; // latest positions (Float32Array)
@@ -64,8 +74,12 @@ function showError(message) {
 async function loadModel(s) {
   const id = s.model_id;
   loadingModel = id;
-  const [q, g, c, p] = await Promise.all(['quads', 'face-groups', 'face-colors', 'staircase'].map((n) => bytes('/api/' + n)));
+  const early = window.voxregEarly?.arrays;
+  let arrays = early && early.id === id ? await early.bytes.catch(() => null) : null;
+  if (!arrays || arrays.includes(null)) arrays = await Promise.all(['quads', 'face-groups', 'face-colors', 'staircase'].map((n) => bytes('/api/' + n)));
+  const [q, g, c, p] = arrays;
   if (loadingModel !== id) return;
+  mark('arrays');
   const stair = new Float32Array(p);
   const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
   for (let i = 0; i < stair.length; i++) { lo[i % 3] = Math.min(lo[i % 3], stair[i]); hi[i % 3] = Math.max(hi[i % 3], stair[i]); }
@@ -77,6 +91,7 @@ async function loadModel(s) {
   listGroups();
   frameCamera();
   rebuild();
+  mark('staircase drawn');
 }
 
 function frameCamera() {
@@ -214,6 +229,7 @@ async function fetchPositions(s) {
         await loadResult(want);
       }
       rebuild();
+      mark(want.final ? 'result drawn' : 'iterate drawn');
       if (view.solvePostedAt !== null) {
         // The first frame drawn after a re-solve was posted: its latency, and whether it
         // was an iterate (streamed) or already the final result.
@@ -280,6 +296,7 @@ for (const id of ['clamp', 'clamped']) $(id).addEventListener('input', () => {
 
 let tuned = -1;
 async function onState(s) {
+  mark('state');
   view.state = s;
   const busy = s.busy ? `${s.stage}${s.iteration != null ? ' iteration ' + s.iteration : ''}…` : 'ready';
   $('status').textContent = `${s.name || ''}: ${busy}${s.total_ms != null && !s.busy ? ` (${(s.total_ms / 1000).toFixed(2)} s)` : ''}`;
@@ -300,8 +317,11 @@ async function onState(s) {
   fetchPositions(s);
 }
 
-const events = new EventSource('/api/events');
+// The stream index.html opened; its latest event, if one came while this module loaded.
+const events = window.voxregEarly?.events ?? new EventSource('/api/events');
 events.onmessage = (e) => onState(JSON.parse(e.data)).catch((err) => showError(`the page could not update: ${err}`));
+if (window.voxregEarly?.last) events.onmessage(window.voxregEarly.last);
+mark('module done');
 
 let pending = null;
 async function solve() {
