@@ -20,7 +20,11 @@ fn with_solver(mut p: Params, choice: SolverChoice) -> Params {
 }
 
 /// A run, and each solve round's last iterate (what a viewer keeps for the next run).
-fn run_keeping_iterates(r: &mut Regularizer, params: &Params, warm: &[Vec<DVec3>]) -> (Output, Vec<Vec<DVec3>>) {
+fn run_keeping_iterates(
+    r: &mut Regularizer,
+    params: &Params,
+    warm: &[Vec<DVec3>],
+) -> (Output, Vec<Vec<DVec3>>) {
     let mut rounds: Vec<Vec<DVec3>> = Vec::new();
     let out = r
         .run_warm(params, None, warm, &mut |e| {
@@ -68,8 +72,8 @@ fn a_warm_refined_run_matches_the_cold_one_in_fewer_iterations() {
     // The default pipeline (refinement rounds, re-centring): each round starts from the
     // previous run's solution of that round, and every solve stops within the tolerance
     // of its own minimizer, so the results agree to a few times it.
-    let mut r = Regularizer::from_volume(&digitize(&Sphere { radius: 9.6 }, 1.0), &RegionMap::per_label())
-        .unwrap();
+    let mut r =
+        Regularizer::from_volume(&digitize(&Sphere { radius: 9.6 }, 1.0), &RegionMap::per_label()).unwrap();
     let before = with_solver(Params::default(), SolverChoice::Cg);
     let (_, rounds) = run_keeping_iterates(&mut r, &before, &[]);
     assert_eq!(rounds.len(), before.refine + 1);
@@ -93,7 +97,7 @@ fn the_direct_solver_ignores_the_start_and_a_wrong_length_is_an_error() {
     let p = with_solver(Params::papers(), SolverChoice::Direct);
     let cold = r.run(&p).unwrap();
     let far: Vec<DVec3> = cold.positions.iter().map(|x| *x + DVec3::splat(3.0)).collect();
-    let warm = r.run_warm(&p, None, &[far.clone()], &mut |_| {}).unwrap();
+    let warm = r.run_warm(&p, None, std::slice::from_ref(&far), &mut |_| {}).unwrap();
     assert_eq!(warm.positions.as_slice(), cold.positions.as_slice());
     let short = far[..far.len() - 1].to_vec();
     let err = r.run_warm(&p, None, &[far, short], &mut |_| {}).unwrap_err();

@@ -129,13 +129,28 @@ function ramp(v) { // the CLI's feature ramp: dark red 0, amber 0.5, light grey 
 
 // Positions blended between the staircase and the latest result; flat or smooth normals;
 // only the faces of visible groups.
+// The work arrays, kept while their sizes do not change (a streamed iterate refills them).
+const work = {};
+function scratch(name, n) {
+  if (!work[name] || work[name].length !== n) work[name] = new Float32Array(n);
+  return work[name];
+}
+// `geometry`'s attribute `name` over `array`: refilled in place when it is the same array.
+function attribute(g, name, array) {
+  const a = g.getAttribute(name);
+  if (a && a.array === array) a.needsUpdate = true;
+  else g.setAttribute(name, new THREE.BufferAttribute(array, 3));
+}
+
 function rebuild() {
   if (!model) return;
+  const started = performance.now();
   const t = parseFloat($('blend').value), st = model.stair, n = st.length;
-  const x = new Float32Array(n);
+  const x = scratch('x', n);
   for (let i = 0; i < n; i++) x[i] = st[i] + (result[i] - st[i]) * t;
   const q = model.quads, m = q.length / 4;
-  const fn = new Float32Array(3 * m), vn = new Float32Array(n);
+  const fn = scratch('fn', 3 * m), vn = scratch('vn', n);
+  vn.fill(0);
   for (let f = 0; f < m; f++) {
     const [a, b, c, d] = [q[4 * f], q[4 * f + 1], q[4 * f + 2], q[4 * f + 3]];
     const u = [0, 1, 2].map((k) => x[3 * c + k] - x[3 * a + k]), v = [0, 1, 2].map((k) => x[3 * d + k] - x[3 * b + k]);
@@ -146,7 +161,7 @@ function rebuild() {
   const smooth = $('smooth').checked, showFeatures = $('features').checked && features;
   const drawn = [];
   for (let f = 0; f < m; f++) if (model.visible[model.faceGroups[f]]) drawn.push(f);
-  const pos = new Float32Array(18 * drawn.length), nor = new Float32Array(18 * drawn.length), col = new Float32Array(18 * drawn.length);
+  const pos = scratch('pos', 18 * drawn.length), nor = scratch('nor', 18 * drawn.length), col = scratch('col', 18 * drawn.length);
   const corner = [0, 1, 2, 0, 2, 3];
   drawn.forEach((f, j) => {
     const g = model.faceGroups[f];
@@ -162,9 +177,9 @@ function rebuild() {
       }
     }
   });
-  geometry.setAttribute('position', new THREE.BufferAttribute(pos, 3));
-  geometry.setAttribute('normal', new THREE.BufferAttribute(nor, 3));
-  geometry.setAttribute('color', new THREE.BufferAttribute(col, 3));
+  attribute(geometry, 'position', pos);
+  attribute(geometry, 'normal', nor);
+  attribute(geometry, 'color', col);
   geometry.normalizeNormals();
   geometry.computeBoundingSphere();
   wire.visible = $('wireframe').checked;
@@ -199,7 +214,9 @@ function rebuild() {
     clipPlane.constant = model.lo[axis] + at * (model.hi[axis] - model.lo[axis]);
   }
   for (const o of [mesh, wire, arrows]) o.material.clippingPlanes = clip;
+  const built = performance.now();
   draw();
+  view.lastRebuildMs = { build: Math.round(built - started), draw: Math.round(performance.now() - built) };
 }
 
 function draw() {
@@ -219,8 +236,10 @@ async function fetchPositions(s) {
   try {
     while (frame !== view.state.frame && model && view.state.model_id === model.id) {
       const want = view.state;
+      const asked = performance.now();
       const { r, body } = await get('/api/positions');
       if (!r.ok) break;
+      view.lastFetchMs = Math.round(performance.now() - asked);
       const got = parseInt(r.headers.get('X-Frame'));
       result = new Float32Array(body);
       frame = got;
