@@ -5,8 +5,12 @@
 //   1. the canvas shows the model (pixels other than the background),
 //   2. a parameter change re-solves and a new mesh arrives,
 //   3. the GLB download passes the Khronos validator (tools/gltf-validate),
-//   4. a corrupt dropped file shows the reader's error and the server keeps serving;
-// and saves a screenshot (default docs/figures/view.png). Prints the timings it saw.
+//   4. a corrupt dropped file shows the reader's error and the server keeps serving,
+//   5. the voxel-art smoothness slider re-solves with --smoothness in the command line,
+//   6. on bunny-128 (opened from the page), a parameter change re-solves from the last
+//      result: fewer iterations, and a streamed iterate before the final result;
+// and saves a screenshot (default docs/figures/view.png). Prints the timings it saw, and
+// fails when the first picture takes over FIRST_PICTURE_MS (a stalled request, not noise).
 // With --measure, it only prints the timings (no screenshot).
 import { spawn, execFileSync } from 'node:child_process';
 import { mkdtempSync, rmSync } from 'node:fs';
@@ -25,6 +29,9 @@ const voxreg = resolve(arg('--voxreg', process.env.VOXREG ?? join(root, 'target/
 const input = resolve(root, arg('--input', 'data/chr_army1.vox'));
 const screenshot = measure ? null : resolve(root, arg('--screenshot', 'docs/figures/view.png'));
 const browserPath = process.env.CHROMIUM ?? '/usr/bin/chromium';
+// The target is 1 s (docs/performance.md has the figures); this bound is what a loaded
+// 2-core machine with software WebGL still meets, and what a stalled request (4 s) misses.
+const FIRST_PICTURE_MS = 3000;
 
 function fail(message) {
   console.error(`browser test FAILED: ${message}`);
@@ -80,7 +87,9 @@ try {
   }
   const firstPicture = Date.now() - t0;
   check(pixels > 1000, `the canvas shows no model (${pixels} non-background pixels): ${pageErrors.join('; ')}`);
-  console.log(`first picture: ${firstPicture} ms after opening the page (${pixels} model pixels)`);
+  console.log(`first picture: ${firstPicture} ms after opening the page (${pixels} model pixels); ` +
+    `page steps (ms): ${JSON.stringify(await page.evaluate(() => window.voxregView.marks))}`);
+  check(firstPicture <= FIRST_PICTURE_MS, `the first picture took ${firstPicture} ms (at most ${FIRST_PICTURE_MS})`);
   await page.waitForFunction(() => window.voxregView.state?.final && !window.voxregView.state.busy, null, { timeout: 120000 });
   console.log(`first result: ${Date.now() - t0} ms after opening the page`);
 
@@ -133,6 +142,49 @@ try {
     check(state.name === 'chr_army1.vox' || state.name === input.split('/').pop(), `the surface changed: ${state.name}`);
     check(await drawnPixels() > 1000, 'the model is gone after the error');
   }
+  // 5. The voxel-art smoothness slider (a .vox input): a re-solve with smaller boxes.
+  if ((await page.evaluate(() => window.voxregView.state.tuning.preset)) === 'voxel-art') {
+  check(await page.isVisible('#smoothness'), 'no smoothness slider for a voxel-art input');
+  const framed = await page.evaluate(() => window.voxregView.state.frame);
+  await page.fill('#smoothness', '0.3');
+  await page.dispatchEvent('#smoothness', 'change');
+  await page.waitForFunction((f) => {
+    const s = window.voxregView.state;
+    return s.final && !s.busy && s.frame > f && s.tuning.smoothness === 0.3;
+  }, framed, { timeout: 120000 });
+  const command = await page.inputValue('#command');
+  check(command.includes('--smoothness 0.3') && !command.includes('--clamp'), `the command line: ${command}`);
+  check(await drawnPixels() > 1000, 'the smoothed model is not drawn');
+  console.log(`smoothness 0.3: ${command}`);
+  }
+
+  // 6. bunny-128, opened from the page: a parameter change starts from the last result.
+  const bunny = resolve(root, 'data/bunny-128.vol');
+  const opened = await page.evaluate(() => window.voxregView.modelId);
+  await page.setInputFiles('#open', bunny);
+  await page.waitForFunction((id) => {
+    const v = window.voxregView;
+    return v.modelId > id && v.state.final && !v.state.busy && v.state.name === 'bunny-128.vol';
+  }, opened, { timeout: 120000 });
+  check(!(await page.isVisible('#smoothness')), 'the smoothness slider shows for the default preset');
+  const cold = await page.evaluate(() => window.voxregView.state);
+  const beforeBunny = cold.frame;
+  await page.fill('#gamma', String(cold.tuning.gamma * 1.2));
+  await page.dispatchEvent('#gamma', 'change');
+  await page.waitForFunction((f) => {
+    const v = window.voxregView;
+    return v.solveLatencyMs !== null && v.state.final && !v.state.busy && v.state.frame > f;
+  }, beforeBunny, { timeout: 120000 });
+  const warm = await page.evaluate(() => ({ state: window.voxregView.state, latency: window.voxregView.solveLatencyMs,
+    finalFirst: window.voxregView.firstSolveFrameFinal, frames: window.voxregView.solveFrames }));
+  console.log(`bunny-128: cold ${cold.iterations} iterations in ${cold.total_ms.toFixed(0)} ms; re-solve ${warm.state.iterations} iterations ` +
+    `(warm: ${warm.state.warm}) in ${warm.state.total_ms.toFixed(0)} ms; first frame on the page after ${warm.latency.toFixed(0)} ms ` +
+    `(${warm.finalFirst ? 'the final result' : 'a streamed iterate'}; server: first iterate ${warm.state.first_frame_ms?.toFixed(0)} ms), ${warm.frames} frames`);
+  check(warm.state.warm === true, 'the bunny re-solve did not start from the last result');
+  check(warm.state.iterations < cold.iterations, `the warm re-solve took ${warm.state.iterations} iterations, the cold run ${cold.iterations}`);
+  check(!warm.finalFirst, 'no streamed iterate before the final result');
+  check(await drawnPixels() > 1000, 'the bunny is not drawn');
+
   check(pageErrors.length === 0, `errors on the page: ${pageErrors.join('; ')}`);
   console.log('browser test passed');
 } finally {

@@ -180,7 +180,33 @@ impl Regularizer {
         initial: Option<&NormalField>,
         progress: &mut dyn FnMut(&Event),
     ) -> Result<Output, RegularizeError> {
+        self.run_warm(params, initial, &[], progress)
+    }
+
+    /// [`Regularizer::run_with`], the iterations of solve round `k` starting from `warm[k]`
+    /// (one position per vertex) where given, instead of from the input (round 0) or the
+    /// previous round's result (the refinement rounds): a re-run after a small parameter
+    /// change, from the previous run's solutions (each round's last iterate,
+    /// [`Event::iterate`]), takes fewer iterations. The minimizers are the same (the
+    /// energy is convex), so the result matches a cold run's within the solver's
+    /// tolerance. Only the conjugate gradient uses the starts ([`Solver::solve_from`]);
+    /// the direct solver is exact and the bounded one starts inside its boxes. Rounds past
+    /// the end of `warm` start as without it.
+    pub fn run_warm(
+        &mut self,
+        params: &Params,
+        initial: Option<&NormalField>,
+        warm: &[Vec<DVec3>],
+        progress: &mut dyn FnMut(&Event),
+    ) -> Result<Output, RegularizeError> {
         params.validate()?;
+        if let Some(w) = warm.iter().find(|w| w.len() != self.surface.num_vertices()) {
+            return Err(RegularizeError::SizeMismatch(format!(
+                "{} start positions for {} vertices",
+                w.len(),
+                self.surface.num_vertices()
+            )));
+        }
         let surface = Arc::clone(&self.surface);
         let stages_total = 1.0 + (params.refine as f64) * 2.0 + 1.0;
         let mut times = StageTimes { surface: self.surface_seconds, ..Default::default() };
@@ -304,10 +330,10 @@ impl Regularizer {
             // Refinement rounds start from the last solution: the minimizer moves little
             // when the normals and targets do, so CG needs fewer iterations to the same
             // tolerance.
-            let (x, info) = if round > 0 {
-                solver.solve_from(&energy, &positions, &mut report)?
-            } else {
-                solver.solve_with(&energy, &mut report)?
+            let (x, info) = match (warm.get(round), round) {
+                (Some(start), _) => solver.solve_from(&energy, start, &mut report)?,
+                (None, 0) => solver.solve_with(&energy, &mut report)?,
+                (None, _) => solver.solve_from(&energy, &positions, &mut report)?,
             };
             if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {
                 let h = surface.spacing();

@@ -5,7 +5,10 @@ import { OrbitControls } from '/three/OrbitControls.js';
 
 const $ = (id) => document.getElementById(id);
 // What the browser test reads.
-const view = (window.voxregView = { frames: 0, modelId: 0, state: null, solvePostedAt: null, solveLatencyMs: null, solveFrames: 0 });
+const view = (window.voxregView = { frames: 0, modelId: 0, state: null, solvePostedAt: null, solveLatencyMs: null, solveFrames: 0, marks: {} });
+// Milliseconds since navigation of the first time each step happened (the browser test prints them).
+const mark = (k) => { if (!(k in view.marks)) view.marks[k] = Math.round(performance.now()); };
+mark('module');
 
 const renderer = new THREE.WebGLRenderer({ canvas: $('canvas'), antialias: true, preserveDrawingBuffer: true });
 renderer.setPixelRatio(window.devicePixelRatio);
@@ -27,6 +30,13 @@ const mesh = new THREE.Mesh(geometry, material);
 const wire = new THREE.LineSegments(new THREE.BufferGeometry(), new THREE.LineBasicMaterial({ color: 0x202020, transparent: true, opacity: 0.5 }));
 const arrows = new THREE.LineSegments(new THREE.BufferGeometry(), new THREE.LineBasicMaterial({ color: 0x1060d0 }));
 scene.add(mesh, wire, arrows);
+// Compile the surface's shaders while the first state and arrays are on their way (with
+// KHR_parallel_shader_compile, off the page's thread): a placeholder triangle with the
+// attributes the surface will have, so the program is the one it draws with.
+if (!location.search.includes('nowarm')) {
+  for (const [name, n] of [['position', 3], ['normal', 3], ['color', 3]]) geometry.setAttribute(name, new THREE.BufferAttribute(new Float32Array(9), n));
+  renderer.compileAsync(mesh, camera, scene).then(() => mark('compiled'));
+}
 
 let model = null; // { quads, faceGroups, faceColors, stair, groups, colors, visible, lo, hi }
 let result = null; // latest positions (Float32Array)
@@ -64,8 +74,12 @@ function showError(message) {
 async function loadModel(s) {
   const id = s.model_id;
   loadingModel = id;
-  const [q, g, c, p] = await Promise.all(['quads', 'face-groups', 'face-colors', 'staircase'].map((n) => bytes('/api/' + n)));
+  const early = window.voxregEarly?.arrays;
+  let arrays = early && early.id === id ? await early.bytes.catch(() => null) : null;
+  if (!arrays || arrays.includes(null)) arrays = await Promise.all(['quads', 'face-groups', 'face-colors', 'staircase'].map((n) => bytes('/api/' + n)));
+  const [q, g, c, p] = arrays;
   if (loadingModel !== id) return;
+  mark('arrays');
   const stair = new Float32Array(p);
   const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
   for (let i = 0; i < stair.length; i++) { lo[i % 3] = Math.min(lo[i % 3], stair[i]); hi[i % 3] = Math.max(hi[i % 3], stair[i]); }
@@ -77,6 +91,7 @@ async function loadModel(s) {
   listGroups();
   frameCamera();
   rebuild();
+  mark('staircase drawn');
 }
 
 function frameCamera() {
@@ -114,13 +129,28 @@ function ramp(v) { // the CLI's feature ramp: dark red 0, amber 0.5, light grey 
 
 // Positions blended between the staircase and the latest result; flat or smooth normals;
 // only the faces of visible groups.
+// The work arrays, kept while their sizes do not change (a streamed iterate refills them).
+const work = {};
+function scratch(name, n) {
+  if (!work[name] || work[name].length !== n) work[name] = new Float32Array(n);
+  return work[name];
+}
+// `geometry`'s attribute `name` over `array`: refilled in place when it is the same array.
+function attribute(g, name, array) {
+  const a = g.getAttribute(name);
+  if (a && a.array === array) a.needsUpdate = true;
+  else g.setAttribute(name, new THREE.BufferAttribute(array, 3));
+}
+
 function rebuild() {
   if (!model) return;
+  const started = performance.now();
   const t = parseFloat($('blend').value), st = model.stair, n = st.length;
-  const x = new Float32Array(n);
+  const x = scratch('x', n);
   for (let i = 0; i < n; i++) x[i] = st[i] + (result[i] - st[i]) * t;
   const q = model.quads, m = q.length / 4;
-  const fn = new Float32Array(3 * m), vn = new Float32Array(n);
+  const fn = scratch('fn', 3 * m), vn = scratch('vn', n);
+  vn.fill(0);
   for (let f = 0; f < m; f++) {
     const [a, b, c, d] = [q[4 * f], q[4 * f + 1], q[4 * f + 2], q[4 * f + 3]];
     const u = [0, 1, 2].map((k) => x[3 * c + k] - x[3 * a + k]), v = [0, 1, 2].map((k) => x[3 * d + k] - x[3 * b + k]);
@@ -131,7 +161,7 @@ function rebuild() {
   const smooth = $('smooth').checked, showFeatures = $('features').checked && features;
   const drawn = [];
   for (let f = 0; f < m; f++) if (model.visible[model.faceGroups[f]]) drawn.push(f);
-  const pos = new Float32Array(18 * drawn.length), nor = new Float32Array(18 * drawn.length), col = new Float32Array(18 * drawn.length);
+  const pos = scratch('pos', 18 * drawn.length), nor = scratch('nor', 18 * drawn.length), col = scratch('col', 18 * drawn.length);
   const corner = [0, 1, 2, 0, 2, 3];
   drawn.forEach((f, j) => {
     const g = model.faceGroups[f];
@@ -147,9 +177,9 @@ function rebuild() {
       }
     }
   });
-  geometry.setAttribute('position', new THREE.BufferAttribute(pos, 3));
-  geometry.setAttribute('normal', new THREE.BufferAttribute(nor, 3));
-  geometry.setAttribute('color', new THREE.BufferAttribute(col, 3));
+  attribute(geometry, 'position', pos);
+  attribute(geometry, 'normal', nor);
+  attribute(geometry, 'color', col);
   geometry.normalizeNormals();
   geometry.computeBoundingSphere();
   wire.visible = $('wireframe').checked;
@@ -184,7 +214,9 @@ function rebuild() {
     clipPlane.constant = model.lo[axis] + at * (model.hi[axis] - model.lo[axis]);
   }
   for (const o of [mesh, wire, arrows]) o.material.clippingPlanes = clip;
+  const built = performance.now();
   draw();
+  view.lastRebuildMs = { build: Math.round(built - started), draw: Math.round(performance.now() - built) };
 }
 
 function draw() {
@@ -204,8 +236,10 @@ async function fetchPositions(s) {
   try {
     while (frame !== view.state.frame && model && view.state.model_id === model.id) {
       const want = view.state;
+      const asked = performance.now();
       const { r, body } = await get('/api/positions');
       if (!r.ok) break;
+      view.lastFetchMs = Math.round(performance.now() - asked);
       const got = parseInt(r.headers.get('X-Frame'));
       result = new Float32Array(body);
       frame = got;
@@ -214,6 +248,7 @@ async function fetchPositions(s) {
         await loadResult(want);
       }
       rebuild();
+      mark(want.final ? 'result drawn' : 'iterate drawn');
       if (view.solvePostedAt !== null) {
         // The first frame drawn after a re-solve was posted: its latency, and whether it
         // was an iterate (streamed) or already the final result.
@@ -242,21 +277,45 @@ async function loadResult(s) {
     s.total_ms !== null ? `last solve on the page: ${(s.total_ms / 1000).toFixed(2)} s` : ''].join('\n');
 }
 
+// The voxel-art smoothness S is another view of the clamping margin (1 - 0.99 S, the
+// library's Params::with_smoothness): the slider and the margin follow each other, and
+// the slider's value is sent (the command line then says --smoothness) once it was moved.
+let smoothnessSet = false;
+function showSmoothness(s) {
+  $('smoothness').value = s; $('smoothness-value').textContent = (+s).toFixed(2);
+  $('smoothness-row').hidden = $('preset').value !== 'voxel-art';
+}
 function setTuning(t) {
   $('preset').value = t.preset; $('estimator').value = t.estimator;
   $('alpha').value = t.alpha; $('beta').value = t.beta; $('gamma').value = t.gamma; $('refine').value = t.refine;
   $('clamped').checked = t.clamp !== null; if (t.clamp !== null) $('clamp').value = t.clamp;
   $('texture-aware').checked = t.texture_aware;
+  smoothnessSet = t.smoothness != null;
+  showSmoothness(smoothnessSet ? t.smoothness : t.clamp !== null ? Math.min(Math.max((1 - t.clamp) / 0.99, 0.05), 1) : 1);
 }
 
 function tuning() {
+  const smoothness = smoothnessSet && $('clamped').checked ? parseFloat($('smoothness').value) : null;
   return { preset: $('preset').value, estimator: $('estimator').value, alpha: parseFloat($('alpha').value),
     beta: parseFloat($('beta').value), gamma: parseFloat($('gamma').value), refine: parseInt($('refine').value) || 0,
-    clamp: $('clamped').checked ? parseFloat($('clamp').value) : null, texture_aware: $('texture-aware').checked };
+    clamp: $('clamped').checked ? parseFloat($('clamp').value) : null, smoothness, texture_aware: $('texture-aware').checked };
 }
+$('smoothness').addEventListener('input', () => {
+  const s = parseFloat($('smoothness').value);
+  smoothnessSet = true;
+  $('clamped').checked = true;
+  $('clamp').value = +(1 - 0.99 * s).toFixed(4);
+  showSmoothness(s);
+});
+for (const id of ['clamp', 'clamped']) $(id).addEventListener('input', () => {
+  smoothnessSet = false;
+  const c = parseFloat($('clamp').value);
+  if (c > 0 && c < 1) showSmoothness(Math.min(Math.max((1 - c) / 0.99, 0.05), 1));
+});
 
 let tuned = -1;
 async function onState(s) {
+  mark('state');
   view.state = s;
   const busy = s.busy ? `${s.stage}${s.iteration != null ? ' iteration ' + s.iteration : ''}…` : 'ready';
   $('status').textContent = `${s.name || ''}: ${busy}${s.total_ms != null && !s.busy ? ` (${(s.total_ms / 1000).toFixed(2)} s)` : ''}`;
@@ -277,8 +336,11 @@ async function onState(s) {
   fetchPositions(s);
 }
 
-const events = new EventSource('/api/events');
+// The stream index.html opened; its latest event, if one came while this module loaded.
+const events = window.voxregEarly?.events ?? new EventSource('/api/events');
 events.onmessage = (e) => onState(JSON.parse(e.data)).catch((err) => showError(`the page could not update: ${err}`));
+if (window.voxregEarly?.last) events.onmessage(window.voxregEarly.last);
+mark('module done');
 
 let pending = null;
 async function solve() {

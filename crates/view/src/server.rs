@@ -149,7 +149,7 @@ impl Viewer {
 
     fn answer(&self, mut request: Request) {
         if let Err(why) = self.allowed(&request) {
-            let _ = request.respond(json_response(403, &json!({ "error": why })));
+            respond_whole(request, json_response(403, &json!({ "error": why })));
             return;
         }
         if request.method() == &Method::Get && request.url() == "/api/events" {
@@ -163,7 +163,7 @@ impl Viewer {
                 json_response(500, &json!({ "error": format!("internal error: {}", panic_message(&*panic)) }))
             }
         };
-        let _ = request.respond(response);
+        respond_whole(request, response);
     }
 
     /// Only loopback peers, and only this server's own host names (a page on another
@@ -329,6 +329,8 @@ impl Viewer {
             "error": s.error,
             "first_frame_ms": s.first_frame_ms,
             "total_ms": s.total_ms,
+            "iterations": s.iterations,
+            "warm": s.warm,
             "summary": s.finished.as_ref().map(|f| f.summary.clone()),
             "has_features": s.finished.as_ref().is_some_and(|f| f.features.is_some()),
             "superseded": s.superseded,
@@ -358,11 +360,10 @@ impl Viewer {
     /// change, the latest), until the page goes or the server stops.
     fn events(&self, request: Request) {
         let mut w = request.into_writer();
-        let head = "HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\n\
-                    Connection: close\r\n\r\n";
-        if w.write_all(head.as_bytes()).and_then(|()| w.flush()).is_err() {
-            return;
-        }
+        // The head goes out with the first event, in one write (see `respond_whole`).
+        let mut out = "HTTP/1.1 200 OK\r\nContent-Type: text/event-stream\r\nCache-Control: no-cache\r\n\
+                       Connection: close\r\n\r\n"
+            .to_string();
         let mut sent = u64::MAX;
         loop {
             let version = {
@@ -377,17 +378,45 @@ impl Viewer {
                 }
                 s.version
             };
-            let message = if version == sent {
-                ": keep-alive\n\n".to_string()
+            if version == sent {
+                out.push_str(": keep-alive\n\n");
             } else {
                 sent = version;
-                format!("data: {}\n\n", self.state_json())
-            };
-            if w.write_all(message.as_bytes()).and_then(|()| w.flush()).is_err() {
+                out.push_str(&format!("data: {}\n\n", self.state_json()));
+            }
+            if w.write_all(out.as_bytes()).and_then(|()| w.flush()).is_err() {
                 return;
             }
+            out.clear();
         }
     }
+}
+
+/// Sends `response` as one write, with `Connection: close`.
+///
+/// One write: tiny_http writes the head and the body separately, and a small body written
+/// while the head is unacknowledged waits for the peer's delayed ACK (Nagle's algorithm:
+/// about 40 ms per request on Linux loopback; tiny_http gives no access to the accepted
+/// sockets' `TCP_NODELAY`).
+///
+/// Closed: tiny_http runs each connection as one task of its thread pool for as long as
+/// the connection lives, and its pool can miss a wake-up when connections arrive in a
+/// burst (a page load), leaving a new connection queued until another task ends. With
+/// kept-alive connections that was seconds (the page's first picture waited up to 4 s
+/// for one of its arrays); closed connections end within a request.
+fn respond_whole(request: Request, response: Response<Cursor<Vec<u8>>>) {
+    let mut message = Vec::with_capacity(response.data_length().unwrap_or(0) + 512);
+    let head_only = request.method() == &Method::Head;
+    let version = request.http_version().clone();
+    if response.raw_print(&mut message, version, request.headers(), head_only, None).is_err() {
+        return;
+    }
+    // After the status line (tiny_http's `Response` refuses a `Connection` header).
+    if let Some(end) = message.windows(2).position(|w| w == b"\r\n") {
+        message.splice(end + 2..end + 2, b"Connection: close\r\n".iter().copied());
+    }
+    let mut w = request.into_writer();
+    let _ = w.write_all(&message).and_then(|()| w.flush());
 }
 
 fn header(name: &str, value: &str) -> Header {

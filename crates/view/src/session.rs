@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 use voxreg_digisurf::{LabelVolume, RegionMap};
 use voxreg_io::{Palette, QuadMesh};
-use voxreg_regularize::{Output, Params, Regularizer};
+use voxreg_regularize::{Output, Params, Regularizer, Stage};
 
 use crate::model::{f32_bytes, Model};
 use crate::tuning::Tuning;
@@ -61,6 +61,10 @@ pub(crate) struct State {
     /// Milliseconds from the job's arrival to its first streamed iterate, and to its end.
     pub(crate) first_frame_ms: Option<f64>,
     pub(crate) total_ms: Option<f64>,
+    /// The last finished run's solver iterations (all its solves), and whether its first
+    /// solve started from the previous result (the conjugate gradient only).
+    pub(crate) iterations: Option<usize>,
+    pub(crate) warm: bool,
     pub(crate) finished: Option<Arc<Finished>>,
     /// Runs stopped because a newer job replaced them.
     pub(crate) superseded: u64,
@@ -112,6 +116,10 @@ struct Current {
     loaded: Loaded,
     regularizer: Regularizer,
     regions: voxreg_digisurf::RegionMap,
+    /// The last finished run's solutions on this surface, one per solve round (each
+    /// round's last iterate): the next run's starting guesses ([`Regularizer::run_warm`]);
+    /// empty on a new surface.
+    last: Vec<Vec<DVec3>>,
 }
 
 /// Runs jobs until the channel closes; a panicking job becomes an error on the page.
@@ -165,7 +173,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
             match build(&loaded.volume, &params.regions, &loaded.name) {
                 Ok(regularizer) => {
                     let regions = params.regions.clone();
-                    *current = Some(Current { loaded, regularizer, regions });
+                    *current = Some(Current { loaded, regularizer, regions, last: Vec::new() });
                     let c = current.as_mut().expect("set above");
                     publish_model(shared, c);
                     if let Some(reply) = reply {
@@ -202,6 +210,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                     Ok(r) => {
                         c.regularizer = r;
                         c.regions = params.regions.clone();
+                        c.last.clear();
                         publish_model(shared, c);
                     }
                     Err(message) => {
@@ -243,6 +252,9 @@ fn publish_model(shared: &Shared, c: &Current) {
         s.model = Some(model);
         s.surface = Some(surface);
         s.palette = palette;
+        // The panel shows a surface's parameters once its solve sets them, not the last
+        // input's.
+        s.tuning = None;
         s.finished = None;
         s.error = None;
     });
@@ -257,9 +269,21 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
         s.total_ms = None;
     });
     let mut last: Option<Instant> = None;
-    let result = c.regularizer.run_with(&params, None, &mut |e| {
+    // The same surface: each round starts from the last run's (the same minimizers, fewer
+    // iterations); this run's rounds are kept for the next.
+    let warm = c.last.clone();
+    let mut rounds: Vec<Vec<DVec3>> = Vec::new();
+    let result = c.regularizer.run_warm(&params, None, &warm, &mut |e| {
         if shared.superseded(job) {
             std::panic::resume_unwind(Box::new(Superseded));
+        }
+        if let (Stage::Solve { round }, Some(p), Some(input)) = (e.stage, e.iteration, e.input) {
+            if rounds.len() <= round {
+                rounds.resize(round + 1, Vec::new());
+            }
+            let x = &mut rounds[round];
+            x.clear();
+            x.extend(input.iter().zip(p.displacement).map(|(x, d)| *x + *d));
         }
         let label = e.stage.label(&params);
         let due = last.is_none_or(|l| l.elapsed() >= FRAME_INTERVAL);
@@ -289,6 +313,10 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
     match result {
         Ok(out) => {
             let finished = Arc::new(finish(&out));
+            let iterations = out.report.solves.iter().map(|s| s.iterations()).sum();
+            // Only the conjugate gradient takes the starting guess.
+            let warmed = !warm.is_empty() && out.report.solves.first().is_some_and(|s| s.name() == "cg");
+            c.last = rounds;
             let bytes = Arc::new(f32_bytes(out.positions.iter().flat_map(|p| p.to_array())));
             shared.update(|s| {
                 s.positions = Some(bytes);
@@ -298,6 +326,8 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
                 s.iteration = None;
                 s.busy = false;
                 s.total_ms = Some(ms);
+                s.iterations = Some(iterations);
+                s.warm = warmed;
                 s.finished = Some(finished);
             });
         }

@@ -55,6 +55,11 @@ pub struct Tuning {
     pub refine: usize,
     /// Clamping margin in voxels (`0 < eps < 1`), or `None`: no clamping.
     pub clamp: Option<f64>,
+    /// The voxel-art smoothness `s` in `(0, 1]` (`--smoothness`), or `None`: when given,
+    /// it sets the boxes instead of `clamp` ([`Params::with_smoothness`]: margin `1 -
+    /// 0.99 s`), the slider's view of the same setting. Default: `None`.
+    #[serde(default)]
+    pub smoothness: Option<f64>,
     /// Texture-aware fairness (quad edges follow colour boundaries).
     pub texture_aware: bool,
 }
@@ -81,6 +86,7 @@ impl Tuning {
             gamma: params.energy.gamma,
             refine: params.refine,
             clamp: params.solver.bounded.clamp.filter(|_| clamped),
+            smoothness: None,
             texture_aware: params.texture_aware,
         }
     }
@@ -107,6 +113,11 @@ impl Tuning {
                 format!("clamp: the margin must be in (0, 1) voxel, got {eps}")
             }
         })?;
+        if let Some(s) = self.smoothness {
+            // Boxes need the bounded solver, as a margin from the panel does.
+            p.solver.choice = SolverChoice::Bounded;
+            p = p.with_smoothness(s).map_err(|_| format!("smoothness: must be in (0, 1], got {s}"))?;
+        }
         p.validate().map_err(|e| e.to_string())?;
         Ok(p)
     }
@@ -125,9 +136,10 @@ impl Tuning {
             self.gamma,
             self.refine
         );
-        match self.clamp {
-            Some(eps) => c.push_str(&format!(" --clamp {eps}")),
-            None => c.push_str(" --no-clamp"),
+        match (self.smoothness, self.clamp) {
+            (Some(s), _) => c.push_str(&format!(" --smoothness {s}")),
+            (None, Some(eps)) => c.push_str(&format!(" --clamp {eps}")),
+            (None, None) => c.push_str(" --no-clamp"),
         }
         if self.texture_aware {
             c.push_str(" --texture-aware");
@@ -193,6 +205,37 @@ mod tests {
         assert!(bad(&|t| t.beta = f64::NAN).contains("beta"));
         assert!(bad(&|t| t.clamp = Some(1.5)).contains("(0, 1)"));
         assert!(bad(&|t| t.estimator = "magic".into()).contains("magic"));
+        assert!(bad(&|t| t.smoothness = Some(0.0)).starts_with("smoothness:"));
+        assert!(bad(&|t| t.smoothness = Some(1.5)).contains("(0, 1]"));
+    }
+
+    #[test]
+    fn the_smoothness_sets_the_boxes_as_the_command_line_does() {
+        let base = Params::voxel_art();
+        let mut t = Tuning::of(Preset::VoxelArt, &base);
+        assert_eq!(t.smoothness, None);
+        t.smoothness = Some(0.3);
+        // It wins over the margin field, as --smoothness without --clamp does.
+        t.clamp = None;
+        let p = t.params(Preset::VoxelArt, &base).unwrap();
+        let expected = Params::voxel_art().with_smoothness(0.3).unwrap();
+        assert_eq!(p.solver, expected.solver);
+        assert_eq!(p.solver.bounded.thin_depth, Some(Params::THIN_DEPTH));
+        let line = t.command_line("a.vox", "a.glb");
+        assert!(line.ends_with("--refine 0 --smoothness 0.3"), "{line}");
+        assert!(!line.contains("clamp"), "{line}");
+        // Meaningful on other inputs too: it clamps them.
+        let mut d = Tuning::of(Preset::Default, &Params::default());
+        d.smoothness = Some(0.5);
+        let p = d.params(Preset::Default, &Params::default()).unwrap();
+        assert_eq!(
+            p.solver.bounded.clamp,
+            Params::default().with_smoothness(0.5).unwrap().solver.bounded.clamp
+        );
+        // Pages that predate the field still parse.
+        let mut v = serde_json::to_value(&d).unwrap();
+        v.as_object_mut().unwrap().remove("smoothness");
+        assert_eq!(serde_json::from_value::<Tuning>(v).unwrap().smoothness, None);
     }
 
     #[test]

@@ -273,3 +273,37 @@ fn a_newer_solve_stops_the_running_one() {
     assert_eq!(done["superseded"], 1, "{done}");
     assert_eq!(done["error"], serde_json::Value::Null);
 }
+
+#[test]
+fn a_re_solve_of_the_same_surface_starts_from_the_last_result() {
+    // The iterative solver (the one that takes a starting guess), one solve per run.
+    let volume = LabelVolume::from_fn([25, 25, 25], |[x, y, z]| {
+        let d = |c: usize| c as f64 - 12.0;
+        u32::from(d(x).powi(2) + d(y).powi(2) + d(z).powi(2) <= 100.0)
+    });
+    let mut params = Preset::Papers.params();
+    params.solver.choice = voxreg_regularize::SolverChoice::Cg;
+    let r =
+        start_with(Loaded { name: "ball.vol".into(), volume, palette: None, preset: Preset::Papers, params });
+    let first = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
+    assert_eq!(first["warm"], false, "the first run of a surface is cold");
+    let cold = first["iterations"].as_u64().unwrap();
+    let mut tuning = first["tuning"].clone();
+    tuning["gamma"] = serde_json::json!(0.13);
+    assert_eq!(post(&r, "/api/solve", tuning.to_string().as_bytes()).0, 202);
+    let frame = first["frame"].as_u64().unwrap();
+    let again =
+        wait_for(&r, |s| s["final"] == true && s["busy"] == false && s["frame"].as_u64().unwrap() > frame);
+    assert_eq!(again["warm"], true, "{again}");
+    let warm = again["iterations"].as_u64().unwrap();
+    assert!(warm < cold, "warm {warm} iterations, cold {cold}");
+    // The panel's smoothness reaches the solver (bounded, clamped) and the command line.
+    tuning["smoothness"] = serde_json::json!(0.5);
+    assert_eq!(post(&r, "/api/solve", tuning.to_string().as_bytes()).0, 202);
+    let frame = again["frame"].as_u64().unwrap();
+    let clamped =
+        wait_for(&r, |s| s["final"] == true && s["busy"] == false && s["frame"].as_u64().unwrap() > frame);
+    assert!(clamped["command"].as_str().unwrap().ends_with("--smoothness 0.5"), "{clamped}");
+    let report = json(&get(&r, "/api/report").1);
+    assert_eq!(report["report"]["params"]["solver"]["choice"], "bounded", "{report}");
+}

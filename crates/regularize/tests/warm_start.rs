@@ -1,0 +1,106 @@
+//! Warm starts of the front door (`Regularizer::run_warm`): a re-run from the previous
+//! positions reaches the same minimizer as a cold run, in fewer iterations.
+
+use glam::DVec3;
+use voxreg_digisurf::RegionMap;
+use voxreg_regularize::{Output, Params, RegularizeError, Regularizer, SolverChoice, SolverParams, Stage};
+use voxreg_testkit::{digitize, Sphere, Torus};
+
+fn max_distance(a: &[DVec3], b: &[DVec3]) -> f64 {
+    a.iter().zip(b).map(|(x, y)| (*x - *y).length()).fold(0.0, f64::max)
+}
+
+fn iterations(out: &Output) -> usize {
+    out.report.solves.iter().map(|s| s.iterations()).sum()
+}
+
+fn with_solver(mut p: Params, choice: SolverChoice) -> Params {
+    p.solver = SolverParams { choice, ..p.solver };
+    p
+}
+
+/// A run, and each solve round's last iterate (what a viewer keeps for the next run).
+fn run_keeping_iterates(
+    r: &mut Regularizer,
+    params: &Params,
+    warm: &[Vec<DVec3>],
+) -> (Output, Vec<Vec<DVec3>>) {
+    let mut rounds: Vec<Vec<DVec3>> = Vec::new();
+    let out = r
+        .run_warm(params, None, warm, &mut |e| {
+            if let (Stage::Solve { round }, Some(x)) = (e.stage, e.iterate()) {
+                rounds.resize(round + 1, Vec::new());
+                rounds[round] = x;
+            }
+        })
+        .unwrap();
+    (out, rounds)
+}
+
+fn torus() -> Regularizer {
+    let volume = digitize(&Torus { major: 11.0, minor: 4.3 }, 1.0);
+    Regularizer::from_volume(&volume, &RegionMap::per_label()).unwrap()
+}
+
+#[test]
+fn a_warm_single_solve_reaches_the_cold_minimizer_in_fewer_iterations() {
+    let mut r = torus();
+    let before = with_solver(Params::papers(), SolverChoice::Cg);
+    let previous = r.run(&before).unwrap();
+    // Small changes of each weight: the minimizer moves a little.
+    for change in [|p: &mut Params| p.energy.gamma *= 1.3, |p: &mut Params| p.energy.alpha *= 1.5] {
+        let mut after = before.clone();
+        change(&mut after);
+        let cold = r.run(&after).unwrap();
+        let warm = r.run_warm(&after, None, &[previous.positions.to_vec()], &mut |_| {}).unwrap();
+        let exact = r.run(&with_solver(after.clone(), SolverChoice::Direct)).unwrap();
+        let tol = after.solver.cg.tolerance;
+        // Both within the tolerance of the exact minimizer, so within twice it of each other.
+        assert!(max_distance(&warm.positions, &exact.positions) <= tol, "warm vs exact");
+        assert!(max_distance(&cold.positions, &exact.positions) <= tol, "cold vs exact");
+        assert!(max_distance(&warm.positions, &cold.positions) <= 2.0 * tol);
+        let moved = max_distance(&previous.positions, &exact.positions);
+        assert!(moved > 10.0 * tol, "the change moves the minimizer ({moved} voxel)");
+        let (w, c) = (iterations(&warm), iterations(&cold));
+        assert!(w < c, "warm {w} iterations, cold {c}");
+        assert!(warm.report.solves[0].converged());
+    }
+}
+
+#[test]
+fn a_warm_refined_run_matches_the_cold_one_in_fewer_iterations() {
+    // The default pipeline (refinement rounds, re-centring): each round starts from the
+    // previous run's solution of that round, and every solve stops within the tolerance
+    // of its own minimizer, so the results agree to a few times it.
+    let mut r =
+        Regularizer::from_volume(&digitize(&Sphere { radius: 9.6 }, 1.0), &RegionMap::per_label()).unwrap();
+    let before = with_solver(Params::default(), SolverChoice::Cg);
+    let (_, rounds) = run_keeping_iterates(&mut r, &before, &[]);
+    assert_eq!(rounds.len(), before.refine + 1);
+    let mut after = before.clone();
+    after.energy.gamma *= 1.2;
+    let cold = r.run(&after).unwrap();
+    let (warm, _) = run_keeping_iterates(&mut r, &after, &rounds);
+    let tol = after.solver.cg.tolerance;
+    let d = max_distance(&warm.positions, &cold.positions);
+    assert!(d <= 10.0 * tol, "warm and cold differ by {d} voxel");
+    let (w, c) = (iterations(&warm), iterations(&cold));
+    assert!(w < c, "warm {w} iterations, cold {c}");
+    for (k, (w, c)) in warm.report.solves.iter().zip(&cold.report.solves).enumerate() {
+        assert!(w.converged() && w.iterations() <= c.iterations(), "round {k}: {w:?} vs {c:?}");
+    }
+}
+
+#[test]
+fn the_direct_solver_ignores_the_start_and_a_wrong_length_is_an_error() {
+    let mut r = torus();
+    let p = with_solver(Params::papers(), SolverChoice::Direct);
+    let cold = r.run(&p).unwrap();
+    let far: Vec<DVec3> = cold.positions.iter().map(|x| *x + DVec3::splat(3.0)).collect();
+    let warm = r.run_warm(&p, None, std::slice::from_ref(&far), &mut |_| {}).unwrap();
+    assert_eq!(warm.positions.as_slice(), cold.positions.as_slice());
+    let short = far[..far.len() - 1].to_vec();
+    let err = r.run_warm(&p, None, &[far, short], &mut |_| {}).unwrap_err();
+    assert!(matches!(err, RegularizeError::SizeMismatch(_)), "{err}");
+    assert!(err.to_string().contains("start positions"), "{err}");
+}
