@@ -25,7 +25,9 @@ use crate::{NormalError, NormalEstimator, NormalField};
 /// Orientation follows `previous`. A quad with no such neighbour keeps its normal from
 /// `previous`.
 ///
-/// **Anisotropic voxels.** Where the spacing is not cubic, away from junctions, the
+/// **Anisotropic voxels.** Where the spacing is not cubic, away from junctions and sharp
+/// features (discs where the feature rule stopped at no jump between neighbouring quads),
+/// the
 /// average is a first-order fit evaluated at `c_f` (the mean normal plus the fitted slope
 /// of the quad normals times `c_f` minus the disc's weighted centre), blended in with the
 /// weight [`anisotropic_fit_weight`] of the spacing (0 for cubic voxels, whose normals are
@@ -171,16 +173,21 @@ fn refined(
                 let cf = centres[f];
                 let mut sum = DVec3::ZERO;
                 let mut fit = FirstOrder::default();
-                let mut near_junction = false;
+                let mut near_junction = false; // or a feature
                 let regions_f = surfels[f].regions;
-                queue.push_back((f, 0.0));
+                queue.push_back((f, 0.0, f));
                 seen[f] = true;
                 touched.push(f);
-                while let Some((g, d)) = queue.pop_front() {
+                while let Some((g, d, parent)) = queue.pop_front() {
                     let a = areas[g];
                     let len = lengths[g];
                     let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
                     if dot.abs() < cos_max {
+                        // A sharp feature (a jump past the feature angle from the quad it
+                        // was reached from, not a gradual turn of a curved surface): the
+                        // fit would extrapolate across it.
+                        let from = areas[parent];
+                        near_junction |= a.dot(from).abs() < cos_max * len * lengths[parent];
                         continue; // across a feature: neither counted nor crossed
                     }
                     sum += (1.0 - d / r) * a * dot.signum();
@@ -195,7 +202,7 @@ fn refined(
                             if dk < r {
                                 seen[k] = true;
                                 touched.push(k);
-                                queue.push_back((k, dk));
+                                queue.push_back((k, dk, g));
                             }
                         }
                     }
