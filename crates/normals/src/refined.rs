@@ -27,8 +27,7 @@ use crate::{NormalError, NormalEstimator, NormalField};
 ///
 /// **Anisotropic voxels.** Where the spacing is not cubic, away from junctions and sharp
 /// features (discs where the feature rule stopped at no jump between neighbouring quads),
-/// the
-/// average is a first-order fit evaluated at `c_f` (the mean normal plus the fitted slope
+/// the average is a first-order fit evaluated at `c_f` (the mean normal plus the fitted slope
 /// of the quad normals times `c_f` minus the disc's weighted centre), blended in with the
 /// weight [`anisotropic_fit_weight`] of the spacing (0 for cubic voxels, whose normals are
 /// the plain mean bit for bit). Why: thick slices make quads of very different areas (the
@@ -186,8 +185,10 @@ fn refined(
                         // A sharp feature (a jump past the feature angle from the quad it
                         // was reached from, not a gradual turn of a curved surface): the
                         // fit would extrapolate across it.
-                        let from = areas[parent];
-                        near_junction |= a.dot(from).abs() < cos_max * len * lengths[parent];
+                        if blend > 0.0 {
+                            let from = areas[parent];
+                            near_junction |= a.dot(from).abs() < cos_max * len * lengths[parent];
+                        }
                         continue; // across a feature: neither counted nor crossed
                     }
                     sum += (1.0 - d / r) * a * dot.signum();
