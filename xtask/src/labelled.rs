@@ -26,7 +26,8 @@ static SPHERE_20: Sphere = Sphere { radius: 20.0 };
 static TORUS: Torus = Torus { major: 12.0, minor: 5.0 };
 
 /// The cases: the split ball, the quartered ball and the touching balls at unit spacing,
-/// the sphere of radius 20 at `(1, 1, 2.5)` and `(1, 1, 5)`, a torus at `(1, 1, 2.5)`.
+/// the sphere of radius 20 at `(1, 1, 2.5)`, `(1, 1, 5)` and `(1, 2, 3)`, a torus at
+/// `(1, 1, 2.5)` and `(1, 1, 5)`.
 pub(crate) fn label_cases() -> Vec<LabelCase> {
     let c = |shape: Box<dyn LabelShape>, spacing: DVec3, label: &str| LabelCase {
         shape,
@@ -40,6 +41,8 @@ pub(crate) fn label_cases() -> Vec<LabelCase> {
         c(Box::new(Solid(&SPHERE_20)), DVec3::new(1.0, 1.0, 2.5), "sphere r=20, spacing (1, 1, 2.5)"),
         c(Box::new(Solid(&SPHERE_20)), DVec3::new(1.0, 1.0, 5.0), "sphere r=20, spacing (1, 1, 5)"),
         c(Box::new(Solid(&TORUS)), DVec3::new(1.0, 1.0, 2.5), "torus 12/5, spacing (1, 1, 2.5)"),
+        c(Box::new(Solid(&TORUS)), DVec3::new(1.0, 1.0, 5.0), "torus 12/5, spacing (1, 1, 5)"),
+        c(Box::new(Solid(&SPHERE_20)), DVec3::new(1.0, 2.0, 3.0), "sphere r=20, spacing (1, 2, 3)"),
     ]
 }
 

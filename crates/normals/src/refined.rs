@@ -2,10 +2,11 @@
 
 use std::collections::VecDeque;
 
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 use rayon::prelude::*;
-use voxreg_digisurf::{DigitalSurface, SurfelId};
+use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
 
+use crate::eigen::symmetric_eigen;
 use crate::{NormalError, NormalEstimator, NormalField};
 
 /// Normals re-estimated from positions of the surface's vertices (typically a
@@ -23,6 +24,18 @@ use crate::{NormalError, NormalEstimator, NormalField};
 /// rule: the two sides of a sharp edge, and interfaces meeting at an angle, never mix).
 /// Orientation follows `previous`. A quad with no such neighbour keeps its normal from
 /// `previous`.
+///
+/// **Anisotropic voxels.** Where the spacing is not cubic, away from junctions and sharp
+/// features (discs where the feature rule stopped at no jump between neighbouring quads),
+/// the average is a first-order fit evaluated at `c_f` (the mean normal plus the fitted slope
+/// of the quad normals times `c_f` minus the disc's weighted centre), blended in with the
+/// weight [`anisotropic_fit_weight`] of the spacing (0 for cubic voxels, whose normals are
+/// the plain mean bit for bit). Why: thick slices make quads of very different areas (the
+/// walls of a slice `h_z / h_x` times larger than its steps), so a quad's disc is weighted
+/// unevenly and its mean normal is the normal at a centre up to a voxel away, tilted by
+/// that distance over the radius of curvature; the fit removes that tilt. On cubic voxels
+/// it is not used: there it rounded a cube's edges and fed back through the rounds next to
+/// junctions (docs/design/junctions.md, docs/design/anisotropic-spacing.md).
 ///
 /// Why: after one solve the quads follow the shape far better than the staircase, so
 /// their own normals, averaged over a small disc, are a better field than any estimate
@@ -60,7 +73,8 @@ impl NormalEstimator for Refined<'_> {
                 self.radius
             )));
         }
-        Ok(refined(surface, self.positions, self.previous, self.radius, self.feature_angle_deg))
+        let blend = anisotropic_fit_weight(surface.spacing());
+        Ok(refined(surface, self.positions, self.previous, self.radius, self.feature_angle_deg, blend))
     }
 }
 
@@ -102,12 +116,36 @@ fn interface_adjacency(surface: &DigitalSurface) -> (Vec<u32>, Vec<u32>) {
     (starts, adjacent)
 }
 
+/// The weight of the first-order fit in [`Refined`] on a surface of voxel `spacing`:
+/// `clamp(h_max / h_min - 1, 0, 1)`, 0 for cubic voxels, 1 from a ratio of 2 on, so the
+/// fit comes in continuously with the anisotropy.
+pub fn anisotropic_fit_weight(spacing: DVec3) -> f64 {
+    (spacing.max_element() / spacing.min_element() - 1.0).clamp(0.0, 1.0)
+}
+
+/// Per surfel, whether one of its vertices is on a junction (its quads span three
+/// regions or more).
+fn junction_surfels(surface: &DigitalSurface) -> Vec<bool> {
+    let junction: Vec<bool> = (0..surface.num_vertices())
+        .into_par_iter()
+        .map(|v| {
+            let mut regions =
+                surface.vertex_surfels(VertexId(v as u32)).iter().flat_map(|s| surface.surfel(*s).regions);
+            let first = regions.next();
+            let second = regions.find(|r| Some(*r) != first);
+            second.is_some_and(|b| regions.any(|r| Some(r) != first && r != b))
+        })
+        .collect();
+    surface.surfels().par_iter().map(|s| s.vertices.iter().any(|v| junction[v.index()])).collect()
+}
+
 fn refined(
     surface: &DigitalSurface,
     positions: &[DVec3],
     field: &NormalField,
     radius: f64,
     feature_angle_deg: f64,
+    blend: f64,
 ) -> NormalField {
     let n = surface.num_surfels();
     let h = surface.spacing().max_element();
@@ -121,6 +159,7 @@ fn refined(
         .collect();
     let lengths: Vec<f64> = areas.par_iter().map(|a| a.length()).collect();
     let (starts, adjacent) = interface_adjacency(surface);
+    let at_junction = if blend > 0.0 { junction_surfels(surface) } else { Vec::new() };
     let surfels = surface.surfels();
     let normals = field.as_slice();
     let out: Vec<DVec3> = (0..n)
@@ -132,18 +171,31 @@ fn refined(
                 let nf = normals[f];
                 let cf = centres[f];
                 let mut sum = DVec3::ZERO;
+                let mut fit = FirstOrder::default();
+                let mut near_junction = false; // or a feature
                 let regions_f = surfels[f].regions;
-                queue.push_back((f, 0.0));
+                queue.push_back((f, 0.0, f));
                 seen[f] = true;
                 touched.push(f);
-                while let Some((g, d)) = queue.pop_front() {
+                while let Some((g, d, parent)) = queue.pop_front() {
                     let a = areas[g];
                     let len = lengths[g];
                     let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
                     if dot.abs() < cos_max {
+                        // A sharp feature (a jump past the feature angle from the quad it
+                        // was reached from, not a gradual turn of a curved surface): the
+                        // fit would extrapolate across it.
+                        if blend > 0.0 {
+                            let from = areas[parent];
+                            near_junction |= a.dot(from).abs() < cos_max * len * lengths[parent];
+                        }
                         continue; // across a feature: neither counted nor crossed
                     }
                     sum += (1.0 - d / r) * a * dot.signum();
+                    if blend > 0.0 && len > 0.0 {
+                        near_junction |= at_junction[g];
+                        fit.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf);
+                    }
                     for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
                         let k = k as usize;
                         if !seen[k] && surfels[k].regions.iter().any(|r| regions_f.contains(r)) {
@@ -151,13 +203,17 @@ fn refined(
                             if dk < r {
                                 seen[k] = true;
                                 touched.push(k);
-                                queue.push_back((k, dk));
+                                queue.push_back((k, dk, g));
                             }
                         }
                     }
                 }
                 touched.drain(..).for_each(|k| seen[k] = false);
-                let m = sum.normalize_or_zero();
+                let m = match fit.at_origin(r, blend) {
+                    Some(m) if !near_junction => m,
+                    _ => sum,
+                }
+                .normalize_or_zero();
                 if m == DVec3::ZERO {
                     nf
                 } else {
@@ -169,10 +225,65 @@ fn refined(
     NormalField::new(out)
 }
 
+/// A weighted first-order fit of unit normals `u` against positions `c` (relative to the
+/// quad being estimated): `u(c) ~ u_mean + J (c - c_mean)`, evaluated at `c = 0`.
+#[derive(Default)]
+struct FirstOrder {
+    w: f64,
+    wu: DVec3,
+    wc: DVec3,
+    wcc: DMat3,
+    wuc: DMat3,
+}
+
+impl FirstOrder {
+    fn add(&mut self, w: f64, u: DVec3, c: DVec3) {
+        self.w += w;
+        self.wu += w * u;
+        self.wc += w * c;
+        self.wcc += outer(w * c, c);
+        self.wuc += outer(w * u, c);
+    }
+
+    /// The mean normal plus `blend` times the first-order correction, at the origin (not
+    /// normalized); `None` without weight or with `blend = 0`. The positions' covariance
+    /// is inverted only along directions where the disc spans at least a tenth of the
+    /// radius `r` (a thin strip of quads gives no slope across it), and the correction
+    /// is kept below a quarter of the mean normal.
+    fn at_origin(&self, r: f64, blend: f64) -> Option<DVec3> {
+        if self.w <= 0.0 || blend <= 0.0 {
+            return None;
+        }
+        let mean_u = self.wu / self.w;
+        let mean_c = self.wc / self.w;
+        let ccov = self.wcc / self.w - outer(mean_c, mean_c);
+        let ucov = self.wuc / self.w - outer(mean_u, mean_c);
+        let (values, vectors) = symmetric_eigen(ccov);
+        let floor = (0.1 * r).powi(2);
+        // J (0 - mean_c) = ucov C^+ (-mean_c).
+        let mut solved = DVec3::ZERO;
+        for (l, e) in values.iter().zip(vectors) {
+            if *l > floor {
+                solved += e * (e.dot(-mean_c) / l);
+            }
+        }
+        let mut correction = ucov * solved;
+        let cap = 0.25 * mean_u.length();
+        if correction.length() > cap {
+            correction *= cap / correction.length();
+        }
+        Some(mean_u + blend * correction)
+    }
+}
+
+fn outer(a: DVec3, b: DVec3) -> DMat3 {
+    DMat3::from_cols(a * b.x, a * b.y, a * b.z)
+}
+
 #[cfg(test)]
 mod tests {
     use voxreg_digisurf::SurfelId;
-    use voxreg_testkit::{digitize, Lcg, Sphere, Torus};
+    use voxreg_testkit::{digitize, digitize_labels, Lcg, Shape, Solid, Sphere, Torus};
 
     use super::*;
 
@@ -257,5 +368,58 @@ mod tests {
                 assert!((*a - *b).length() < 1e-13, "{a} vs {b}");
             }
         }
+    }
+
+    /// Mean angle (degrees) between each quad's refined normal and the sphere's normal at
+    /// the quad's centre.
+    fn sphere_error(surface: &DigitalSurface, on_sphere: &[DVec3], field: &NormalField) -> f64 {
+        let errors: Vec<f64> = surface
+            .surfels()
+            .iter()
+            .zip(field.as_slice())
+            .map(|(s, n)| {
+                let c = s.vertices.iter().map(|v| on_sphere[v.index()]).sum::<DVec3>() / 4.0;
+                n.dot(c.normalize()).abs().min(1.0).acos().to_degrees()
+            })
+            .collect();
+        voxreg_testkit::mean_max(&errors).0
+    }
+
+    #[test]
+    fn the_fit_removes_the_tilt_of_uneven_discs_on_thick_slices() {
+        // Quads on the exact sphere, sampled on slices 2.5 and 5 times thicker than the
+        // in-plane spacing: the plain mean is tilted by the uneven quad areas, the fit
+        // is closer to the analytic normal.
+        let sphere = Sphere { radius: 12.0 };
+        for spacing in [DVec3::new(1.0, 1.0, 2.5), DVec3::new(1.0, 1.0, 5.0), DVec3::new(1.0, 2.0, 3.0)] {
+            let surface = DigitalSurface::from_volume(&digitize_labels(&Solid(&sphere), spacing)).unwrap();
+            let on_sphere: Vec<DVec3> = surface.positions().iter().map(|p| sphere.project(*p)).collect();
+            let start = NormalField::new(surface.surfels().iter().map(|s| s.normal()).collect());
+            let [plain, fit] = [0.0, 1.0].map(|blend| {
+                sphere_error(&surface, &on_sphere, &refined(&surface, &on_sphere, &start, 3.0, 90.0, blend))
+            });
+            eprintln!("spacing {spacing}: plain mean {plain:.3} deg, fit {fit:.3} deg");
+            assert!(fit < 0.5 * plain, "spacing {spacing}: plain mean {plain:.3} deg, fit {fit:.3} deg");
+        }
+    }
+
+    #[test]
+    fn cubic_voxels_take_the_plain_mean() {
+        for h in [1.0, 0.3, 2.0] {
+            assert_eq!(anisotropic_fit_weight(DVec3::splat(h)), 0.0);
+        }
+        assert_eq!(anisotropic_fit_weight(DVec3::new(1.0, 1.0, 1.5)), 0.5);
+        assert_eq!(anisotropic_fit_weight(DVec3::new(2.0, 1.0, 5.0)), 1.0);
+        // At unit spacing the estimator is the plain mean, bit for bit.
+        let surface = DigitalSurface::from_volume(&digitize(&Sphere { radius: 5.2 }, 1.0)).unwrap();
+        let mut rng = Lcg::new(11);
+        let positions: Vec<DVec3> =
+            surface.positions().iter().map(|p| *p + 0.2 * rng.vec3(-1.0, 1.0)).collect();
+        let field = NormalField::new(surface.surfels().iter().map(|s| s.normal()).collect());
+        let estimated =
+            Refined { positions: &positions, previous: &field, radius: 3.0, feature_angle_deg: 30.0 }
+                .estimate(&surface)
+                .unwrap();
+        assert_eq!(estimated, refined(&surface, &positions, &field, 3.0, 30.0, 0.0));
     }
 }

@@ -5,9 +5,11 @@
 
 use glam::{DVec2, DVec3};
 use voxreg_digisurf::DigitalSurface;
+use voxreg_normals::{NormalEstimator, Trivial};
 use voxreg_regularize::{Params, Regularizer};
 use voxreg_testkit::{
-    digitize_labels, label_fidelity, LabelFidelity, LabelShape, QuarteredBall, Solid, Sphere, SplitBall,
+    digitize_labels, label_fidelity, Cuboid, LabelFidelity, LabelShape, QuarteredBall, Solid, Sphere,
+    SplitBall, Torus,
 };
 
 fn fidelity(shape: &dyn LabelShape, spacing: DVec3, params: &Params) -> LabelFidelity {
@@ -49,11 +51,58 @@ fn sphere_on_thick_slices() {
     let sphere = Sphere { radius: 20.0 };
     let f = fidelity(&Solid(&sphere), DVec3::new(1.0, 1.0, 5.0), &Params::default());
     eprintln!("sphere at (1, 1, 5): {f:?}");
-    // Far from the in-plane figures (0.375 / 1.197, normals 7.3 degrees): reported, not a target.
-    assert!(f.surface.mean <= 0.45 && f.surface_normals.mean <= 8.5, "{f:?}");
+    // Reported, not a target: 0.106 / 0.332, normals 1.35 degrees (0.375 / 1.197 and
+    // 7.3 degrees before the first-order refinement fit on anisotropic voxels).
+    assert!(f.surface.mean <= 0.12 && f.surface.max <= 0.4 && f.surface_normals.mean <= 1.6, "{f:?}");
     // At (1, 1, 2.5) the normals meet the target (0.6 degrees), the distance does not
     // (0.044 against 0.03).
     let f = fidelity(&Solid(&sphere), DVec3::new(1.0, 1.0, 2.5), &Params::default());
     eprintln!("sphere at (1, 1, 2.5): {f:?}");
     assert!(f.surface_normals.mean <= 0.6 && f.surface.mean <= 0.05, "{f:?}");
+}
+
+#[test]
+fn torus_on_thick_slices() {
+    // Kept aside from tuning, like the sphere at (1, 2, 3) below.
+    let torus = Torus { major: 12.0, minor: 5.0 };
+    let f = fidelity(&Solid(&torus), DVec3::new(1.0, 1.0, 2.5), &Params::default());
+    eprintln!("torus at (1, 1, 2.5): {f:?}");
+    // 0.330 / 0.757, normals 12.4 degrees (0.378 / 0.872 and 14.1 degrees before).
+    assert!(f.surface.mean <= 0.36 && f.surface_normals.mean <= 13.5, "{f:?}");
+    let f = fidelity(&Solid(&torus), DVec3::new(1.0, 1.0, 5.0), &Params::default());
+    eprintln!("torus at (1, 1, 5): {f:?}");
+    // Two slices across the tube: reported only, and worse than before (1.21 / 2.31,
+    // normals 29 degrees, against 1.09 / 2.15 and 26 degrees).
+    assert!(f.surface.mean <= 1.3, "{f:?}");
+}
+
+#[test]
+fn sphere_on_voxels_of_three_sizes() {
+    let sphere = Sphere { radius: 20.0 };
+    let f = fidelity(&Solid(&sphere), DVec3::new(1.0, 2.0, 3.0), &Params::default());
+    eprintln!("sphere at (1, 2, 3): {f:?}");
+    // 0.056 / 0.178, normals 0.73 degrees (0.061 / 0.191, 0.78 degrees before).
+    assert!(f.surface.mean <= 0.06 && f.surface_normals.mean <= 0.8, "{f:?}");
+}
+
+#[test]
+fn refinement_keeps_the_edges_of_a_cube_sharp_on_thick_slices() {
+    // The first-order fit is used on anisotropic voxels only; on a cube it must not round
+    // the edges off (it did on cubic voxels, where it is not used).
+    let cube = Cuboid { half: DVec3::new(6.0, 6.0, 7.5) };
+    let surface =
+        DigitalSurface::from_volume(&digitize_labels(&Solid(&cube), DVec3::new(1.0, 1.0, 2.5))).unwrap();
+    let normals = Trivial.estimate(&surface).unwrap();
+    let out = Regularizer::new(surface.clone()).run_from(&Params::default(), &normals).unwrap();
+    let worst = surface
+        .surfels()
+        .iter()
+        .zip(normals.as_slice())
+        .map(|(s, n)| {
+            let [a, b, c, d] = s.vertices.map(|v| out.positions[v.index()]);
+            (c - a).cross(d - b).normalize().dot(*n).abs().min(1.0).acos().to_degrees()
+        })
+        .fold(0.0, f64::max);
+    eprintln!("cube at (1, 1, 2.5): worst face {worst:.2} degrees");
+    assert!(worst <= 5.0, "{worst}");
 }
