@@ -302,6 +302,10 @@ impl Regularizer {
             // Refinement rounds start from the last solution: the minimizer moves little
             // when the normals and targets do, so CG needs fewer iterations to the same
             // tolerance.
+            // The solves before the last only feed the refinement: a looser tolerance.
+            let last = round == params.refine;
+            let factor = if last { 1.0 } else { params.intermediate_tolerance };
+            solver.set_cg_tolerance(params.solver.cg.tolerance * factor)?;
             let (x, info) = if round > 0 {
                 solver.solve_from(&energy, &positions, &mut report)?
             } else {
