@@ -146,10 +146,12 @@ pub struct Params {
     /// Default: `3`.
     pub refine: usize,
     /// Tolerance of the solves whose result only feeds a refinement round (every solve
-    /// but the last), as a multiple of the iterative solver's tolerance: their positions
-    /// only go into the refined normals and the re-centring, which an error of a hundredth
-    /// of a voxel does not change measurably, while the last solve still stops at the
-    /// tolerance itself. `1` solves every round to the tolerance. Default: `10`.
+    /// but the last), as a multiple of the iterative solver's tolerance; the last solve
+    /// stops at the tolerance itself. Their positions only go into the refined normals
+    /// and the re-centring: at `3` the output stays within the tolerance of the one with
+    /// every round solved to it (`1`), while larger factors save more iterations but let
+    /// a few quads cross the crease and feature thresholds (up to a tenth of a voxel at
+    /// `10` on bunny-128; `docs/design/intermediate-tolerance.md`). Default: `3`.
     pub intermediate_tolerance: f64,
     /// Radius, in voxels, of the disc whose regularized quad normals are averaged into a
     /// refined normal. Default: `3`.
@@ -300,7 +302,7 @@ impl Default for Params {
             normals: NormalsParams::default(),
             energy: Self::ENERGY,
             refine: 3,
-            intermediate_tolerance: 10.0,
+            intermediate_tolerance: 3.0,
             refine_radius: 3.0,
             feature_angle_deg: 30.0,
             preserve_size: true,
