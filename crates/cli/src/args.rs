@@ -335,6 +335,11 @@ pub(crate) struct RegularizeArgs {
     /// voxel art, whose blocky art is not a sampled smooth shape].
     #[arg(long, value_name = "K")]
     pub(crate) refine: Option<usize>,
+    /// The solves before the last refinement round stop at F times --tolerance (their
+    /// positions only feed the refined normals): larger is faster, 1 solves every round
+    /// to the tolerance [default: 3].
+    #[arg(long, value_name = "F")]
+    pub(crate) intermediate_tolerance: Option<f64>,
     /// Do not re-centre the attachment targets between refinement rounds (the papers'
     /// behaviour: thin curved shapes shrink).
     #[arg(long)]
@@ -381,6 +386,12 @@ impl RegularizeArgs {
         }
         if let Some(k) = self.refine {
             p.refine = k;
+        }
+        if let Some(f) = self.intermediate_tolerance {
+            if !(f.is_finite() && f >= 1.0) {
+                anyhow::bail!("--intermediate-tolerance: F must be a finite factor of at least 1, got {f}");
+            }
+            p.intermediate_tolerance = f;
         }
         if self.no_preserve_size {
             p.preserve_size = false;

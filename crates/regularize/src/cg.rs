@@ -118,6 +118,14 @@ impl CgSolver {
         &self.params
     }
 
+    /// Sets the tolerance of the next solves (the refinement loop's intermediate solves
+    /// stop earlier than its last).
+    pub(crate) fn set_tolerance(&mut self, tolerance: f64) -> Result<(), RegularizeError> {
+        check_tolerance(tolerance)?;
+        self.params.tolerance = tolerance;
+        Ok(())
+    }
+
     /// Number of multigrid levels, the surface included (1 without multigrid).
     pub fn levels(&self) -> usize {
         self.setup.levels()

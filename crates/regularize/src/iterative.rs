@@ -52,7 +52,7 @@ pub(crate) struct Setup {
     pub(crate) spacing: f64,
     /// The voxel spacing per axis: the unit of boxes.
     pub(crate) voxel: DVec3,
-    /// Seconds spent on structure (connectivity, hierarchy) so far.
+    /// Seconds spent on structure (connectivity, hierarchy) not yet reported by a solve.
     pub(crate) structure_seconds: f64,
 }
 
@@ -88,10 +88,11 @@ impl Setup {
         })
     }
 
-    /// The seconds of a solve of `prepared` whose iterations took `solve` seconds.
-    pub(crate) fn timings(&self, prepared: &Prepared<'_>, solve: f64) -> SolveTimings {
+    /// The seconds of a solve of `prepared` whose iterations took `solve` seconds; the
+    /// structure's seconds go to the first solve that built it (later ones report `0`).
+    pub(crate) fn timings(&mut self, prepared: &Prepared<'_>, solve: f64) -> SolveTimings {
         SolveTimings {
-            structure: self.structure_seconds,
+            structure: std::mem::take(&mut self.structure_seconds),
             symbolic: 0.0,
             assemble: prepared.assemble_seconds,
             factor: prepared.factor_seconds,

@@ -145,6 +145,14 @@ pub struct Params {
     /// regularized quads ([`voxreg_normals::Refined`]) and the energy solved again.
     /// Default: `3`.
     pub refine: usize,
+    /// Tolerance of the solves whose result only feeds a refinement round (every solve
+    /// but the last), as a multiple of the iterative solver's tolerance; the last solve
+    /// stops at the tolerance itself. Their positions only go into the refined normals
+    /// and the re-centring: at `3` the output stays within the tolerance of the one with
+    /// every round solved to it (`1`), while larger factors save more iterations but let
+    /// a few quads cross the crease and feature thresholds (up to a tenth of a voxel at
+    /// `10` on bunny-128; `docs/design/intermediate-tolerance.md`). Default: `3`.
+    pub intermediate_tolerance: f64,
     /// Radius, in voxels, of the disc whose regularized quad normals are averaged into a
     /// refined normal. Default: `3`.
     pub refine_radius: f64,
@@ -259,6 +267,12 @@ impl Params {
                 self.refine_radius, self.recentre_sigma
             )));
         }
+        if !(self.intermediate_tolerance.is_finite() && self.intermediate_tolerance >= 1.0) {
+            return Err(RegularizeError::InvalidParams(format!(
+                "the intermediate tolerance must be a finite factor of at least 1, got {}",
+                self.intermediate_tolerance
+            )));
+        }
         if !(self.crease_alignment >= 0.0 && self.crease_alignment <= 1.0) {
             return Err(RegularizeError::InvalidParams(format!(
                 "the crease alignment weight must be in [0, 1], got {}",
@@ -288,6 +302,7 @@ impl Default for Params {
             normals: NormalsParams::default(),
             energy: Self::ENERGY,
             refine: 3,
+            intermediate_tolerance: 3.0,
             refine_radius: 3.0,
             feature_angle_deg: 30.0,
             preserve_size: true,
@@ -322,6 +337,8 @@ mod tests {
         assert!(Params::voxel_art().with_smoothness(0.0).is_err());
         assert!(Params::voxel_art().with_smoothness(1.5).is_err());
         let bad = Params { crease_alignment: 2.0, ..Default::default() };
+        assert!(bad.validate().is_err());
+        let bad = Params { intermediate_tolerance: 0.5, ..Default::default() };
         assert!(bad.validate().is_err());
         let bad = Params {
             normals: NormalsParams { radius: Some(-1.0), ..Default::default() },

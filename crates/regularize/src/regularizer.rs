@@ -327,9 +327,13 @@ impl Regularizer {
                     input: Some(&targets),
                 });
             };
-            // Refinement rounds start from the last solution: the minimizer moves little
-            // when the normals and targets do, so CG needs fewer iterations to the same
-            // tolerance.
+            // Refinement rounds start from the last solution (or the round's given start):
+            // the minimizer moves little when the normals and targets do, so CG needs
+            // fewer iterations to the same tolerance. The solves before the last only
+            // feed the refinement: a looser tolerance.
+            let last = round == params.refine;
+            let factor = if last { 1.0 } else { params.intermediate_tolerance };
+            solver.set_cg_tolerance(params.solver.cg.tolerance * factor)?;
             let (x, info) = match (warm.get(round), round) {
                 (Some(start), _) => solver.solve_from(&energy, start, &mut report)?,
                 (None, 0) => solver.solve_with(&energy, &mut report)?,

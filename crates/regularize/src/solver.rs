@@ -222,6 +222,15 @@ impl Solver {
         }
     }
 
+    /// Sets the conjugate gradient's tolerance for the next solves (in voxels); the
+    /// direct solver is exact and the bounded one keeps its own.
+    pub(crate) fn set_cg_tolerance(&mut self, tolerance: f64) -> Result<(), RegularizeError> {
+        match self {
+            Solver::Cg(s) => s.set_tolerance(tolerance),
+            _ => Ok(()),
+        }
+    }
+
     /// Minimizes `energy` (see each solver's `solve`).
     pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
         self.solve_with(energy, &mut |_| {})

@@ -147,3 +147,27 @@ fn clamping_keeps_every_vertex_in_its_box() {
     let half = 0.5 * (1.0 - 0.01) + 1e-12;
     assert!(out.positions.iter().zip(&input).all(|(x, p)| (*x - *p).abs().max_element() <= half));
 }
+
+#[test]
+fn intermediate_solves_stop_early_without_moving_the_output() {
+    // The default factor against every round solved to the tolerance, by CG on both.
+    let h = 0.5;
+    let surface = DigitalSurface::from_volume(&digitize(&Torus { major: 6.0, minor: 2.0 }, h)).unwrap();
+    let solver = SolverParams { choice: voxreg_regularize::SolverChoice::Cg, ..Default::default() };
+    let loose = Params { solver, ..Default::default() };
+    assert!(loose.intermediate_tolerance > 1.0);
+    let tight = Params { intermediate_tolerance: 1.0, ..loose.clone() };
+    let mut r = Regularizer::new(surface);
+    let (a, b) = (r.run(&loose).unwrap(), r.run(&tight).unwrap());
+    let its = |o: &voxreg_regularize::Output| -> Vec<usize> {
+        o.report.solves.iter().map(|s| s.iterations()).collect()
+    };
+    let (ia, ib) = (its(&a), its(&b));
+    let n = ia.len() - 1;
+    assert!(ia[..n].iter().sum::<usize>() < ib[..n].iter().sum::<usize>(), "{ia:?} vs {ib:?}");
+    let last = a.report.solves.last().unwrap();
+    assert!(last.converged() && last.error_estimate().unwrap() <= 1e-3, "{last:?}");
+    let moved = a.positions.iter().zip(b.positions.iter()).map(|(p, q)| p.distance(*q) / h);
+    let max = moved.fold(0.0f64, f64::max);
+    assert!(max <= 2e-3, "the output moved by {max} voxel ({ia:?} vs {ib:?} iterations)");
+}
