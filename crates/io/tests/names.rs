@@ -14,30 +14,9 @@ fn data(name: &str) -> PathBuf {
     Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../data")).join(name)
 }
 
-/// The awkward names of [`write_odd_names`], by label 1 to 7.
-pub(crate) const ODD_NAMES: [&str; 7] =
-    ["Left kidney", "a/b\\c", "肝臓 région", "liver", "liver", "", "../.."];
-
-/// A `.seg.nrrd` (raw `uint8`, 9 x 3 x 3) with labels 1 to 7 in a row along x, named
-/// [`ODD_NAMES`], in background 0.
+/// [`voxreg_testkit::odd_names_seg_nrrd`] written to `path`.
 pub(crate) fn write_odd_names(path: &Path) {
-    let mut text = String::from("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 9 3 3\nencoding: raw\n");
-    for (k, name) in ODD_NAMES.iter().enumerate() {
-        text += &format!(
-            "Segment{k}_Name:={name}\nSegment{k}_LabelValue:={}\nSegment{k}_Layer:=0\nSegment{k}_Color:=0.{k} 0.5 1\n",
-            k + 1
-        );
-    }
-    text.push('\n');
-    let mut bytes = text.into_bytes();
-    for z in 0..3 {
-        for y in 0..3 {
-            for x in 0..9u8 {
-                bytes.push(if y == 1 && z == 1 && (1..=7).contains(&x) { x } else { 0 });
-            }
-        }
-    }
-    std::fs::write(path, bytes).unwrap();
+    std::fs::write(path, voxreg_testkit::odd_names_seg_nrrd()).unwrap();
 }
 
 fn mesh_of(loaded: &LoadedVolume) -> (DigitalSurface, QuadMesh) {

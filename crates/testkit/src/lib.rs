@@ -1,6 +1,6 @@
 //! Dev-only test kit: analytic shapes with known surfaces and normals, their Gauss
-//! digitizations, error metrics, and a deterministic random generator ([`Lcg`]). Shared by
-//! tests, benches and xtask.
+//! digitizations, error metrics, a deterministic random generator ([`Lcg`]) and small
+//! input files written byte by byte. Shared by tests, benches and xtask.
 //!
 //! A shape is an implicit function `f` (inside where `f <= 0`). [`digitize`] makes the
 //! volume whose voxel `p` (integer coordinates) is inside iff `f(h p) <= 0`, with spacing
@@ -22,8 +22,11 @@
 //! assert_eq!(normals.len(), surface.num_surfels());
 //! ```
 
+mod files;
 mod labelled;
 mod rng;
+
+pub use files::{odd_names_seg_nrrd, ODD_NAMES};
 
 pub use labelled::{
     digitize_labels, label_fidelity, vertex_labels, JunctionKind, LabelFidelity, LabelShape, QuarteredBall,

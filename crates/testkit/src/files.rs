@@ -1,0 +1,27 @@
+//! Small input files written byte by byte, for tests of the readers and writers.
+
+/// The awkward label names of [`odd_names_seg_nrrd`], for labels 1 to 7: a space, a
+/// slash and a backslash, non-ASCII letters, a duplicate, nothing, and only dots.
+pub const ODD_NAMES: [&str; 7] = ["Left kidney", "a/b\\c", "肝臓 région", "liver", "liver", "", "../.."];
+
+/// A 3D Slicer `.seg.nrrd` (raw `uint8`, 9 x 3 x 3) with labels 1 to 7 in a row along x,
+/// in background 0, its segments named [`ODD_NAMES`].
+pub fn odd_names_seg_nrrd() -> Vec<u8> {
+    let mut text = String::from("NRRD0004\ntype: uint8\ndimension: 3\nsizes: 9 3 3\nencoding: raw\n");
+    for (k, name) in ODD_NAMES.iter().enumerate() {
+        text += &format!(
+            "Segment{k}_Name:={name}\nSegment{k}_LabelValue:={}\nSegment{k}_Layer:=0\nSegment{k}_Color:=0.{k} 0.5 1\n",
+            k + 1
+        );
+    }
+    text.push('\n');
+    let mut bytes = text.into_bytes();
+    for z in 0..3 {
+        for y in 0..3 {
+            for x in 0..9u8 {
+                bytes.push(if y == 1 && z == 1 && (1..=7).contains(&x) { x } else { 0 });
+            }
+        }
+    }
+    bytes
+}
