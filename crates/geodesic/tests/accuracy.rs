@@ -150,13 +150,14 @@ fn the_proxy_error_shrinks_as_the_grid_refines() {
 /// CPU time of the thread that computes them (what wall time is on an idle core; on a
 /// loaded machine the wall time counts the waits for a core as well), the heat method
 /// within 0.3 s wall once factored (best of 3 each; see docs/performance.md); the heat
-/// distances within 3% of the exact ones. In release builds only (debug builds are far
-/// slower). CPU time also grows when other processes share the cores' caches and memory
-/// bandwidth: 1.2 s idle, 1.3 s at a load average of 12 on the 2-core machine.
-/// `cargo test --release -p voxreg-geodesic --test accuracy bunny_128_speed -- --nocapture`
+/// distances within 3% of the exact ones. Ignored by default: the budgets are the
+/// targets on the reference 2-core machine (1.2 s idle, 1.3 s of CPU at a load average
+/// of 12), not on whatever machine runs the tests; debug builds skip them.
+/// `cargo test --release -p voxreg-geodesic --test accuracy bunny_128_speed -- --ignored --nocapture`
 /// prints the figures (`VOXREG_BUNNY=bunny-64.vol` for a smaller bunny: timings printed,
 /// the budgets, set for bunny-128, not asserted).
 #[test]
+#[ignore]
 fn bunny_128_speed() {
     if cfg!(debug_assertions) {
         eprintln!("bunny_128_speed: timed in release builds only");
