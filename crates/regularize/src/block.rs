@@ -107,23 +107,59 @@ pub fn regularize_block<S: LabelStorage>(
     block: &Block,
     params: &Params,
 ) -> Result<BlockMesh, RegularizeError> {
-    block.validate(sub.dims())?;
-    let mut regularizer = match Regularizer::from_volume(sub, &params.regions) {
-        Ok(r) => r,
-        Err(RegularizeError::Surface(SurfaceError::Empty)) => {
-            return Ok(BlockMesh {
-                vertex_ids: Vec::new(),
-                positions: Vec::new(),
-                owns_vertex: Vec::new(),
-                quads: Vec::new(),
-                labels: Vec::new(),
-                report: None,
-            })
-        }
-        Err(e) => return Err(e),
+    let Some(mut regularizer) = block_regularizer(sub, block, params, CUT_MARGIN)? else {
+        return Ok(BlockMesh {
+            vertex_ids: Vec::new(),
+            positions: Vec::new(),
+            owns_vertex: Vec::new(),
+            quads: Vec::new(),
+            labels: Vec::new(),
+            report: None,
+        });
     };
     let out = regularizer.run(params)?;
     Ok(owned_part(&out.surface, out.positions.as_slice(), block, Some(out.report)))
+}
+
+/// Vertices within this many voxels of a cut side are not measured by the re-centring
+/// (their drift is the cap's, which the whole-volume solve does not have).
+pub(crate) const CUT_MARGIN: usize = 3;
+
+/// The regularizer of a block's sub-volume (`None` without a surface), its cut-side
+/// vertices (within `margin` voxels of a cut side) left out of the re-centring's
+/// measurement.
+pub(crate) fn block_regularizer<S: LabelStorage>(
+    sub: &LabelVolume<S>,
+    block: &Block,
+    params: &Params,
+    margin: usize,
+) -> Result<Option<Regularizer>, RegularizeError> {
+    block.validate(sub.dims())?;
+    let mut regularizer = match Regularizer::from_volume(sub, &params.regions) {
+        Ok(r) => r,
+        Err(RegularizeError::Surface(SurfaceError::Empty)) => return Ok(None),
+        Err(e) => return Err(e),
+    };
+    if margin > 0 {
+        regularizer.untrusted = Some(cut_side_vertices(regularizer.surface(), block, sub.dims(), margin));
+    }
+    Ok(Some(regularizer))
+}
+
+/// Whether each vertex's corner lies within `margin` voxels of one of the sub-volume's
+/// cut sides (the sides inside the whole volume, where the surfaces are capped).
+fn cut_side_vertices(surface: &DigitalSurface, block: &Block, dims: [usize; 3], margin: usize) -> Vec<bool> {
+    let cut_lo = [0, 1, 2].map(|k| block.start[k] > 0);
+    let cut_hi = [0, 1, 2].map(|k| block.start[k] + dims[k] < block.global_dims[k]);
+    (0..surface.num_vertices())
+        .map(|v| {
+            let c = surface.vertex_corner(voxreg_digisurf::VertexId(v as u32));
+            (0..3).any(|k| {
+                let c = c[k] as usize;
+                (cut_lo[k] && c <= margin) || (cut_hi[k] && c + margin >= dims[k])
+            })
+        })
+        .collect()
 }
 
 /// The part of `surface` (with `positions`) that `block` owns.
@@ -176,6 +212,10 @@ fn owned_part(
     }
     mesh
 }
+
+#[cfg(test)]
+#[path = "block_diag.rs"]
+mod diag;
 
 #[cfg(test)]
 mod tests {
@@ -344,6 +384,35 @@ mod tests {
         let worst = deviations.iter().copied().fold(0.0, f64::max);
         let mean = deviations.iter().sum::<f64>() / deviations.len() as f64;
         assert!(worst < 1e-2 && mean < 1e-3, "deviation {mean} mean, {worst} max (voxels)");
+    }
+
+    #[test]
+    fn cut_side_vertices_are_those_near_a_cut_not_near_the_volume_border() {
+        let volume = volume();
+        // The sub-volume [4, 12) x [0, 10) x [0, 9): cut at x = 4 only.
+        let (start, end) = ([4, 0, 0], [12, 10, 9]);
+        let block = Block { global_dims: [12, 10, 9], start, owned: [[6, 12], [0, 10], [0, 9]] };
+        let s = sub(&volume, start, end);
+        let surface = DigitalSurface::from_volume(&s).unwrap();
+        let cut = cut_side_vertices(&surface, &block, s.dims(), 2);
+        for v in 0..surface.num_vertices() {
+            let c = surface.vertex_corner(voxreg_digisurf::VertexId(v as u32));
+            assert_eq!(cut[v], c[0] <= 2, "corner {c:?}");
+        }
+        assert!(cut.iter().any(|&c| c) && cut.iter().any(|&c| !c));
+    }
+
+    #[test]
+    fn a_block_owning_the_whole_volume_is_the_whole_solve() {
+        let volume = volume();
+        let dims = volume.dims();
+        let params = Params::default();
+        let whole = crate::regularize(&volume, &params).unwrap();
+        let block = Block { global_dims: dims, start: [0; 3], owned: dims.map(|n| [0, n]) };
+        let part = regularize_block(&volume, &block, &params).unwrap();
+        let expected = owned_part(&whole.surface, whole.positions.as_slice(), &block, None);
+        assert_eq!(part.vertex_ids, expected.vertex_ids);
+        assert_eq!(part.positions, expected.positions, "bit for bit");
     }
 
     #[test]

@@ -107,6 +107,8 @@ pub struct Regularizer {
     solver: Option<(SolverParams, Solver)>,
     normals: Option<(crate::NormalsParams, crate::params::EstimatedNormals)>,
     trusted: Option<Vec<bool>>,
+    /// Vertices the re-centring must not measure its drift at (a block's cut sides).
+    pub(crate) untrusted: Option<Vec<bool>>,
 }
 
 impl Regularizer {
@@ -118,6 +120,7 @@ impl Regularizer {
             solver: None,
             normals: None,
             trusted: None,
+            untrusted: None,
         }
     }
 
@@ -245,7 +248,11 @@ impl Regularizer {
         let clamps = solver.clamp().is_some();
         let recentre = params.preserve_size && !clamps && params.refine > 0;
         if recentre && self.trusted.is_none() {
-            self.trusted = Some(informative_vertices(&surface));
+            let mut trusted = informative_vertices(&surface);
+            if let Some(untrusted) = &self.untrusted {
+                trusted.iter_mut().zip(untrusted).for_each(|(t, u)| *t &= !*u);
+            }
+            self.trusted = Some(trusted);
         }
         let trusted = if recentre { self.trusted.as_deref().unwrap_or(&[]) } else { &[] };
         let texture = params.texture_aware.then(|| FairnessMask::texture_aware(&surface));
