@@ -101,7 +101,9 @@ impl Block {
 /// Regularizes `sub` (the voxels `block.start ..` of the whole volume, with their halo;
 /// its origin, spacing and background those of the whole volume's part) with `params`,
 /// and returns the quads and vertices `block` owns. Deterministic; a sub-volume without
-/// a surface gives an empty mesh.
+/// a surface gives an empty mesh. The size preservation does not measure its drift within
+/// [`CUT_MARGIN`] voxels of the sub-volume's cut sides, where the surfaces meet the caps
+/// that close them (the whole volume has no such edge).
 pub fn regularize_block<S: LabelStorage>(
     sub: &LabelVolume<S>,
     block: &Block,
@@ -123,7 +125,7 @@ pub fn regularize_block<S: LabelStorage>(
 
 /// Vertices within this many voxels of a cut side are not measured by the re-centring
 /// (their drift is the cap's, which the whole-volume solve does not have).
-pub(crate) const CUT_MARGIN: usize = 3;
+pub const CUT_MARGIN: usize = 3;
 
 /// The regularizer of a block's sub-volume (`None` without a surface), its cut-side
 /// vertices (within `margin` voxels of a cut side) left out of the re-centring's

@@ -82,7 +82,7 @@ mod vecops;
 mod weights;
 
 pub use assemble::{Operator, OperatorPattern};
-pub use block::{lattice_id, regularize_block, Block, BlockMesh, MIN_HALO};
+pub use block::{lattice_id, regularize_block, Block, BlockMesh, CUT_MARGIN, MIN_HALO};
 pub use bounded::{BoundedParams, BoundedSolver};
 pub use cg::{CgParams, CgSolver, StoppingRule};
 pub use direct::DirectSolver;
