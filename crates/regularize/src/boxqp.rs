@@ -504,7 +504,8 @@ fn hold_pushed_out(u: &[DVec3], r: &[DVec3], b: &Boxes, hold: &mut [[Hold; 3]]) 
         |((hold, (u, r)), (lo, hi))| {
             for i in 0..hold.len() {
                 for a in 0..3 {
-                    if hold[i][a] == Hold::Free && place(u[i][a], r[i][a], lo[i][a], hi[i][a]) == Place::Held {
+                    if hold[i][a] == Hold::Free && place(u[i][a], r[i][a], lo[i][a], hi[i][a]) == Place::Held
+                    {
                         hold[i][a] =
                             if hi[i][a] - u[i][a] <= u[i][a] - lo[i][a] { Hold::Hi } else { Hold::Lo };
                     }

@@ -320,7 +320,8 @@ fn apply_edit(shared: &Shared, c: &mut Current, edit: &Edit) -> Result<(), Strin
     }
     let (voxel, label) = if edit.add { (voxels[1], labels[0]) } else { (voxels[0], labels[1]) };
     let dims = c.loaded.volume.dims();
-    let index = (0..3).map(|k| usize::try_from(voxel[k]).ok().filter(|&i| i < dims[k])).collect::<Option<Vec<_>>>();
+    let index =
+        (0..3).map(|k| usize::try_from(voxel[k]).ok().filter(|&i| i < dims[k])).collect::<Option<Vec<_>>>();
     let Some(index) = index else {
         return Err(format!(
             "the voxel ({}, {}, {}) is outside the volume ({} x {} x {}): only voxels inside it can change",

@@ -311,9 +311,18 @@ fn a_re_solve_of_the_same_surface_starts_from_the_last_result() {
 #[test]
 fn a_voxel_art_re_solve_starts_from_the_last_result() {
     // The clamped bounded solver of the voxel-art preset takes the last result too.
-    let volume = LabelVolume::from_fn([14, 12, 10], |[x, y, z]| u32::from((2..12).contains(&x) && y > 1 && z > 1 && y + z < 18));
+    let volume = LabelVolume::from_fn([14, 12, 10], |[x, y, z]| {
+        u32::from((2..12).contains(&x) && y > 1 && z > 1 && y + z < 18)
+    })
+    .with_background(Some(0));
     let params = Preset::VoxelArt.params();
-    let r = start_with(Loaded { name: "art.vox".into(), volume, palette: None, preset: Preset::VoxelArt, params });
+    let r = start_with(Loaded {
+        name: "art.vox".into(),
+        volume,
+        palette: None,
+        preset: Preset::VoxelArt,
+        params,
+    });
     let first = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
     assert_eq!(first["warm"], false);
     let mut tuning = first["tuning"].clone();
@@ -335,14 +344,12 @@ fn a_voxel_edit_rebuilds_the_surface_and_re_solves_from_the_shape_shown() {
     // Face 0 of the ball: remove the voxel behind it.
     let edit = serde_json::json!({ "model": model, "face": 0 });
     assert_eq!(post(&r, "/api/edit", edit.to_string().as_bytes()).0, 202);
-    let edited = wait_for(&r, |s| {
-        s["model_id"].as_u64() > Some(model) && s["final"] == true && s["busy"] == false
-    });
+    let edited =
+        wait_for(&r, |s| s["model_id"].as_u64() > Some(model) && s["final"] == true && s["busy"] == false);
     assert_eq!(edited["edited"], true, "{edited}");
     assert_eq!(edited["error"], serde_json::Value::Null, "{edited}");
     assert_ne!(edited["faces"].as_u64().unwrap(), faces, "{edited}");
     assert!(edited["edit_ms"].as_f64().is_some(), "{edited}");
-    // The same face added back (across the new face where the voxel was): the ball again.
     let model = edited["model_id"].as_u64().unwrap();
     let quads = get(&r, "/api/quads").1;
     assert_eq!(quads.len() as u64, 16 * edited["faces"].as_u64().unwrap());
