@@ -7,8 +7,10 @@
 //   3. the GLB download passes the Khronos validator (tools/gltf-validate),
 //   4. a corrupt dropped file shows the reader's error and the server keeps serving,
 //   5. the voxel-art smoothness slider re-solves with --smoothness in the command line,
-//   6. on bunny-128 (opened from the page), a parameter change re-solves from the last
-//      result: fewer iterations, and a streamed iterate before the final result;
+//   6. a shift+click on the model removes a voxel: a new surface, re-solved,
+//   7. on bunny-128 (opened from the page), a parameter change re-solves from the last
+//      result: fewer iterations, and a streamed iterate before the final result, leaving
+//      the server and drawn within bounds (the best of three changes);
 // and saves a screenshot (default docs/figures/view.png). Prints the timings it saw, and
 // fails when the first picture takes over FIRST_PICTURE_MS (a stalled request, not noise).
 // With --measure, it only prints the timings (no screenshot).
@@ -32,6 +34,12 @@ const browserPath = process.env.CHROMIUM ?? '/usr/bin/chromium';
 // The target is 1 s (docs/performance.md has the figures); this bound is what a loaded
 // 2-core machine with software WebGL still meets, and what a stalled request (4 s) misses.
 const FIRST_PICTURE_MS = 5000;
+// bunny-128, a parameter change: its first streamed iterate leaves the server, and is drawn
+// on the page, within these (the best of three re-solves). The target is 200 ms drawn; these
+// bounds are what a 2-core machine at load 15 to 26 still met (docs/performance.md), and what a
+// re-solve that rebuilt the surface or its solver, or a page that rebuilt its arrays, misses.
+const SERVER_FIRST_ITERATE_MS = 1500;
+const PAGE_FIRST_ITERATE_MS = 3000;
 
 function fail(message) {
   console.error(`browser test FAILED: ${message}`);
@@ -89,7 +97,7 @@ try {
   check(pixels > 1000, `the canvas shows no model (${pixels} non-background pixels): ${pageErrors.join('; ')}`);
   console.log(`first picture: ${firstPicture} ms after opening the page (${pixels} model pixels); ` +
     `page steps (ms): ${JSON.stringify(await page.evaluate(() => window.voxregView.marks))}`);
-  check(firstPicture <= FIRST_PICTURE_MS, `the first picture took ${firstPicture} ms (at most ${FIRST_PICTURE_MS})`);
+  if (!measure) check(firstPicture <= FIRST_PICTURE_MS, `the first picture took ${firstPicture} ms (at most ${FIRST_PICTURE_MS})`);
   await page.waitForFunction(() => window.voxregView.state?.final && !window.voxregView.state.busy, null, { timeout: 120000 });
   console.log(`first result: ${Date.now() - t0} ms after opening the page`);
 
@@ -158,7 +166,31 @@ try {
   console.log(`smoothness 0.3: ${command}`);
   }
 
-  // 6. bunny-128, opened from the page: a parameter change starts from the last result.
+  // 6. A voxel edit: shift+click on the model removes the voxel behind the face clicked;
+  // the server rebuilds the surface and re-solves from the shape shown.
+  {
+    const before = await page.evaluate(() => ({ id: window.voxregView.modelId, faces: window.voxregView.state.faces, edits: window.voxregView.edits }));
+    const box = await page.locator('#canvas').boundingBox();
+    for (const [dx, dy] of [[0, 0], [0, 0.05], [0, -0.05], [0.05, 0], [-0.05, 0], [0, 0.15], [0, -0.15]]) {
+      await page.keyboard.down('Shift');
+      await page.mouse.click(box.x + box.width * (0.5 + dx), box.y + box.height * (0.5 + dy));
+      await page.keyboard.up('Shift');
+      if (await page.evaluate((n) => window.voxregView.edits > n, before.edits)) break;
+    }
+    check(await page.evaluate((n) => window.voxregView.edits > n, before.edits), 'no shift+click hit the model');
+    await page.waitForFunction((id) => {
+      const v = window.voxregView;
+      return v.modelId > id && v.state.edited && v.state.final && !v.state.busy && v.editDrawnMs != null;
+    }, before.id, { timeout: 60000 });
+    const edited = await page.evaluate(() => ({ state: window.voxregView.state, drawn: window.voxregView.editDrawnMs }));
+    check(edited.state.error === null, `the edit failed: ${edited.state.error}`);
+    check(edited.state.faces !== before.faces, `the edit left ${edited.state.faces} faces`);
+    check(await drawnPixels() > 1000, 'the edited model is not drawn');
+    console.log(`voxel edit: ${before.faces} -> ${edited.state.faces} faces; new surface built in ${edited.state.edit_ms?.toFixed(0)} ms, ` +
+      `first frame on the page after ${edited.drawn.toFixed(0)} ms, solved in ${edited.state.total_ms?.toFixed(0)} ms (warm: ${edited.state.warm})`);
+  }
+
+  // 7. bunny-128, opened from the page: a parameter change starts from the last result.
   const bunny = resolve(root, 'data/bunny-128.vol');
   const opened = await page.evaluate(() => window.voxregView.modelId);
   await page.setInputFiles('#open', bunny);
@@ -168,21 +200,43 @@ try {
   }, opened, { timeout: 120000 });
   check(!(await page.isVisible('#smoothness')), 'the smoothness slider shows for the default preset');
   const cold = await page.evaluate(() => window.voxregView.state);
-  const beforeBunny = cold.frame;
-  await page.fill('#gamma', String(cold.tuning.gamma * 1.2));
-  await page.dispatchEvent('#gamma', 'change');
-  await page.waitForFunction((f) => {
-    const v = window.voxregView;
-    return v.solveLatencyMs !== null && v.state.final && !v.state.busy && v.state.frame > f;
-  }, beforeBunny, { timeout: 120000 });
-  const warm = await page.evaluate(() => ({ state: window.voxregView.state, latency: window.voxregView.solveLatencyMs,
-    finalFirst: window.voxregView.firstSolveFrameFinal, frames: window.voxregView.solveFrames }));
-  console.log(`bunny-128: cold ${cold.iterations} iterations in ${cold.total_ms.toFixed(0)} ms; re-solve ${warm.state.iterations} iterations ` +
-    `(warm: ${warm.state.warm}) in ${warm.state.total_ms.toFixed(0)} ms; first frame on the page after ${warm.latency.toFixed(0)} ms ` +
-    `(${warm.finalFirst ? 'the final result' : 'a streamed iterate'}; server: first iterate ${warm.state.first_frame_ms?.toFixed(0)} ms), ${warm.frames} frames`);
+  // Three gamma changes: the first runs to its end (warm, fewer iterations), the next two
+  // only until their first frame is drawn (each replaces the run before it).
+  const resolves = [];
+  let gamma = cold.tuning.gamma;
+  for (let k = 0; k < 3; k++) {
+    const posted = await page.evaluate(() => window.voxregView.solves);
+    gamma *= 1.2;
+    await page.fill('#gamma', String(gamma));
+    await page.dispatchEvent('#gamma', 'change');
+    const whole = k === 0 || k === 2;
+    // Frames of this change's run only (the page counts the frames of its job).
+    await page.waitForFunction(([n, whole]) => {
+      const v = window.voxregView;
+      return v.solves > n && v.solveLatencyMs !== null && (!whole || (v.state.final && !v.state.busy && v.state.job >= v.solveJob));
+    }, [posted, whole], { timeout: 120000 });
+    const r = await page.evaluate(() => ({ state: window.voxregView.state, latency: window.voxregView.solveLatencyMs,
+      finalFirst: window.voxregView.firstSolveFrameFinal, frames: window.voxregView.solveFrames, rebuild: window.voxregView.lastRebuildMs }));
+    // The server's figure of this run: its state once its first iterate left.
+    r.server = r.state.first_frame_ms;
+    resolves.push(r);
+    console.log(`bunny-128 re-solve ${k + 1}: first frame on the page after ${r.latency.toFixed(0)} ms ` +
+      `(${r.finalFirst ? 'the final result' : 'a streamed iterate'}; server: first iterate ${r.server?.toFixed(0)} ms; ` +
+      `last frame built in ${r.rebuild?.build} ms, drawn in ${r.rebuild?.draw} ms)` +
+      (whole ? `; ${r.state.iterations} iterations (warm: ${r.state.warm}) in ${r.state.total_ms.toFixed(0)} ms` : ''));
+  }
+  const warm = resolves[0];
+  console.log(`bunny-128: cold ${cold.iterations} iterations in ${cold.total_ms.toFixed(0)} ms; re-solve ${warm.state.iterations} iterations`);
   check(warm.state.warm === true, 'the bunny re-solve did not start from the last result');
   check(warm.state.iterations < cold.iterations, `the warm re-solve took ${warm.state.iterations} iterations, the cold run ${cold.iterations}`);
-  check(!warm.finalFirst, 'no streamed iterate before the final result');
+  check(resolves.every((r) => !r.finalFirst), 'no streamed iterate before the final result');
+  // The target is 200 ms on the page; software WebGL on a loaded 2-core machine is slower,
+  // so the page's bound is looser. The best of three, against the machine's noise.
+  const best = (f) => Math.min(...resolves.map(f));
+  check(best((r) => r.server) <= SERVER_FIRST_ITERATE_MS,
+    `the first iterate left the server after ${best((r) => r.server).toFixed(0)} ms at best (at most ${SERVER_FIRST_ITERATE_MS})`);
+  check(best((r) => r.latency) <= PAGE_FIRST_ITERATE_MS,
+    `the first iterate was drawn after ${best((r) => r.latency).toFixed(0)} ms at best (at most ${PAGE_FIRST_ITERATE_MS})`);
   check(await drawnPixels() > 1000, 'the bunny is not drawn');
 
   check(pageErrors.length === 0, `errors on the page: ${pageErrors.join('; ')}`);

@@ -156,6 +156,39 @@ impl BoundedSolver {
         energy: &Energy<'_>,
         progress: &mut dyn FnMut(&Progress),
     ) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
+        self.run(energy, None, progress)
+    }
+
+    /// [`BoundedSolver::solve_with`], iterating from `start` (one position per vertex)
+    /// projected into the boxes: a re-solve after a small change of the weights or the
+    /// boxes, from the previous solution, finds the same minimizer (the problem is convex)
+    /// with fewer operator products. When clamping with [`BoundedParams::conjugate`], the
+    /// active-set rounds start from it (its coordinates on a bound that the gradient
+    /// pushes outwards held), instead of from the unconstrained minimizer, which is not
+    /// computed; a start whose projection has a higher energy than the input is dropped
+    /// for the input.
+    pub fn solve_from(
+        &mut self,
+        energy: &Energy<'_>,
+        start: &[DVec3],
+        progress: &mut dyn FnMut(&Progress),
+    ) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
+        if start.len() != energy.input().len() {
+            return Err(RegularizeError::SizeMismatch(format!(
+                "{} start positions for {} vertices",
+                start.len(),
+                energy.input().len()
+            )));
+        }
+        self.run(energy, Some(start), progress)
+    }
+
+    fn run(
+        &mut self,
+        energy: &Energy<'_>,
+        start: Option<&[DVec3]>,
+        progress: &mut dyn FnMut(&Progress),
+    ) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
         let mut prepared = self.setup.prepare(energy)?;
         let stencil = &self.setup.stencil;
         let n = stencil.len();
@@ -183,8 +216,26 @@ impl BoundedSolver {
         s.energy = problem.energy0;
         s.applications = 1;
         s.estimate = f64::INFINITY;
+        if let Some(start) = start {
+            // The displacement of the start, inside the boxes; kept where it lowers the
+            // energy below the input's.
+            s.u.par_iter_mut().zip(input.par_iter().zip(start)).for_each(|(u, (p, x))| *u = *x - *p);
+            if let Some(w) = half {
+                w.project(&mut s.u);
+            }
+            let x: Vec<DVec3> = input.par_iter().zip(&s.u).map(|(p, u)| *p + *u).collect();
+            let e = energy.terms(&x).total;
+            if e <= s.energy && e.is_finite() {
+                s.energy = e;
+                stencil.residual(&prepared.coef, &s.u, &rhs, &mut s.r, &mut tmp);
+                s.applications += 1;
+            } else {
+                s.u.iter_mut().for_each(|d| *d = DVec3::ZERO);
+            }
+        }
+        let warm = start.is_some() && s.u.iter().any(|d| *d != DVec3::ZERO);
         match (half, self.params.conjugate) {
-            (Some(w), true) => self.mprgp(energy, &problem, &mut prepared, w, &mut s, progress),
+            (Some(w), true) => self.mprgp(energy, &problem, &mut prepared, w, warm, &mut s, progress),
             _ => self.projected_descent(&problem, &mut prepared, half, &mut s, progress),
         }
         let (r0, alpha_min) = (problem.r0, problem.alpha_min);
@@ -232,19 +283,28 @@ impl BoundedSolver {
     /// iteration without bounds, i.e. PCG) improved by the active-set rounds
     /// ([`BoundedParams::active_set_rounds`]) and projected into the boxes when that lowers
     /// the energy, so that it starts with nearly the right set of clamped coordinates.
+    /// With `warm`, `s` holds a feasible start (with its residual and energy) that replaces
+    /// the unconstrained minimizer.
+    #[allow(clippy::too_many_arguments)]
     fn mprgp(
         &self,
         energy: &Energy<'_>,
         problem: &BoxProblem<'_>,
         prepared: &mut Prepared<'_>,
         w: &Boxes,
+        warm: bool,
         s: &mut Iterate,
         progress: &mut dyn FnMut(&Progress),
     ) {
         let input = energy.input();
-        let unbounded = Boxes::unbounded(s.u.len());
-        let free = minimize_in_boxes(problem, prepared, &unbounded, &mut s.u, &mut s.r, &mut |_| {});
-        s.applications += free.applications;
+        if !warm {
+            let unbounded = Boxes::unbounded(s.u.len());
+            let free = minimize_in_boxes(problem, prepared, &unbounded, &mut s.u, &mut s.r, &mut |_| {});
+            s.applications += free.applications;
+        }
+        // What MPRGP starts from if the rounds' projected result is worse: the warm start,
+        // or the input.
+        let fallback = warm.then(|| (s.u.clone(), s.energy));
         let rounds = self.params.active_set_rounds;
         if rounds > 0 {
             let st = active_set(problem, prepared, w, rounds, &mut s.u, &mut s.r);
@@ -260,6 +320,9 @@ impl BoundedSolver {
         let start = energy.terms(&input.iter().zip(&s.u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
         if start <= s.energy {
             s.energy = start;
+        } else if let Some((u, e)) = fallback {
+            s.u = u;
+            s.energy = e;
         } else {
             // The projection can cost more than it gained: start from the input.
             s.u.iter_mut().for_each(|d| *d = DVec3::ZERO);

@@ -406,8 +406,11 @@ pub(crate) fn active_set(
     let (mut z, mut p, mut q, mut t) = (zero(), zero(), zero(), zero());
     let mut hold = vec![[Hold::Free; 3]; n];
     let mut stats = ActiveSetStats { iterations: 0, applications: 0, rounds: 0, settled: false };
-    // The first holds: the coordinates the unconstrained minimizer puts outside.
+    // The first holds: the coordinates the start puts outside (the unconstrained
+    // minimizer), or on a bound with the gradient pushing them out (a warm start inside
+    // the boxes).
     update_holds(u, r, w, &mut hold);
+    hold_pushed_out(u, r, w, &mut hold);
     // Rounds whose holds still change need no accurate face solve: they stop at
     // `LOOSE` times the tolerance, until one changes nothing; then one round at the
     // tolerance, warm, makes it exact.
@@ -493,6 +496,23 @@ fn update_holds(u: &[DVec3], r: &[DVec3], b: &Boxes, hold: &mut [[Hold; 3]]) -> 
             changes
         })
         .sum()
+}
+
+/// Holds the free coordinates that sit on a bound with `r` pointing out of the interval.
+fn hold_pushed_out(u: &[DVec3], r: &[DVec3], b: &Boxes, hold: &mut [[Hold; 3]]) {
+    hold.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK).zip(r.par_chunks(CHUNK))).zip(b.chunks()).for_each(
+        |((hold, (u, r)), (lo, hi))| {
+            for i in 0..hold.len() {
+                for a in 0..3 {
+                    if hold[i][a] == Hold::Free && place(u[i][a], r[i][a], lo[i][a], hi[i][a]) == Place::Held
+                    {
+                        hold[i][a] =
+                            if hi[i][a] - u[i][a] <= u[i][a] - lo[i][a] { Hold::Hi } else { Hold::Lo };
+                    }
+                }
+            }
+        },
+    );
 }
 
 /// `face` = 1 on the free coordinates, 0 on the held ones.

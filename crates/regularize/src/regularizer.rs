@@ -192,9 +192,10 @@ impl Regularizer {
     /// change, from the previous run's solutions (each round's last iterate,
     /// [`Event::iterate`]), takes fewer iterations. The minimizers are the same (the
     /// energy is convex), so the result matches a cold run's within the solver's
-    /// tolerance. Only the conjugate gradient uses the starts ([`Solver::solve_from`]);
-    /// the direct solver is exact and the bounded one starts inside its boxes. Rounds past
-    /// the end of `warm` start as without it.
+    /// tolerance. The iterative solvers use the starts ([`Solver::solve_from`]; the
+    /// bounded one projects them into its boxes, which may have changed); the direct
+    /// solver is exact and ignores them. Rounds past the end of `warm` start as without
+    /// it.
     pub fn run_warm(
         &mut self,
         params: &Params,
@@ -341,10 +342,13 @@ impl Regularizer {
             let last = round == params.refine;
             let factor = if last { 1.0 } else { params.intermediate_tolerance };
             solver.set_cg_tolerance(params.solver.cg.tolerance * factor)?;
-            let (x, info) = match (warm.get(round), round) {
-                (Some(start), _) => solver.solve_from(&energy, start, &mut report)?,
-                (None, 0) => solver.solve_with(&energy, &mut report)?,
-                (None, _) => solver.solve_from(&energy, &positions, &mut report)?,
+            // The bounded solver's refinement rounds start as its first does (a cold run's
+            // results stay those its measurements describe); given starts it takes.
+            let chained = round > 0 && !matches!(solver, Solver::Bounded(_));
+            let (x, info) = match warm.get(round) {
+                Some(start) => solver.solve_from(&energy, start, &mut report)?,
+                None if chained => solver.solve_from(&energy, &positions, &mut report)?,
+                None => solver.solve_with(&energy, &mut report)?,
             };
             if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {
                 let h = surface.spacing();

@@ -250,9 +250,9 @@ impl Solver {
         }
     }
 
-    /// [`Solver::solve_with`], the conjugate gradient iterating from `start` (one
-    /// position per vertex; see [`CgSolver::solve_from`]). The direct and the bounded
-    /// solvers ignore `start`: the first is exact, the second starts inside its boxes.
+    /// [`Solver::solve_with`], the iterative solvers starting from `start` (one position
+    /// per vertex; see [`CgSolver::solve_from`], and [`BoundedSolver::solve_from`], which
+    /// projects it into its boxes). The direct solver is exact and ignores `start`.
     pub fn solve_from(
         &mut self,
         energy: &Energy<'_>,
@@ -261,7 +261,10 @@ impl Solver {
     ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
         match self {
             Solver::Cg(s) => s.solve_from(energy, start, progress).map(|(x, i)| (x, SolveInfo::Cg(i))),
-            _ => self.solve_with(energy, progress),
+            Solver::Bounded(s) => {
+                s.solve_from(energy, start, progress).map(|(x, i)| (x, SolveInfo::Bounded(i)))
+            }
+            Solver::Direct(_) => self.solve_with(energy, progress),
         }
     }
 }

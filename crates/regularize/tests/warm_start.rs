@@ -3,7 +3,9 @@
 
 use glam::DVec3;
 use voxreg_digisurf::RegionMap;
-use voxreg_regularize::{Output, Params, RegularizeError, Regularizer, SolverChoice, SolverParams, Stage};
+use voxreg_regularize::{
+    Output, Params, RegularizeError, Regularizer, SolveInfo, SolverChoice, SolverParams, Stage,
+};
 use voxreg_testkit::{digitize, Sphere, Torus};
 
 fn max_distance(a: &[DVec3], b: &[DVec3]) -> f64 {
@@ -103,4 +105,59 @@ fn the_direct_solver_ignores_the_start_and_a_wrong_length_is_an_error() {
     let err = r.run_warm(&p, None, &[far, short], &mut |_| {}).unwrap_err();
     assert!(matches!(err, RegularizeError::SizeMismatch(_)), "{err}");
     assert!(err.to_string().contains("start positions"), "{err}");
+}
+
+fn products(out: &Output) -> usize {
+    out.report
+        .solves
+        .iter()
+        .map(|s| match s {
+            SolveInfo::Bounded(b) => b.operator_applications,
+            other => panic!("not the bounded solver: {}", other.name()),
+        })
+        .sum()
+}
+
+#[test]
+fn a_warm_clamped_solve_reaches_the_cold_minimizer_with_fewer_operator_products() {
+    // The voxel-art preset (clamped, bounded solver) on a torus, then small changes of a
+    // weight and of the boxes: each re-solve starts from the previous run's solution
+    // projected into its boxes.
+    let mut r = torus();
+    let before = Params::voxel_art();
+    let (first, rounds) = run_keeping_iterates(&mut r, &before, &[]);
+    assert!(first.report.solves[0].name() == "bounded" && first.report.solves[0].converged());
+    let input = r.surface().positions().clone();
+    let changes: [fn(Params) -> Params; 3] = [
+        |mut p| {
+            p.energy.gamma *= 1.3;
+            p
+        },
+        |mut p| {
+            p.energy.alpha *= 1.5;
+            p
+        },
+        |p| p.with_smoothness(0.8).unwrap(),
+    ];
+    for (k, change) in changes.into_iter().enumerate() {
+        let after = change(before.clone());
+        let cold = r.run(&after).unwrap();
+        let (warm, _) = run_keeping_iterates(&mut r, &after, &rounds);
+        assert!(warm.report.solves[0].converged() && cold.report.solves[0].converged(), "change {k}");
+        // Both stop by the tolerance's estimate rule on the same convex problem.
+        let tol = after.solver.bounded.tolerance;
+        let d = max_distance(&warm.positions, &cold.positions);
+        assert!(d <= 10.0 * tol, "change {k}: warm and cold differ by {d} voxel");
+        let (ew, ec) = (warm.report.energy.after.total, cold.report.energy.after.total);
+        assert!((ew - ec).abs() <= 1e-4 * ec.abs(), "change {k}: energies {ew} warm, {ec} cold");
+        let moved = max_distance(&first.positions, &cold.positions);
+        assert!(moved > 10.0 * tol, "change {k}: the change moves the minimizer ({moved} voxel)");
+        // Inside the new boxes (the warm start was projected into them).
+        let half = 0.5 * (1.0 - after.solver.bounded.clamp.unwrap()) + 1e-9;
+        for (x, p) in warm.positions.iter().zip(input.iter()) {
+            assert!((*x - *p).abs().max_element() <= half, "change {k}: {x} outside the box of {p}");
+        }
+        let (w, c) = (products(&warm), products(&cold));
+        assert!(w < c, "change {k}: warm {w} operator products, cold {c}");
+    }
 }

@@ -5,7 +5,7 @@ import { OrbitControls } from '/three/OrbitControls.js';
 
 const $ = (id) => document.getElementById(id);
 // What the browser test reads.
-const view = (window.voxregView = { frames: 0, modelId: 0, state: null, solvePostedAt: null, solveLatencyMs: null, solveFrames: 0, marks: {} });
+const view = (window.voxregView = { frames: 0, modelId: 0, state: null, solvePostedAt: null, solveLatencyMs: null, solveFrames: 0, marks: {}, edits: 0, solves: 0, solveJob: null });
 // Milliseconds since navigation of the first time each step happened (the browser test prints them).
 const mark = (k) => { if (!(k in view.marks)) view.marks[k] = Math.round(performance.now()); };
 mark('module');
@@ -83,13 +83,23 @@ async function loadModel(s) {
   const stair = new Float32Array(p);
   const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
   for (let i = 0; i < stair.length; i++) { lo[i % 3] = Math.min(lo[i % 3], stair[i]); hi[i % 3] = Math.max(hi[i % 3], stair[i]); }
+  // A voxel edit of the surface shown keeps the view: the camera, and the groups' settings
+  // where the groups are the same.
+  const previous = s.edited && model && model.groups.map((x) => x.name).join('\n') === s.groups.map((x) => x.name).join('\n') ? model : null;
   model = { id, quads: new Uint32Array(q), faceGroups: new Uint32Array(g), faceColors: new Uint8Array(c), stair, lo, hi,
     groups: s.groups, colors: s.groups.map((x) => x.color.slice()), visible: s.groups.map(() => true), custom: s.groups.map(() => false) };
+  if (previous) Object.assign(model, { colors: previous.colors, visible: previous.visible, custom: previous.custom });
   result = stair; normals = null; features = null;
+  if (s.edited) {
+    // Drawn first as the shape shown before the edit (the server maps it onto the new surface).
+    const { r, body } = await get('/api/positions');
+    if (loadingModel !== id) return;
+    if (r.ok && body.byteLength === p.byteLength) result = new Float32Array(body);
+  }
   view.modelId = id;
   $('name').textContent = s.name;
   listGroups();
-  frameCamera();
+  if (!s.edited) frameCamera();
   rebuild();
   mark('staircase drawn');
 }
@@ -111,8 +121,9 @@ function listGroups() {
   model.groups.forEach((g, i) => {
     const li = document.createElement('li');
     const vis = Object.assign(document.createElement('input'), { type: 'checkbox', checked: true });
+    vis.checked = model.visible[i];
     vis.onchange = () => { model.visible[i] = vis.checked; rebuild(); };
-    const hex = '#' + g.color.map((x) => x.toString(16).padStart(2, '0')).join('');
+    const hex = '#' + model.colors[i].map((x) => x.toString(16).padStart(2, '0')).join('');
     const col = Object.assign(document.createElement('input'), { type: 'color', value: hex });
     col.oninput = () => { const v = parseInt(col.value.slice(1), 16); model.colors[i] = [v >> 16, (v >> 8) & 255, v & 255]; model.custom[i] = true; rebuild(); };
     li.append(vis, col, `${g.name} (${g.faces})`);
@@ -127,75 +138,134 @@ function ramp(v) { // the CLI's feature ramp: dark red 0, amber 0.5, light grey 
   return u.map((x, i) => x + (w[i] - x) * s);
 }
 
-// Positions blended between the staircase and the latest result; flat or smooth normals;
-// only the faces of visible groups.
-// The work arrays, kept while their sizes do not change (a streamed iterate refills them).
+// The drawn geometry is indexed: one vertex per (surface vertex, face colour) of the visible
+// faces, two triangles per quad. Its layout (which vertices, the index, the colours) changes
+// with the visible groups and the colours; a streamed iterate refills only the positions and
+// the normals, in place. Flat shading is the material's (per-triangle normals in the shader).
+let layout = null; // { src: Uint32Array (drawn vertex -> surface vertex), faces: Uint32Array (drawn quads) }
 const work = {};
 function scratch(name, n) {
   if (!work[name] || work[name].length !== n) work[name] = new Float32Array(n);
   return work[name];
 }
-// `geometry`'s attribute `name` over `array`: refilled in place when it is the same array.
-function attribute(g, name, array) {
-  const a = g.getAttribute(name);
-  if (a && a.array === array) a.needsUpdate = true;
-  else g.setAttribute(name, new THREE.BufferAttribute(array, 3));
+
+// A new layout for the visible faces and the current colours.
+function buildLayout() {
+  const q = model.quads, m = q.length / 4, fg = model.faceGroups, fc = model.faceColors;
+  const showFeatures = $('features').checked && features;
+  let drawn = 0;
+  for (let f = 0; f < m; f++) if (model.visible[fg[f]]) drawn++;
+  const faces = new Uint32Array(drawn);
+  for (let f = 0, j = 0; f < m; f++) if (model.visible[fg[f]]) faces[j++] = f;
+  // A drawn vertex per surface vertex and colour: the first copy in `first`, others in `more`.
+  const nv = model.stair.length / 3, first = new Int32Array(nv).fill(-1), firstKey = new Int32Array(nv), more = new Map();
+  const src = [], keys = [], index = new Uint32Array(6 * drawn), corner = [0, 1, 2, 0, 2, 3];
+  const packed = model.colors.map((c) => (c[0] << 16) | (c[1] << 8) | c[2]);
+  for (let j = 0; j < drawn; j++) {
+    const f = faces[j], g = fg[f];
+    const key = showFeatures ? 0 : model.custom[g] ? packed[g] : (fc[3 * f] << 16) | (fc[3 * f + 1] << 8) | fc[3 * f + 2];
+    const at = [0, 0, 0, 0];
+    for (let k = 0; k < 4; k++) {
+      const w = q[4 * f + k];
+      let i = first[w];
+      if (i < 0) { i = first[w] = src.length; firstKey[w] = key; src.push(w); keys.push(key); }
+      else if (firstKey[w] !== key) {
+        const mk = w * 16777216 + key;
+        i = more.get(mk);
+        if (i === undefined) { i = src.length; more.set(mk, i); src.push(w); keys.push(key); }
+      }
+      at[k] = i;
+    }
+    for (let k = 0; k < 6; k++) index[6 * j + k] = at[corner[k]];
+  }
+  const n = src.length, col = new Float32Array(3 * n), lin = (c) => Math.pow(c / 255, 2.2);
+  for (let i = 0; i < n; i++) {
+    const c = showFeatures ? ramp(features[src[i]]) : [lin(keys[i] >> 16), lin((keys[i] >> 8) & 255), lin(keys[i] & 255)];
+    col[3 * i] = c[0]; col[3 * i + 1] = c[1]; col[3 * i + 2] = c[2];
+  }
+  // A fresh geometry (its buffers sized for this layout); the wireframe's edges share its positions.
+  const g = new THREE.BufferGeometry();
+  g.setIndex(new THREE.BufferAttribute(index, 1));
+  const pos = new THREE.BufferAttribute(new Float32Array(3 * n), 3), nor = new THREE.BufferAttribute(new Float32Array(3 * n), 3);
+  for (const a of [pos, nor]) a.setUsage(THREE.DynamicDrawUsage);
+  g.setAttribute('position', pos);
+  g.setAttribute('normal', nor);
+  g.setAttribute('color', new THREE.BufferAttribute(col, 3));
+  mesh.geometry.dispose();
+  mesh.geometry = g;
+  const edges = new Uint32Array(8 * drawn);
+  for (let j = 0; j < drawn; j++) {
+    const a = index[6 * j], b = index[6 * j + 1], c = index[6 * j + 2], d = index[6 * j + 5];
+    edges.set([a, b, b, c, c, d, d, a], 8 * j);
+  }
+  const wg = new THREE.BufferGeometry();
+  wg.setIndex(new THREE.BufferAttribute(edges, 1));
+  wg.setAttribute('position', pos);
+  wire.geometry.dispose();
+  wire.geometry = wg;
+  layout = { src: new Uint32Array(src), faces, sphere: false };
 }
 
-function rebuild() {
-  if (!model) return;
-  const started = performance.now();
+// Positions blended between the staircase and the latest result, with area-weighted
+// vertex normals (the quads' diagonal cross products), into the drawn vertices.
+function fillPositions() {
   const t = parseFloat($('blend').value), st = model.stair, n = st.length;
-  const x = scratch('x', n);
-  for (let i = 0; i < n; i++) x[i] = st[i] + (result[i] - st[i]) * t;
-  const q = model.quads, m = q.length / 4;
-  const fn = scratch('fn', 3 * m), vn = scratch('vn', n);
+  let x = result;
+  if (t !== 1) {
+    x = scratch('x', n);
+    for (let i = 0; i < n; i++) x[i] = st[i] + (result[i] - st[i]) * t;
+  }
+  const q = model.quads, m = q.length / 4, vn = scratch('vn', n);
   vn.fill(0);
   for (let f = 0; f < m; f++) {
-    const [a, b, c, d] = [q[4 * f], q[4 * f + 1], q[4 * f + 2], q[4 * f + 3]];
-    const u = [0, 1, 2].map((k) => x[3 * c + k] - x[3 * a + k]), v = [0, 1, 2].map((k) => x[3 * d + k] - x[3 * b + k]);
-    const nx = u[1] * v[2] - u[2] * v[1], ny = u[2] * v[0] - u[0] * v[2], nz = u[0] * v[1] - u[1] * v[0];
-    fn[3 * f] = nx; fn[3 * f + 1] = ny; fn[3 * f + 2] = nz;
-    for (const w of [a, b, c, d]) { vn[3 * w] += nx; vn[3 * w + 1] += ny; vn[3 * w + 2] += nz; }
+    const a = 3 * q[4 * f], b = 3 * q[4 * f + 1], c = 3 * q[4 * f + 2], d = 3 * q[4 * f + 3];
+    const u0 = x[c] - x[a], u1 = x[c + 1] - x[a + 1], u2 = x[c + 2] - x[a + 2];
+    const v0 = x[d] - x[b], v1 = x[d + 1] - x[b + 1], v2 = x[d + 2] - x[b + 2];
+    const nx = u1 * v2 - u2 * v1, ny = u2 * v0 - u0 * v2, nz = u0 * v1 - u1 * v0;
+    vn[a] += nx; vn[a + 1] += ny; vn[a + 2] += nz;
+    vn[b] += nx; vn[b + 1] += ny; vn[b + 2] += nz;
+    vn[c] += nx; vn[c + 1] += ny; vn[c + 2] += nz;
+    vn[d] += nx; vn[d + 1] += ny; vn[d + 2] += nz;
   }
-  const smooth = $('smooth').checked, showFeatures = $('features').checked && features;
-  const drawn = [];
-  for (let f = 0; f < m; f++) if (model.visible[model.faceGroups[f]]) drawn.push(f);
-  const pos = scratch('pos', 18 * drawn.length), nor = scratch('nor', 18 * drawn.length), col = scratch('col', 18 * drawn.length);
-  const corner = [0, 1, 2, 0, 2, 3];
-  drawn.forEach((f, j) => {
-    const g = model.faceGroups[f];
-    const fc = model.custom[g] ? model.colors[g] : [model.faceColors[3 * f], model.faceColors[3 * f + 1], model.faceColors[3 * f + 2]];
-    const lin = fc.map((c) => Math.pow(c / 255, 2.2));
-    for (let k = 0; k < 6; k++) {
-      const w = q[4 * f + corner[k]], o = 18 * j + 3 * k;
-      const c = showFeatures ? ramp(features[w]) : lin;
-      for (let e = 0; e < 3; e++) {
-        pos[o + e] = x[3 * w + e];
-        nor[o + e] = smooth ? vn[3 * w + e] : fn[3 * f + e];
-        col[o + e] = c[e];
-      }
-    }
-  });
-  attribute(geometry, 'position', pos);
-  attribute(geometry, 'normal', nor);
-  attribute(geometry, 'color', col);
-  geometry.normalizeNormals();
-  geometry.computeBoundingSphere();
+  const g = mesh.geometry, pa = g.getAttribute('position'), na = g.getAttribute('normal');
+  const pos = pa.array, nor = na.array, src = layout.src;
+  for (let i = 0; i < src.length; i++) {
+    const s = 3 * src[i], o = 3 * i;
+    pos[o] = x[s]; pos[o + 1] = x[s + 1]; pos[o + 2] = x[s + 2];
+    nor[o] = vn[s]; nor[o + 1] = vn[s + 1]; nor[o + 2] = vn[s + 2];
+  }
+  pa.needsUpdate = true;
+  na.needsUpdate = true;
+  // The bounds once per layout: the solve moves vertices by less than a voxel.
+  if (!layout.sphere) {
+    g.computeBoundingSphere();
+    g.boundingSphere.radius += 1;
+    wire.geometry.boundingSphere = g.boundingSphere;
+    layout.sphere = true;
+  }
+  return x;
+}
+
+// Everything again: the layout (visible faces, colours) and the positions.
+function rebuild() {
+  layout = null;
+  refresh();
+}
+
+// Redraws the current layout with the latest positions (what a streamed iterate needs).
+function refresh() {
+  if (!model) return;
+  const started = performance.now();
+  if (!layout) buildLayout();
+  const x = fillPositions();
+  const flat = !$('smooth').checked;
+  if (material.flatShading !== flat) { material.flatShading = flat; material.needsUpdate = true; }
   wire.visible = $('wireframe').checked;
-  if (wire.visible) {
-    const l = new Float32Array(24 * drawn.length);
-    drawn.forEach((f, j) => {
-      for (let k = 0; k < 4; k++) for (const [s, w] of [[0, q[4 * f + k]], [1, q[4 * f + (k + 1) % 4]]])
-        for (let e = 0; e < 3; e++) l[24 * j + 6 * k + 3 * s + e] = x[3 * w + e];
-    });
-    wire.geometry.setAttribute('position', new THREE.BufferAttribute(l, 3));
-    wire.geometry.computeBoundingSphere();
-  }
   arrows.visible = $('normals').checked && !!normals;
   if (arrows.visible) {
-    const step = Math.max(1, Math.floor(drawn.length / 20000)), len = 0.6;
-    const chosen = drawn.filter((_, j) => j % step === 0), l = new Float32Array(6 * chosen.length);
+    const q = model.quads, faces = layout.faces;
+    const step = Math.max(1, Math.floor(faces.length / 20000)), len = 0.6;
+    const chosen = faces.filter((_, j) => j % step === 0), l = new Float32Array(6 * chosen.length);
     chosen.forEach((f, j) => {
       for (let e = 0; e < 3; e++) {
         let c = 0;
@@ -240,16 +310,21 @@ async function fetchPositions(s) {
       const { r, body } = await get('/api/positions');
       if (!r.ok) break;
       view.lastFetchMs = Math.round(performance.now() - asked);
-      const got = parseInt(r.headers.get('X-Frame'));
+      const got = parseInt(r.headers.get('X-Frame')), job = parseInt(r.headers.get('X-Job'));
       result = new Float32Array(body);
       frame = got;
       view.frames++;
       if (want.final && got === want.frame) {
         await loadResult(want);
+        // The feature field colours the vertices: a new layout.
+        if ($('features').checked) layout = null;
       }
-      rebuild();
+      refresh();
       mark(want.final ? 'result drawn' : 'iterate drawn');
-      if (view.solvePostedAt !== null) {
+      if (view.editPostedAt != null && view.editDrawnMs == null && want.edited && want.model_id === model.id) {
+        view.editDrawnMs = performance.now() - view.editPostedAt;
+      }
+      if (view.solvePostedAt !== null && view.solveJob !== null && job >= view.solveJob) {
         // The first frame drawn after a re-solve was posted: its latency, and whether it
         // was an iterate (streamed) or already the final result.
         view.solveFrames++;
@@ -344,9 +419,10 @@ mark('module done');
 
 let pending = null;
 async function solve() {
-  view.solvePostedAt = performance.now(); view.solveLatencyMs = null; view.solveFrames = 0;
+  view.solvePostedAt = performance.now(); view.solveLatencyMs = null; view.solveFrames = 0; view.solveJob = null; view.solves++;
   const r = await fetch('/api/solve', { method: 'POST', body: JSON.stringify(tuning()) });
   if (!r.ok) { view.solvePostedAt = null; showError((await r.json()).error); return; }
+  view.solveJob = (await r.json()).job;
   showError(null);
 }
 $('tuning').addEventListener('change', async (e) => {
@@ -358,11 +434,34 @@ $('tuning').addEventListener('change', async (e) => {
   pending = setTimeout(solve, 100);
 });
 $('tuning').addEventListener('submit', (e) => e.preventDefault());
-for (const id of ['blend', 'wireframe', 'smooth', 'features', 'normals', 'clip', 'clip-axis', 'clip-at']) $(id).addEventListener('input', rebuild);
+for (const id of ['blend', 'wireframe', 'smooth', 'normals', 'clip', 'clip-axis', 'clip-at']) $(id).addEventListener('input', refresh);
+$('features').addEventListener('input', rebuild);
 $('copy').onclick = async () => {
   $('command').select();
   try { await navigator.clipboard.writeText($('command').value); } catch { document.execCommand('copy'); }
 };
+
+// Voxel edits: shift+click on a face removes the voxel behind it, alt+click adds the voxel
+// in front of it (a click, not a drag of the camera).
+const raycaster = new THREE.Raycaster();
+let pressed = null;
+renderer.domElement.addEventListener('pointerdown', (e) => { pressed = { x: e.clientX, y: e.clientY }; });
+renderer.domElement.addEventListener('pointerup', async (e) => {
+  const click = pressed && Math.hypot(e.clientX - pressed.x, e.clientY - pressed.y) < 4;
+  pressed = null;
+  if (!click || !(e.shiftKey || e.altKey) || !model || !layout) return;
+  const r = renderer.domElement.getBoundingClientRect();
+  raycaster.setFromCamera(new THREE.Vector2(((e.clientX - r.left) / r.width) * 2 - 1, -((e.clientY - r.top) / r.height) * 2 + 1), camera);
+  const clip = $('clip').checked ? clipPlane : null;
+  const hit = raycaster.intersectObject(mesh).find((h) => !clip || clip.distanceToPoint(h.point) >= 0);
+  if (!hit) return;
+  const face = layout.faces[Math.floor(hit.faceIndex / 2)];
+  view.editPostedAt = performance.now(); view.editDrawnMs = null; view.edits++;
+  const d = raycaster.ray.direction;
+  const body = { model: model.id, face, add: e.altKey && !e.shiftKey, toward: [d.x, d.y, d.z], tuning: tuning() };
+  const reply = await fetch('/api/edit', { method: 'POST', body: JSON.stringify(body) });
+  if (!reply.ok) { view.editPostedAt = null; showError((await reply.json()).error); } else showError(null);
+});
 
 async function open(file) {
   $('status').textContent = `opening ${file.name}…`;

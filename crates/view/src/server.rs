@@ -13,7 +13,7 @@ use std::time::Duration;
 use serde_json::json;
 use tiny_http::{Header, Method, Request, Response, Server};
 
-use crate::session::{mesh_file, panic_message, Job, Shared};
+use crate::session::{mesh_file, panic_message, Edit, Job, Shared};
 use crate::tuning::{Preset, Tuning};
 use crate::{Loaded, ViewError};
 
@@ -196,7 +196,9 @@ impl Viewer {
             (Method::Get, "/api/positions") => {
                 let s = self.shared.lock();
                 match &s.positions {
-                    Some(p) => binary(p.to_vec()).with_header(header("X-Frame", &s.frame.to_string())),
+                    Some(p) => binary(p.to_vec())
+                        .with_header(header("X-Frame", &s.frame.to_string()))
+                        .with_header(header("X-Job", &s.job.to_string())),
                     None => error(404, "no surface yet"),
                 }
             }
@@ -262,7 +264,36 @@ impl Viewer {
                 }
                 let job = self.shared.next_job();
                 self.send(Job::Solve(tuning, job));
-                json_response(202, &json!({ "queued": true }))
+                json_response(202, &json!({ "queued": true, "job": job }))
+            }
+            (Method::Post, "/api/edit") => {
+                let body = match read_body(request, 1 << 16) {
+                    Ok(b) => b,
+                    Err(e) => return error(400, &e),
+                };
+                let edit: Edit = match serde_json::from_slice(&body) {
+                    Ok(e) => e,
+                    Err(e) => return error(400, &format!("bad edit: {e}")),
+                };
+                let s = self.shared.lock();
+                let Some(faces) = s.model.as_ref().map(|m| m.faces) else {
+                    return error(409, "no input to edit: open a file");
+                };
+                if edit.model != s.model_id {
+                    return error(409, "the surface changed since that click: click again");
+                }
+                if edit.face >= faces {
+                    return error(400, &format!("no face {} on this surface of {faces} faces", edit.face));
+                }
+                drop(s);
+                if let Some(t) = &edit.tuning {
+                    if let Err(e) = t.params(t.preset, &t.preset.params()) {
+                        return error(400, &e);
+                    }
+                }
+                let job = self.shared.next_job();
+                self.send(Job::Edit(edit, job));
+                json_response(202, &json!({ "queued": true, "job": job }))
             }
             (Method::Post, "/api/open") => {
                 let name = query_value(query, "name").unwrap_or_default();
@@ -322,6 +353,7 @@ impl Viewer {
             "tuning": s.tuning,
             "command": command,
             "frame": s.frame,
+            "job": s.job,
             "final": s.frame_final,
             "stage": s.stage,
             "iteration": s.iteration,
@@ -334,6 +366,8 @@ impl Viewer {
             "summary": s.finished.as_ref().map(|f| f.summary.clone()),
             "has_features": s.finished.as_ref().is_some_and(|f| f.features.is_some()),
             "superseded": s.superseded,
+            "edited": s.edited,
+            "edit_ms": s.edit_ms,
         })
     }
 

@@ -26,6 +26,27 @@ pub(crate) enum Job {
     Open(Box<Loaded>, Option<Sender<Result<(), String>>>, u64),
     /// Re-solve the current input with these parameters.
     Solve(Tuning, u64),
+    /// Remove or add a voxel at a face of the surface shown, and re-solve.
+    Edit(Edit, u64),
+}
+
+/// A voxel edit from the page: at face `face` of surface `model` (the state's
+/// `model_id`), remove the voxel behind the face (it takes the label of the one in front)
+/// or, with `add`, give the voxel in front the label of the one behind. Behind is along
+/// `toward` (the click's ray), or without it the face's inner side (seen against its
+/// normal).
+#[derive(Clone, Debug, serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+pub(crate) struct Edit {
+    pub(crate) model: u64,
+    pub(crate) face: usize,
+    #[serde(default)]
+    pub(crate) add: bool,
+    #[serde(default)]
+    pub(crate) toward: Option<[f64; 3]>,
+    /// The panel's parameters for the re-solve (default: the last solve's).
+    #[serde(default)]
+    pub(crate) tuning: Option<Tuning>,
 }
 
 /// The last result of the current input, for downloads and the side panel.
@@ -53,21 +74,27 @@ pub(crate) struct State {
     pub(crate) positions: Option<Arc<Vec<u8>>>,
     /// Grows with every new `positions`.
     pub(crate) frame: u64,
+    /// The job whose run produced `positions` (the number [`Shared::next_job`] gave it).
+    pub(crate) job: u64,
     pub(crate) frame_final: bool,
     pub(crate) stage: String,
     pub(crate) iteration: Option<usize>,
     pub(crate) busy: bool,
     pub(crate) error: Option<String>,
-    /// Milliseconds from the job's arrival to its first streamed iterate, and to its end.
+    /// Milliseconds from the job's request to its first streamed iterate, and to its end.
     pub(crate) first_frame_ms: Option<f64>,
     pub(crate) total_ms: Option<f64>,
     /// The last finished run's solver iterations (all its solves), and whether its first
-    /// solve started from the previous result (the conjugate gradient only).
+    /// solve started from the previous result (the iterative solvers).
     pub(crate) iterations: Option<usize>,
     pub(crate) warm: bool,
     pub(crate) finished: Option<Arc<Finished>>,
     /// Runs stopped because a newer job replaced them.
     pub(crate) superseded: u64,
+    /// Whether the surface comes from a voxel edit of the previous one (the page keeps
+    /// its view), and the milliseconds the edit's new surface took to build.
+    pub(crate) edited: bool,
+    pub(crate) edit_ms: Option<f64>,
     pub(crate) shutdown: bool,
 }
 
@@ -79,6 +106,9 @@ pub(crate) struct Shared {
     /// Counts the jobs queued: a run whose job is older than the latest stops at its next
     /// iteration (the job that replaced it runs next).
     jobs: AtomicU64,
+    /// The latest job and when its request came (a job's times count from there, the
+    /// wait for the run it replaces included).
+    arrival: Mutex<Option<(u64, Instant)>>,
 }
 
 /// The panic payload that stops a superseded run (through the progress callback, the
@@ -89,7 +119,16 @@ struct Superseded;
 impl Shared {
     /// Numbers a new job (and so supersedes the running one).
     pub(crate) fn next_job(&self) -> u64 {
-        self.jobs.fetch_add(1, Ordering::SeqCst) + 1
+        let mut arrival = self.arrival.lock().unwrap_or_else(|e| e.into_inner());
+        let job = self.jobs.fetch_add(1, Ordering::SeqCst) + 1;
+        *arrival = Some((job, Instant::now()));
+        job
+    }
+
+    /// When job `job`'s request came, if it is the latest.
+    fn arrival(&self, job: u64) -> Option<Instant> {
+        let arrival = self.arrival.lock().unwrap_or_else(|e| e.into_inner());
+        arrival.filter(|(j, _)| *j == job).map(|(_, t)| t)
     }
 
     fn superseded(&self, job: u64) -> bool {
@@ -120,6 +159,8 @@ struct Current {
     /// round's last iterate): the next run's starting guesses ([`Regularizer::run_warm`]);
     /// empty on a new surface.
     last: Vec<Vec<DVec3>>,
+    /// The last solve's parameters (a voxel edit re-solves with them).
+    tuned: Option<(Tuning, Params)>,
 }
 
 /// Runs jobs until the channel closes; a panicking job becomes an error on the page.
@@ -133,7 +174,10 @@ pub(crate) fn worker(shared: Arc<Shared>, jobs: Receiver<Job>) {
                 Err(_) => break,
             }
         }
-        let t = Instant::now();
+        let id = match &job {
+            Job::Open(_, _, id) | Job::Solve(_, id) | Job::Edit(_, id) => *id,
+        };
+        let t = shared.arrival(id).unwrap_or_else(Instant::now);
         let result = catch_unwind(AssertUnwindSafe(|| run(&shared, &mut current, job, t)));
         if let Err(panic) = result {
             if panic.is::<Superseded>() {
@@ -173,9 +217,9 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
             match build(&loaded.volume, &params.regions, &loaded.name) {
                 Ok(regularizer) => {
                     let regions = params.regions.clone();
-                    *current = Some(Current { loaded, regularizer, regions, last: Vec::new() });
+                    *current = Some(Current { loaded, regularizer, regions, last: Vec::new(), tuned: None });
                     let c = current.as_mut().expect("set above");
-                    publish_model(shared, c);
+                    publish_model(shared, c, None);
                     if let Some(reply) = reply {
                         let _ = reply.send(Ok(()));
                     }
@@ -211,7 +255,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                         c.regularizer = r;
                         c.regions = params.regions.clone();
                         c.last.clear();
-                        publish_model(shared, c);
+                        publish_model(shared, c, None);
                     }
                     Err(message) => {
                         shared.update(|s| s.error = Some(message));
@@ -221,7 +265,97 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
             }
             solve(shared, c, tuning, params, t, job);
         }
+        Job::Edit(edit, job) => {
+            let Some(c) = current.as_mut() else {
+                shared.update(|s| s.error = Some("no input to edit: open a file".into()));
+                return;
+            };
+            let tuned = match edit.tuning.clone() {
+                Some(tuning) => tuning.params(c.loaded.preset, &c.loaded.params).map(|p| (tuning, p)),
+                None => Ok(c.tuned.clone().unwrap_or_else(|| {
+                    (Tuning::of(c.loaded.preset, &c.loaded.params), c.loaded.params.clone())
+                })),
+            };
+            let (tuning, params) = match tuned {
+                Ok(tp) if tp.1.regions == c.regions => tp,
+                Ok(_) => {
+                    let message = "the preset groups the labels otherwise: solve with it before editing";
+                    shared.update(|s| s.error = Some(message.into()));
+                    return;
+                }
+                Err(e) => {
+                    shared.update(|s| s.error = Some(e));
+                    return;
+                }
+            };
+            if let Err(message) = apply_edit(shared, c, &edit) {
+                shared.update(|s| s.error = Some(message));
+                return;
+            }
+            shared.update(|s| s.edit_ms = Some(t.elapsed().as_secs_f64() * 1e3));
+            solve(shared, c, tuning, params, t, job);
+        }
     }
+}
+
+/// Changes the voxel of `edit`, rebuilds the surface, and maps the last run's solutions
+/// onto it by lattice corner (a new vertex starts at its corner), so that the re-solve
+/// starts from the shape shown; a refused edit leaves everything as it was.
+fn apply_edit(shared: &Shared, c: &mut Current, edit: &Edit) -> Result<(), String> {
+    let shown = shared.lock().model_id;
+    if edit.model != shown {
+        return Err("the surface changed since that click: click again".into());
+    }
+    let old = Arc::clone(c.regularizer.surface());
+    let Some(face) = old.surfels().get(edit.face) else {
+        return Err(format!("no face {} on this surface of {} faces", edit.face, old.num_surfels()));
+    };
+    // [behind, in front], voxels and labels: [inner, outer] unless the ray crosses the face
+    // from the outer side (the inner voxel is on the negative side unless it is flipped).
+    let (mut voxels, mut labels) = (face.voxels(), face.labels);
+    let axis = usize::from(face.axis);
+    if edit.toward.is_some_and(|t| t[axis] != 0.0 && (t[axis] > 0.0) != face.flipped) {
+        voxels.swap(0, 1);
+        labels.swap(0, 1);
+    }
+    let (voxel, label) = if edit.add { (voxels[1], labels[0]) } else { (voxels[0], labels[1]) };
+    let dims = c.loaded.volume.dims();
+    let index =
+        (0..3).map(|k| usize::try_from(voxel[k]).ok().filter(|&i| i < dims[k])).collect::<Option<Vec<_>>>();
+    let Some(index) = index else {
+        return Err(format!(
+            "the voxel ({}, {}, {}) is outside the volume ({} x {} x {}): only voxels inside it can change",
+            voxel[0], voxel[1], voxel[2], dims[0], dims[1], dims[2]
+        ));
+    };
+    let at = [index[0], index[1], index[2]];
+    let labels = c.loaded.volume.labels_mut();
+    let before = labels[at];
+    labels[at] = label;
+    let regularizer = match build(&c.loaded.volume, &c.regions, &c.loaded.name) {
+        Ok(r) => r,
+        Err(e) => {
+            c.loaded.volume.labels_mut()[at] = before;
+            return Err(e);
+        }
+    };
+    let new = Arc::clone(regularizer.surface());
+    let mut by_corner = std::collections::HashMap::with_capacity(old.num_vertices());
+    for v in 0..old.num_vertices() {
+        by_corner.entry(old.vertex_corner(voxreg_digisurf::VertexId(v as u32))).or_insert(v);
+    }
+    let staircase = new.positions();
+    let map: Vec<Option<usize>> = (0..new.num_vertices())
+        .map(|v| by_corner.get(&new.vertex_corner(voxreg_digisurf::VertexId(v as u32))).copied())
+        .collect();
+    let mapped = |x: &[DVec3]| -> Vec<DVec3> {
+        map.iter().zip(staircase.iter()).map(|(m, p)| m.map_or(*p, |i| x[i])).collect()
+    };
+    c.last = c.last.iter().map(|x| mapped(x)).collect();
+    let shown = shared.lock().finished.as_ref().map(|f| mapped(&f.positions));
+    c.regularizer = regularizer;
+    publish_model(shared, c, shown.as_deref());
+    Ok(())
 }
 
 /// The regularizer of `volume`, refused up front (as the CLI does) when its run would not
@@ -238,15 +372,24 @@ fn build(volume: &LabelVolume, regions: &RegionMap, name: &str) -> Result<Regula
     Regularizer::from_volume(volume, regions).map_err(|e| format!("{name}: {e}"))
 }
 
-fn publish_model(shared: &Shared, c: &Current) {
+/// Publishes the current surface, drawn at `positions` (a voxel edit: the last result
+/// mapped onto it) or as its staircase.
+fn publish_model(shared: &Shared, c: &Current, positions: Option<&[DVec3]>) {
     let surface = Arc::clone(c.regularizer.surface());
     let model = Arc::new(Model::new(&surface, c.loaded.palette.as_ref()));
     let name = c.loaded.name.clone();
     let palette = c.loaded.palette.clone();
+    let edited = positions.is_some();
+    let shown = match positions {
+        Some(x) => f32_bytes(x.iter().flat_map(|p| p.to_array())),
+        None => model.staircase.clone(),
+    };
     shared.update(|s| {
         s.model_id += 1;
+        s.edited = edited;
+        s.edit_ms = None;
         s.name = name;
-        s.positions = Some(Arc::new(model.staircase.clone()));
+        s.positions = Some(Arc::new(shown));
         s.frame += 1;
         s.frame_final = false;
         s.model = Some(model);
@@ -261,6 +404,7 @@ fn publish_model(shared: &Shared, c: &Current) {
 }
 
 fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: Instant, job: u64) {
+    c.tuned = Some((tuning.clone(), params.clone()));
     shared.update(|s| {
         s.busy = true;
         s.error = None;
@@ -296,6 +440,7 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
                 shared.update(|s| {
                     s.positions = Some(bytes);
                     s.frame += 1;
+                    s.job = job;
                     s.frame_final = false;
                     s.stage = label;
                     s.iteration = e.iteration.map(|p| p.iteration);
@@ -314,13 +459,31 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
         Ok(out) => {
             let finished = Arc::new(finish(&out));
             let iterations = out.report.solves.iter().map(|s| s.iterations()).sum();
-            // Only the conjugate gradient takes the starting guess.
-            let warmed = !warm.is_empty() && out.report.solves.first().is_some_and(|s| s.name() == "cg");
+            // The iterative solvers take the starting guesses, the direct one does not.
+            let warmed = !warm.is_empty() && out.report.solves.first().is_some_and(|s| s.name() != "direct");
+            // A round that reported no iterate (it started at its minimizer) keeps the
+            // previous run's start, or the result for the last round; the starts end at
+            // the first round without one.
+            for (k, x) in rounds.iter_mut().enumerate() {
+                if x.is_empty() {
+                    *x = warm.get(k).cloned().unwrap_or_default();
+                }
+            }
+            let solves = params.refine + 1;
+            if rounds.len() < solves {
+                rounds.resize(solves, Vec::new());
+            }
+            if rounds[solves - 1].is_empty() {
+                rounds[solves - 1] = out.positions.to_vec();
+            }
+            let kept = rounds.iter().take_while(|x| !x.is_empty()).count();
+            rounds.truncate(kept);
             c.last = rounds;
             let bytes = Arc::new(f32_bytes(out.positions.iter().flat_map(|p| p.to_array())));
             shared.update(|s| {
                 s.positions = Some(bytes);
                 s.frame += 1;
+                s.job = job;
                 s.frame_final = true;
                 s.stage = "done".into();
                 s.iteration = None;

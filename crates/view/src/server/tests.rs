@@ -307,3 +307,85 @@ fn a_re_solve_of_the_same_surface_starts_from_the_last_result() {
     let report = json(&get(&r, "/api/report").1);
     assert_eq!(report["report"]["params"]["solver"]["choice"], "bounded", "{report}");
 }
+
+#[test]
+fn a_voxel_art_re_solve_starts_from_the_last_result() {
+    // The clamped bounded solver of the voxel-art preset takes the last result too.
+    let volume = LabelVolume::from_fn([14, 12, 10], |[x, y, z]| {
+        u32::from((2..12).contains(&x) && y > 1 && z > 1 && y + z < 18)
+    })
+    .with_background(Some(0));
+    let params = Preset::VoxelArt.params();
+    let r = start_with(Loaded {
+        name: "art.vox".into(),
+        volume,
+        palette: None,
+        preset: Preset::VoxelArt,
+        params,
+    });
+    let first = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
+    assert_eq!(first["warm"], false);
+    let mut tuning = first["tuning"].clone();
+    tuning["gamma"] = serde_json::json!(tuning["gamma"].as_f64().unwrap() * 1.3);
+    assert_eq!(post(&r, "/api/solve", tuning.to_string().as_bytes()).0, 202);
+    let frame = first["frame"].as_u64().unwrap();
+    let again =
+        wait_for(&r, |s| s["final"] == true && s["busy"] == false && s["frame"].as_u64().unwrap() > frame);
+    assert_eq!(again["warm"], true, "{again}");
+    let report = json(&get(&r, "/api/report").1);
+    assert_eq!(report["report"]["solves"][0]["solver"], "bounded", "{report}");
+}
+
+#[test]
+fn a_voxel_edit_rebuilds_the_surface_and_re_solves_from_the_shape_shown() {
+    let r = start();
+    let first = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
+    let (model, faces) = (first["model_id"].as_u64().unwrap(), first["faces"].as_u64().unwrap());
+    // Face 0 of the ball: remove the voxel behind it.
+    let edit = serde_json::json!({ "model": model, "face": 0 });
+    assert_eq!(post(&r, "/api/edit", edit.to_string().as_bytes()).0, 202);
+    let edited =
+        wait_for(&r, |s| s["model_id"].as_u64() > Some(model) && s["final"] == true && s["busy"] == false);
+    assert_eq!(edited["edited"], true, "{edited}");
+    assert_eq!(edited["error"], serde_json::Value::Null, "{edited}");
+    assert_ne!(edited["faces"].as_u64().unwrap(), faces, "{edited}");
+    assert!(edited["edit_ms"].as_f64().is_some(), "{edited}");
+    let model = edited["model_id"].as_u64().unwrap();
+    let quads = get(&r, "/api/quads").1;
+    assert_eq!(quads.len() as u64, 16 * edited["faces"].as_u64().unwrap());
+    // Bad edits: a stale surface, a face out of range, a voxel outside the volume, junk.
+    let stale = serde_json::json!({ "model": model - 1, "face": 0 });
+    let (status, message) = error_of(post(&r, "/api/edit", stale.to_string().as_bytes()));
+    assert_eq!(status, 409);
+    assert!(message.contains("click again"), "{message}");
+    let far = serde_json::json!({ "model": model, "face": 1_000_000 });
+    let (status, message) = error_of(post(&r, "/api/edit", far.to_string().as_bytes()));
+    assert_eq!(status, 400);
+    assert!(message.starts_with("no face 1000000"), "{message}");
+    let (status, message) = error_of(post(&r, "/api/edit", b"{\"model\": 1}"));
+    assert_eq!(status, 400);
+    assert!(message.starts_with("bad edit:"), "{message}");
+    assert_eq!(get(&r, "/").0, 200);
+}
+
+#[test]
+fn adding_a_voxel_outside_the_volume_is_refused_with_a_message() {
+    // A solid filling its whole volume: every face is on the border, and the voxel across
+    // it is outside.
+    let volume = LabelVolume::from_fn([3, 3, 3], |_| 1).with_background(Some(0));
+    let r = start_with(Loaded {
+        name: "cube.vol".into(),
+        volume,
+        palette: None,
+        preset: Preset::Papers,
+        params: Preset::Papers.params(),
+    });
+    let first = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
+    let model = first["model_id"].as_u64().unwrap();
+    let add = serde_json::json!({ "model": model, "face": 0, "add": true });
+    assert_eq!(post(&r, "/api/edit", add.to_string().as_bytes()).0, 202);
+    let refused = wait_for(&r, |s| !s["error"].is_null());
+    assert!(refused["error"].as_str().unwrap().contains("outside the volume"), "{refused}");
+    assert_eq!(refused["model_id"].as_u64(), Some(model));
+    assert_eq!(get(&r, "/").0, 200);
+}
