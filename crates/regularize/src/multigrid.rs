@@ -599,7 +599,8 @@ fn l1_face_smoother(rows: &Rows<FACE>, damping: f64) -> Vec<Block> {
             let mut d = [0.0; 6];
             for (j, b) in rows.row(i) {
                 if j as usize == i {
-                    let sym = [b[0], b[4], b[8], 0.5 * (b[3] + b[1]), 0.5 * (b[6] + b[2]), 0.5 * (b[7] + b[5])];
+                    let sym =
+                        [b[0], b[4], b[8], 0.5 * (b[3] + b[1]), 0.5 * (b[6] + b[2]), 0.5 * (b[7] + b[5])];
                     for t in 0..6 {
                         d[t] += sym[t];
                     }
@@ -941,6 +942,8 @@ impl Vcycle {
     /// operator's, not the whole one's (which moves held coordinates' neighbourhoods as if
     /// they were free). Costs about one multigrid setup.
     pub(crate) fn set_face(&mut self, stencil: &Stencil, coef: &Coefficients<'_>, face: &[Vec3A]) {
+        // The former face's levels go first: one face hierarchy in memory at a time.
+        self.face_levels = None;
         self.face_levels = self.face_hierarchy(stencil, coef, face);
         let damping = self.damping;
         self.face_smoother = self
@@ -968,7 +971,12 @@ impl Vcycle {
 
     /// The coarse levels of the face's operator; `None` when its coarsest level does not
     /// factor (the cycle then falls back to the whole operator's coarse levels).
-    fn face_hierarchy(&self, stencil: &Stencil, coef: &Coefficients<'_>, face: &[Vec3A]) -> Option<FaceLevels> {
+    fn face_hierarchy(
+        &self,
+        stencil: &Stencil,
+        coef: &Coefficients<'_>,
+        face: &[Vec3A],
+    ) -> Option<FaceLevels> {
         let mut levels: Vec<Level> = Vec::with_capacity(self.aggregations.len());
         let mut rows: Option<Rows<FACE>> = None;
         for agg in &self.aggregations {
