@@ -7,7 +7,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
-use crate::boxqp::{active_set, minimize_in_boxes, place, BoxProblem, Boxes, Place};
+use crate::boxqp::{active_set, minimize_in_boxes, place, BoxProblem, Boxes, Place, ACTIVE_SET_LOOSE};
 use crate::cg::check_tolerance;
 use crate::clamping::clamp_boxes;
 use crate::info::BoundedInfo;
@@ -52,8 +52,9 @@ pub struct BoundedParams {
     /// projected gradient steps to add bounds, proportioning steps to release them). Tens
     /// of times fewer iterations than the projected descent, with the same guarantees
     /// (feasible iterates, monotone energy). It starts from the unconstrained minimizer
-    /// (found by the same iteration without bounds, i.e. preconditioned CG) projected into
-    /// the boxes when that lowers the energy, else from the input; [`BoundedInfo::iterations`](crate::BoundedInfo::iterations)
+    /// (found by the same iteration without bounds, i.e. preconditioned CG, to 100 times
+    /// the tolerance when active-set rounds follow) projected into the boxes when that
+    /// lowers the energy, else from the input; [`BoundedInfo::iterations`](crate::BoundedInfo::iterations)
     /// counts the bounded iterations only, [`BoundedInfo::operator_applications`](crate::BoundedInfo::operator_applications) all.
     /// `false`: plain projected descent. Default: `true`.
     pub conjugate: bool,
@@ -265,6 +266,9 @@ impl BoundedSolver {
             BoundedInfo {
                 iterations,
                 operator_applications: applications,
+                start_applications: s.start_applications,
+                active_set_rounds: s.active_set_rounds,
+                active_set_applications: s.active_set_applications,
                 relative_gradient: if r0 > 0.0 { rp_norm_true / r0 } else { 0.0 },
                 error_bound: bound,
                 error_estimate: estimate,
@@ -297,15 +301,20 @@ impl BoundedSolver {
         progress: &mut dyn FnMut(&Progress),
     ) {
         let input = energy.input();
+        let rounds = self.params.active_set_rounds;
         if !warm {
             let unbounded = Boxes::unbounded(s.u.len());
-            let free = minimize_in_boxes(problem, prepared, &unbounded, &mut s.u, &mut s.r, &mut |_| {});
+            // The rounds only need the unconstrained minimizer's binding coordinates, not
+            // its last digits: a start as loose as their own first solves.
+            let loose = if rounds > 0 { ACTIVE_SET_LOOSE } else { 1.0 };
+            let first = BoxProblem { tol: problem.tol * loose, ..*problem };
+            let free = minimize_in_boxes(&first, prepared, &unbounded, &mut s.u, &mut s.r, &mut |_| {});
             s.applications += free.applications;
+            s.start_applications = free.applications;
         }
         // What MPRGP starts from if the rounds' projected result is worse: the warm start,
         // or the input.
         let fallback = warm.then(|| (s.u.clone(), s.energy));
-        let rounds = self.params.active_set_rounds;
         if rounds > 0 {
             let st = active_set(problem, prepared, w, rounds, &mut s.u, &mut s.r);
             tracing::debug!(
@@ -315,6 +324,8 @@ impl BoundedSolver {
                 "active set"
             );
             s.applications += st.applications;
+            s.active_set_rounds = st.rounds;
+            s.active_set_applications = st.applications;
         }
         w.project(&mut s.u);
         let start = energy.terms(&input.iter().zip(&s.u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
@@ -464,6 +475,9 @@ struct Iterate {
     applications: usize,
     iterations: usize,
     estimate: f64,
+    start_applications: usize,
+    active_set_rounds: usize,
+    active_set_applications: usize,
 }
 
 /// Zeroes the residual's coordinates held on their bound.

@@ -352,6 +352,10 @@ pub(crate) fn minimize_in_boxes(
     BoxStats { iterations, applications, estimate, energy_change: de_total }
 }
 
+/// The factor of the tolerance at which the active-set rounds stop their CG while the
+/// holds change, and at which the unconstrained start before them stops.
+pub(crate) const ACTIVE_SET_LOOSE: f64 = 100.0;
+
 /// How the active-set phase treats a coordinate: free, or held on its lower or upper
 /// bound.
 #[derive(Copy, Clone, PartialEq, Eq, Debug, Default)]
@@ -380,7 +384,8 @@ pub(crate) struct ActiveSetStats {
 ///
 /// Each round holds a set of coordinates on their bounds and minimizes over the others
 /// as the unconstrained solve does: preconditioned CG (with the multigrid cycle of the
-/// face's operator, [`Pre::apply_on_face`](crate::iterative::Pre::apply_on_face)),
+/// face's operator, its own Galerkin coarse levels included,
+/// [`Pre::apply_on_face`](crate::iterative::Pre::apply_on_face)),
 /// warm-started from the previous round and stopped by the same estimate rule (at
 /// `100 tol` while the holds change, then at `tol`). Then every free coordinate outside
 /// its interval is held on the bound it crossed, and every held coordinate whose gradient
@@ -414,14 +419,14 @@ pub(crate) fn active_set(
     // Rounds whose holds still change need no accurate face solve: they stop at
     // `LOOSE` times the tolerance, until one changes nothing; then one round at the
     // tolerance, warm, makes it exact.
-    const LOOSE: f64 = 100.0;
+    const LOOSE: f64 = ACTIVE_SET_LOOSE;
     let mut loose = LOOSE;
     let mut face = vec![Vec3A::ONE; n];
     while stats.rounds < max_rounds && stats.iterations < max_iterations {
         stats.rounds += 1;
         hold_on_bounds(&hold, w, u);
         face_of(&hold, &mut face);
-        prepared.pre.set_face(&face);
+        prepared.pre.set_face(stencil, coef, &face);
         let tol = tol * loose;
         stencil.residual(coef, u, rhs, r, &mut t);
         stats.applications += 1;
@@ -454,10 +459,8 @@ pub(crate) fn active_set(
             });
             rz = rz_new;
         }
-        // The recursive residual of the held coordinates is exact up to rounding: refresh
-        // it before reading the multipliers' signs.
-        stencil.residual(coef, u, rhs, r, &mut t);
-        stats.applications += 1;
+        // The multipliers' signs are read from the recursive residual (CG updates it on
+        // the held coordinates too); the next round starts from a true one.
         if update_holds(u, r, w, &mut hold) == 0 {
             if loose > 1.0 {
                 loose = 1.0;

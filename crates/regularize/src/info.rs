@@ -80,6 +80,13 @@ pub struct BoundedInfo {
     pub iterations: usize,
     /// Products by the operator `H`, every phase included.
     pub operator_applications: usize,
+    /// Of [`BoundedInfo::operator_applications`], those of the unconstrained start
+    /// (`0` without boxes or with [`crate::BoundedParams::conjugate`] off).
+    pub start_applications: usize,
+    /// Active-set rounds run ([`crate::BoundedParams::active_set_rounds`]).
+    pub active_set_rounds: usize,
+    /// Of [`BoundedInfo::operator_applications`], those of the active-set rounds.
+    pub active_set_applications: usize,
     /// Certificate: the norm of the projected gradient at the result relative to the
     /// gradient at the input.
     pub relative_gradient: f64,

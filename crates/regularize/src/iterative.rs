@@ -201,9 +201,9 @@ impl Pre {
     }
 
     /// Prepares [`Pre::apply_on_face`] for a new face.
-    pub(crate) fn set_face(&mut self, face: &[Vec3A]) {
+    pub(crate) fn set_face(&mut self, stencil: &Stencil, coef: &Coefficients<'_>, face: &[Vec3A]) {
         if let Pre::Multigrid(v) = self {
-            v.set_face(face);
+            v.set_face(stencil, coef, face);
         }
     }
 

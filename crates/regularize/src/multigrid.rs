@@ -208,6 +208,7 @@ impl Hierarchy {
                 .map(|d| block(&scale6(&sym_inverse(d), self.params.damping)))
                 .collect(),
             face_smoother: Vec::new(),
+            face_levels: None,
             majorant: fine_smoother,
             damping: self.params.damping,
             levels,
@@ -330,20 +331,20 @@ fn fine_majorant(stencil: &Stencil, coef: &Coefficients<'_>) -> Vec<[f64; 6]> {
         .collect()
 }
 
-/// One row of a coarse operator under construction: sorted columns and blocks, each the
-/// sum of an alignment part (a 3x3 block, column-major, entries `0..9`: positive
-/// semi-definite on the diagonal, negative semi-definite off it) and a multiple of the
-/// identity (entry `9`: attachment and fairness). Kept apart so that the smoother's
-/// majorant needs no eigenvalues.
-/// The rows of an operator under construction, flat.
-struct Rows {
+/// The rows of an operator under construction, flat: sorted columns and blocks of `W`
+/// numbers. For the whole operator (`W = 10`) each block is the sum of an alignment part
+/// (a 3x3 block, column-major, entries `0..9`: positive semi-definite on the diagonal,
+/// negative semi-definite off it) and a multiple of the identity (entry `9`: attachment
+/// and fairness), kept apart so that the smoother's majorant needs no eigenvalues; for a
+/// face's operator, see [`FACE`].
+struct Rows<const W: usize = 10> {
     offsets: Vec<usize>,
     cols: Vec<u32>,
     /// Accumulated in `f64`, stored in `f32`: they only precondition.
-    vals: Vec<[f32; 10]>,
+    vals: Vec<[f32; W]>,
 }
 
-impl Rows {
+impl<const W: usize> Rows<W> {
     fn len(&self) -> usize {
         self.offsets.len() - 1
     }
@@ -352,21 +353,21 @@ impl Rows {
         self.cols.len()
     }
 
-    fn row(&self, i: usize) -> impl Iterator<Item = (u32, [f64; 10])> + '_ {
+    fn row(&self, i: usize) -> impl Iterator<Item = (u32, [f64; W])> + '_ {
         let r = self.offsets[i]..self.offsets[i + 1];
         self.cols[r.clone()].iter().zip(&self.vals[r]).map(|(c, v)| (*c, v.map(f64::from)))
     }
 
     /// Builds `n` rows with `f(accumulator, row)`, columns in `0..cols`, in parallel
     /// chunks of rows (one marker array and one output buffer per chunk).
-    fn build(n: usize, cols: usize, f: impl Fn(&mut Accumulator, usize) + Sync) -> Rows {
+    fn build(n: usize, cols: usize, f: impl Fn(&mut Accumulator<W>, usize) + Sync) -> Rows<W> {
         const ROWS: usize = 1024;
-        type Part = (Vec<usize>, Vec<u32>, Vec<[f32; 10]>);
-        let parts: Vec<Part> = (0..n.div_ceil(ROWS))
+        type Part<const W: usize> = (Vec<usize>, Vec<u32>, Vec<[f32; W]>);
+        let parts: Vec<Part<W>> = (0..n.div_ceil(ROWS))
             .into_par_iter()
             .map(|c| {
                 let mut acc = Accumulator { slot: vec![u32::MAX; cols], row: Vec::with_capacity(64) };
-                let mut part: Part = (Vec::with_capacity(ROWS), Vec::new(), Vec::new());
+                let mut part: Part<W> = (Vec::with_capacity(ROWS), Vec::new(), Vec::new());
                 for i in c * ROWS..((c + 1) * ROWS).min(n) {
                     f(&mut acc, i);
                     part.0.push(acc.row.len());
@@ -391,22 +392,35 @@ impl Rows {
 }
 
 /// Row accumulator with a dense marker.
-struct Accumulator {
+struct Accumulator<const W: usize = 10> {
     slot: Vec<u32>,
-    row: Vec<(u32, [f64; 10])>,
+    row: Vec<(u32, [f64; W])>,
 }
 
-impl Accumulator {
+impl<const W: usize> Accumulator<W> {
     #[inline]
-    fn entry(&mut self, col: u32) -> &mut [f64; 10] {
+    fn entry(&mut self, col: u32) -> &mut [f64; W] {
         let s = &mut self.slot[col as usize];
         if *s == u32::MAX {
             *s = self.row.len() as u32;
-            self.row.push((col, [0.0; 10]));
+            self.row.push((col, [0.0; W]));
         }
         &mut self.row[*s as usize].1
     }
 
+    /// Appends the row, sorted by column, to `cols` and `vals`, and clears it.
+    fn flush_into(&mut self, cols: &mut Vec<u32>, vals: &mut Vec<[f32; W]>) {
+        for (c, _) in &self.row {
+            self.slot[*c as usize] = u32::MAX;
+        }
+        self.row.sort_unstable_by_key(|e| e.0);
+        cols.extend(self.row.iter().map(|e| e.0));
+        vals.extend(self.row.iter().map(|e| e.1.map(|x| x as f32)));
+        self.row.clear();
+    }
+}
+
+impl Accumulator<10> {
     fn add_scalar(&mut self, col: u32, v: f64) {
         self.entry(col)[9] += v;
     }
@@ -417,17 +431,6 @@ impl Accumulator {
         for t in 0..9 {
             e[t] += s * nn[t];
         }
-    }
-
-    /// Appends the row, sorted by column, to `cols` and `vals`, and clears it.
-    fn flush_into(&mut self, cols: &mut Vec<u32>, vals: &mut Vec<[f32; 10]>) {
-        for (c, _) in &self.row {
-            self.slot[*c as usize] = u32::MAX;
-        }
-        self.row.sort_unstable_by_key(|e| e.0);
-        cols.extend(self.row.iter().map(|e| e.0));
-        vals.extend(self.row.iter().map(|e| e.1.map(|x| x as f32)));
-        self.row.clear();
     }
 }
 
@@ -486,18 +489,148 @@ fn galerkin_from_stencil(stencil: &Stencil, coef: &Coefficients<'_>, agg: &Aggre
 }
 
 /// `P^T A P` of an assembled level.
-fn galerkin_from_rows(rows: &Rows, agg: &Aggregation) -> Rows {
+fn galerkin_from_rows<const W: usize>(rows: &Rows<W>, agg: &Aggregation) -> Rows<W> {
     let nc = agg.len();
     Rows::build(nc, nc, |acc, a| {
         for &i in agg.members(a) {
             for (j, block) in rows.row(i as usize) {
                 let e = acc.entry(agg.parent[j as usize]);
-                for t in 0..10 {
+                for t in 0..W {
                     e[t] += block[t];
                 }
             }
         }
     })
+}
+
+/// The numbers of a block of a face's operator `P^T D H D P` (`D` the 0/1 diagonal of the
+/// face's free coordinates): entries `0..9`, the alignment part, a general 3x3 block
+/// (column-major); `9..12`, the diagonal part (attachment and fairness, masked at both
+/// ends: no longer a multiple of the identity); `12..18`, a symmetric `[xx, yy, zz, xy,
+/// xz, yz]` block bounding what the alignment part adds to its row's majorant off the
+/// diagonal: the sum of `b (D_i n)(D_i n)^T` over the fine couplings it aggregates, since
+/// `[[0, -b u v^T], [-b v u^T, 0]] <= diag(b u u^T, b v v^T)`. (Masking breaks the sign
+/// structure the whole operator's blocks have; this carries the bound instead.)
+const FACE: usize = 18;
+
+impl Accumulator<FACE> {
+    fn add_diag(&mut self, col: u32, d: DVec3) {
+        let e = self.entry(col);
+        e[9] += d.x;
+        e[10] += d.y;
+        e[11] += d.z;
+    }
+
+    /// Adds `s u v^T` to the alignment part and `g u u^T` to the majorant part.
+    fn add_coupling(&mut self, col: u32, s: f64, u: DVec3, v: DVec3, g: f64) {
+        let e = self.entry(col);
+        for c in 0..3 {
+            for r in 0..3 {
+                e[3 * c + r] += s * u[r] * v[c];
+            }
+        }
+        if g != 0.0 {
+            let m = [u.x * u.x, u.y * u.y, u.z * u.z, u.x * u.y, u.x * u.z, u.y * u.z];
+            for t in 0..6 {
+                e[12 + t] += g * m[t];
+            }
+        }
+    }
+}
+
+/// `P^T D H D P` of the matrix-free fine operator, `D = diag(face)`: the rows of
+/// [`galerkin_from_stencil`], each contribution masked at its row's and its column's
+/// vertex.
+fn galerkin_face_from_stencil(
+    stencil: &Stencil,
+    coef: &Coefficients<'_>,
+    agg: &Aggregation,
+    face: &[Vec3A],
+) -> Rows<FACE> {
+    let nc = agg.len();
+    let parent = &agg.parent;
+    let f = |i: usize| face[i].as_dvec3();
+    Rows::build(nc, nc, |acc, a| {
+        let me = a as u32;
+        for &i in agg.members(a) {
+            let i = i as usize;
+            let fi = f(i);
+            acc.add_diag(me, coef.alpha.get(i) * fi);
+            for s in stencil.faces(i) {
+                let n = coef.normals[s.face as usize];
+                let b = coef.beta.get(s.face as usize);
+                let m = n * fi;
+                acc.add_coupling(me, 2.0 * b, m, m, 0.0);
+                for j in [s.prev, s.next] {
+                    acc.add_coupling(parent[j as usize], -b, m, n * f(j as usize), b);
+                }
+            }
+            let mut row_k = |k: usize, coeff: f64| {
+                let ck = coef.fair[k];
+                if ck == 0.0 {
+                    return;
+                }
+                let nbk = stencil.fair_neighbours(k);
+                let w = ck * nbk.len() as f64 * coeff;
+                acc.add_diag(parent[k], w * fi * f(k));
+                let share = -w / nbk.len() as f64;
+                for &j in nbk {
+                    acc.add_diag(parent[j as usize], share * fi * f(j as usize));
+                }
+            };
+            row_k(i, 1.0);
+            for &k in stencil.fair_neighbours(i) {
+                let dk = stencil.fair_neighbours(k as usize).len();
+                if dk > 0 {
+                    row_k(k as usize, -1.0 / dk as f64);
+                }
+            }
+        }
+    })
+}
+
+/// [`l1_smoother`] of a face's level: `M_I = A_II + sum_{J != I} (G_IJ + |d_IJ|)` (`G` the
+/// majorant part, `d` the diagonal part of [`FACE`]); a coordinate that no free vertex
+/// moves (a zero row) gets the identity.
+fn l1_face_smoother(rows: &Rows<FACE>, damping: f64) -> Vec<Block> {
+    (0..rows.len())
+        .into_par_iter()
+        .map(|i| {
+            let mut d = [0.0; 6];
+            for (j, b) in rows.row(i) {
+                if j as usize == i {
+                    let sym =
+                        [b[0], b[4], b[8], 0.5 * (b[3] + b[1]), 0.5 * (b[6] + b[2]), 0.5 * (b[7] + b[5])];
+                    for t in 0..6 {
+                        d[t] += sym[t];
+                    }
+                    for t in 0..3 {
+                        d[t] += b[9 + t];
+                    }
+                } else {
+                    for t in 0..6 {
+                        d[t] += b[12 + t];
+                    }
+                    for t in 0..3 {
+                        d[t] += b[9 + t].abs();
+                    }
+                }
+            }
+            for t in 0..3 {
+                if d[t] == 0.0 {
+                    d[t] = 1.0;
+                }
+            }
+            block(&scale6(&sym_inverse(&d), damping))
+        })
+        .collect()
+}
+
+/// The coarse levels of a face's operator ([`Vcycle::set_face`]).
+#[derive(Debug)]
+struct FaceLevels {
+    levels: Vec<Level>,
+    coarsest: Option<Coarsest>,
 }
 
 /// The inverse blocks of a block-diagonal majorant `M >= A` of an assembled level,
@@ -553,6 +686,25 @@ impl Bsr {
         Bsr { offsets, cols, blocks }
     }
 
+    /// The blocks of a face's level: alignment part plus diagonal part.
+    fn from_face_rows(rows: &Rows<FACE>) -> Self {
+        let offsets = rows.offsets.iter().map(|&o| o as u32).collect();
+        let cols = rows.cols.clone();
+        let blocks = rows
+            .vals
+            .par_iter()
+            .map(|b| {
+                let mut m = [0.0f32; 9];
+                m.copy_from_slice(&b[..9]);
+                for (k, t) in [0, 4, 8].into_iter().enumerate() {
+                    m[t] += b[9 + k];
+                }
+                [Vec3A::new(m[0], m[1], m[2]), Vec3A::new(m[3], m[4], m[5]), Vec3A::new(m[6], m[7], m[8])]
+            })
+            .collect();
+        Bsr { offsets, cols, blocks }
+    }
+
     /// Bytes read by one product.
     pub(crate) fn bytes(&self) -> usize {
         4 * self.offsets.len() + 4 * self.cols.len() + 48 * self.blocks.len()
@@ -590,6 +742,22 @@ impl std::fmt::Debug for Coarsest {
 
 impl Coarsest {
     fn new(rows: &Rows) -> Result<Self, RegularizeError> {
+        Self::from_blocks(rows, |b, r, c| b[3 * c + r] + if r == c { b[9] } else { 0.0 })
+    }
+
+    /// The factor of a face's coarsest level, with the identity on the coordinates no
+    /// free vertex moves.
+    fn face(rows: &Rows<FACE>) -> Result<Self, RegularizeError> {
+        Self::from_blocks(rows, |b, r, c| b[3 * c + r] + if r == c { b[9 + r] } else { 0.0 })
+    }
+
+    /// `entry(block, r, c)`: the entry `(r, c)` of a block (symmetric: block `(j, i)` is
+    /// block `(i, j)` transposed). A zero diagonal entry becomes `1` (a coordinate no
+    /// free vertex moves, on a face; never on the whole operator).
+    fn from_blocks<const W: usize>(
+        rows: &Rows<W>,
+        entry: impl Fn(&[f64; W], usize, usize) -> f64,
+    ) -> Result<Self, RegularizeError> {
         let n = rows.len();
         let dim = 3 * n;
         // Full symmetric CSC: block row i is block column i transposed.
@@ -602,10 +770,10 @@ impl Coarsest {
                 for (j, block) in rows.row(i) {
                     for r in 0..3 {
                         // Column 3i + c, row 3j + r: entry (3j + r, 3i + c) = A_ji[r][c]
-                        // = A_ij[c][r] (symmetry), block stored column-major.
+                        // = A_ij[c][r] (symmetry).
                         row_idx.push(3 * j as usize + r);
-                        let diag = if r == c { block[9] } else { 0.0 };
-                        values.push(block[3 * r + c] + diag);
+                        let v = entry(&block, c, r);
+                        values.push(if v == 0.0 && j as usize == i && r == c { 1.0 } else { v });
                     }
                 }
                 col_ptr.push(row_idx.len());
@@ -677,6 +845,8 @@ pub(crate) struct Vcycle {
     fine_smoother: Vec<Block>,
     /// The smoother of the face operator ([`Vcycle::set_face`]).
     face_smoother: Vec<Block>,
+    /// The face operator's own coarse levels ([`Vcycle::set_face`]).
+    face_levels: Option<FaceLevels>,
     /// The fine majorant's blocks, for the face smoothers.
     majorant: Vec<[f64; 6]>,
     damping: f64,
@@ -733,7 +903,11 @@ impl Vcycle {
         let works: usize =
             self.works.iter().map(|w| 16 * (w.r.len() + w.x.len() + w.t.len() + w.b.len())).sum();
         let coarsest = self.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len());
-        48 * (self.fine_smoother.len() + self.face_smoother.len() + self.majorant.len())
+        let face = self.face_levels.as_ref().map_or(0, |f| {
+            let levels: usize = f.levels.iter().map(|l| l.matrix.bytes() + 48 * l.n).sum();
+            levels + f.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len())
+        });
+        face + 48 * (self.fine_smoother.len() + self.face_smoother.len() + self.majorant.len())
             + self.fine.bytes()
             + agg
             + levels
@@ -761,9 +935,16 @@ impl Vcycle {
 
     /// Prepares [`Vcycle::apply_on_face`] for `face`: the fine smoother of the face's
     /// operator, each vertex's majorant block with the held coordinates' rows and columns
-    /// replaced by the identity, inverted. (The whole block's inverse, masked, would be
-    /// the face block of `M^-1`, larger than `M_FF^-1`: no longer a convergent smoother.)
-    pub(crate) fn set_face(&mut self, face: &[Vec3A]) {
+    /// replaced by the identity, inverted (the whole block's inverse, masked, would be
+    /// the face block of `M^-1`, larger than `M_FF^-1`: no longer a convergent smoother),
+    /// and the face's own Galerkin coarse operators `P^T D H D P` (`D = diag(face)`) with
+    /// their smoothers and coarsest factor, so that the coarse correction is the face
+    /// operator's, not the whole one's (which moves held coordinates' neighbourhoods as if
+    /// they were free). Costs about one multigrid setup.
+    pub(crate) fn set_face(&mut self, stencil: &Stencil, coef: &Coefficients<'_>, face: &[Vec3A]) {
+        // The former face's levels go first: one face hierarchy in memory at a time.
+        self.face_levels = None;
+        self.face_levels = self.face_hierarchy(stencil, coef, face);
         let damping = self.damping;
         self.face_smoother = self
             .majorant
@@ -786,6 +967,36 @@ impl Vcycle {
                 block(&scale6(&sym_inverse(&b), damping))
             })
             .collect();
+    }
+
+    /// The coarse levels of the face's operator; `None` when its coarsest level does not
+    /// factor (the cycle then falls back to the whole operator's coarse levels).
+    fn face_hierarchy(
+        &self,
+        stencil: &Stencil,
+        coef: &Coefficients<'_>,
+        face: &[Vec3A],
+    ) -> Option<FaceLevels> {
+        let mut levels: Vec<Level> = Vec::with_capacity(self.aggregations.len());
+        let mut rows: Option<Rows<FACE>> = None;
+        for agg in &self.aggregations {
+            let coarse = match &rows {
+                None => galerkin_face_from_stencil(stencil, coef, agg, face),
+                Some(finer) => galerkin_from_rows(finer, agg),
+            };
+            if let Some(finer) = rows.take() {
+                let last = levels.last_mut().expect("a previous level");
+                last.matrix = Bsr::from_face_rows(&finer);
+                last.smoother = l1_face_smoother(&finer, self.damping);
+            }
+            rows = Some(coarse);
+            levels.push(Level { matrix: Bsr::default(), smoother: Vec::new(), n: agg.len() });
+        }
+        let coarsest = match rows {
+            Some(rows) => Some(Coarsest::face(&rows).ok()?),
+            None => None,
+        };
+        Some(FaceLevels { levels, coarsest })
     }
 
     /// [`Vcycle::apply`] for the operator restricted to a face (the coordinates where
@@ -831,7 +1042,10 @@ impl Vcycle {
                 }
             }
             restrict(&self.aggregations[0], &w.r, &mut rest[0].r);
-            self.coarse_cycle(0, rest);
+            match (face, &self.face_levels) {
+                (Some(_), Some(f)) => self.coarse_cycle(&f.levels, f.coarsest.as_ref(), 0, rest),
+                _ => self.coarse_cycle(&self.levels, self.coarsest.as_ref(), 0, rest),
+            }
             prolong_add(&self.aggregations[0].parent, &rest[0].x, &mut w.x);
             mask(face, &mut w.x);
             for _ in 0..steps {
@@ -851,17 +1065,17 @@ impl Vcycle {
     }
 
     /// Solves approximately on coarse level `l + 1` (`works[l]`): `x = V(r)`.
-    fn coarse_cycle(&self, l: usize, works: &mut [Work]) {
-        let last = l + 1 == self.levels.len();
+    fn coarse_cycle(&self, levels: &[Level], coarsest: Option<&Coarsest>, l: usize, works: &mut [Work]) {
+        let last = l + 1 == levels.len();
         if last {
             let w = &mut works[0];
-            self.coarsest.as_ref().expect("factored").solve(&w.r, &mut w.x);
+            coarsest.expect("factored").solve(&w.r, &mut w.x);
             return;
         }
         let steps = self.coarse_steps;
         let (here, rest) = works.split_at_mut(1);
         let w = &mut here[0];
-        let level = &self.levels[l];
+        let level = &levels[l];
         smooth(&level.smoother, &w.r, &mut w.x, false);
         for s in 0..steps {
             level.matrix.residual(&w.x, &w.r, &mut w.t);
@@ -870,8 +1084,8 @@ impl Vcycle {
             }
         }
         restrict(&self.aggregations[l + 1], &w.t, &mut rest[0].r);
-        self.coarse_cycle(l + 1, rest);
-        let level = &self.levels[l];
+        self.coarse_cycle(levels, coarsest, l + 1, rest);
+        let level = &levels[l];
         let (here, rest) = works.split_at_mut(1);
         let w = &mut here[0];
         prolong_add(&self.aggregations[l + 1].parent, &rest[0].x, &mut w.x);
