@@ -668,26 +668,10 @@ pub(crate) struct Bsr {
 }
 
 impl Bsr {
-    fn from_rows(rows: &Rows) -> Self {
-        let offsets = rows.offsets.iter().map(|&o| o as u32).collect();
-        let cols = rows.cols.clone();
-        let blocks = rows
-            .vals
-            .par_iter()
-            .map(|b| {
-                let mut m = [0.0f32; 9];
-                m.copy_from_slice(&b[..9]);
-                for t in [0, 4, 8] {
-                    m[t] += b[9];
-                }
-                [Vec3A::new(m[0], m[1], m[2]), Vec3A::new(m[3], m[4], m[5]), Vec3A::new(m[6], m[7], m[8])]
-            })
-            .collect();
-        Bsr { offsets, cols, blocks }
-    }
-
-    /// The blocks of a face's level: alignment part plus diagonal part.
-    fn from_face_rows(rows: &Rows<FACE>) -> Self {
+    /// The blocks of a level: the alignment part (`b[..9]`) plus the diagonal part, one
+    /// value for the three coordinates (the whole operator's rows, `W = 10`) or one per
+    /// coordinate (a face's rows, `W = FACE`, from `b[9]`).
+    fn from_rows<const W: usize>(rows: &Rows<W>) -> Self {
         let offsets = rows.offsets.iter().map(|&o| o as u32).collect();
         let cols = rows.cols.clone();
         let blocks = rows
@@ -697,7 +681,7 @@ impl Bsr {
                 let mut m = [0.0f32; 9];
                 m.copy_from_slice(&b[..9]);
                 for (k, t) in [0, 4, 8].into_iter().enumerate() {
-                    m[t] += b[9 + k];
+                    m[t] += b[if W == 10 { 9 } else { 9 + k }];
                 }
                 [Vec3A::new(m[0], m[1], m[2]), Vec3A::new(m[3], m[4], m[5]), Vec3A::new(m[6], m[7], m[8])]
             })
@@ -986,7 +970,7 @@ impl Vcycle {
             };
             if let Some(finer) = rows.take() {
                 let last = levels.last_mut().expect("a previous level");
-                last.matrix = Bsr::from_face_rows(&finer);
+                last.matrix = Bsr::from_rows(&finer);
                 last.smoother = l1_face_smoother(&finer, self.damping);
             }
             rows = Some(coarse);
