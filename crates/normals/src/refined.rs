@@ -35,6 +35,12 @@ use crate::{NormalError, NormalEstimator, NormalField};
 /// quarter of the mean). Why: the plain mean next to a junction averaged the bent quads
 /// (the sphere's quads at a ball's cut reached 30 degrees of error), and the mean of the
 /// interior alone is the normal of a point a voxel or more away from the quad.
+/// Where the surface continues smoothly across the junction (an interior sample of
+/// another interface enters the disc: the sphere's two caps at a ball's cut), the disc of
+/// such a quad is [`JUNCTION_DISC_FACTOR`] times wider: the two-ring gap leaves only the
+/// rim of a disc of the plain radius, whose few samples fit the curvature poorly (the
+/// sphere's quads touching the cut kept 1.3 degrees of error, against 0.7 elsewhere).
+/// Where it stops at the junction (one-sided discs: a crease), the plain radius is kept.
 ///
 /// **Anisotropic voxels.** Where the spacing is not cubic, away from junctions and sharp
 /// features (discs where the feature rule stopped at no jump between neighbouring quads),
@@ -128,6 +134,11 @@ fn interface_adjacency(surface: &DigitalSurface) -> (Vec<u32>, Vec<u32>) {
     (starts, adjacent)
 }
 
+/// How much wider than [`Refined::radius`] the disc of a quad within two rings of a
+/// junction is, where its surface continues smoothly across the junction (see
+/// [`Refined`]).
+pub const JUNCTION_DISC_FACTOR: f64 = 3.0;
+
 /// The weight of the first-order fit in [`Refined`] on a surface of voxel `spacing`:
 /// `clamp(h_max / h_min - 1, 0, 1)`, 0 for cubic voxels, 1 from a ratio of 2 on, so the
 /// fit comes in continuously with the anisotropy.
@@ -197,58 +208,71 @@ fn refined(
             |(seen, touched, queue), f| {
                 let nf = normals[f];
                 let cf = centres[f];
-                let mut sum = DVec3::ZERO;
-                let mut fit = FirstOrder::default();
-                let mut interior = Umbilic::default();
-                let mut excluded = false; // a quad near a junction in the disc
-                let mut feature = false; // the feature rule stopped at a sharp jump
                 let regions_f = surfels[f].regions;
-                queue.push_back((f, 0.0, f));
-                seen[f] = true;
-                touched.push(f);
-                while let Some((g, d, parent)) = queue.pop_front() {
-                    let a = areas[g];
-                    let len = lengths[g];
-                    let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
-                    if dot.abs() < cos_max {
-                        // A sharp feature (a jump past the feature angle from the quad it
-                        // was reached from, not a gradual turn of a curved surface): the
-                        // fit would extrapolate across it.
-                        if blend > 0.0 {
-                            let from = areas[parent];
-                            feature |= a.dot(from).abs() < cos_max * len * lengths[parent];
+                let iface_f = surfels[f].interface;
+                let mut disc = |r: f64| -> (DVec3, bool) {
+                    let mut sum = DVec3::ZERO;
+                    let mut fit = FirstOrder::default();
+                    let mut interior = Umbilic::default();
+                    let mut excluded = false; // a quad near a junction in the disc
+                    let mut feature = false; // the feature rule stopped at a sharp jump
+                    let mut continued = false; // an interior sample of another interface
+                    queue.push_back((f, 0.0, f));
+                    seen[f] = true;
+                    touched.push(f);
+                    while let Some((g, d, parent)) = queue.pop_front() {
+                        let a = areas[g];
+                        let len = lengths[g];
+                        let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
+                        if dot.abs() < cos_max {
+                            // A sharp feature (a jump past the feature angle from the quad it
+                            // was reached from, not a gradual turn of a curved surface): the
+                            // fit would extrapolate across it.
+                            if blend > 0.0 {
+                                let from = areas[parent];
+                                feature |= a.dot(from).abs() < cos_max * len * lengths[parent];
+                            }
+                            continue; // across a feature: neither counted nor crossed
                         }
-                        continue; // across a feature: neither counted nor crossed
-                    }
-                    sum += (1.0 - d / r) * a * dot.signum();
-                    if near_junction[g] {
-                        excluded = true;
-                    } else if len > 0.0 {
-                        interior.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf, nf);
-                    }
-                    if blend > 0.0 && len > 0.0 {
-                        fit.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf);
-                    }
-                    for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
-                        let k = k as usize;
-                        if !seen[k] && surfels[k].regions.iter().any(|r| regions_f.contains(r)) {
-                            let dk = centres[k].distance(cf);
-                            if dk < r {
-                                seen[k] = true;
-                                touched.push(k);
-                                queue.push_back((k, dk, g));
+                        sum += (1.0 - d / r) * a * dot.signum();
+                        if near_junction[g] {
+                            excluded = true;
+                        } else if len > 0.0 {
+                            continued |= surfels[g].interface != iface_f;
+                            interior.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf, nf);
+                        }
+                        if blend > 0.0 && len > 0.0 {
+                            fit.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf);
+                        }
+                        for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
+                            let k = k as usize;
+                            if !seen[k] && surfels[k].regions.iter().any(|r| regions_f.contains(r)) {
+                                let dk = centres[k].distance(cf);
+                                if dk < r {
+                                    seen[k] = true;
+                                    touched.push(k);
+                                    queue.push_back((k, dk, g));
+                                }
                             }
                         }
                     }
-                }
-                touched.drain(..).for_each(|k| seen[k] = false);
-                let m = if excluded {
-                    interior.at_origin().unwrap_or(sum)
-                } else {
-                    match fit.at_origin(r, blend) {
-                        Some(m) if !feature => m,
-                        _ => sum,
-                    }
+                    touched.drain(..).for_each(|k| seen[k] = false);
+                    let m = if excluded {
+                        interior.at_origin().unwrap_or(sum)
+                    } else {
+                        match fit.at_origin(r, blend) {
+                            Some(m) if !feature => m,
+                            _ => sum,
+                        }
+                    };
+                    (m, continued)
+                };
+                // Next to a junction, the wider disc where the surface continues across
+                // the curve (its samples on both sides); the plain radius where it stops
+                // there (one-sided: a wider disc would extrapolate farther).
+                let m = match near_junction[f].then(|| disc(JUNCTION_DISC_FACTOR * r)) {
+                    Some((m, true)) => m,
+                    _ => disc(r).0,
                 }
                 .normalize_or_zero();
                 if m == DVec3::ZERO {
