@@ -190,7 +190,7 @@ impl BoundedSolver {
         start: Option<&[DVec3]>,
         progress: &mut dyn FnMut(&Progress),
     ) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
-        let mut prepared = self.setup.prepare(energy)?;
+        let mut prepared = self.setup.prepare(energy, false)?;
         let stencil = &self.setup.stencil;
         let n = stencil.len();
         let input = energy.input();

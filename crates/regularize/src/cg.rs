@@ -78,6 +78,9 @@ impl Default for CgParams {
 pub struct CgSolver {
     params: CgParams,
     setup: Setup,
+    /// Whether solves from a given start begin on the last solve's multigrid cycle
+    /// ([`CgSolver::set_quick_start`]).
+    quick_start: bool,
 }
 
 /// Work vectors of one solve.
@@ -110,7 +113,11 @@ impl CgSolver {
     /// The solver of energies with the matrix-free `operator`.
     pub fn new(operator: MatrixFreeOperator, params: CgParams) -> Result<Self, RegularizeError> {
         check_tolerance(params.tolerance)?;
-        Ok(CgSolver { params, setup: Setup::new(operator, params.preconditioner, params.multigrid)? })
+        Ok(CgSolver {
+            params,
+            setup: Setup::new(operator, params.preconditioner, params.multigrid)?,
+            quick_start: false,
+        })
     }
 
     /// The parameters.
@@ -124,6 +131,17 @@ impl CgSolver {
         check_tolerance(tolerance)?;
         self.params.tolerance = tolerance;
         Ok(())
+    }
+
+    /// Whether the next solves from a given start ([`CgSolver::solve_from`], with a
+    /// progress callback) begin on the last solve's multigrid cycle, its fine level put on
+    /// the new energy, and build the energy's own cycle only after the first iteration,
+    /// restarting from that iterate: the first iterate comes without waiting for the
+    /// coarse levels' setup (a re-solve after a parameter change, shown as it converges).
+    /// The minimizer and the stopping rule are those of any solve; the iterations may
+    /// differ by one or two. Off by default.
+    pub(crate) fn set_quick_start(&mut self, on: bool) {
+        self.quick_start = on;
     }
 
     /// Number of multigrid levels, the surface included (1 without multigrid).
@@ -173,9 +191,9 @@ impl CgSolver {
         start: Option<&[DVec3]>,
         mut progress: Option<&mut dyn FnMut(&Progress)>,
     ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        let mut prepared = self.setup.prepare(energy)?;
+        let quick = self.quick_start && start.is_some() && progress.is_some();
+        let mut prepared = self.setup.prepare(energy, quick)?;
         let stencil = &self.setup.stencil;
-        let coef = &prepared.coef;
         let n = stencil.len();
         let input = energy.input();
 
@@ -183,7 +201,7 @@ impl CgSolver {
         let zero = || vec![DVec3::ZERO; n];
         let mut b = Buffers { u: zero(), r: zero(), z: zero(), p: zero(), q: zero(), t: zero() };
         // r = alpha p - H p = -(H - diag(alpha)) p: only differences of positions, exact.
-        stencil.apply(coef, input, &mut b.r, &mut b.t, false);
+        stencil.apply(&prepared.coef, input, &mut b.r, &mut b.t, false);
         b.r.par_chunks_mut(CHUNK).for_each(|c| c.iter_mut().for_each(|x| *x = -*x));
         let rhs = b.r.clone();
         let r0 = norm(&b.r);
@@ -194,7 +212,7 @@ impl CgSolver {
             b.u.par_chunks_mut(CHUNK).zip(input.par_chunks(CHUNK).zip(start.par_chunks(CHUNK))).for_each(
                 |(u, (p, s))| u.iter_mut().zip(p.iter().zip(s)).for_each(|(u, (p, s))| *u = *s - *p),
             );
-            stencil.residual(coef, &b.u, &rhs, &mut b.r, &mut b.t);
+            stencil.residual(&prepared.coef, &b.u, &rhs, &mut b.r, &mut b.t);
             applications += 1;
             rnorm = norm(&b.r);
         }
@@ -205,6 +223,7 @@ impl CgSolver {
         let e0 = if progress.is_some() { energy.terms(input).total } else { 0.0 };
 
         let mut iterations = 0;
+        let mut stale_iterations = 0;
         let mut estimate = f64::INFINITY;
         let mut residuals = vec![rnorm];
         let mut restarts = 0;
@@ -213,7 +232,7 @@ impl CgSolver {
             scale_add(&mut b.p, 0.0, &b.z);
             let mut rz = dot(&b.r, &b.z);
             loop {
-                let pq = stencil.apply_dot(coef, &b.p, &mut b.q, &mut b.t);
+                let pq = stencil.apply_dot(&prepared.coef, &b.p, &mut b.q, &mut b.t);
                 applications += 1;
                 if !(pq > 0.0 && rz > 0.0) {
                     break 'outer; // converged to rounding
@@ -230,7 +249,7 @@ impl CgSolver {
                 };
                 if done || iterations >= self.params.max_iterations {
                     // The recursive residual drifts from the true one: report the latter.
-                    stencil.residual(coef, &b.u, &rhs, &mut b.r, &mut b.t);
+                    stencil.residual(&prepared.coef, &b.u, &rhs, &mut b.r, &mut b.t);
                     applications += 1;
                     rnorm = norm(&b.r);
                     let drifted = self.params.stopping == StoppingRule::Guaranteed && rnorm > guaranteed;
@@ -240,8 +259,6 @@ impl CgSolver {
                     }
                     break 'outer;
                 }
-                prepared.pre.apply(stencil, &b.r, &mut b.z);
-                let rz_new = dot(&b.r, &b.z);
                 if let Some(report) = progress.as_mut() {
                     // E(p + u) = E(p) - u.b - u.r for the quadratic with H u = b - r.
                     let energy_now = e0 - dot(&b.u, &rhs) - dot(&b.u, &b.r);
@@ -255,6 +272,15 @@ impl CgSolver {
                         displacement: &b.u,
                     });
                 }
+                if prepared.stale {
+                    // The first iterate is out: this energy's own cycle, and a restart
+                    // (the directions so far are conjugate for the stale one).
+                    stale_iterations = iterations;
+                    self.setup.renew(&mut prepared)?;
+                    continue 'outer;
+                }
+                prepared.pre.apply(stencil, &b.r, &mut b.z);
+                let rz_new = dot(&b.r, &b.z);
                 scale_add(&mut b.p, rz_new / rz, &b.z);
                 rz = rz_new;
             }
@@ -273,10 +299,17 @@ impl CgSolver {
         // update (p, z), and the preconditioner.
         let traffic = self.setup.traffic_model(&prepared, 1, 2 + 6 + 2 + 3);
         let memory = self.setup.memory_bytes(&prepared) + 7 * 24 * n;
+        if prepared.stale {
+            stale_iterations = iterations;
+        }
+        let seconds = self.setup.timings(&prepared, solve_seconds);
+        // A solve that stopped on the stale cycle keeps it: its energy's own was not built.
+        self.setup.keep(prepared);
         Ok((
             x,
             CgInfo {
                 iterations,
+                quick_start_iterations: stale_iterations,
                 operator_applications: applications,
                 relative_gradient: relative,
                 error_bound: bound,
@@ -285,7 +318,7 @@ impl CgSolver {
                 preconditioner: self.params.preconditioner,
                 memory_bytes: memory,
                 bytes_per_iteration: traffic,
-                seconds: self.setup.timings(&prepared, solve_seconds),
+                seconds,
             },
         ))
     }
@@ -367,5 +400,100 @@ mod kernel_timings {
         );
         let mut v = h.numeric(&st, &c).unwrap();
         eprintln!("v-cycle: {:.3} ms ({} levels)", time(&mut || v.apply(&st, &y, &mut t)), h.levels());
+    }
+}
+
+#[cfg(test)]
+mod quick_start {
+    //! The quick start of a warm re-solve: the first iterate before the new energy's
+    //! multigrid setup, and the same minimizer as a cold solve.
+    use super::*;
+    use crate::multigrid::tests::setups;
+    use crate::{DirectSolver, EnergyParams};
+    use voxreg_normals::{NormalEstimator, NormalField, Trivial};
+    use voxreg_testkit::{digitize, true_normals, Torus};
+
+    fn max_distance(a: &[DVec3], b: &[DVec3]) -> f64 {
+        a.iter().zip(b).map(|(x, y)| (*x - *y).length()).fold(0.0, f64::max)
+    }
+
+    /// A solve from `start`: the result, its report, and the multigrid setups done on
+    /// this thread before its first iterate and in all.
+    fn solve(
+        solver: &mut CgSolver,
+        energy: &Energy<'_>,
+        start: &[DVec3],
+    ) -> (Vec<DVec3>, CgInfo, Option<usize>, usize) {
+        let before = setups();
+        let mut first = None;
+        let (x, info) =
+            solver.solve_from(energy, start, &mut |_| _ = *first.get_or_insert(setups() - before)).unwrap();
+        (x, info, first, setups() - before)
+    }
+
+    #[test]
+    fn a_quick_start_iterates_before_any_setup_and_reaches_the_minimizer() {
+        let torus = Torus { major: 11.0, minor: 4.3 };
+        let s = DigitalSurface::from_volume(&digitize(&torus, 1.0)).unwrap();
+        let exact_normals = NormalField::new(true_normals(&s, &torus));
+        let trivial = Trivial.estimate(&s).unwrap();
+        let input = s.positions();
+        let base = EnergyParams::default();
+        let mut solver = CgSolver::for_surface(&s, CgParams::default()).unwrap();
+        assert!(solver.levels() > 2, "a hierarchy with coarse levels");
+        let before = Energy::new(&s, &exact_normals, &input, base).unwrap();
+        let (x0, _) = solver.solve(&before).unwrap();
+        // Changes far larger than a slider step: the stale cycle is a poor match.
+        let changes = [
+            (EnergyParams { gamma: base.gamma * 10.0, ..base }, &exact_normals),
+            (EnergyParams { alpha: base.alpha / 3.0, beta: base.beta * 2.0, ..base }, &exact_normals),
+            (base, &trivial),
+        ];
+        for (params, normals) in changes {
+            let energy = Energy::new(&s, normals, &input, params).unwrap();
+            let (exact, _) = DirectSolver::for_surface(&s).unwrap().solve(&energy).unwrap();
+            // The kept cycle is the first energy's; the quick start begins on it.
+            solver.set_quick_start(false);
+            solver.solve(&before).unwrap();
+            solver.set_quick_start(true);
+            let (quick, info, first, total) = solve(&mut solver, &energy, &x0);
+            assert_eq!(first, Some(0), "{params:?}: no multigrid setup before the first iterate");
+            assert_eq!(total, 1, "the energy's own cycle after it");
+            assert_eq!(info.quick_start_iterations, 1);
+            solver.set_quick_start(false);
+            let (plain, plain_info, first, total) = solve(&mut solver, &energy, &x0);
+            assert_eq!((first, total), (Some(1), 1), "without it, the setup comes first");
+            let tol = solver.params().tolerance;
+            assert!(info.converged);
+            assert!(max_distance(&quick, &exact) <= tol, "{params:?}: quick vs exact");
+            assert!(max_distance(&plain, &exact) <= tol, "{params:?}: plain vs exact");
+            assert!(
+                // The restart after the first iteration costs a few; a change this
+                // large, up to an eighth (63 against 56 with gamma x10).
+                info.iterations <= plain_info.iterations + plain_info.iterations / 4 + 2,
+                "{params:?}: {} iterations, {} without the quick start",
+                info.iterations,
+                plain_info.iterations
+            );
+        }
+    }
+
+    #[test]
+    fn a_quick_start_needs_a_start_a_listener_and_a_kept_cycle() {
+        let torus = Torus { major: 9.0, minor: 3.5 };
+        let s = DigitalSurface::from_volume(&digitize(&torus, 1.0)).unwrap();
+        let normals = NormalField::new(true_normals(&s, &torus));
+        let input = s.positions();
+        let energy = Energy::new(&s, &normals, &input, EnergyParams::default()).unwrap();
+        let mut solver = CgSolver::for_surface(&s, CgParams::default()).unwrap();
+        solver.set_quick_start(true);
+        // Nothing kept yet: the first solve sets up its own cycle first.
+        let (x, info, first, _) = solve(&mut solver, &energy, &input);
+        assert_eq!((first, info.quick_start_iterations), (Some(1), 0));
+        // No start (a cold solve) or no listener: nothing to show early.
+        let (_, info) = solver.solve_with(&energy, &mut |_| {}).unwrap();
+        assert_eq!(info.quick_start_iterations, 0);
+        let (_, info) = solver.run(&energy, Some(&x), None).unwrap();
+        assert_eq!(info.quick_start_iterations, 0);
     }
 }

@@ -54,6 +54,9 @@ pub(crate) struct Setup {
     pub(crate) voxel: DVec3,
     /// Seconds spent on structure (connectivity, hierarchy) not yet reported by a solve.
     pub(crate) structure_seconds: f64,
+    /// The last solve's multigrid cycle ([`Setup::keep`]), which a quick start's first
+    /// iterations use ([`Setup::prepare`]).
+    kept: Option<Box<Vcycle>>,
 }
 
 /// One energy's numbers and preconditioner, ready to iterate.
@@ -62,6 +65,9 @@ pub(crate) struct Prepared<'a> {
     pub(crate) pre: Pre,
     pub(crate) assemble_seconds: f64,
     pub(crate) factor_seconds: f64,
+    /// Whether `pre` is the previous solve's cycle with its fine level refreshed (a quick
+    /// start), to be replaced by this energy's own ([`Setup::renew`]).
+    pub(crate) stale: bool,
 }
 
 impl Setup {
@@ -85,6 +91,7 @@ impl Setup {
             spacing: spacing.min_element(),
             voxel: spacing,
             structure_seconds: build_seconds + t.elapsed().as_secs_f64(),
+            kept: None,
         })
     }
 
@@ -107,7 +114,20 @@ impl Setup {
 
     /// Checks that `energy` is on this surface, rebuilds the connectivity if its fairness
     /// mask changed, and computes its coefficients and preconditioner.
-    pub(crate) fn prepare<'a>(&mut self, energy: &Energy<'a>) -> Result<Prepared<'a>, RegularizeError> {
+    ///
+    /// With `quick`, and a multigrid cycle kept from the last solve on this connectivity
+    /// ([`Setup::keep`]), the preconditioner is that cycle with its fine level put on the
+    /// new operator ([`Vcycle::refresh_fine`]: O(n), no Galerkin products or coarse
+    /// factorization), marked `stale`: the solver iterates at once and builds the
+    /// energy's own cycle later ([`Setup::renew`]). Any symmetric positive definite
+    /// preconditioner leaves the conjugate gradient's minimizer unchanged; only its rate
+    /// depends on how far the energy moved. Otherwise a kept cycle is dropped before the
+    /// new one is built (one in memory at a time).
+    pub(crate) fn prepare<'a>(
+        &mut self,
+        energy: &Energy<'a>,
+        quick: bool,
+    ) -> Result<Prepared<'a>, RegularizeError> {
         let surface = energy.surface();
         let n = self.stencil.len();
         if energy.input().len() != n || surface.num_vertices() != n {
@@ -118,10 +138,22 @@ impl Setup {
             let t = Instant::now();
             self.stencil = Stencil::new(surface, mask)?;
             self.mask = mask.cloned();
+            self.kept = None;
             self.structure_seconds += t.elapsed().as_secs_f64();
         }
         let t = Instant::now();
         let coef = self.stencil.coefficients(energy);
+        let kept = self.kept.take().filter(|_| quick && self.preconditioner == Preconditioner::Multigrid);
+        if let Some(mut v) = kept {
+            v.refresh_fine(&self.stencil, &coef);
+            return Ok(Prepared {
+                coef,
+                pre: Pre::Multigrid(v),
+                assemble_seconds: t.elapsed().as_secs_f64(),
+                factor_seconds: 0.0,
+                stale: true,
+            });
+        }
         let pre = match self.preconditioner {
             Preconditioner::Identity => Pre::Identity,
             Preconditioner::Jacobi => Pre::Jacobi(
@@ -148,7 +180,32 @@ impl Setup {
             pre,
             assemble_seconds: t.elapsed().as_secs_f64() - factor_seconds,
             factor_seconds,
+            stale: false,
         })
+    }
+
+    /// Replaces a quick start's stale cycle by `prepared`'s energy's own (the setup
+    /// [`Setup::prepare`] deferred), its seconds added to `prepared`'s; the stale cycle
+    /// is dropped first.
+    pub(crate) fn renew(&self, prepared: &mut Prepared<'_>) -> Result<(), RegularizeError> {
+        let Some(h) = self.hierarchy.as_ref().filter(|_| prepared.stale) else {
+            return Ok(());
+        };
+        let t = Instant::now();
+        prepared.pre = Pre::Identity;
+        let v = h.numeric(&self.stencil, &prepared.coef)?;
+        prepared.factor_seconds += v.factor_seconds;
+        prepared.assemble_seconds += t.elapsed().as_secs_f64() - v.factor_seconds;
+        prepared.pre = Pre::Multigrid(Box::new(v));
+        prepared.stale = false;
+        Ok(())
+    }
+
+    /// Keeps `prepared`'s multigrid cycle for the next solve's quick start.
+    pub(crate) fn keep(&mut self, prepared: Prepared<'_>) {
+        if let Pre::Multigrid(v) = prepared.pre {
+            self.kept = Some(v);
+        }
     }
 
     /// Bytes of the connectivity and per-solve numbers (normals borrowed, not counted).

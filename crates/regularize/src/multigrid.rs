@@ -153,6 +153,8 @@ impl Hierarchy {
         stencil: &Stencil,
         coef: &Coefficients<'_>,
     ) -> Result<Vcycle, RegularizeError> {
+        #[cfg(test)]
+        tests::SETUPS.with(|c| c.set(c.get() + 1));
         let clock = Instant::now();
         let lap = |what: &str| {
             tracing::trace!(stage = what, ms = clock.elapsed().as_secs_f64() * 1e3, "multigrid setup");
@@ -201,8 +203,9 @@ impl Hierarchy {
         let mut works = vec![work(stencil.len())];
         works[0].b = vec![Vec3A::ZERO; stencil.len()];
         works.extend(levels.iter().map(|l| work(l.n)));
+        let fine = FineNumbers::new(stencil, coef);
         Ok(Vcycle {
-            fine: FineNumbers::new(stencil, coef),
+            fine,
             fine_smoother: fine_smoother
                 .par_iter()
                 .map(|d| block(&scale6(&sym_inverse(d), self.params.damping)))
@@ -899,6 +902,24 @@ impl Vcycle {
             + coarsest
     }
 
+    /// Puts the fine level on the operator of `coef` (its numbers, majorant and smoother)
+    /// and keeps the coarse levels, which stay those of the energy the cycle was built
+    /// for: the cycle of a quick start ([`crate::iterative::Setup::prepare`]), O(n) instead
+    /// of a setup. Still a fixed symmetric positive definite preconditioner of the new
+    /// operator `A`: with the smoother `S = damping M^-1`, `M >= A` and damping below 2,
+    /// the cycle is `2S - SAS + (I - SA) P C P^T (I - AS)`, where `2S - SAS` is positive
+    /// definite and `C` (the old levels' own symmetric cycle) positive semi-definite; how
+    /// close the old levels are to the new operator's only sets the rate.
+    pub(crate) fn refresh_fine(&mut self, stencil: &Stencil, coef: &Coefficients<'_>) {
+        let majorant = fine_majorant(stencil, coef);
+        self.fine_smoother =
+            majorant.par_iter().map(|d| block(&scale6(&sym_inverse(d), self.damping))).collect();
+        self.majorant = majorant;
+        self.fine = FineNumbers::new(stencil, coef);
+        self.face_smoother = Vec::new();
+        self.face_levels = None;
+    }
+
     /// Bytes moved by one cycle (`connectivity`: bytes of the stencil's connectivity).
     pub(crate) fn traffic(&self, connectivity: usize, n: usize) -> usize {
         let (s, cs) = (self.steps, self.coarse_steps);
@@ -1077,5 +1098,19 @@ impl Vcycle {
             level.matrix.residual(&w.x, &w.r, &mut w.t);
             smooth(&level.smoother, &w.t, &mut w.x, true);
         }
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod tests {
+    thread_local! {
+        /// Multigrid setups ([`super::Hierarchy::numeric`]) run on this thread, for the
+        /// tests that bound the work before a quick start's first iterate.
+        pub(crate) static SETUPS: std::cell::Cell<usize> = const { std::cell::Cell::new(0) };
+    }
+
+    /// The setups run on this thread so far.
+    pub(crate) fn setups() -> usize {
+        SETUPS.with(|c| c.get())
     }
 }

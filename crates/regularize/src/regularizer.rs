@@ -197,6 +197,14 @@ impl Regularizer {
     /// bounded one projects them into its boxes, which may have changed); the direct
     /// solver is exact and ignores them. Rounds past the end of `warm` start as without
     /// it.
+    ///
+    /// A started round of the conjugate gradient reports its first iterate before the
+    /// new energy's multigrid setup: that iteration is preconditioned by the last solve's
+    /// cycle with its fine level put on the new operator (still symmetric positive
+    /// definite), then the energy's own cycle is built and the iterations restart from
+    /// that iterate ([`crate::CgInfo::quick_start_iterations`]). An interactive re-solve
+    /// shows its first iterate after the coefficients and one iteration, not after the
+    /// coarse levels' Galerkin products and factorization.
     pub fn run_warm(
         &mut self,
         params: &Params,
@@ -343,6 +351,7 @@ impl Regularizer {
             let last = round == params.refine;
             let factor = if last { 1.0 } else { params.intermediate_tolerance };
             solver.set_cg_tolerance(params.solver.cg.tolerance * factor)?;
+            solver.set_quick_start(warm.get(round).is_some());
             // The bounded solver's refinement rounds start as its first does (a cold run's
             // results stay those its measurements describe); given starts it takes.
             let chained = round > 0 && !matches!(solver, Solver::Bounded(_));

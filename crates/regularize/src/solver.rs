@@ -231,6 +231,14 @@ impl Solver {
         }
     }
 
+    /// Whether the conjugate gradient's next solves from a given start begin on the last
+    /// solve's multigrid cycle ([`CgSolver::set_quick_start`]); the others ignore it.
+    pub(crate) fn set_quick_start(&mut self, on: bool) {
+        if let Solver::Cg(s) = self {
+            s.set_quick_start(on);
+        }
+    }
+
     /// Minimizes `energy` (see each solver's `solve`).
     pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
         self.solve_with(energy, &mut |_| {})

@@ -94,6 +94,47 @@ fn a_warm_refined_run_matches_the_cold_one_in_fewer_iterations() {
 }
 
 #[test]
+fn a_warm_run_far_from_the_last_one_reaches_the_cold_result() {
+    // Each warm round's first iteration is preconditioned by the last solve's multigrid
+    // cycle (a quick start); changes far larger than a slider step make it a poor match,
+    // and the results must still be the cold run's, every round with its own minimizer.
+    let mut r =
+        Regularizer::from_volume(&digitize(&Sphere { radius: 9.6 }, 1.0), &RegionMap::per_label()).unwrap();
+    let before = with_solver(Params::default(), SolverChoice::Cg);
+    let (_, rounds) = run_keeping_iterates(&mut r, &before, &[]);
+    let changes: [fn(&mut Params); 3] = [
+        |p| p.energy.gamma *= 10.0,
+        |p| p.energy.alpha /= 4.0,
+        |p| {
+            p.energy.beta *= 3.0;
+            p.energy.gamma /= 5.0;
+        },
+    ];
+    for (k, change) in changes.into_iter().enumerate() {
+        let mut after = before.clone();
+        change(&mut after);
+        // The kept cycle is the first parameters' (their run comes just before).
+        run_keeping_iterates(&mut r, &before, &rounds);
+        let (warm, _) = run_keeping_iterates(&mut r, &after, &rounds);
+        let cold = r.run(&after).unwrap();
+        let tol = after.solver.cg.tolerance;
+        let d = max_distance(&warm.positions, &cold.positions);
+        assert!(d <= 10.0 * tol, "change {k}: warm and cold differ by {d} voxel");
+        let (ew, ec) = (warm.report.energy.after.total, cold.report.energy.after.total);
+        assert!((ew - ec).abs() <= 1e-4 * ec.abs(), "change {k}: energies {ew} warm, {ec} cold");
+        for (round, (w, c)) in warm.report.solves.iter().zip(&cold.report.solves).enumerate() {
+            let (SolveInfo::Cg(w), SolveInfo::Cg(c)) = (w, c) else { panic!("the conjugate gradient") };
+            assert!(w.converged && c.converged, "change {k}, round {round}");
+            assert_eq!(
+                (w.quick_start_iterations, c.quick_start_iterations),
+                (1, 0),
+                "change {k}, round {round}"
+            );
+        }
+    }
+}
+
+#[test]
 fn the_direct_solver_ignores_the_start_and_a_wrong_length_is_an_error() {
     let mut r = torus();
     let p = with_solver(Params::papers(), SolverChoice::Direct);

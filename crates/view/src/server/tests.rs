@@ -283,6 +283,7 @@ fn a_re_solve_of_the_same_surface_starts_from_the_last_result() {
     });
     let mut params = Preset::Papers.params();
     params.solver.choice = voxreg_regularize::SolverChoice::Cg;
+    let (copy, base) = (volume.clone(), params.clone());
     let r =
         start_with(Loaded { name: "ball.vol".into(), volume, palette: None, preset: Preset::Papers, params });
     let first = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
@@ -297,6 +298,24 @@ fn a_re_solve_of_the_same_surface_starts_from_the_last_result() {
     assert_eq!(again["warm"], true, "{again}");
     let warm = again["iterations"].as_u64().unwrap();
     assert!(warm < cold, "warm {warm} iterations, cold {cold}");
+    // The warm re-solve (its first iteration on the last run's multigrid cycle) ends at
+    // the result of a cold run with its parameters, as `voxreg regularize` computes it.
+    let p = serde_json::from_value::<crate::Tuning>(tuning.clone())
+        .unwrap()
+        .params(Preset::Papers, &base)
+        .unwrap();
+    let cold_run = voxreg_regularize::regularize(&copy, &p).unwrap();
+    let shown = get(&r, "/api/positions").1;
+    let shown: Vec<f32> = shown.chunks_exact(4).map(|b| f32::from_le_bytes(b.try_into().unwrap())).collect();
+    let d = shown
+        .chunks_exact(3)
+        .zip(cold_run.positions.iter())
+        .map(|(x, c)| (glam::DVec3::new(x[0].into(), x[1].into(), x[2].into()) - *c).length())
+        .fold(0.0, f64::max);
+    assert_eq!(shown.len(), 3 * cold_run.positions.len());
+    assert!(d <= 10.0 * p.solver.cg.tolerance, "warm and cold results differ by {d} voxel");
+    let report = json(&get(&r, "/api/report").1);
+    assert_eq!(report["report"]["solves"][0]["quick_start_iterations"], 1, "{report}");
     // The panel's smoothness reaches the solver (bounded, clamped) and the command line.
     tuning["smoothness"] = serde_json::json!(0.5);
     assert_eq!(post(&r, "/api/solve", tuning.to_string().as_bytes()).0, 202);
@@ -388,4 +407,59 @@ fn adding_a_voxel_outside_the_volume_is_refused_with_a_message() {
     assert!(refused["error"].as_str().unwrap().contains("outside the volume"), "{refused}");
     assert_eq!(refused["model_id"].as_u64(), Some(model));
     assert_eq!(get(&r, "/").0, 200);
+}
+
+/// The latency of a re-solve on bunny-128 (the default preset, as `voxreg view
+/// data/bunny-128.vol` opens it): `RUNS` (default 6) gamma changes alternating x1.2 and
+/// /1.2, each waited for, printing the server's times. Ignored: a measurement, meant for a
+/// quiet machine:
+///
+/// ```text
+/// cargo test --release -p voxreg-view --lib bunny_re_solve_latency -- --ignored --nocapture
+/// ```
+#[test]
+#[ignore]
+fn bunny_re_solve_latency() {
+    let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/bunny-128.vol");
+    let v = voxreg_io::read_volume(&path).unwrap();
+    let r = start_with(Loaded {
+        name: "bunny-128.vol".into(),
+        volume: v.volume,
+        palette: v.palette,
+        preset: Preset::Default,
+        params: Preset::Default.params(),
+    });
+    let mut state = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
+    eprintln!(
+        "cold: {} iterations, done {:.0} ms after opening",
+        state["iterations"],
+        state["total_ms"].as_f64().unwrap_or(f64::NAN)
+    );
+    let runs: usize = std::env::var("RUNS").map(|v| v.parse().unwrap()).unwrap_or(6);
+    let replace_after: Option<u64> = std::env::var("REPLACE_AFTER_MS").ok().map(|v| v.parse().unwrap());
+    for k in 0..runs {
+        let mut tuning = state["tuning"].clone();
+        let factor = if k % 2 == 0 { 1.2 } else { 1.0 / 1.2 };
+        tuning["gamma"] = serde_json::json!(tuning["gamma"].as_f64().unwrap() * factor);
+        let frame = state["frame"].as_u64().unwrap();
+        if let Some(ms) = replace_after {
+            // A change that replaces the running one `ms` into its run.
+            let mut first = tuning.clone();
+            first["gamma"] = serde_json::json!(tuning["gamma"].as_f64().unwrap() * 1.1);
+            assert_eq!(post(&r, "/api/solve", first.to_string().as_bytes()).0, 202);
+            std::thread::sleep(Duration::from_millis(ms + 37 * k as u64));
+        }
+        assert_eq!(post(&r, "/api/solve", tuning.to_string().as_bytes()).0, 202);
+        state = wait_for(&r, |s| {
+            s["final"] == true && s["busy"] == false && s["frame"].as_u64().unwrap() > frame
+        });
+        eprintln!(
+            "gamma x{factor:.3}: first iterate {:.1} ms, done {:.0} ms, {} iterations, warm {}, replaced {}",
+            state["first_frame_ms"].as_f64().unwrap_or(f64::NAN),
+            state["total_ms"].as_f64().unwrap_or(f64::NAN),
+            state["iterations"],
+            state["warm"],
+            state["superseded"]
+        );
+    }
 }
