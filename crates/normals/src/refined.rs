@@ -250,7 +250,10 @@ fn refined(
                         let g = g as usize;
                         let (a, len) = (areas[g], lengths[g]);
                         let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
-                        if !(dot.abs() < cos_max) && !near_junction[g] && len > 0.0 {
+                        if dot.abs() < cos_max {
+                            continue;
+                        }
+                        if !near_junction[g] && len > 0.0 {
                             interior.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf, nf);
                         }
                     }
