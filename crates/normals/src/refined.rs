@@ -1,7 +1,5 @@
 //! Normals re-estimated from a regularized geometry (the refinement rounds).
 
-use std::collections::VecDeque;
-
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
@@ -200,12 +198,14 @@ fn refined(
     let (starts, adjacent) = interface_adjacency(surface);
     let surfels = surface.surfels();
     let normals = field.as_slice();
+    // One interface: every quad the adjacency reaches shares `f`'s regions.
+    let single = surface.interfaces().len() < 2;
     let out: Vec<DVec3> = (0..n)
         .into_par_iter()
         .with_min_len(4096)
         .map_init(
-            || (vec![false; n], Vec::new(), VecDeque::new()),
-            |(seen, touched, queue), f| {
+            || (vec![false; n], Vec::new()),
+            |(seen, queue): &mut (Vec<bool>, Vec<(u32, u32, f64)>), f| {
                 let nf = normals[f];
                 let cf = centres[f];
                 let regions_f = surfels[f].regions;
@@ -213,14 +213,18 @@ fn refined(
                 let mut disc = |r: f64| -> (DVec3, bool) {
                     let mut sum = DVec3::ZERO;
                     let mut fit = FirstOrder::default();
-                    let mut interior = Umbilic::default();
                     let mut excluded = false; // a quad near a junction in the disc
                     let mut feature = false; // the feature rule stopped at a sharp jump
-                    let mut continued = false; // an interior sample of another interface
-                    queue.push_back((f, 0.0, f));
+                                             // Breadth first: the queue keeps every quad it reached (its visiting
+                                             // order), so the seen marks are cleared from it and the junctions' second
+                                             // pass below reads the same quads in the same order.
+                    queue.push((f as u32, f as u32, 0.0));
                     seen[f] = true;
-                    touched.push(f);
-                    while let Some((g, d, parent)) = queue.pop_front() {
+                    let mut head = 0;
+                    while head < queue.len() {
+                        let (g, parent, d) = queue[head];
+                        head += 1;
+                        let (g, parent) = (g as usize, parent as usize);
                         let a = areas[g];
                         let len = lengths[g];
                         let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
@@ -235,28 +239,48 @@ fn refined(
                             continue; // across a feature: neither counted nor crossed
                         }
                         sum += (1.0 - d / r) * a * dot.signum();
-                        if near_junction[g] {
-                            excluded = true;
-                        } else if len > 0.0 {
-                            continued |= surfels[g].interface != iface_f;
-                            interior.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf, nf);
-                        }
+                        excluded |= near_junction[g];
                         if blend > 0.0 && len > 0.0 {
                             fit.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf);
                         }
                         for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
-                            let k = k as usize;
-                            if !seen[k] && surfels[k].regions.iter().any(|r| regions_f.contains(r)) {
-                                let dk = centres[k].distance(cf);
+                            let ku = k as usize;
+                            if !seen[ku]
+                                && (single || surfels[ku].regions.iter().any(|r| regions_f.contains(r)))
+                            {
+                                let dk = centres[ku].distance(cf);
                                 if dk < r {
-                                    seen[k] = true;
-                                    touched.push(k);
-                                    queue.push_back((k, dk, g));
+                                    seen[ku] = true;
+                                    queue.push((k, g as u32, dk));
                                 }
                             }
                         }
                     }
-                    touched.drain(..).for_each(|k| seen[k] = false);
+                    // Only a disc that reached a junction's quads needs the interior's fit
+                    // (and whether the surface continues across): the counted quads again,
+                    // in the order they were counted.
+                    let mut interior = Umbilic::default();
+                    let mut continued = false; // an interior sample of another interface
+                    if excluded {
+                        for &(g, _, d) in queue.iter() {
+                            let g = g as usize;
+                            let (a, len) = (areas[g], lengths[g]);
+                            let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
+                            if dot.abs() < cos_max {
+                                continue;
+                            }
+                            if !near_junction[g] && len > 0.0 {
+                                continued |= surfels[g].interface != iface_f;
+                                interior.add(
+                                    (1.0 - d / r) * len,
+                                    a / len * dot.signum(),
+                                    centres[g] - cf,
+                                    nf,
+                                );
+                            }
+                        }
+                    }
+                    queue.drain(..).for_each(|(k, _, _)| seen[k as usize] = false);
                     let m = if excluded {
                         interior.at_origin().unwrap_or(sum)
                     } else {
@@ -388,6 +412,8 @@ fn outer(a: DVec3, b: DVec3) -> DMat3 {
 
 #[cfg(test)]
 mod tests {
+    use std::collections::VecDeque;
+
     use voxreg_digisurf::SurfelId;
     use voxreg_testkit::{
         digitize, digitize_labels, vertex_labels, LabelShape, Lcg, Shape, Solid, Sphere, SplitBall, Torus,
