@@ -52,7 +52,7 @@ pub use at::{AmbrosioTortorelli, AtInfo, AtLinearSolver, AtParams, AtSolver, Fea
 pub use convolved::ConvolvedTrivial;
 pub use field::NormalField;
 pub use ii::{default_radius, multigrid_radius, IntegralInvariant, MAX_DEFAULT_RADIUS_VOXELS};
-pub use refined::{anisotropic_fit_weight, Refined};
+pub use refined::{anisotropic_fit_weight, Refined, JUNCTION_DISC_FACTOR};
 pub use trivial::Trivial;
 
 use voxreg_digisurf::DigitalSurface;

@@ -1,7 +1,5 @@
 //! Normals re-estimated from a regularized geometry (the refinement rounds).
 
-use std::collections::VecDeque;
-
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
@@ -35,6 +33,12 @@ use crate::{NormalError, NormalEstimator, NormalField};
 /// quarter of the mean). Why: the plain mean next to a junction averaged the bent quads
 /// (the sphere's quads at a ball's cut reached 30 degrees of error), and the mean of the
 /// interior alone is the normal of a point a voxel or more away from the quad.
+/// Where the surface continues smoothly across the junction (an interior sample of
+/// another interface enters the disc: the sphere's two caps at a ball's cut), the disc of
+/// such a quad is [`JUNCTION_DISC_FACTOR`] times wider: the two-ring gap leaves only the
+/// rim of a disc of the plain radius, whose few samples fit the curvature poorly (the
+/// sphere's quads touching the cut kept 1.3 degrees of error, against 0.7 elsewhere).
+/// Where it stops at the junction (one-sided discs: a crease), the plain radius is kept.
 ///
 /// **Anisotropic voxels.** Where the spacing is not cubic, away from junctions and sharp
 /// features (discs where the feature rule stopped at no jump between neighbouring quads),
@@ -128,6 +132,11 @@ fn interface_adjacency(surface: &DigitalSurface) -> (Vec<u32>, Vec<u32>) {
     (starts, adjacent)
 }
 
+/// How much wider than [`Refined::radius`] the disc of a quad within two rings of a
+/// junction is, where its surface continues smoothly across the junction (see
+/// [`Refined`]).
+pub const JUNCTION_DISC_FACTOR: f64 = 3.0;
+
 /// The weight of the first-order fit in [`Refined`] on a surface of voxel `spacing`:
 /// `clamp(h_max / h_min - 1, 0, 1)`, 0 for cubic voxels, 1 from a ratio of 2 on, so the
 /// fit comes in continuously with the anisotropy.
@@ -189,66 +198,105 @@ fn refined(
     let (starts, adjacent) = interface_adjacency(surface);
     let surfels = surface.surfels();
     let normals = field.as_slice();
+    // One interface: every quad the adjacency reaches shares `f`'s regions.
+    let single = surface.interfaces().len() < 2;
     let out: Vec<DVec3> = (0..n)
         .into_par_iter()
         .with_min_len(4096)
         .map_init(
-            || (vec![false; n], Vec::new(), VecDeque::new()),
-            |(seen, touched, queue), f| {
+            || (vec![false; n], Vec::new()),
+            |(seen, queue): &mut (Vec<bool>, Vec<(u32, u32, f64)>), f| {
                 let nf = normals[f];
                 let cf = centres[f];
-                let mut sum = DVec3::ZERO;
-                let mut fit = FirstOrder::default();
-                let mut interior = Umbilic::default();
-                let mut excluded = false; // a quad near a junction in the disc
-                let mut feature = false; // the feature rule stopped at a sharp jump
                 let regions_f = surfels[f].regions;
-                queue.push_back((f, 0.0, f));
-                seen[f] = true;
-                touched.push(f);
-                while let Some((g, d, parent)) = queue.pop_front() {
-                    let a = areas[g];
-                    let len = lengths[g];
-                    let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
-                    if dot.abs() < cos_max {
-                        // A sharp feature (a jump past the feature angle from the quad it
-                        // was reached from, not a gradual turn of a curved surface): the
-                        // fit would extrapolate across it.
-                        if blend > 0.0 {
-                            let from = areas[parent];
-                            feature |= a.dot(from).abs() < cos_max * len * lengths[parent];
+                let iface_f = surfels[f].interface;
+                let mut disc = |r: f64| -> (DVec3, bool) {
+                    let mut sum = DVec3::ZERO;
+                    let mut fit = FirstOrder::default();
+                    let mut excluded = false; // a quad near a junction in the disc
+                    let mut feature = false; // the feature rule stopped at a sharp jump
+                                             // Breadth first: the queue keeps every quad it reached (its visiting
+                                             // order), so the seen marks are cleared from it and the junctions' second
+                                             // pass below reads the same quads in the same order.
+                    queue.push((f as u32, f as u32, 0.0));
+                    seen[f] = true;
+                    let mut head = 0;
+                    while head < queue.len() {
+                        let (g, parent, d) = queue[head];
+                        head += 1;
+                        let (g, parent) = (g as usize, parent as usize);
+                        let a = areas[g];
+                        let len = lengths[g];
+                        let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
+                        if dot.abs() < cos_max {
+                            // A sharp feature (a jump past the feature angle from the quad it
+                            // was reached from, not a gradual turn of a curved surface): the
+                            // fit would extrapolate across it.
+                            if blend > 0.0 {
+                                let from = areas[parent];
+                                feature |= a.dot(from).abs() < cos_max * len * lengths[parent];
+                            }
+                            continue; // across a feature: neither counted nor crossed
                         }
-                        continue; // across a feature: neither counted nor crossed
-                    }
-                    sum += (1.0 - d / r) * a * dot.signum();
-                    if near_junction[g] {
-                        excluded = true;
-                    } else if len > 0.0 {
-                        interior.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf, nf);
-                    }
-                    if blend > 0.0 && len > 0.0 {
-                        fit.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf);
-                    }
-                    for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
-                        let k = k as usize;
-                        if !seen[k] && surfels[k].regions.iter().any(|r| regions_f.contains(r)) {
-                            let dk = centres[k].distance(cf);
-                            if dk < r {
-                                seen[k] = true;
-                                touched.push(k);
-                                queue.push_back((k, dk, g));
+                        sum += (1.0 - d / r) * a * dot.signum();
+                        excluded |= near_junction[g];
+                        if blend > 0.0 && len > 0.0 {
+                            fit.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf);
+                        }
+                        for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
+                            let ku = k as usize;
+                            if !seen[ku]
+                                && (single || surfels[ku].regions.iter().any(|r| regions_f.contains(r)))
+                            {
+                                let dk = centres[ku].distance(cf);
+                                if dk < r {
+                                    seen[ku] = true;
+                                    queue.push((k, g as u32, dk));
+                                }
                             }
                         }
                     }
-                }
-                touched.drain(..).for_each(|k| seen[k] = false);
-                let m = if excluded {
-                    interior.at_origin().unwrap_or(sum)
-                } else {
-                    match fit.at_origin(r, blend) {
-                        Some(m) if !feature => m,
-                        _ => sum,
+                    // Only a disc that reached a junction's quads needs the interior's fit
+                    // (and whether the surface continues across): the counted quads again,
+                    // in the order they were counted.
+                    let mut interior = Umbilic::default();
+                    let mut continued = false; // an interior sample of another interface
+                    if excluded {
+                        for &(g, _, d) in queue.iter() {
+                            let g = g as usize;
+                            let (a, len) = (areas[g], lengths[g]);
+                            let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
+                            if dot.abs() < cos_max {
+                                continue;
+                            }
+                            if !near_junction[g] && len > 0.0 {
+                                continued |= surfels[g].interface != iface_f;
+                                interior.add(
+                                    (1.0 - d / r) * len,
+                                    a / len * dot.signum(),
+                                    centres[g] - cf,
+                                    nf,
+                                );
+                            }
+                        }
                     }
+                    queue.drain(..).for_each(|(k, _, _)| seen[k as usize] = false);
+                    let m = if excluded {
+                        interior.at_origin().unwrap_or(sum)
+                    } else {
+                        match fit.at_origin(r, blend) {
+                            Some(m) if !feature => m,
+                            _ => sum,
+                        }
+                    };
+                    (m, continued)
+                };
+                // Next to a junction, the wider disc where the surface continues across
+                // the curve (its samples on both sides); the plain radius where it stops
+                // there (one-sided: a wider disc would extrapolate farther).
+                let m = match near_junction[f].then(|| disc(JUNCTION_DISC_FACTOR * r)) {
+                    Some((m, true)) => m,
+                    _ => disc(r).0,
                 }
                 .normalize_or_zero();
                 if m == DVec3::ZERO {
@@ -364,6 +412,8 @@ fn outer(a: DVec3, b: DVec3) -> DMat3 {
 
 #[cfg(test)]
 mod tests {
+    use std::collections::VecDeque;
+
     use voxreg_digisurf::SurfelId;
     use voxreg_testkit::{
         digitize, digitize_labels, vertex_labels, LabelShape, Lcg, Shape, Solid, Sphere, SplitBall, Torus,
