@@ -426,7 +426,8 @@ pub(crate) fn active_set(
         stats.rounds += 1;
         hold_on_bounds(&hold, w, u);
         face_of(&hold, &mut face);
-        prepared.pre.set_face(stencil, coef, &face);
+        // Later rounds change few holds: their face's levels are updated, not rebuilt.
+        prepared.pre.set_face(stencil, coef, &face, stats.rounds > 1);
         let tol = tol * loose;
         stencil.residual(coef, u, rhs, r, &mut t);
         stats.applications += 1;

@@ -257,10 +257,18 @@ impl Pre {
         }
     }
 
-    /// Prepares [`Pre::apply_on_face`] for a new face.
-    pub(crate) fn set_face(&mut self, stencil: &Stencil, coef: &Coefficients<'_>, face: &[Vec3A]) {
+    /// Prepares [`Pre::apply_on_face`] for a new face; with `update`, the multigrid
+    /// updates the coarse levels of the last face where the face changed
+    /// ([`crate::multigrid::Vcycle::set_face`]).
+    pub(crate) fn set_face(
+        &mut self,
+        stencil: &Stencil,
+        coef: &Coefficients<'_>,
+        face: &[Vec3A],
+        update: bool,
+    ) {
         if let Pre::Multigrid(v) = self {
-            v.set_face(stencil, coef, face);
+            v.set_face(stencil, coef, face, update);
         }
     }
 

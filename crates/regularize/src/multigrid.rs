@@ -340,6 +340,7 @@ fn fine_majorant(stencil: &Stencil, coef: &Coefficients<'_>) -> Vec<[f64; 6]> {
 /// negative semi-definite off it) and a multiple of the identity (entry `9`: attachment
 /// and fairness), kept apart so that the smoother's majorant needs no eigenvalues; for a
 /// face's operator, see [`FACE`].
+#[derive(Debug)]
 struct Rows<const W: usize = 10> {
     offsets: Vec<usize>,
     cols: Vec<u32>,
@@ -354,6 +355,10 @@ impl<const W: usize> Rows<W> {
 
     fn nnz(&self) -> usize {
         self.cols.len()
+    }
+
+    fn bytes(&self) -> usize {
+        8 * self.offsets.len() + (4 + 4 * W) * self.cols.len()
     }
 
     fn row(&self, i: usize) -> impl Iterator<Item = (u32, [f64; W])> + '_ {
@@ -550,46 +555,67 @@ fn galerkin_face_from_stencil(
     agg: &Aggregation,
     face: &[Vec3A],
 ) -> Rows<FACE> {
-    let nc = agg.len();
+    Rows::build(agg.len(), agg.len(), |acc, a| face_row(acc, stencil, coef, agg, face, a))
+}
+
+/// Row `a` of [`galerkin_face_from_stencil`]. It reads the face at the members of
+/// aggregate `a`, their faces' vertices and their fairness 2-rings ([`face_row_reads`]);
+/// which entries it creates does not depend on the face.
+fn face_row(
+    acc: &mut Accumulator<FACE>,
+    stencil: &Stencil,
+    coef: &Coefficients<'_>,
+    agg: &Aggregation,
+    face: &[Vec3A],
+    a: usize,
+) {
     let parent = &agg.parent;
     let f = |i: usize| face[i].as_dvec3();
-    Rows::build(nc, nc, |acc, a| {
-        let me = a as u32;
-        for &i in agg.members(a) {
-            let i = i as usize;
-            let fi = f(i);
-            acc.add_diag(me, coef.alpha.get(i) * fi);
-            for s in stencil.faces(i) {
-                let n = coef.normals[s.face as usize];
-                let b = coef.beta.get(s.face as usize);
-                let m = n * fi;
-                acc.add_coupling(me, 2.0 * b, m, m, 0.0);
-                for j in [s.prev, s.next] {
-                    acc.add_coupling(parent[j as usize], -b, m, n * f(j as usize), b);
-                }
-            }
-            let mut row_k = |k: usize, coeff: f64| {
-                let ck = coef.fair[k];
-                if ck == 0.0 {
-                    return;
-                }
-                let nbk = stencil.fair_neighbours(k);
-                let w = ck * nbk.len() as f64 * coeff;
-                acc.add_diag(parent[k], w * fi * f(k));
-                let share = -w / nbk.len() as f64;
-                for &j in nbk {
-                    acc.add_diag(parent[j as usize], share * fi * f(j as usize));
-                }
-            };
-            row_k(i, 1.0);
-            for &k in stencil.fair_neighbours(i) {
-                let dk = stencil.fair_neighbours(k as usize).len();
-                if dk > 0 {
-                    row_k(k as usize, -1.0 / dk as f64);
-                }
+    let me = a as u32;
+    for &i in agg.members(a) {
+        let i = i as usize;
+        let fi = f(i);
+        acc.add_diag(me, coef.alpha.get(i) * fi);
+        for s in stencil.faces(i) {
+            let n = coef.normals[s.face as usize];
+            let b = coef.beta.get(s.face as usize);
+            let m = n * fi;
+            acc.add_coupling(me, 2.0 * b, m, m, 0.0);
+            for j in [s.prev, s.next] {
+                acc.add_coupling(parent[j as usize], -b, m, n * f(j as usize), b);
             }
         }
-    })
+        let mut row_k = |k: usize, coeff: f64| {
+            let ck = coef.fair[k];
+            if ck == 0.0 {
+                return;
+            }
+            let nbk = stencil.fair_neighbours(k);
+            let w = ck * nbk.len() as f64 * coeff;
+            acc.add_diag(parent[k], w * fi * f(k));
+            let share = -w / nbk.len() as f64;
+            for &j in nbk {
+                acc.add_diag(parent[j as usize], share * fi * f(j as usize));
+            }
+        };
+        row_k(i, 1.0);
+        for &k in stencil.fair_neighbours(i) {
+            let dk = stencil.fair_neighbours(k as usize).len();
+            if dk > 0 {
+                row_k(k as usize, -1.0 / dk as f64);
+            }
+        }
+    }
+}
+
+/// Whether [`face_row`]'s contributions of vertex `i` read a vertex where `changed` is
+/// set: `i` itself, the other vertices of its faces, its fairness neighbours and theirs.
+fn face_row_reads(stencil: &Stencil, changed: &[bool], i: usize) -> bool {
+    changed[i]
+        || stencil.faces(i).iter().any(|s| changed[s.prev as usize] || changed[s.next as usize])
+        || stencil.fair_neighbours(i).iter().any(|&k| {
+            changed[k as usize] || stencil.fair_neighbours(k as usize).iter().any(|&j| changed[j as usize])
+        })
 }
 
 /// [`l1_smoother`] of a face's level: `M_I = A_II + sum_{J != I} (G_IJ + |d_IJ|)` (`G` the
@@ -634,6 +660,10 @@ fn l1_face_smoother(rows: &Rows<FACE>, damping: f64) -> Vec<Block> {
 struct FaceLevels {
     levels: Vec<Level>,
     coarsest: Option<Coarsest>,
+    /// The first coarse level's rows, and the face they were built for, to update them
+    /// for the next face ([`Vcycle::updated_face_hierarchy`]).
+    rows: Rows<FACE>,
+    face: Vec<Vec3A>,
 }
 
 /// The inverse blocks of a block-diagonal majorant `M >= A` of an assembled level,
@@ -892,7 +922,10 @@ impl Vcycle {
         let coarsest = self.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len());
         let face = self.face_levels.as_ref().map_or(0, |f| {
             let levels: usize = f.levels.iter().map(|l| l.matrix.bytes() + 48 * l.n).sum();
-            levels + f.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len())
+            levels
+                + f.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len())
+                + f.rows.bytes()
+                + 16 * f.face.len()
         });
         face + 48 * (self.fine_smoother.len() + self.face_smoother.len() + self.majorant.len())
             + self.fine.bytes()
@@ -946,10 +979,24 @@ impl Vcycle {
     /// their smoothers and coarsest factor, so that the coarse correction is the face
     /// operator's, not the whole one's (which moves held coordinates' neighbourhoods as if
     /// they were free). Costs about one multigrid setup.
-    pub(crate) fn set_face(&mut self, stencil: &Stencil, coef: &Coefficients<'_>, face: &[Vec3A]) {
+    ///
+    /// With `update`, levels built for another face of the same operator (the previous
+    /// round of the active-set iteration) are updated where the face changed
+    /// ([`Vcycle::updated_face_hierarchy`]) instead of built anew.
+    pub(crate) fn set_face(
+        &mut self,
+        stencil: &Stencil,
+        coef: &Coefficients<'_>,
+        face: &[Vec3A],
+        update: bool,
+    ) {
         // The former face's levels go first: one face hierarchy in memory at a time.
-        self.face_levels = None;
-        self.face_levels = self.face_hierarchy(stencil, coef, face);
+        let built = self.face_levels.take();
+        self.face_levels = match built {
+            Some(b) if update => self.updated_face_hierarchy(stencil, coef, face, b),
+            _ => None,
+        }
+        .or_else(|| self.face_hierarchy(stencil, coef, face));
         let damping = self.damping;
         self.face_smoother = self
             .majorant
@@ -975,33 +1022,84 @@ impl Vcycle {
     }
 
     /// The coarse levels of the face's operator; `None` when its coarsest level does not
-    /// factor (the cycle then falls back to the whole operator's coarse levels).
+    /// factor (the cycle then falls back to the whole operator's coarse levels) or the
+    /// surface is its own coarsest level.
     fn face_hierarchy(
         &self,
         stencil: &Stencil,
         coef: &Coefficients<'_>,
         face: &[Vec3A],
     ) -> Option<FaceLevels> {
-        let mut levels: Vec<Level> = Vec::with_capacity(self.aggregations.len());
-        let mut rows: Option<Rows<FACE>> = None;
-        for agg in &self.aggregations {
-            let coarse = match &rows {
-                None => galerkin_face_from_stencil(stencil, coef, agg, face),
-                Some(finer) => galerkin_from_rows(finer, agg),
-            };
-            if let Some(finer) = rows.take() {
-                let last = levels.last_mut().expect("a previous level");
-                last.matrix = Bsr::from_rows(&finer);
-                last.smoother = l1_face_smoother(&finer, self.damping);
-            }
-            rows = Some(coarse);
+        let first = self.aggregations.first()?;
+        let rows = galerkin_face_from_stencil(stencil, coef, first, face);
+        self.face_levels_from(rows, face.to_vec())
+    }
+
+    /// The face's levels from its first coarse level's rows.
+    fn face_levels_from(&self, rows: Rows<FACE>, face: Vec<Vec3A>) -> Option<FaceLevels> {
+        let mut levels = vec![Level { matrix: Bsr::default(), smoother: Vec::new(), n: rows.len() }];
+        let mut owned: Option<Rows<FACE>> = None;
+        for agg in &self.aggregations[1..] {
+            let finer = owned.as_ref().unwrap_or(&rows);
+            let coarse = galerkin_from_rows(finer, agg);
+            let last = levels.last_mut().expect("a previous level");
+            last.matrix = Bsr::from_rows(finer);
+            last.smoother = l1_face_smoother(finer, self.damping);
             levels.push(Level { matrix: Bsr::default(), smoother: Vec::new(), n: agg.len() });
+            owned = Some(coarse);
         }
-        let coarsest = match rows {
-            Some(rows) => Some(Coarsest::face(&rows).ok()?),
-            None => None,
-        };
-        Some(FaceLevels { levels, coarsest })
+        let coarsest = Coarsest::face(owned.as_ref().unwrap_or(&rows)).ok()?;
+        Some(FaceLevels { levels, coarsest: Some(coarsest), rows, face })
+    }
+
+    /// The face's levels for `face`, updated from `built` (those of another face of the
+    /// same operator): only the rows of the first coarse level that read a vertex whose
+    /// free coordinates changed are recomputed ([`face_row_reads`]), the coarser levels
+    /// are rebuilt from them. The same levels as [`Vcycle::face_hierarchy`], at a cost
+    /// that follows the number of changed vertices instead of the surface's size. `None`
+    /// where the change is too large to gain (a quarter of the vertices or more) or a
+    /// row's pattern differs (it cannot: which entries a row has does not depend on the
+    /// face); the caller builds them anew.
+    fn updated_face_hierarchy(
+        &self,
+        stencil: &Stencil,
+        coef: &Coefficients<'_>,
+        face: &[Vec3A],
+        built: FaceLevels,
+    ) -> Option<FaceLevels> {
+        let agg = self.aggregations.first()?;
+        let changed: Vec<bool> = built.face.par_iter().zip(face).map(|(a, b)| a != b).collect();
+        let count = changed.iter().filter(|&&c| c).count();
+        if 4 * count >= face.len() {
+            return None;
+        }
+        let dirty: Vec<usize> = (0..agg.len())
+            .into_par_iter()
+            .filter(|&a| agg.members(a).iter().any(|&i| face_row_reads(stencil, &changed, i as usize)))
+            .collect();
+        let FaceLevels { mut rows, .. } = built;
+        let fresh: Vec<(usize, Vec<u32>, Vec<[f32; FACE]>)> = dirty
+            .par_chunks(256)
+            .flat_map_iter(|part| {
+                let mut acc = Accumulator { slot: vec![u32::MAX; agg.len()], row: Vec::with_capacity(64) };
+                part.iter()
+                    .map(|&a| {
+                        face_row(&mut acc, stencil, coef, agg, face, a);
+                        let (mut cols, mut vals) = (Vec::new(), Vec::new());
+                        acc.flush_into(&mut cols, &mut vals);
+                        (a, cols, vals)
+                    })
+                    .collect::<Vec<_>>()
+            })
+            .collect();
+        for (a, cols, vals) in fresh {
+            let r = rows.offsets[a]..rows.offsets[a + 1];
+            if rows.cols[r.clone()] != cols[..] {
+                return None;
+            }
+            rows.vals[r].copy_from_slice(&vals);
+        }
+        self.face_levels_from(rows, face.to_vec())
     }
 
     /// [`Vcycle::apply`] for the operator restricted to a face (the coordinates where
@@ -1112,5 +1210,60 @@ pub(crate) mod tests {
     /// The setups run on this thread so far.
     pub(crate) fn setups() -> usize {
         SETUPS.with(|c| c.get())
+    }
+
+    use glam::{DVec3, Vec3A};
+    use voxreg_digisurf::DigitalSurface;
+    use voxreg_testkit::{digitize, true_normals, Lcg, Torus};
+
+    use super::*;
+    use crate::stencil::Stencil;
+    use crate::{Energy, EnergyParams};
+
+    /// A face holding a random fifth of the coordinates.
+    fn random_face(n: usize, rng: &mut Lcg) -> Vec<Vec3A> {
+        (0..n)
+            .map(|_| {
+                let v = rng.vec3(0.0, 1.0);
+                Vec3A::new(f32::from(v.x > 0.2), f32::from(v.y > 0.2), f32::from(v.z > 0.2))
+            })
+            .collect()
+    }
+
+    #[test]
+    fn updated_face_levels_are_those_built_anew() {
+        let torus = Torus { major: 8.0, minor: 3.0 };
+        let s = DigitalSurface::from_volume(&digitize(&torus, 1.0)).unwrap();
+        let normals = voxreg_normals::NormalField::new(true_normals(&s, &torus));
+        let input = s.positions();
+        let e = Energy::new(&s, &normals, &input, EnergyParams::default()).unwrap();
+        let st = Stencil::new(&s, None).unwrap();
+        let c = st.coefficients(&e);
+        let h = Hierarchy::new(&st, &MultigridParams { coarsest_nodes: 20, ..Default::default() });
+        assert!(h.levels() > 2);
+        let mut rng = Lcg::new(3);
+        let first = random_face(st.len(), &mut rng);
+        // The next face: the first one with a few vertices changed (an update), then one
+        // with most of them changed (built anew).
+        let mut few = first.clone();
+        for i in (0..st.len()).step_by(37) {
+            few[i] = Vec3A::new(1.0, 0.0, 1.0) - few[i] * Vec3A::new(1.0, 0.0, 1.0);
+        }
+        let many = random_face(st.len(), &mut rng);
+        let r: Vec<DVec3> = (0..st.len()).map(|_| rng.vec3(-1.0, 1.0)).collect();
+        for next in [few, many] {
+            let mut updated = h.numeric(&st, &c).unwrap();
+            updated.set_face(&st, &c, &first, false);
+            updated.set_face(&st, &c, &next, true);
+            let mut fresh = h.numeric(&st, &c).unwrap();
+            fresh.set_face(&st, &c, &next, false);
+            let (a, b) = (updated.face_levels.as_ref().unwrap(), fresh.face_levels.as_ref().unwrap());
+            assert_eq!(a.rows.cols, b.rows.cols);
+            assert_eq!(a.rows.vals, b.rows.vals);
+            let (mut za, mut zb) = (vec![DVec3::ZERO; st.len()], vec![DVec3::ZERO; st.len()]);
+            updated.apply_on_face(&st, &r, &mut za, Some(&next));
+            fresh.apply_on_face(&st, &r, &mut zb, Some(&next));
+            assert_eq!(za, zb);
+        }
     }
 }
