@@ -188,15 +188,26 @@ fn refined(
     let h = surface.spacing().max_element();
     let r = radius * h;
     let cos_max = feature_angle_deg.to_radians().cos();
-    let areas: Vec<DVec3> = (0..n).into_par_iter().map(|s| area_vector(surface, positions, s)).collect();
-    let centres: Vec<DVec3> = surface
+    // What the disc search reads of a quad, packed: of each candidate neighbour its centre
+    // and regions (one cache line holds two), of each counted quad its area vector and
+    // length. The search is bound by the latency of these reads, not by its arithmetic.
+    let samples: Vec<Sample> = (0..n)
+        .into_par_iter()
+        .map(|s| {
+            let area = area_vector(surface, positions, s);
+            Sample { area, len: area.length() }
+        })
+        .collect();
+    let nodes: Vec<Node> = surface
         .surfels()
         .par_iter()
-        .map(|s| s.vertices.iter().map(|v| positions[v.index()]).sum::<DVec3>() / 4.0)
+        .map(|s| Node {
+            centre: s.vertices.iter().map(|v| positions[v.index()]).sum::<DVec3>() / 4.0,
+            regions: s.regions.map(|r| r.0),
+            interface: s.interface.0,
+        })
         .collect();
-    let lengths: Vec<f64> = areas.par_iter().map(|a| a.length()).collect();
     let (starts, adjacent) = interface_adjacency(surface);
-    let surfels = surface.surfels();
     let normals = field.as_slice();
     // One interface: every quad the adjacency reaches shares `f`'s regions.
     let single = surface.interfaces().len() < 2;
@@ -207,9 +218,9 @@ fn refined(
             || (vec![false; n], Vec::new()),
             |(seen, queue): &mut (Vec<bool>, Vec<(u32, u32, f64)>), f| {
                 let nf = normals[f];
-                let cf = centres[f];
-                let regions_f = surfels[f].regions;
-                let iface_f = surfels[f].interface;
+                let cf = nodes[f].centre;
+                let regions_f = nodes[f].regions;
+                let iface_f = nodes[f].interface;
                 let mut disc = |r: f64| -> (DVec3, bool) {
                     let mut sum = DVec3::ZERO;
                     let mut fit = FirstOrder::default();
@@ -225,30 +236,29 @@ fn refined(
                         let (g, parent, d) = queue[head];
                         head += 1;
                         let (g, parent) = (g as usize, parent as usize);
-                        let a = areas[g];
-                        let len = lengths[g];
+                        let Sample { area: a, len } = samples[g];
                         let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
                         if dot.abs() < cos_max {
                             // A sharp feature (a jump past the feature angle from the quad it
                             // was reached from, not a gradual turn of a curved surface): the
                             // fit would extrapolate across it.
                             if blend > 0.0 {
-                                let from = areas[parent];
-                                feature |= a.dot(from).abs() < cos_max * len * lengths[parent];
+                                let from = samples[parent];
+                                feature |= a.dot(from.area).abs() < cos_max * len * from.len;
                             }
                             continue; // across a feature: neither counted nor crossed
                         }
                         sum += (1.0 - d / r) * a * dot.signum();
                         excluded |= near_junction[g];
                         if blend > 0.0 && len > 0.0 {
-                            fit.add((1.0 - d / r) * len, a / len * dot.signum(), centres[g] - cf);
+                            fit.add((1.0 - d / r) * len, a / len * dot.signum(), nodes[g].centre - cf);
                         }
                         for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
                             let ku = k as usize;
                             if !seen[ku]
-                                && (single || surfels[ku].regions.iter().any(|r| regions_f.contains(r)))
+                                && (single || nodes[ku].regions.iter().any(|r| regions_f.contains(r)))
                             {
-                                let dk = centres[ku].distance(cf);
+                                let dk = nodes[ku].centre.distance(cf);
                                 if dk < r {
                                     seen[ku] = true;
                                     queue.push((k, g as u32, dk));
@@ -264,17 +274,17 @@ fn refined(
                     if excluded {
                         for &(g, _, d) in queue.iter() {
                             let g = g as usize;
-                            let (a, len) = (areas[g], lengths[g]);
+                            let Sample { area: a, len } = samples[g];
                             let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
                             if dot.abs() < cos_max {
                                 continue;
                             }
                             if !near_junction[g] && len > 0.0 {
-                                continued |= surfels[g].interface != iface_f;
+                                continued |= nodes[g].interface != iface_f;
                                 interior.add(
                                     (1.0 - d / r) * len,
                                     a / len * dot.signum(),
-                                    centres[g] - cf,
+                                    nodes[g].centre - cf,
                                     nf,
                                 );
                             }
@@ -308,6 +318,22 @@ fn refined(
         )
         .collect();
     NormalField::new(out)
+}
+
+/// A quad as a disc search's candidate: its centre at the positions, its regions and
+/// its interface.
+#[derive(Clone, Copy)]
+struct Node {
+    centre: DVec3,
+    regions: [u32; 2],
+    interface: u32,
+}
+
+/// A quad as a disc search's sample: its vector area at the positions and its length.
+#[derive(Clone, Copy)]
+struct Sample {
+    area: DVec3,
+    len: f64,
 }
 
 /// A weighted first-order fit of unit normals `u` against positions `c` (relative to the
