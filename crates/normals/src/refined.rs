@@ -102,20 +102,26 @@ fn area_vector(surface: &DigitalSurface, positions: &[DVec3], s: usize) -> DVec3
 }
 
 /// For each surfel, the other surfels of its interface across each of its edges, in
-/// the order of its edges and of each edge's surfels (compressed lists: surfel `g`'s are
-/// `adjacent[starts[g]..starts[g + 1]]`). Built once per estimate so the disc searches
+/// the order of its edges and of each edge's surfels, all numbered by their place in
+/// `order` (compressed lists: the `i`-th surfel of `order` has
+/// `adjacent[starts[i]..starts[i + 1]]`). Built once per estimate so the disc searches
 /// read one short list per quad instead of walking edges.
-fn interface_adjacency(surface: &DigitalSurface) -> (Vec<u32>, Vec<u32>) {
-    let lists: Vec<Vec<u32>> = (0..surface.num_surfels())
-        .into_par_iter()
-        .map(|g| {
+fn interface_adjacency(surface: &DigitalSurface, order: &[u32]) -> (Vec<u32>, Vec<u32>) {
+    let mut rank = vec![0u32; order.len()];
+    for (i, &s) in order.iter().enumerate() {
+        rank[s as usize] = i as u32;
+    }
+    let lists: Vec<Vec<u32>> = order
+        .par_iter()
+        .map(|&g| {
+            let g = g as usize;
             let regions = surface.surfels()[g].regions;
             let mut list = Vec::with_capacity(4);
             for e in surface.surfel_edges(SurfelId(g as u32)) {
                 for &k in surface.edge_surfels(e) {
                     let other = surface.surfels()[k.index()].regions;
                     if k.index() != g && regions.iter().any(|r| other.contains(r)) {
-                        list.push(k.0);
+                        list.push(rank[k.index()]);
                     }
                 }
             }
@@ -188,27 +194,33 @@ fn refined(
     let h = surface.spacing().max_element();
     let r = radius * h;
     let cos_max = feature_angle_deg.to_radians().cos();
-    // What the disc search reads of a quad, packed: of each candidate neighbour its centre
-    // and regions (one cache line holds two), of each counted quad its area vector and
-    // length. The search is bound by the latency of these reads, not by its arithmetic.
-    let samples: Vec<Sample> = (0..n)
-        .into_par_iter()
-        .map(|s| {
-            let area = area_vector(surface, positions, s);
+    // The search is bound by the latency of its reads, not by its arithmetic: it runs on
+    // the quads renumbered along a Morton curve of their cells (a disc's quads close in
+    // memory), reading packed records: of each candidate neighbour its centre and regions
+    // (one cache line holds two), of each counted quad its area vector and length. The
+    // visiting order, hence every sum, is the same as in the surface's numbering.
+    let order = morton_order(surface);
+    let samples: Vec<Sample> = order
+        .par_iter()
+        .map(|&s| {
+            let area = area_vector(surface, positions, s as usize);
             Sample { area, len: area.length() }
         })
         .collect();
-    let nodes: Vec<Node> = surface
-        .surfels()
+    let nodes: Vec<Node> = order
         .par_iter()
-        .map(|s| Node {
-            centre: s.vertices.iter().map(|v| positions[v.index()]).sum::<DVec3>() / 4.0,
-            regions: s.regions.map(|r| r.0),
-            interface: s.interface.0,
+        .map(|&s| {
+            let s = &surface.surfels()[s as usize];
+            Node {
+                centre: s.vertices.iter().map(|v| positions[v.index()]).sum::<DVec3>() / 4.0,
+                regions: s.regions.map(|r| r.0),
+                interface: s.interface.0,
+            }
         })
         .collect();
-    let (starts, adjacent) = interface_adjacency(surface);
-    let normals = field.as_slice();
+    let near_junction: Vec<bool> = order.par_iter().map(|&s| near_junction[s as usize]).collect();
+    let (starts, adjacent) = interface_adjacency(surface, &order);
+    let normals: Vec<DVec3> = order.par_iter().map(|&s| field.as_slice()[s as usize]).collect();
     // One interface: every quad the adjacency reaches shares `f`'s regions.
     let single = surface.interfaces().len() < 2;
     let out: Vec<DVec3> = (0..n)
@@ -317,7 +329,35 @@ fn refined(
             },
         )
         .collect();
-    NormalField::new(out)
+    let mut field = vec![DVec3::ZERO; n];
+    for (s, m) in order.iter().zip(out) {
+        field[*s as usize] = m;
+    }
+    NormalField::new(field)
+}
+
+/// The surfels sorted along a Morton (Z-order) curve of their cells, then by axis.
+fn morton_order(surface: &DigitalSurface) -> Vec<u32> {
+    fn spread(x: u32) -> u64 {
+        // Bit k of `x` (21 bits kept) to bit 3k.
+        let mut v = u64::from(x) & 0x1f_ffff;
+        v = (v | v << 32) & 0x1f00000000ffff;
+        v = (v | v << 16) & 0x1f0000ff0000ff;
+        v = (v | v << 8) & 0x100f00f00f00f00f;
+        v = (v | v << 4) & 0x10c30c30c30c30c3;
+        (v | v << 2) & 0x1249249249249249
+    }
+    let mut keys: Vec<(u64, u8, u32)> = surface
+        .surfels()
+        .par_iter()
+        .enumerate()
+        .map(|(i, s)| {
+            let [x, y, z] = s.cell;
+            (spread(x) | spread(y) << 1 | spread(z) << 2, s.axis, i as u32)
+        })
+        .collect();
+    keys.par_sort_unstable();
+    keys.into_iter().map(|k| k.2).collect()
 }
 
 /// A quad as a disc search's candidate: its centre at the positions, its regions and
