@@ -461,13 +461,15 @@ voxreg: default weights (alpha 1e-3, beta 1, gamma 0.1), exact solve. MC: marchi
 DC: Hermite data from the binary map (midpoints, central-difference gradients), SVD truncation 0.1, no clamping. \
 Shrouds: see voxreg-baselines (eps 0.05, damping 0.5, at most 200 sweeps).\n";
 
-/// Runs the comparison; `args`: `[--quick] [--out DIR]`.
+/// Runs the comparison; `args`: `[--quick] [--labels] [--surfacenets] [--out DIR]`.
 pub(crate) fn compare(args: &[String]) -> Result<()> {
     let labels_only = args.iter().any(|a| a == "--labels");
-    let args: Vec<String> = args.iter().filter(|a| *a != "--labels").cloned().collect();
+    let surfacenets = args.iter().any(|a| a == "--surfacenets");
+    let args: Vec<String> =
+        args.iter().filter(|a| *a != "--labels" && *a != "--surfacenets").cloned().collect();
     let (quick, out) = crate::quick_and_out("compare", &args)?;
     let start = Instant::now();
-    let labelled = crate::labelled::label_tables()?;
+    let labelled = crate::labelled::label_tables(surfacenets.then(|| out.join("volumes")).as_deref())?;
     std::fs::write(out.join("labels.md"), &labelled)?;
     println!("{labelled}");
     if labels_only {

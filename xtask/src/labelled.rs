@@ -1,18 +1,21 @@
 //! The multi-label and anisotropic part of `cargo xtask compare`: the test kit's label
 //! shapes (split ball, quartered ball, touching balls) and anisotropically sampled
-//! spheres and tori, voxreg against marching cubes, by part: surfaces (interfaces with the
-//! background), inner interfaces, junction curves, junction points.
+//! spheres and tori, voxreg against marching cubes (and, with `--surfacenets`, VTK's
+//! SurfaceNets3D run by `bench/surfacenets_labels.py`), by part: surfaces (interfaces with
+//! the background), inner interfaces, junction curves, junction points.
 
 use std::fmt::Write as _;
+use std::io::Write as _;
+use std::path::Path;
 
-use anyhow::Result;
+use anyhow::{bail, Context, Result};
 use glam::{DVec2, DVec3};
 use voxreg_baselines::{marching_cubes_volume, Mesh};
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
 use voxreg_regularize::{Params, Regularizer};
 use voxreg_testkit::{
-    digitize_labels, label_fidelity, LabelFidelity, LabelShape, QuarteredBall, Solid, Sphere, SplitBall,
-    Stat, Torus, TouchingBalls,
+    digitize_labels, label_fidelity, JunctionKind, LabelFidelity, LabelShape, QuarteredBall, Solid, Sphere,
+    SplitBall, Stat, Torus, TouchingBalls,
 };
 
 /// One label shape at one spacing.
@@ -151,27 +154,159 @@ background; inner interface = two labels, neither the background; junction curve
 curve; junction points = where the curves end. Normals: unsigned angle between each face's normal and the true \
 normal at the nearest point of its interface, mean / max. voxreg: the default pipeline. Marching cubes: iso 0.5 on \
 each label's indicator, separately (no shared junction vertices), each vertex measured against the interface of the \
-two labels at the ends of its lattice edge.\n";
+two labels at the ends of its lattice edge. VTK SurfaceNets3D (`--surfacenets`, `bench/surfacenets_labels.py`): its \
+defaults (every label, constrained smoothing on, triangles), each vertex measured by the labels of its triangles.\n";
 
-/// The tables of every [`label_cases`] case.
-pub(crate) fn label_tables() -> Result<String> {
+/// The tables of every [`label_cases`] case; with `surfacenets`, a folder where each
+/// case's volume is written and `bench/surfacenets_labels.py` meshes it, a row for VTK's
+/// SurfaceNets3D too.
+pub(crate) fn label_tables(surfacenets: Option<&Path>) -> Result<String> {
+    let cases = label_cases();
+    let volumes: Vec<LabelVolume> =
+        cases.iter().map(|c| digitize_labels(c.shape.as_ref(), c.spacing)).collect();
+    if let Some(dir) = surfacenets {
+        run_surface_nets(dir, &volumes)?;
+    }
     let mut md =
         format!("# Multi-label interfaces, junctions and anisotropic spacing\n\n{FIDELITY_LEGEND}\n");
-    for case in label_cases() {
-        let volume = digitize_labels(case.shape.as_ref(), case.spacing);
-        let surface = DigitalSurface::from_volume(&volume)?;
+    for (k, (case, volume)) in cases.iter().zip(&volumes).enumerate() {
+        let surface = DigitalSurface::from_volume(volume)?;
         let input = label_fidelity(&surface, &surface.positions(), case.shape.as_ref());
-        let voxreg = voxreg_fidelity(&case, &Params::default())?;
-        let mc = marching_cubes_fidelity(&volume, case.shape.as_ref());
+        let voxreg = voxreg_fidelity(case, &Params::default())?;
+        let mc = marching_cubes_fidelity(volume, case.shape.as_ref());
         let _ = write!(
             md,
-            "## {}\n\n{FIDELITY_HEADER}{}{}{}\n",
+            "## {}\n\n{FIDELITY_HEADER}{}{}{}",
             case.label,
             fidelity_row("digital surface (input)", &input),
             fidelity_row("voxreg (default)", &voxreg),
             fidelity_row("marching cubes (per label)", &mc)
         );
+        if let Some(dir) = surfacenets {
+            let mesh = dir.join(format!("case_{k}.snets"));
+            let f = surface_nets_fidelity(&mesh, volume.spacing().min_element(), case.shape.as_ref())
+                .with_context(|| format!("{}", mesh.display()))?;
+            md.push_str(&fidelity_row("VTK SurfaceNets3D (defaults)", &f));
+        }
+        md.push('\n');
         eprintln!("{}: done", case.label);
     }
     Ok(md)
+}
+
+/// Writes each volume to `dir/case_K.npy` (`u32` labels, shape `(X, Y, Z)`) with its
+/// spacing and origin in `dir/case_K.json`, and runs `bench/surfacenets_labels.py` on `dir`.
+fn run_surface_nets(dir: &Path, volumes: &[LabelVolume]) -> Result<()> {
+    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    for (k, volume) in volumes.iter().enumerate() {
+        let [nx, ny, nz] = volume.dims();
+        let mut header = format!("{{'descr': '<u4', 'fortran_order': False, 'shape': ({nx}, {ny}, {nz}), }}");
+        while (10 + header.len() + 1) % 64 != 0 {
+            header.push(' ');
+        }
+        header.push('\n');
+        let path = dir.join(format!("case_{k}.npy"));
+        let mut f = std::io::BufWriter::new(
+            std::fs::File::create(&path).with_context(|| format!("{}: cannot create", path.display()))?,
+        );
+        f.write_all(b"\x93NUMPY\x01\x00")?;
+        f.write_all(&(header.len() as u16).to_le_bytes())?;
+        f.write_all(header.as_bytes())?;
+        // C order, shape (X, Y, Z): z fastest.
+        for x in 0..nx as i64 {
+            for y in 0..ny as i64 {
+                for z in 0..nz as i64 {
+                    f.write_all(&volume.label([x, y, z]).unwrap_or(0).to_le_bytes())?;
+                }
+            }
+        }
+        f.flush()?;
+        let (h, o) = (volume.spacing(), volume.origin());
+        std::fs::write(
+            dir.join(format!("case_{k}.json")),
+            format!(
+                "{{\"spacing\": [{:?}, {:?}, {:?}], \"origin\": [{:?}, {:?}, {:?}]}}\n",
+                h.x, h.y, h.z, o.x, o.y, o.z
+            ),
+        )?;
+    }
+    let script = crate::root().join("bench/surfacenets_labels.py");
+    let status = std::process::Command::new("python3")
+        .arg(&script)
+        .arg(dir)
+        .status()
+        .context("running python3 (SurfaceNets3D needs Python with numpy and pip's vtk)")?;
+    if !status.success() {
+        bail!("{} failed ({status}); it needs numpy and pip's vtk (pip install vtk)", script.display());
+    }
+    Ok(())
+}
+
+/// The fidelity of a SurfaceNets3D mesh written by `bench/surfacenets_labels.py`, with
+/// [`label_fidelity`]'s metric: each vertex measured against the part given by the labels
+/// of its triangles (two labels: an interface; three or more: a junction curve or point),
+/// each triangle's normal against its interface's; distances over `unit`.
+fn surface_nets_fidelity(path: &Path, unit: f64, shape: &dyn LabelShape) -> Result<LabelFidelity> {
+    let text = std::fs::read_to_string(path)?;
+    let mut lines = text.lines();
+    let counts: Vec<usize> =
+        lines.next().context("empty")?.split_whitespace().map(str::parse).collect::<Result<_, _>>()?;
+    let [n, m] = counts[..] else { bail!("the first line must be `vertices triangles`") };
+    let mut points = Vec::with_capacity(n);
+    for _ in 0..n {
+        let v: Vec<f64> = lines
+            .next()
+            .context("too few vertices")?
+            .split_whitespace()
+            .map(str::parse)
+            .collect::<Result<_, _>>()?;
+        points.push(DVec3::new(v[0], v[1], v[2]));
+    }
+    let mut labels: Vec<Vec<u32>> = vec![Vec::new(); n];
+    let mut normals: [Vec<f64>; 2] = Default::default();
+    for _ in 0..m {
+        let t: Vec<i64> = lines
+            .next()
+            .context("too few triangles")?
+            .split_whitespace()
+            .map(str::parse)
+            .collect::<Result<_, _>>()?;
+        let [i, j, k, a, b] = t[..] else { bail!("a triangle line must be `i j k a b`") };
+        let (a, b) = (a.min(b) as u32, a.max(b) as u32);
+        for v in [i, j, k] {
+            labels[v as usize].extend([a, b]);
+        }
+        let [p0, p1, p2] = [i, j, k].map(|v| points[v as usize]);
+        let area = (p1 - p0).cross(p2 - p0);
+        if let Some((_, t)) = shape.interface(a, b, (p0 + p1 + p2) / 3.0) {
+            let cos = area.normalize_or_zero().dot(t).abs().min(1.0);
+            normals[usize::from(a != 0)].push(cos.acos().to_degrees());
+        }
+    }
+    let mut parts: [Vec<f64>; 4] = Default::default();
+    for (p, l) in points.iter().zip(&mut labels) {
+        l.sort_unstable();
+        l.dedup();
+        if l.len() == 2 {
+            if let Some((q, _)) = shape.interface(l[0], l[1], *p) {
+                parts[usize::from(l[0] != 0)].push(p.distance(q) / unit);
+            }
+        } else if l.len() >= 3 {
+            if let Some((q, kind)) = shape.junction(l, *p) {
+                parts[if kind == JunctionKind::Curve { 2 } else { 3 }].push(p.distance(q) / unit);
+            }
+        }
+    }
+    let stat = |v: &[f64]| {
+        let (mean, max) = voxreg_testkit::mean_max(v);
+        Stat { mean, max, count: v.len() }
+    };
+    Ok(LabelFidelity {
+        surface: stat(&parts[0]),
+        inner: stat(&parts[1]),
+        junction: stat(&parts[2]),
+        points: stat(&parts[3]),
+        surface_normals: stat(&normals[0]),
+        inner_normals: stat(&normals[1]),
+    })
 }

@@ -4,10 +4,12 @@
 //!   normals, assemble, solve, refine, write; the input's preset, as the CLI runs it) on
 //!   the given volumes (default: the bundled bunny-128 and cat10) and prints a Markdown
 //!   table of medians.
-//! - `compare [--quick] [--labels] [--out DIR]`: every meshing method (voxreg with each normal
-//!   estimator, marching cubes, smoothed MC, dual contouring, shrouds) against every
-//!   metric of `voxreg-baselines` on analytic shapes; Markdown and CSV tables in
-//!   `target/xtask/compare/` (see `compare.rs`).
+//! - `compare [--quick] [--labels] [--surfacenets] [--out DIR]`: every meshing method (voxreg
+//!   with each normal estimator, marching cubes, smoothed MC, dual contouring, shrouds)
+//!   against every metric of `voxreg-baselines` on analytic shapes; Markdown and CSV tables
+//!   in `target/xtask/compare/` (see `compare.rs`). `--labels`: the label shapes' tables
+//!   alone (`labelled.rs`); `--surfacenets`: with VTK's SurfaceNets3D on them, run by
+//!   `bench/surfacenets_labels.py` (needs Python with numpy and pip's `vtk`).
 //! - `table1 [--runs N] [FILE...]`: the paper's Table 1 (normals, precomputation, direct
 //!   and CG solves) on ball+tet 40^3 and bunny-128 (see `table1.rs`).
 //! - `synth-labels [--dims X,Y,Z] [--out FILE.npy]`: a deterministic 25-label volume of
@@ -47,7 +49,7 @@ fn main() -> Result<()> {
         Some("gallery") => voxart::gallery(&args[1..]),
         _ => {
             eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
-            eprintln!("       cargo xtask compare [--quick] [--labels] [--out DIR]");
+            eprintln!("       cargo xtask compare [--quick] [--labels] [--surfacenets] [--out DIR]");
             eprintln!("       cargo xtask table1 [--runs N] [FILE...]");
             eprintln!("       cargo xtask synth-labels [--dims X,Y,Z] [--out FILE.npy]");
             eprintln!("       cargo xtask figures [--quick] [--out DIR]");

@@ -161,7 +161,11 @@ pub struct Params {
     pub feature_angle_deg: f64,
     /// Size preservation (re-centring): before each refinement solve, the attachment
     /// targets move by minus the smoothed displacement of the last solve, measured
-    /// outside digital plateaus; this cancels the inward drift of thin curved shapes.
+    /// outside digital plateaus; this cancels the inward drift of thin curved shapes. On
+    /// anisotropic voxels the quad centres are weighted as samples by their precision,
+    /// long quads' sagitta is lifted out of the measurement, and the interiors of
+    /// plateaus facing a coarse axis are attached and aligned with the inverse variance
+    /// of their level (docs/design/anisotropic-spacing.md).
     /// Ignored when the solver clamps (its boxes are centred on the input, which
     /// Proposition 2 needs). Default: `true`.
     pub preserve_size: bool,

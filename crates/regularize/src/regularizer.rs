@@ -5,9 +5,12 @@ use std::time::Instant;
 
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
-use voxreg_normals::{FeatureField, NormalEstimator, NormalField, Refined};
+use voxreg_normals::{anisotropic_fit_weight, FeatureField, NormalEstimator, NormalField, Refined};
 
-use crate::pipeline::{crease_weights, informative_vertices, surfel_drift, trusted_drift};
+use crate::pipeline::{
+    crease_weights, informative_vertices, plateau_weights, sagitta_lift, sample_weights, surfel_drift,
+    trusted_drift,
+};
 use crate::report::{EnergyReport, NormalsReport, Report, StageTimes};
 use crate::{Energy, FairnessMask, Params, Progress, RegularizeError, Solver, SolverParams, Weights};
 
@@ -107,7 +110,10 @@ pub struct Regularizer {
     surface_seconds: f64,
     solver: Option<(SolverParams, Solver)>,
     normals: Option<(crate::NormalsParams, crate::params::EstimatedNormals)>,
-    trusted: Option<Vec<bool>>,
+    /// The re-centring's inputs that depend on the surface alone: the vertices outside
+    /// digital plateaus ([`informative_vertices`]), the surfels' sample weights
+    /// ([`sample_weights`]) and the plateaus' multipliers ([`plateau_weights`]).
+    recentring: Option<Recentring>,
     /// Vertices the re-centring must not measure its drift at (a block's cut sides).
     pub(crate) untrusted: Option<Vec<bool>>,
 }
@@ -120,7 +126,7 @@ impl Regularizer {
             surface_seconds: 0.0,
             solver: None,
             normals: None,
-            trusted: None,
+            recentring: None,
             untrusted: None,
         }
     }
@@ -257,14 +263,16 @@ impl Regularizer {
         let solver = &mut self.solver.as_mut().expect("built above").1;
         let clamps = solver.clamp().is_some();
         let recentre = params.preserve_size && !clamps && params.refine > 0;
-        if recentre && self.trusted.is_none() {
-            let mut trusted = informative_vertices(&surface);
+        if recentre && self.recentring.is_none() {
+            let informative = informative_vertices(&surface);
+            let plateaus = plateau_weights(&surface, &informative);
+            let mut trusted = informative;
             if let Some(untrusted) = &self.untrusted {
                 trusted.iter_mut().zip(untrusted).for_each(|(t, u)| *t &= !*u);
             }
-            self.trusted = Some(trusted);
+            self.recentring = Some(Recentring { trusted, samples: sample_weights(&surface), plateaus });
         }
-        let trusted = if recentre { self.trusted.as_deref().unwrap_or(&[]) } else { &[] };
+        let recentring = if recentre { self.recentring.as_ref() } else { None };
         let texture = params.texture_aware.then(|| FairnessMask::texture_aware(&surface));
         let junction = (params.junction_fairness && surface.interfaces().len() > 1)
             .then(|| FairnessMask::junction_curves(&surface))
@@ -273,8 +281,15 @@ impl Regularizer {
             (Some(t), Some(j)) => Some(t.and(&j)),
             (t, j) => t.or(j),
         };
-        let weights = Weights { fairness, ..Default::default() };
+        let (alpha, beta) = match recentring.and_then(|r| r.plateaus.as_ref()) {
+            Some((a, b)) => (Some(a.clone().into()), Some(b.clone().into())),
+            None => (None, None),
+        };
+        let weights = Weights { fairness, alpha, beta, ..Default::default() };
         let weights = (weights != Weights::default()).then_some(weights);
+        // The sagitta lift, blended in with the anisotropy like the refinement's fit
+        // (0 on cubic voxels).
+        let lift_weight = anisotropic_fit_weight(surface.spacing());
 
         let input = surface.positions();
         let mut targets = input.clone();
@@ -298,13 +313,17 @@ impl Regularizer {
                     feature_angle_deg: params.feature_angle_deg,
                 }
                 .estimate(&surface)?;
-                if recentre {
-                    let drift = trusted_drift(
-                        &surface,
-                        &surfel_drift(&surface, &positions, &input),
-                        trusted,
-                        params.recentre_sigma,
-                    );
+                if let Some(r) = recentring {
+                    let lift = (lift_weight > 0.0).then(|| {
+                        let mut lift = sagitta_lift(&surface, &positions, &field);
+                        lift.iter_mut().for_each(|l| *l *= lift_weight);
+                        lift
+                    });
+                    let (drift, sampled) =
+                        surfel_drift(&surface, &positions, &input, r.samples.as_deref(), lift.as_deref());
+                    let weight: Vec<f64> =
+                        sampled.iter().zip(&r.trusted).map(|(w, &t)| if t { *w } else { 0.0 }).collect();
+                    let drift = trusted_drift(&surface, &drift, &weight, params.recentre_sigma);
                     targets.iter_mut().zip(&drift).for_each(|(t, d)| *t -= *d);
                 }
                 times.refine += t.elapsed().as_secs_f64();
@@ -415,4 +434,17 @@ impl Regularizer {
         };
         Ok(Output { surface, positions, normals: field, targets, features, report })
     }
+}
+
+/// What the re-centring reads from the surface alone, kept across runs.
+#[derive(Debug)]
+struct Recentring {
+    /// Per vertex, whether the drift is measured there (outside digital plateaus and a
+    /// block's cut sides).
+    trusted: Vec<bool>,
+    /// Per surfel, the weight of its centre as a sample ([`sample_weights`]; `None`: all 1).
+    samples: Option<Vec<f64>>,
+    /// The plateaus' attachment and alignment multipliers ([`plateau_weights`]; `None`:
+    /// all 1).
+    plateaus: Option<(Vec<f64>, Vec<f64>)>,
 }

@@ -8,7 +8,7 @@ use voxreg_digisurf::DigitalSurface;
 use voxreg_normals::{NormalEstimator, Trivial};
 use voxreg_regularize::{Params, Regularizer};
 use voxreg_testkit::{
-    digitize_labels, label_fidelity, Cuboid, LabelFidelity, LabelShape, QuarteredBall, Solid, Sphere,
+    digitize_labels, label_fidelity, Cuboid, LabelFidelity, LabelShape, QuarteredBall, Shape, Solid, Sphere,
     SplitBall, Torus, TouchingBalls,
 };
 
@@ -79,16 +79,73 @@ fn touching_balls_junction_circle() {
 #[test]
 fn sphere_on_thick_slices() {
     let sphere = Sphere { radius: 20.0 };
-    let f = fidelity(&Solid(&sphere), DVec3::new(1.0, 1.0, 5.0), &Params::default());
-    eprintln!("sphere at (1, 1, 5): {f:?}");
-    // Reported, not a target: 0.106 / 0.332, normals 1.35 degrees (0.375 / 1.197 and
-    // 7.3 degrees before the first-order refinement fit on anisotropic voxels).
-    assert!(f.surface.mean <= 0.12 && f.surface.max <= 0.4 && f.surface_normals.mean <= 1.6, "{f:?}");
-    // At (1, 1, 2.5) the normals meet the target (0.6 degrees), the distance does not
-    // (0.044 against 0.03).
     let f = fidelity(&Solid(&sphere), DVec3::new(1.0, 1.0, 2.5), &Params::default());
     eprintln!("sphere at (1, 1, 2.5): {f:?}");
-    assert!(f.surface_normals.mean <= 0.6 && f.surface.mean <= 0.05, "{f:?}");
+    // The target: 0.03 voxel, normals 0.6 degrees. 0.025 / 0.097, normals 0.48 degrees
+    // (0.044 / 0.206, 0.57 degrees before the re-centring's sample weights, sagitta lift
+    // and plateau weights).
+    assert!(f.surface.mean <= 0.028 && f.surface.max <= 0.12 && f.surface_normals.mean <= 0.55, "{f:?}");
+    // Reported, not a target: 0.050 / 0.312, normals 1.01 degrees (0.105 / 0.332 and
+    // 1.35 degrees before; 0.375 / 1.197 and 7.3 degrees before the first-order
+    // refinement fit on anisotropic voxels).
+    let f = fidelity(&Solid(&sphere), DVec3::new(1.0, 1.0, 5.0), &Params::default());
+    eprintln!("sphere at (1, 1, 5): {f:?}");
+    assert!(f.surface.mean <= 0.06 && f.surface.max <= 0.4 && f.surface_normals.mean <= 1.2, "{f:?}");
+}
+
+/// A sphere of radius `radius` centred at `centre` (off the lattice's points).
+struct OffCentre {
+    radius: f64,
+    centre: DVec3,
+}
+
+impl Shape for OffCentre {
+    fn value(&self, p: DVec3) -> f64 {
+        (p - self.centre).length() - self.radius
+    }
+    fn gradient(&self, p: DVec3) -> DVec3 {
+        (p - self.centre).normalize_or_zero()
+    }
+    fn bounds(&self) -> (DVec3, DVec3) {
+        (self.centre - DVec3::splat(self.radius), self.centre + DVec3::splat(self.radius))
+    }
+    fn name(&self) -> &'static str {
+        "off-centre sphere"
+    }
+    fn project(&self, p: DVec3) -> DVec3 {
+        self.centre + (p - self.centre).normalize_or(DVec3::Z) * self.radius
+    }
+}
+
+#[test]
+fn spheres_on_thick_slices_kept_aside_from_tuning() {
+    // Other radii, and spheres whose centres are off the lattice's points (each a
+    // different digitization), at (1, 1, 2.5). Mean distances 0.011, 0.026, 0.025, 0.033,
+    // 0.028, 0.026 (set mean 0.025), normals at most 0.53 degrees; before the re-centring's
+    // sample weights, sagitta lift and plateau weights: 0.030, 0.036, 0.042, 0.042, 0.034,
+    // 0.029 (0.035). One of the six stays above the 0.03 target (its poles sit 0.09 voxel
+    // inside).
+    let spacing = DVec3::new(1.0, 1.0, 2.5);
+    let mut means = Vec::new();
+    for (radius, centre) in [
+        (15.3, DVec3::ZERO),
+        (23.7, DVec3::ZERO),
+        (20.0, DVec3::new(0.31, 0.72, 0.45) * spacing),
+        (20.0, DVec3::new(0.83, 0.17, 0.91) * spacing),
+        (17.1, DVec3::new(0.56, 0.38, 0.12) * spacing),
+        (26.4, DVec3::new(0.07, 0.64, 0.69) * spacing),
+    ] {
+        let f = fidelity(&Solid(&OffCentre { radius, centre }), spacing, &Params::default());
+        eprintln!("sphere r = {radius}, centre {centre}: {f:?}");
+        assert!(
+            f.surface.mean <= 0.036 && f.surface_normals.mean <= 0.6,
+            "r = {radius}, centre {centre}: {f:?}"
+        );
+        means.push(f.surface.mean);
+    }
+    let mean = means.iter().sum::<f64>() / means.len() as f64;
+    eprintln!("mean distance over the set: {mean:.4}");
+    assert!(mean <= 0.027, "{means:?}");
 }
 
 #[test]
@@ -97,13 +154,15 @@ fn torus_on_thick_slices() {
     let torus = Torus { major: 12.0, minor: 5.0 };
     let f = fidelity(&Solid(&torus), DVec3::new(1.0, 1.0, 2.5), &Params::default());
     eprintln!("torus at (1, 1, 2.5): {f:?}");
-    // 0.330 / 0.757, normals 12.4 degrees (0.378 / 0.872 and 14.1 degrees before).
-    assert!(f.surface.mean <= 0.36 && f.surface_normals.mean <= 13.5, "{f:?}");
+    // 0.123 / 0.412, normals 5.6 degrees (0.330 / 0.757 and 12.4 degrees before the
+    // plateau weights and the re-centring's sample weights; 0.378 / 0.872 and 14.1
+    // degrees before the first-order refinement fit).
+    assert!(f.surface.mean <= 0.14 && f.surface_normals.mean <= 6.5, "{f:?}");
     let f = fidelity(&Solid(&torus), DVec3::new(1.0, 1.0, 5.0), &Params::default());
     eprintln!("torus at (1, 1, 5): {f:?}");
-    // Two slices across the tube: reported only, and worse than before (1.21 / 2.31,
-    // normals 29 degrees, against 1.09 / 2.15 and 26 degrees).
-    assert!(f.surface.mean <= 1.3, "{f:?}");
+    // Two slices across the tube: reported only (0.85 / 1.99, normals 18 degrees; 1.21 /
+    // 2.31 and 29 degrees before, 1.09 / 2.15 and 26 degrees before the first-order fit).
+    assert!(f.surface.mean <= 0.95, "{f:?}");
 }
 
 #[test]
@@ -111,8 +170,9 @@ fn sphere_on_voxels_of_three_sizes() {
     let sphere = Sphere { radius: 20.0 };
     let f = fidelity(&Solid(&sphere), DVec3::new(1.0, 2.0, 3.0), &Params::default());
     eprintln!("sphere at (1, 2, 3): {f:?}");
-    // 0.056 / 0.178, normals 0.73 degrees (0.061 / 0.191, 0.78 degrees before).
-    assert!(f.surface.mean <= 0.06 && f.surface_normals.mean <= 0.8, "{f:?}");
+    // 0.057 / 0.155, normals 0.64 degrees (0.056 / 0.178, 0.73 degrees before the
+    // re-centring's weights; 0.061 / 0.191, 0.78 degrees before the first-order fit).
+    assert!(f.surface.mean <= 0.06 && f.surface_normals.mean <= 0.7, "{f:?}");
 }
 
 #[test]
