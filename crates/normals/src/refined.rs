@@ -234,6 +234,7 @@ fn refined(
                 let regions_f = nodes[f].regions;
                 let iface_f = nodes[f].interface;
                 let mut disc = |r: f64| -> (DVec3, bool) {
+                    let r2 = r * r;
                     let mut sum = DVec3::ZERO;
                     let mut fit = FirstOrder::default();
                     let mut excluded = false; // a quad near a junction in the disc
@@ -245,7 +246,11 @@ fn refined(
                     seen[f] = true;
                     let mut head = 0;
                     while head < queue.len() {
-                        let (g, parent, d) = queue[head];
+                        // Queued with its squared distance (the test below needs no root):
+                        // the distance is taken here, and kept for the second pass.
+                        let (g, parent, d2) = queue[head];
+                        let d = d2.sqrt();
+                        queue[head].2 = d;
                         head += 1;
                         let (g, parent) = (g as usize, parent as usize);
                         let Sample { area: a, len } = samples[g];
@@ -270,8 +275,8 @@ fn refined(
                             if !seen[ku]
                                 && (single || nodes[ku].regions.iter().any(|r| regions_f.contains(r)))
                             {
-                                let dk = nodes[ku].centre.distance(cf);
-                                if dk < r {
+                                let dk = nodes[ku].centre.distance_squared(cf);
+                                if dk < r2 {
                                     seen[ku] = true;
                                     queue.push((k, g as u32, dk));
                                 }
