@@ -40,7 +40,6 @@
 mod intersections;
 mod solid;
 
-use std::collections::HashMap;
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -114,25 +113,35 @@ fn vector_area(p: [DVec3; 4]) -> DVec3 {
 /// areas, the second one flipped when the pair runs the shared edge in the same direction
 /// (so that orientations agree). Degenerate quads are left out.
 fn adjacent_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize), DVec3, DVec3)> {
-    // Undirected edge -> (quad, runs low to high), for up to two quads; more marks the
-    // edge as shared by more than two.
-    let mut edges: HashMap<(u32, u32), Vec<(usize, bool)>> = HashMap::with_capacity(2 * quads.len());
-    for (f, q) in quads.iter().enumerate() {
-        if corners(positions, q).is_none() {
-            continue;
-        }
-        for i in 0..4 {
-            let (a, b) = (q[i], q[(i + 1) % 4]);
-            if a != b {
-                edges.entry((a.min(b), a.max(b))).or_default().push((f, a < b));
+    // Every quad's edges as (undirected edge, quad, runs low to high), sorted by edge then
+    // quad: a run of two entries of two quads is a pair; longer runs are edges shared by
+    // more than two. A sort, not a map of edges: linear memory, no allocation per edge.
+    let mut edges: Vec<(u64, u32, bool)> = quads
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(f, q)| {
+            let ok = corners(positions, q).is_some();
+            (0..4).filter_map(move |i| {
+                let (a, b) = (q[i], q[(i + 1) % 4]);
+                (ok && a != b).then(|| ((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), f as u32, a < b))
+            })
+        })
+        .collect();
+    edges.par_sort_unstable();
+    let starts: Vec<usize> = (0..edges.len())
+        .into_par_iter()
+        .filter(|&i| i == 0 || edges[i - 1].0 != edges[i].0)
+        .collect();
+    let mut out: Vec<((usize, usize), DVec3, DVec3)> = starts
+        .par_iter()
+        .enumerate()
+        .filter_map(|(k, &i)| {
+            let end = starts.get(k + 1).copied().unwrap_or(edges.len());
+            if end - i != 2 || edges[i].1 == edges[i + 1].1 {
+                return None;
             }
-        }
-    }
-    let mut out: Vec<((usize, usize), DVec3, DVec3)> = edges
-        .values()
-        .filter(|e| e.len() == 2 && e[0].0 != e[1].0)
-        .filter_map(|e| {
-            let [(f, df), (g, dg)] = [e[0], e[1]];
+            let [(_, f, df), (_, g, dg)] = [edges[i], edges[i + 1]];
+            let (f, g) = (f as usize, g as usize);
             let nf = vector_area(corners(positions, &quads[f])?);
             let mut ng = vector_area(corners(positions, &quads[g])?);
             if df == dg {
@@ -141,7 +150,7 @@ fn adjacent_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize
             (nf.length() > 0.0 && ng.length() > 0.0).then_some(((f.min(g), f.max(g)), nf, ng))
         })
         .collect();
-    out.sort_unstable_by_key(|x| x.0);
+    out.par_sort_unstable_by_key(|x| x.0);
     out
 }
 
