@@ -40,7 +40,6 @@
 mod intersections;
 mod solid;
 
-
 use glam::DVec3;
 use rayon::prelude::*;
 
@@ -128,10 +127,8 @@ fn adjacent_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize
         })
         .collect();
     edges.par_sort_unstable();
-    let starts: Vec<usize> = (0..edges.len())
-        .into_par_iter()
-        .filter(|&i| i == 0 || edges[i - 1].0 != edges[i].0)
-        .collect();
+    let starts: Vec<usize> =
+        (0..edges.len()).into_par_iter().filter(|&i| i == 0 || edges[i - 1].0 != edges[i].0).collect();
     let mut out: Vec<((usize, usize), DVec3, DVec3)> = starts
         .par_iter()
         .enumerate()

@@ -371,18 +371,22 @@ impl<const W: usize> Rows<W> {
     fn build(n: usize, cols: usize, f: impl Fn(&mut Accumulator<W>, usize) + Sync) -> Rows<W> {
         const ROWS: usize = 1024;
         type Part<const W: usize> = (Vec<usize>, Vec<u32>, Vec<[f32; W]>);
+        // One marker array per worker, not per chunk of rows: `cols` entries each, so a
+        // fresh one per chunk would cost time quadratic in the level's size.
         let parts: Vec<Part<W>> = (0..n.div_ceil(ROWS))
             .into_par_iter()
-            .map(|c| {
-                let mut acc = Accumulator { slot: vec![u32::MAX; cols], row: Vec::with_capacity(64) };
-                let mut part: Part<W> = (Vec::with_capacity(ROWS), Vec::new(), Vec::new());
-                for i in c * ROWS..((c + 1) * ROWS).min(n) {
-                    f(&mut acc, i);
-                    part.0.push(acc.row.len());
-                    acc.flush_into(&mut part.1, &mut part.2);
-                }
-                part
-            })
+            .map_init(
+                || Accumulator { slot: vec![u32::MAX; cols], row: Vec::with_capacity(64) },
+                |acc, c| {
+                    let mut part: Part<W> = (Vec::with_capacity(ROWS), Vec::new(), Vec::new());
+                    for i in c * ROWS..((c + 1) * ROWS).min(n) {
+                        f(acc, i);
+                        part.0.push(acc.row.len());
+                        acc.flush_into(&mut part.1, &mut part.2);
+                    }
+                    part
+                },
+            )
             .collect();
         let total = parts.iter().map(|p| p.1.len()).sum();
         let mut offsets = Vec::with_capacity(n + 1);
@@ -1079,18 +1083,16 @@ impl Vcycle {
             .collect();
         let FaceLevels { mut rows, .. } = built;
         let fresh: Vec<(usize, Vec<u32>, Vec<[f32; FACE]>)> = dirty
-            .par_chunks(256)
-            .flat_map_iter(|part| {
-                let mut acc = Accumulator { slot: vec![u32::MAX; agg.len()], row: Vec::with_capacity(64) };
-                part.iter()
-                    .map(|&a| {
-                        face_row(&mut acc, stencil, coef, agg, face, a);
-                        let (mut cols, mut vals) = (Vec::new(), Vec::new());
-                        acc.flush_into(&mut cols, &mut vals);
-                        (a, cols, vals)
-                    })
-                    .collect::<Vec<_>>()
-            })
+            .par_iter()
+            .map_init(
+                || Accumulator { slot: vec![u32::MAX; agg.len()], row: Vec::with_capacity(64) },
+                |acc, &a| {
+                    face_row(acc, stencil, coef, agg, face, a);
+                    let (mut cols, mut vals) = (Vec::new(), Vec::new());
+                    acc.flush_into(&mut cols, &mut vals);
+                    (a, cols, vals)
+                },
+            )
             .collect();
         for (a, cols, vals) in fresh {
             let r = rows.offsets[a]..rows.offsets[a + 1];
