@@ -5,7 +5,7 @@ use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
 
 use crate::eigen::symmetric_eigen;
-use crate::{NormalError, NormalEstimator, NormalField};
+use crate::{Interrupt, NormalError, NormalEstimator, NormalField};
 
 /// Normals re-estimated from positions of the surface's vertices (typically a
 /// regularized surface): for each surfel `f`, the normalized, tent-weighted average of
@@ -73,6 +73,15 @@ impl NormalEstimator for Refined<'_> {
     }
 
     fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
+        self.estimate_interruptible(surface, &Interrupt::never())
+    }
+
+    /// Polls `interrupt` once per surfel: a raised one skips the remaining discs.
+    fn estimate_interruptible(
+        &self,
+        surface: &DigitalSurface,
+        interrupt: &Interrupt,
+    ) -> Result<NormalField, NormalError> {
         if self.positions.len() != surface.num_vertices() || self.previous.len() != surface.num_surfels() {
             return Err(NormalError::InvalidParameter(format!(
                 "refinement needs {} positions and {} normals, got {} and {}",
@@ -90,7 +99,20 @@ impl NormalEstimator for Refined<'_> {
         }
         let blend = anisotropic_fit_weight(surface.spacing());
         let near = near_junction_surfels(surface);
-        Ok(refined(surface, self.positions, self.previous, self.radius, self.feature_angle_deg, blend, &near))
+        interrupt.check()?;
+        let field = refined(
+            surface,
+            self.positions,
+            self.previous,
+            self.radius,
+            self.feature_angle_deg,
+            blend,
+            &near,
+            interrupt,
+        );
+        // A raised interrupt left the surfels after it unestimated.
+        interrupt.check()?;
+        Ok(field)
     }
 }
 
@@ -175,6 +197,7 @@ fn junction_surfels(surface: &DigitalSurface) -> Vec<bool> {
     surface.surfels().par_iter().map(|s| s.vertices.iter().any(|v| junction[v.index()])).collect()
 }
 
+#[allow(clippy::too_many_arguments)]
 fn refined(
     surface: &DigitalSurface,
     positions: &[DVec3],
@@ -183,6 +206,7 @@ fn refined(
     feature_angle_deg: f64,
     blend: f64,
     near_junction: &[bool],
+    interrupt: &Interrupt,
 ) -> NormalField {
     let n = surface.num_surfels();
     let h = surface.spacing().max_element();
@@ -206,6 +230,9 @@ fn refined(
         .map_init(
             || (vec![false; n], Vec::new()),
             |(seen, queue): &mut (Vec<bool>, Vec<(u32, u32, f64)>), f| {
+                if interrupt.is_raised() {
+                    return normals[f];
+                }
                 let nf = normals[f];
                 let cf = centres[f];
                 let regions_f = surfels[f].regions;

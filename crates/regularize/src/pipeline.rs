@@ -4,7 +4,9 @@
 use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
-use voxreg_normals::NormalField;
+use voxreg_normals::{Interrupt, NormalField};
+
+use crate::RegularizeError;
 
 /// Per-surfel alignment multipliers: `weight` for the quads whose normal in `field` is
 /// more than `feature_angle_deg` from the normal of an edge-adjacent quad of the same
@@ -58,15 +60,18 @@ fn straddling_quads(surface: &DigitalSurface, field: &NormalField, feature_angle
 /// which is a Gaussian of standard deviation `sigma` voxels on a flat grid (each step
 /// adds a variance of 1/4 voxel^2 per axis). Diffusion follows the surface, so the
 /// two sheets of a thin shape never mix; at junctions it runs across interfaces.
+/// `interrupt` is polled before each step.
 pub(crate) fn smoothed_displacements(
     surface: &DigitalSurface,
     displacements: &[DVec3],
     sigma: f64,
-) -> Vec<DVec3> {
+    interrupt: &Interrupt,
+) -> Result<Vec<DVec3>, RegularizeError> {
     let steps = (4.0 * sigma * sigma).round() as usize;
     let mut u = displacements.to_vec();
     let mut next = vec![DVec3::ZERO; u.len()];
     for _ in 0..steps {
+        interrupt.check()?;
         next.par_iter_mut().enumerate().for_each(|(v, out)| {
             let nb = surface.vertex_neighbours(VertexId(v as u32));
             let mean = if nb.is_empty() {
@@ -78,7 +83,7 @@ pub(crate) fn smoothed_displacements(
         });
         std::mem::swap(&mut u, &mut next);
     }
-    u
+    Ok(u)
 }
 
 /// Whether each vertex's staircase position is informative about where the true surface
@@ -112,15 +117,17 @@ pub(crate) fn informative_vertices(surface: &DigitalSurface) -> Vec<bool> {
 /// vertices (normalized convolution: the smoothed trusted displacements over the smoothed
 /// indicator of trust), so that a plateau's interior takes the drift of its rim. Far from
 /// any trusted vertex (deep inside a large flat face), it falls back continuously to the
-/// plain smoothed drift. An empty `trusted` trusts every vertex.
+/// plain smoothed drift. An empty `trusted` trusts every vertex. `interrupt` is polled
+/// before each diffusion step.
 pub(crate) fn trusted_drift(
     surface: &DigitalSurface,
     drift: &[DVec3],
     trusted: &[bool],
     sigma: f64,
-) -> Vec<DVec3> {
+    interrupt: &Interrupt,
+) -> Result<Vec<DVec3>, RegularizeError> {
     if trusted.is_empty() || trusted.iter().all(|&t| t) {
-        return smoothed_displacements(surface, drift, sigma);
+        return smoothed_displacements(surface, drift, sigma, interrupt);
     }
     // The plain drift, the masked drift and the trust indicator diffused together: one
     // pass over the neighbour lists per step instead of three, each channel summed in the
@@ -137,6 +144,7 @@ pub(crate) fn trusted_drift(
         .collect();
     let mut next = u.clone();
     for _ in 0..steps {
+        interrupt.check()?;
         next.par_iter_mut().enumerate().for_each(|(v, out)| {
             let nb = surface.vertex_neighbours(VertexId(v as u32));
             let c = u[v];
@@ -161,7 +169,7 @@ pub(crate) fn trusted_drift(
         std::mem::swap(&mut u, &mut next);
     }
     const EPS: f64 = 1e-3;
-    u.iter().map(|c| (c.masked + EPS * c.plain) / (c.weight + EPS)).collect()
+    Ok(u.iter().map(|c| (c.masked + EPS * c.plain) / (c.weight + EPS)).collect())
 }
 
 /// The three quantities [`trusted_drift`] diffuses.
@@ -208,12 +216,13 @@ mod tests {
         let masked: Vec<DVec3> =
             drift.iter().zip(&trusted).map(|(d, &t)| if t { *d } else { DVec3::ZERO }).collect();
         let weight: Vec<DVec3> = trusted.iter().map(|&t| DVec3::splat(if t { 1.0 } else { 0.0 })).collect();
-        let plain = smoothed_displacements(&surface, &drift, 3.0);
-        let num = smoothed_displacements(&surface, &masked, 3.0);
-        let den = smoothed_displacements(&surface, &weight, 3.0);
+        let never = Interrupt::never();
+        let plain = smoothed_displacements(&surface, &drift, 3.0, &never).unwrap();
+        let num = smoothed_displacements(&surface, &masked, 3.0, &never).unwrap();
+        let den = smoothed_displacements(&surface, &weight, 3.0, &never).unwrap();
         let expected: Vec<DVec3> =
             num.iter().zip(&den).zip(&plain).map(|((n, w), p)| (*n + 1e-3 * *p) / (w.x + 1e-3)).collect();
-        assert_eq!(trusted_drift(&surface, &drift, &trusted, 3.0), expected);
+        assert_eq!(trusted_drift(&surface, &drift, &trusted, 3.0, &never).unwrap(), expected);
     }
 
     #[test]

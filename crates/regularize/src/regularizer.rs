@@ -5,7 +5,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
-use voxreg_normals::{FeatureField, NormalEstimator, NormalField, Refined};
+use voxreg_normals::{FeatureField, Interrupt, NormalEstimator, NormalField, Refined};
 
 use crate::pipeline::{crease_weights, informative_vertices, surfel_drift, trusted_drift};
 use crate::report::{EnergyReport, NormalsReport, Report, StageTimes};
@@ -101,6 +101,12 @@ pub const BYTES_PER_SURFEL: u64 = 2_400;
 /// analysis, multigrid hierarchy) and the initial normal field across runs, for
 /// parameter sweeps and interactive use. A run whose solver settings or initial-normal
 /// settings differ from the last run's rebuilds only those.
+///
+/// A run polls the regularizer's [`Interrupt`] ([`Regularizer::set_interrupt`]) in every
+/// stage that takes long (the normal estimators, the refinement's re-centring, the
+/// solver's setup and iterations) and returns [`RegularizeError::Interrupted`] soon after
+/// it is raised; what the regularizer keeps (the solver, its last multigrid cycle, the
+/// initial normals) stays usable by the next run.
 #[derive(Debug)]
 pub struct Regularizer {
     surface: Arc<DigitalSurface>,
@@ -110,6 +116,7 @@ pub struct Regularizer {
     trusted: Option<Vec<bool>>,
     /// Vertices the re-centring must not measure its drift at (a block's cut sides).
     pub(crate) untrusted: Option<Vec<bool>>,
+    interrupt: Interrupt,
 }
 
 impl Regularizer {
@@ -122,6 +129,7 @@ impl Regularizer {
             normals: None,
             trusted: None,
             untrusted: None,
+            interrupt: Interrupt::never(),
         }
     }
 
@@ -160,6 +168,15 @@ impl Regularizer {
     /// The digital surface.
     pub fn surface(&self) -> &Arc<DigitalSurface> {
         &self.surface
+    }
+
+    /// The flag the next runs poll: once it is raised (from another thread, through a
+    /// clone), a run returns [`RegularizeError::Interrupted`] within one chunk of its
+    /// current stage's work (a solver iteration, a multigrid level, a diffusion step, a
+    /// surfel of a normal estimate). A raised flag stays raised: give each run its own.
+    /// Default: [`Interrupt::never`].
+    pub fn set_interrupt(&mut self, interrupt: Interrupt) {
+        self.interrupt = interrupt;
     }
 
     /// Runs `params` from the initial normals `params.normals` describes.
@@ -221,6 +238,8 @@ impl Regularizer {
             )));
         }
         let surface = Arc::clone(&self.surface);
+        let interrupt = self.interrupt.clone();
+        interrupt.check()?;
         let stages_total = 1.0 + (params.refine as f64) * 2.0 + 1.0;
         let mut times = StageTimes { surface: self.surface_seconds, ..Default::default() };
 
@@ -241,7 +260,7 @@ impl Regularizer {
             None => {
                 let cached = self.normals.as_ref().filter(|(p, _)| *p == params.normals);
                 if cached.is_none() {
-                    let estimated = params.normals.estimate(&surface)?;
+                    let estimated = params.normals.estimate_interruptible(&surface, &interrupt)?;
                     self.normals = Some((params.normals.clone(), estimated));
                 }
                 let (_, n) = self.normals.as_ref().expect("estimated above");
@@ -251,10 +270,12 @@ impl Regularizer {
         times.normals = t.elapsed().as_secs_f64();
 
         // The solver, kept while its settings do not change.
+        interrupt.check()?;
         if self.solver.as_ref().is_none_or(|(p, _)| *p != params.solver) {
             self.solver = Some((params.solver, Solver::new(&surface, &params.solver)?));
         }
         let solver = &mut self.solver.as_mut().expect("built above").1;
+        solver.set_interrupt(interrupt.clone());
         let clamps = solver.clamp().is_some();
         let recentre = params.preserve_size && !clamps && params.refine > 0;
         if recentre && self.trusted.is_none() {
@@ -297,19 +318,21 @@ impl Regularizer {
                     radius: params.refine_radius,
                     feature_angle_deg: params.feature_angle_deg,
                 }
-                .estimate(&surface)?;
+                .estimate_interruptible(&surface, &interrupt)?;
                 if recentre {
                     let drift = trusted_drift(
                         &surface,
                         &surfel_drift(&surface, &positions, &input),
                         trusted,
                         params.recentre_sigma,
-                    );
+                        &interrupt,
+                    )?;
                     targets.iter_mut().zip(&drift).for_each(|(t, d)| *t -= *d);
                 }
                 times.refine += t.elapsed().as_secs_f64();
                 done += 1.0;
             }
+            interrupt.check()?;
             let creased = (params.refine > 0 && params.crease_alignment < 1.0).then(|| {
                 let crease = crease_weights(
                     &surface,
@@ -383,6 +406,7 @@ impl Regularizer {
             done += 1.0;
         }
 
+        interrupt.check()?;
         if params.fold_free {
             crate::unfold::unfold(&surface, &input, &mut positions);
         }

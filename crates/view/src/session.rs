@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 use voxreg_digisurf::{LabelVolume, RegionMap};
 use voxreg_io::{Palette, QuadMesh};
-use voxreg_regularize::{Output, Params, Regularizer, Stage};
+use voxreg_regularize::{Interrupt, Output, Params, RegularizeError, Regularizer, Stage};
 
 use crate::model::{f32_bytes, Model};
 use crate::tuning::Tuning;
@@ -103,26 +103,39 @@ pub(crate) struct State {
 pub(crate) struct Shared {
     state: Mutex<State>,
     pub(crate) changed: Condvar,
-    /// Counts the jobs queued: a run whose job is older than the latest stops at its next
-    /// iteration (the job that replaced it runs next).
+    /// Counts the jobs queued: a run whose job is older than the latest is interrupted
+    /// (the job that replaced it runs next).
     jobs: AtomicU64,
     /// The latest job and when its request came (a job's times count from there, the
     /// wait for the run it replaces included).
     arrival: Mutex<Option<(u64, Instant)>>,
+    /// The running job and the interrupt its run polls, raised when a newer job comes.
+    running: Mutex<Option<(u64, Interrupt)>>,
 }
 
-/// The panic payload that stops a superseded run (through the progress callback, the
-/// front door's only way out of a run; it stops between iterations, where the solver's
-/// state is whole).
-struct Superseded;
-
 impl Shared {
-    /// Numbers a new job (and so supersedes the running one).
+    /// Numbers a new job, and interrupts the running one (it stops within a chunk of its
+    /// current stage: an iteration, a multigrid level, a surfel of the normals).
     pub(crate) fn next_job(&self) -> u64 {
         let mut arrival = self.arrival.lock().unwrap_or_else(|e| e.into_inner());
         let job = self.jobs.fetch_add(1, Ordering::SeqCst) + 1;
         *arrival = Some((job, Instant::now()));
+        drop(arrival);
+        if let Some((_, interrupt)) = &*self.running.lock().unwrap_or_else(|e| e.into_inner()) {
+            interrupt.raise();
+        }
         job
+    }
+
+    /// The interrupt of job `job`'s run, raised already if a newer job came.
+    fn start(&self, job: u64) -> Interrupt {
+        let interrupt = Interrupt::new();
+        *self.running.lock().unwrap_or_else(|e| e.into_inner()) = Some((job, interrupt.clone()));
+        // A job numbered between this one's and the registration raised no interrupt.
+        if self.superseded(job) {
+            interrupt.raise();
+        }
+        interrupt
     }
 
     /// When job `job`'s request came, if it is the latest.
@@ -178,13 +191,9 @@ pub(crate) fn worker(shared: Arc<Shared>, jobs: Receiver<Job>) {
             Job::Open(_, _, id) | Job::Solve(_, id) | Job::Edit(_, id) => *id,
         };
         let t = shared.arrival(id).unwrap_or_else(Instant::now);
-        let result = catch_unwind(AssertUnwindSafe(|| run(&shared, &mut current, job, t)));
+        let interrupt = shared.start(id);
+        let result = catch_unwind(AssertUnwindSafe(|| run(&shared, &mut current, job, t, &interrupt)));
         if let Err(panic) = result {
-            if panic.is::<Superseded>() {
-                // A newer job is queued: it runs next and publishes its own state.
-                shared.update(|s| s.superseded += 1);
-                continue;
-            }
             let message = panic_message(&*panic);
             current = None;
             shared.update(|s| {
@@ -204,7 +213,7 @@ pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
     }
 }
 
-fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
+fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, interrupt: &Interrupt) {
     match job {
         Job::Open(loaded, reply, job) => {
             let loaded = *loaded;
@@ -223,7 +232,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                     if let Some(reply) = reply {
                         let _ = reply.send(Ok(()));
                     }
-                    solve(shared, c, tuning, params, t, job);
+                    solve(shared, c, tuning, params, t, job, interrupt);
                 }
                 Err(message) => {
                     shared.update(|s| {
@@ -263,7 +272,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                     }
                 }
             }
-            solve(shared, c, tuning, params, t, job);
+            solve(shared, c, tuning, params, t, job, interrupt);
         }
         Job::Edit(edit, job) => {
             let Some(c) = current.as_mut() else {
@@ -293,7 +302,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                 return;
             }
             shared.update(|s| s.edit_ms = Some(t.elapsed().as_secs_f64() * 1e3));
-            solve(shared, c, tuning, params, t, job);
+            solve(shared, c, tuning, params, t, job, interrupt);
         }
     }
 }
@@ -403,7 +412,15 @@ fn publish_model(shared: &Shared, c: &Current, positions: Option<&[DVec3]>) {
     });
 }
 
-fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: Instant, job: u64) {
+fn solve(
+    shared: &Shared,
+    c: &mut Current,
+    tuning: Tuning,
+    params: Params,
+    t: Instant,
+    job: u64,
+    interrupt: &Interrupt,
+) {
     c.tuned = Some((tuning.clone(), params.clone()));
     shared.update(|s| {
         s.busy = true;
@@ -417,10 +434,8 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
     // iterations); this run's rounds are kept for the next.
     let warm = c.last.clone();
     let mut rounds: Vec<Vec<DVec3>> = Vec::new();
+    c.regularizer.set_interrupt(interrupt.clone());
     let result = c.regularizer.run_warm(&params, None, &warm, &mut |e| {
-        if shared.superseded(job) {
-            std::panic::resume_unwind(Box::new(Superseded));
-        }
         if let (Stage::Solve { round }, Some(p), Some(input)) = (e.stage, e.iteration, e.input) {
             if rounds.len() <= round {
                 rounds.resize(round + 1, Vec::new());
@@ -494,6 +509,8 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
                 s.finished = Some(finished);
             });
         }
+        // A newer job is queued: it runs next and publishes its own state.
+        Err(RegularizeError::Interrupted) => shared.update(|s| s.superseded += 1),
         Err(e) => {
             let message = format!("{}: cannot regularize: {e}", c.loaded.name);
             shared.update(|s| {
