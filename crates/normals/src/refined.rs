@@ -100,7 +100,7 @@ impl NormalEstimator for Refined<'_> {
         let blend = anisotropic_fit_weight(surface.spacing());
         let near = near_junction_surfels(surface);
         interrupt.check()?;
-        let field = refined(
+        let field = refined_interruptible(
             surface,
             self.positions,
             self.previous,
@@ -197,8 +197,25 @@ fn junction_surfels(surface: &DigitalSurface) -> Vec<bool> {
     surface.surfels().par_iter().map(|s| s.vertices.iter().any(|v| junction[v.index()])).collect()
 }
 
-#[allow(clippy::too_many_arguments)]
+/// [`refined_interruptible`] never interrupted.
+#[cfg(test)]
 fn refined(
+    surface: &DigitalSurface,
+    positions: &[DVec3],
+    field: &NormalField,
+    radius: f64,
+    feature_angle_deg: f64,
+    blend: f64,
+    near_junction: &[bool],
+) -> NormalField {
+    let never = Interrupt::never();
+    refined_interruptible(surface, positions, field, radius, feature_angle_deg, blend, near_junction, &never)
+}
+
+/// The estimate; once `interrupt` is raised, the surfels not yet done keep `field`'s
+/// normal (the caller reports the interruption).
+#[allow(clippy::too_many_arguments)]
+fn refined_interruptible(
     surface: &DigitalSurface,
     positions: &[DVec3],
     field: &NormalField,

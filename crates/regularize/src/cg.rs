@@ -203,6 +203,10 @@ impl CgSolver {
     ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
         let quick = self.quick_start && start.is_some() && progress.is_some();
         let mut prepared = self.setup.prepare(energy, quick, &self.interrupt)?;
+        if self.interrupt.is_raised() {
+            self.setup.keep(prepared);
+            return Err(RegularizeError::Interrupted);
+        }
         let stencil = &self.setup.stencil;
         let n = stencil.len();
         let input = energy.input();

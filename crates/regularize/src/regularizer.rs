@@ -348,6 +348,7 @@ impl Regularizer {
                 });
                 w
             });
+            interrupt.check()?;
             let energy = Energy::new(&surface, &field, &targets, params.energy)?;
             let energy = match creased.as_ref().or(weights.as_ref()) {
                 Some(w) => energy.with_weights(w)?,

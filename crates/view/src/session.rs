@@ -561,4 +561,112 @@ mod tests {
         assert!(message.contains("memory limit"), "{message}");
         assert!(build(&volume, &regions, "noise.vox").is_ok());
     }
+
+    /// How long a replaced run takes to stop on bunny-128 (the default preset, warm
+    /// re-solves as the worker runs them). For each raise time `STEP_MS` (default 10)
+    /// apart through a run, `RUNS` times (default 1) with offsets between: a run whose
+    /// interrupt is raised then (the wait from the raise to its return), and the same run
+    /// not interrupted (the wait from then to its next progress event, where a run
+    /// stopped before the interrupt). Prints both per stage under way at the raise
+    /// (median, max). Ignored: a measurement.
+    ///
+    /// ```text
+    /// cargo test --release -p voxreg-view --lib interrupt_latency -- --ignored --nocapture
+    /// ```
+    #[test]
+    #[ignore]
+    fn interrupt_latency() {
+        use std::collections::BTreeMap;
+        let env = |k: &str, d: u64| std::env::var(k).map(|v| v.parse().unwrap()).unwrap_or(d);
+        let (step, runs) = (env("STEP_MS", 10), env("RUNS", 1));
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/bunny-128.vol");
+        let v = voxreg_io::read_volume(&path).unwrap();
+        let mut params = Params::default();
+        let mut r = Regularizer::from_volume(&v.volume, &params.regions).unwrap();
+        // Each round's last iterate, the warm starts the worker keeps.
+        let mut warm: Vec<Vec<DVec3>> = Vec::new();
+        r.run_warm(&params, None, &[], &mut |e| {
+            if let (Stage::Solve { round }, Some(x)) = (e.stage, e.iterate()) {
+                warm.resize(warm.len().max(round + 1), Vec::new());
+                warm[round] = x;
+            }
+        })
+        .unwrap();
+        // The stage under way, finer than the events' stages: a solve's setup (before its
+        // first iterate) apart from its iterations.
+        let label = |e: &voxreg_regularize::Event, params: &Params| match (e.stage, e.iteration) {
+            (Stage::Solve { .. }, None) => format!("{} setup", e.stage.label(params)),
+            (Stage::Solve { .. }, Some(_)) => format!("{} iterations", e.stage.label(params)),
+            _ => e.stage.label(params),
+        };
+        // One run raising `interrupt` (if any) `at` into it: the stage under way then, the
+        // wait for the run's return (interrupted) or next event (not), and the run's time.
+        let mut run = |params: &Params, at: Duration, interrupted: bool| {
+            let interrupt = if interrupted { Interrupt::new() } else { Interrupt::never() };
+            r.set_interrupt(interrupt.clone());
+            let stage = Mutex::new((String::from("start"), None::<Instant>));
+            let raised = Mutex::new(None::<(Instant, String)>);
+            let start = Instant::now();
+            let result = std::thread::scope(|scope| {
+                scope.spawn(|| {
+                    std::thread::sleep(at);
+                    let mut s = stage.lock().unwrap();
+                    *raised.lock().unwrap() = Some((Instant::now(), s.0.clone()));
+                    s.1 = None;
+                    interrupt.raise();
+                });
+                r.run_warm(params, None, &warm, &mut |e| {
+                    let mut s = stage.lock().unwrap();
+                    let now = Instant::now();
+                    if raised.lock().unwrap().is_some() && s.1.is_none() {
+                        s.1 = Some(now);
+                    }
+                    s.0 = label(e, params);
+                })
+            });
+            let end = Instant::now();
+            let (when, under_way) = raised.lock().unwrap().take().expect("raised");
+            let next = stage.lock().unwrap().1;
+            let wait = match (&result, interrupted) {
+                (Err(RegularizeError::Interrupted), true) => Some(end - when),
+                (Ok(_), false) => next.map(|n| n - when),
+                (Ok(_), true) => None, // done before the raise
+                (Err(e), _) => panic!("{e}"),
+            };
+            (under_way, wait.map(|w| w.as_secs_f64() * 1e3), (end - start).as_secs_f64() * 1e3)
+        };
+        let (_, _, whole) = run(&params, Duration::ZERO, false);
+        eprintln!("warm re-solve {whole:.0} ms");
+        let mut waits: BTreeMap<String, [Vec<f64>; 2]> = BTreeMap::new();
+        for k in 0..runs {
+            let mut at = Duration::from_millis(step * k / runs.max(1));
+            let mut factor = 1.1;
+            while at.as_secs_f64() * 1e3 < whole {
+                params.energy.gamma *= factor;
+                factor = 1.0 / factor;
+                for interrupted in [true, false] {
+                    if let (stage, Some(w), _) = run(&params, at, interrupted) {
+                        waits.entry(stage).or_default()[usize::from(!interrupted)].push(w);
+                    }
+                }
+                at += Duration::from_millis(step);
+            }
+        }
+        r.set_interrupt(Interrupt::never());
+        let summary = |w: &[f64]| {
+            let mut w = w.to_vec();
+            w.sort_by(f64::total_cmp);
+            match w.len() {
+                0 => "-".to_string(),
+                n => format!("{n} raises, median {:.1} ms, max {:.1} ms", w[n / 2], w[n - 1]),
+            }
+        };
+        let mut all = [Vec::new(), Vec::new()];
+        for (stage, [now, before]) in &waits {
+            eprintln!("{stage}: interrupted {}; next event {}", summary(now), summary(before));
+            all[0].extend(now);
+            all[1].extend(before);
+        }
+        eprintln!("all: interrupted {}; next event {}", summary(&all[0]), summary(&all[1]));
+    }
 }
