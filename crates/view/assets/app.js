@@ -311,10 +311,10 @@ window.addEventListener('resize', draw);
 // yet), one request for the next frame is always out (/api/positions?after=FRAME, which
 // the server answers as soon as a newer frame is published), so a streamed iterate is
 // drawn without waiting for the state event that announces it.
-let lastJob = 0, lastDrawnAt = 0, lastFinal = false;
+let fetchedJob = 0, lastJob = 0, lastDrawnAt = 0, lastFinal = false;
 const framesWanted = () => {
   const s = view.state;
-  return model && s.model_id === model.id && (frame !== s.frame || s.busy || (view.solveJob !== null && lastJob < view.solveJob && !s.error));
+  return model && s.model_id === model.id && (frame !== s.frame || s.busy || (view.solveJob !== null && fetchedJob < view.solveJob && !s.error));
 };
 async function fetchPositions() {
   if (fetching) return;
@@ -330,24 +330,29 @@ async function fetchPositions() {
       view.lastFetchMs = Math.round(performance.now() - asked);
       const final = r.headers.get('X-Final') === '1';
       result = new Float32Array(body);
-      frame = got;
+      [frame, fetchedJob] = [got, job];
       view.frames++;
       if (final) {
         await loadResult();
         // The feature field colours the vertices: a new layout.
         if ($('features').checked) layout = null;
       }
-      refresh();
-      [lastJob, lastDrawnAt, lastFinal] = [job, performance.now(), final];
-      mark(final ? 'result drawn' : 'iterate drawn');
-      if (view.editPostedAt != null && view.editDrawnMs == null && view.state.edited) {
-        view.editDrawnMs = lastDrawnAt - view.editPostedAt;
-      }
-      if (view.solveJob !== null && job >= view.solveJob) solveFrameDrawn(final);
+      drawFrame(job, final);
     }
   } finally {
     fetching = false;
   }
+}
+
+// Draws the frame just fetched (at once: it is what a change waits for).
+function drawFrame(job, final) {
+  refresh();
+  [lastJob, lastDrawnAt, lastFinal] = [job, performance.now(), final];
+  mark(final ? 'result drawn' : 'iterate drawn');
+  if (view.editPostedAt != null && view.editDrawnMs == null && view.state.edited) {
+    view.editDrawnMs = lastDrawnAt - view.editPostedAt;
+  }
+  if (view.solveJob !== null && job >= view.solveJob) solveFrameDrawn(final);
 }
 
 // A frame of the posted re-solve's run (or a later one's) was drawn: the first one's
