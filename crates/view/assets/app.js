@@ -359,10 +359,12 @@ function drawFrame(job, final) {
 // latency from the change, and whether it was a streamed iterate or already the result.
 function solveFrameDrawn(final) {
   view.solveFrames++;
-  if (view.solveLatencyMs === null && view.solveAskedAt !== null) {
+  if (view.solveAskedAt === null) return;
+  if (view.solveLatencyMs === null) {
     view.solveLatencyMs = lastDrawnAt - view.solveAskedAt;
     view.firstSolveFrameFinal = final;
   }
+  if (final && view.solveDoneMs === null) view.solveDoneMs = lastDrawnAt - view.solveAskedAt;
 }
 
 async function loadResult() {
@@ -446,7 +448,7 @@ mark('module done');
 // A change re-solves at once (a running solve is replaced): inputs fire 'change' when a
 // value is committed, not on every keystroke or slider step.
 $('tuning').addEventListener('change', async (e) => {
-  view.solveAskedAt = performance.now(); view.solveLatencyMs = null; view.solveFrames = 0; view.solveJob = null; view.solves++;
+  view.solveAskedAt = performance.now(); view.solveLatencyMs = null; view.solveDoneMs = null; view.solveFrames = 0; view.solveJob = null; view.solves++;
   if (e.target.id === 'preset') {
     const r = await fetch('/api/preset?name=' + $('preset').value);
     if (r.ok) setTuning(await r.json());
