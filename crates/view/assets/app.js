@@ -368,11 +368,11 @@ function solveFrameDrawn(final) {
 }
 
 async function loadResult() {
-  normals = new Float32Array(await bytes('/api/normals'));
-  const f = await get('/api/features');
+  const [n, f, report] = await Promise.all([bytes('/api/normals'), get('/api/features'), get('/api/report')]);
+  normals = new Float32Array(n);
   features = f.r.ok ? new Float32Array(f.body) : null;
   $('features').disabled = !features;
-  const r = JSON.parse(new TextDecoder().decode((await get('/api/report')).body));
+  const r = JSON.parse(new TextDecoder().decode(report.body));
   const rep = r.report, times = rep.stages;
   $('report').textContent = [r.summary,
     `normals: ${rep.normals.estimator}`,
