@@ -1,9 +1,12 @@
-// Times the first picture of `voxreg view`, interleaving two builds (a benchmark, not a test):
-//   node tests/browser/first-picture.mjs --voxreg A [--against B] [--input FILE] [--runs N]
+// Times the first picture of `voxreg view`, interleaving builds (a benchmark, not a test):
+//   node tests/browser/first-picture.mjs --voxreg A [--against B] [--input FILE] [--runs N] [--running]
 // Each run starts `voxreg view INPUT` (default data/chr_army1.vox), opens the page in a fresh
-// headless Chromium (software WebGL) and prints the milliseconds from opening the page to the
-// first frame of positions drawn, and the page's own steps (`voxregView.marks`, where the page
-// has them). With --against, the runs alternate A, B, A, B... so that load drifts hit both.
+// headless Chromium (software WebGL) and prints, in milliseconds from opening the page (the
+// page's own marks, `voxregView.marks`): the first picture (the staircase drawn without WebGL
+// where the page has it, else WebGL's), WebGL's picture, and the first frame of positions
+// drawn. With --running, the browser first shows a blank page for a second (a browser
+// already running, as a user's is, rather than one starting with the page). With
+// --against, the runs alternate A, B, A, B... so that load drifts hit both.
 import { spawn } from 'node:child_process';
 import { dirname, join, resolve } from 'node:path';
 import { fileURLToPath } from 'node:url';
@@ -17,6 +20,7 @@ const arg = (name, fallback) => {
 const builds = [arg('--voxreg', join(root, 'target/release/voxreg')), arg('--against', null)].filter(Boolean).map((b) => resolve(b));
 const input = resolve(root, arg('--input', 'data/chr_army1.vox'));
 const runs = parseInt(arg('--runs', '6'));
+const running = process.argv.includes('--running');
 const browserPath = process.env.CHROMIUM ?? '/usr/bin/chromium';
 
 async function once(voxreg) {
@@ -36,11 +40,20 @@ async function once(voxreg) {
   });
   try {
     const page = await browser.newPage({ viewport: { width: 1200, height: 720 } });
-    const t0 = Date.now();
+    if (running) {
+      await page.goto('about:blank');
+      await page.waitForTimeout(1000);
+    }
     await page.goto(url);
-    await page.waitForFunction(() => window.voxregView?.frames > 0, null, { timeout: 60000, polling: 5 });
-    const ms = Date.now() - t0;
-    return { ms, marks: await page.evaluate(() => window.voxregView.marks ?? null) };
+    // Polled once per animation frame: reading pixels meanwhile would stall the page.
+    await page.waitForFunction(() => {
+      const m = window.voxregView?.marks;
+      return m && m['staircase drawn'] && (m['iterate drawn'] || m['result drawn']);
+    }, null, { timeout: 60000, polling: 'raf' });
+    const marks = await page.evaluate(() => ({ ...window.voxregView.marks, preview: window.voxregEarly?.previewed }));
+    const webgl = marks['staircase drawn'];
+    const frame = marks['iterate drawn'] ?? marks['result drawn'];
+    return { first: Math.round(Math.min(marks.preview ?? Infinity, webgl)), webgl, frame, marks };
   } finally {
     await browser.close();
     server.kill();
@@ -50,12 +63,17 @@ async function once(voxreg) {
 const times = builds.map(() => []);
 for (let r = 0; r < runs; r++) {
   for (const [i, b] of builds.entries()) {
-    const { ms, marks } = await once(b);
-    times[i].push(ms);
-    console.log(`${b}: first frame drawn ${ms} ms ${marks ? JSON.stringify(marks) : ''}`);
+    const t = await once(b);
+    times[i].push(t);
+    console.log(`${b}: first picture ${t.first} ms, WebGL's ${t.webgl} ms, first frame ${t.frame} ms ${JSON.stringify(t.marks)}`);
   }
 }
+const summary = (xs) => {
+  const t = xs.slice().sort((x, y) => x - y);
+  return `min ${t[0]} median ${t[Math.floor(t.length / 2)]} max ${t[t.length - 1]}`;
+};
 for (const [i, b] of builds.entries()) {
-  const t = times[i].slice().sort((x, y) => x - y);
-  console.log(`${b}: min ${t[0]} median ${t[Math.floor(t.length / 2)]} max ${t[t.length - 1]} ms over ${t.length} runs`);
+  const t = times[i];
+  console.log(`${b} over ${t.length} runs: first picture ${summary(t.map((x) => x.first))}; ` +
+    `WebGL's ${summary(t.map((x) => x.webgl))}; first frame ${summary(t.map((x) => x.frame))} ms`);
 }

@@ -2,7 +2,8 @@
 //   node tests/browser/view.mjs [--voxreg PATH] [--screenshot PATH] [--input FILE] [--measure]
 // Starts `voxreg view INPUT` (default data/chr_army1.vox), drives headless Chromium
 // (/usr/bin/chromium, or $CHROMIUM) through playwright-core, and checks that
-//   1. the canvas shows the model (pixels other than the background),
+//   1. the page shows the model (pixels other than the background): first its staircase
+//      drawn without WebGL, within FIRST_PICTURE_MS, then WebGL's,
 //   2. a parameter change re-solves and a new mesh arrives,
 //   3. the GLB download passes the Khronos validator (tools/gltf-validate),
 //   4. a corrupt dropped file shows the reader's error and the server keeps serving,
@@ -11,9 +12,8 @@
 //   7. on bunny-128 (opened from the page), a parameter change re-solves from the last
 //      result: fewer iterations, and a streamed iterate before the final result, leaving
 //      the server and drawn within bounds (the best of three changes);
-// and saves a screenshot (default docs/figures/view.png). Prints the timings it saw, and
-// fails when the first picture takes over FIRST_PICTURE_MS (a stalled request, not noise).
-// With --measure, it only prints the timings (no screenshot).
+// and saves a screenshot (default docs/figures/view.png). Prints the timings it saw.
+// With --measure, it only prints the timings (no screenshot, no time bounds).
 import { spawn, execFileSync } from 'node:child_process';
 import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
@@ -31,15 +31,19 @@ const voxreg = resolve(arg('--voxreg', process.env.VOXREG ?? join(root, 'target/
 const input = resolve(root, arg('--input', 'data/chr_army1.vox'));
 const screenshot = measure ? null : resolve(root, arg('--screenshot', 'docs/figures/view.png'));
 const browserPath = process.env.CHROMIUM ?? '/usr/bin/chromium';
-// The target is 1 s (docs/performance.md has the figures); this bound is what a loaded
-// 2-core machine with software WebGL still meets, and what a stalled request (4 s) misses.
-const FIRST_PICTURE_MS = 5000;
+// Milliseconds from opening the page (docs/performance.md, "Viewer", has the figures). The
+// first picture's target is 1 s: its bound is what the 2-core machine met at load 9 with
+// margin, and what the WebGL picture (the first picture before) often misses there; WebGL's
+// picture only has to come (a stalled request waited 4 s for the page's retry).
+const FIRST_PICTURE_MS = 1500;
+const WEBGL_PICTURE_MS = 10000;
 // bunny-128, a parameter change: its first streamed iterate leaves the server, and is drawn
-// on the page, within these (the best of three re-solves). The target is 200 ms drawn; these
-// bounds are what a 2-core machine at load 15 to 26 still met (docs/performance.md), and what a
-// re-solve that rebuilt the surface or its solver, or a page that rebuilt its arrays, misses.
-const SERVER_FIRST_ITERATE_MS = 1500;
-const PAGE_FIRST_ITERATE_MS = 3000;
+// on the page, within these (the best of three re-solves), counted from the change. The
+// target is 200 ms drawn; these bounds are what the 2-core machine met at load 9 with margin,
+// and what a re-solve that rebuilt the surface or its solver, a page that waits for a state
+// event to ask for the frame, or a replaced run that finishes its stage, misses there.
+const SERVER_FIRST_ITERATE_MS = 500;
+const PAGE_FIRST_ITERATE_MS = 1000;
 
 function fail(message) {
   console.error(`browser test FAILED: ${message}`);
@@ -71,9 +75,10 @@ try {
   const pageErrors = [];
   page.on('pageerror', (e) => pageErrors.push(String(e)));
 
-  // Pixels of the canvas that differ from the background (the page keeps its drawing buffer).
+  // Pixels that differ from the background on the canvas shown: the first picture while it
+  // is there, else WebGL's (the page keeps its drawing buffer).
   const drawnPixels = () => page.evaluate(() => {
-    const c = document.getElementById('canvas');
+    const c = document.getElementById('preview') ?? document.getElementById('canvas');
     const t = Object.assign(document.createElement('canvas'), { width: c.width, height: c.height });
     const g = t.getContext('2d');
     g.drawImage(c, 0, 0);
@@ -83,21 +88,29 @@ try {
     return n;
   });
 
-  // 1. First picture.
-  const t0 = Date.now();
+  // 1. First picture: the page's own marks (milliseconds from opening it), waited for
+  // without reading pixels meanwhile (a read stalls a page that starts WebGL), then the
+  // pixels of the picture shown.
   await page.goto(url);
-  let pixels = 0;
-  // Generous: software WebGL on a loaded CI machine is slow to start (the figure asked of
-  // an ordinary desktop is 1 s; the time is printed).
-  while (Date.now() - t0 < 60000) {
-    if ((pixels = await drawnPixels()) > 1000) break;
-    await page.waitForTimeout(10);
+  const marks = () => page.evaluate(() => ({ ...window.voxregView?.marks, preview: window.voxregEarly?.previewed }));
+  await page.waitForFunction(() => window.voxregEarly?.previewed || window.voxregView?.marks['staircase drawn'],
+    null, { timeout: 60000, polling: 'raf' });
+  const shown = await drawnPixels();
+  const first = await marks();
+  const firstPicture = Math.round(Math.min(first.preview ?? Infinity, first['staircase drawn'] ?? Infinity));
+  check(shown > 1000, `the page shows no model (${shown} non-background pixels): ${pageErrors.join('; ')}`);
+  await page.waitForFunction(() => window.voxregView?.marks['staircase drawn'], null, { timeout: 60000 });
+  const webgl = (await marks())['staircase drawn'];
+  check(await drawnPixels() > 1000, `WebGL shows no model: ${pageErrors.join('; ')}`);
+  console.log(`first picture: ${firstPicture} ms after opening the page (${shown} model pixels), WebGL's ${webgl} ms; ` +
+    `page steps (ms): ${JSON.stringify(await marks())}`);
+  // Surfaces of up to 200,000 quads (index.html's MAX_QUADS) get the picture without WebGL.
+  if ((await page.evaluate(() => window.voxregView.state.faces)) <= 200000) check(first.preview !== undefined, 'no first picture without WebGL');
+  if (!measure) {
+    check(firstPicture <= FIRST_PICTURE_MS, `the first picture took ${firstPicture} ms (at most ${FIRST_PICTURE_MS})`);
+    check(webgl <= WEBGL_PICTURE_MS, `WebGL's picture took ${webgl} ms (at most ${WEBGL_PICTURE_MS})`);
   }
-  const firstPicture = Date.now() - t0;
-  check(pixels > 1000, `the canvas shows no model (${pixels} non-background pixels): ${pageErrors.join('; ')}`);
-  console.log(`first picture: ${firstPicture} ms after opening the page (${pixels} model pixels); ` +
-    `page steps (ms): ${JSON.stringify(await page.evaluate(() => window.voxregView.marks))}`);
-  if (!measure) check(firstPicture <= FIRST_PICTURE_MS, `the first picture took ${firstPicture} ms (at most ${FIRST_PICTURE_MS})`);
+  const t0 = Date.now() - Math.round(await page.evaluate(() => performance.now()));
   await page.waitForFunction(() => window.voxregView.state?.final && !window.voxregView.state.busy, null, { timeout: 120000 });
   console.log(`first result: ${Date.now() - t0} ms after opening the page`);
 
@@ -230,13 +243,16 @@ try {
   check(warm.state.warm === true, 'the bunny re-solve did not start from the last result');
   check(warm.state.iterations < cold.iterations, `the warm re-solve took ${warm.state.iterations} iterations, the cold run ${cold.iterations}`);
   check(resolves.every((r) => !r.finalFirst), 'no streamed iterate before the final result');
-  // The target is 200 ms on the page; software WebGL on a loaded 2-core machine is slower,
-  // so the page's bound is looser. The best of three, against the machine's noise.
+  // The best of three, against the machine's noise.
   const best = (f) => Math.min(...resolves.map(f));
-  check(best((r) => r.server) <= SERVER_FIRST_ITERATE_MS,
-    `the first iterate left the server after ${best((r) => r.server).toFixed(0)} ms at best (at most ${SERVER_FIRST_ITERATE_MS})`);
-  check(best((r) => r.latency) <= PAGE_FIRST_ITERATE_MS,
-    `the first iterate was drawn after ${best((r) => r.latency).toFixed(0)} ms at best (at most ${PAGE_FIRST_ITERATE_MS})`);
+  console.log(`bunny-128: first iterate at best ${best((r) => r.server).toFixed(0)} ms on the server, ` +
+    `${best((r) => r.latency).toFixed(0)} ms on the page`);
+  if (!measure) {
+    check(best((r) => r.server) <= SERVER_FIRST_ITERATE_MS,
+      `the first iterate left the server after ${best((r) => r.server).toFixed(0)} ms at best (at most ${SERVER_FIRST_ITERATE_MS})`);
+    check(best((r) => r.latency) <= PAGE_FIRST_ITERATE_MS,
+      `the first iterate was drawn after ${best((r) => r.latency).toFixed(0)} ms at best (at most ${PAGE_FIRST_ITERATE_MS})`);
+  }
   check(await drawnPixels() > 1000, 'the bunny is not drawn');
 
   check(pageErrors.length === 0, `errors on the page: ${pageErrors.join('; ')}`);

@@ -12,7 +12,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, EdgeId, SurfelId, VertexData};
 
-use crate::{IntegralInvariant, NormalError, NormalEstimator, NormalField};
+use crate::{IntegralInvariant, Interrupt, NormalError, NormalEstimator, NormalField};
 
 mod linear;
 
@@ -357,12 +357,24 @@ impl AmbrosioTortorelli {
         &self,
         surface: &DigitalSurface,
     ) -> Result<(NormalField, FeatureField, AtInfo), NormalError> {
+        self.estimate_with_info_interruptible(surface, &Interrupt::never())
+    }
+
+    /// [`AmbrosioTortorelli::estimate_with_info`], returning [`NormalError::Interrupted`]
+    /// soon after `interrupt` is raised: it is polled by the initial estimator and between
+    /// alternations ([`AtSolver::solve_interruptible`]).
+    pub fn estimate_with_info_interruptible(
+        &self,
+        surface: &DigitalSurface,
+        interrupt: &Interrupt,
+    ) -> Result<(NormalField, FeatureField, AtInfo), NormalError> {
         self.params.validate()?;
         let t = Instant::now();
-        let input = self.initial.estimate(surface)?;
+        let input = self.initial.estimate_interruptible(surface, interrupt)?;
         let input_seconds = t.elapsed().as_secs_f64();
+        interrupt.check()?;
         let mut solver = AtSolver::new(surface)?;
-        let (u, v, mut info) = solver.solve(&input, &self.params)?;
+        let (u, v, mut info) = solver.solve_interruptible(&input, &self.params, interrupt)?;
         info.input_seconds = input_seconds;
         Ok((u, v, info))
     }
@@ -375,6 +387,14 @@ impl NormalEstimator for AmbrosioTortorelli {
 
     fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
         self.estimate_with_features(surface).map(|(u, _)| u)
+    }
+
+    fn estimate_interruptible(
+        &self,
+        surface: &DigitalSurface,
+        interrupt: &Interrupt,
+    ) -> Result<NormalField, NormalError> {
+        self.estimate_with_info_interruptible(surface, interrupt).map(|(u, _, _)| u)
     }
 }
 
@@ -533,6 +553,17 @@ impl AtSolver {
         input: &NormalField,
         params: &AtParams,
     ) -> Result<(NormalField, FeatureField, AtInfo), NormalError> {
+        self.solve_interruptible(input, params, &Interrupt::never())
+    }
+
+    /// [`AtSolver::solve`], returning [`NormalError::Interrupted`] soon after `interrupt`
+    /// is raised: it is polled before each alternation (two linear solves).
+    pub fn solve_interruptible(
+        &mut self,
+        input: &NormalField,
+        params: &AtParams,
+        interrupt: &Interrupt,
+    ) -> Result<(NormalField, FeatureField, AtInfo), NormalError> {
         params.validate()?;
         let ns = self.surfel_area.len();
         if input.len() != ns {
@@ -564,6 +595,7 @@ impl AtSolver {
             let mut iterations = 0;
             let mut change = f64::INFINITY;
             while iterations < params.max_iterations {
+                interrupt.check()?;
                 iterations += 1;
                 change = self.alternate(g, &mut state, params, eps, None, cg, &mut info)?;
                 if change < params.tolerance {
@@ -577,6 +609,7 @@ impl AtSolver {
             let eps = *params.epsilons.last().expect("validated: at least one eps");
             let weight = self.sharpen_weights(&state.v, params.sharpen_threshold);
             while info.sharpen_iterations < params.sharpen_iterations {
+                interrupt.check()?;
                 info.sharpen_iterations += 1;
                 let change = self.alternate(g, &mut state, params, eps, Some(&weight), cg, &mut info)?;
                 if change < params.tolerance {

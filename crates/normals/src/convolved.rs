@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, RegionId, SurfelId};
 
 use crate::sides::combine_sides;
-use crate::{default_radius, NormalError, NormalEstimator, NormalField};
+use crate::{default_radius, Interrupt, NormalError, NormalEstimator, NormalField};
 
 /// Trivial normals convolved over the surface: each surfel's normal is the normalized,
 /// distance-weighted average of the trivial normals of the surfels within distance `t`
@@ -144,6 +144,16 @@ impl NormalEstimator for ConvolvedTrivial {
     }
 
     fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
+        self.estimate_interruptible(surface, &Interrupt::never())
+    }
+
+    /// Polls `interrupt` once per surfel.
+    fn estimate_interruptible(
+        &self,
+        surface: &DigitalSurface,
+        interrupt: &Interrupt,
+    ) -> Result<NormalField, NormalError> {
+        interrupt.check()?;
         let t = self.radius_for(surface);
         if !(t.is_finite() && t > 0.0) {
             return Err(NormalError::InvalidParameter(format!(
@@ -161,6 +171,9 @@ impl NormalEstimator for ConvolvedTrivial {
                 |scratch, s| {
                     let sf = &surface.surfels()[s];
                     let trivial = sf.normal();
+                    if interrupt.is_raised() {
+                        return trivial;
+                    }
                     if binary {
                         let m = scratch.convolve(surface, &graph, s, None, t);
                         return m.try_normalize().unwrap_or(trivial);
@@ -174,6 +187,7 @@ impl NormalEstimator for ConvolvedTrivial {
                 },
             )
             .collect();
+        interrupt.check()?;
         Ok(NormalField::new(normals))
     }
 }

@@ -7,7 +7,7 @@ use voxreg_digisurf::{DigitalSurface, Surfel};
 use crate::eigen::{smallest_eigenvector, symmetric_eigen};
 use crate::runs::RegionRuns;
 use crate::sides::combine_sides;
-use crate::{NormalError, NormalEstimator, NormalField};
+use crate::{Interrupt, NormalError, NormalEstimator, NormalField};
 
 /// The default radius of the ball and convolution estimators, in physical units: the
 /// multigrid rule `r = 3 h^{1/3}`, `h` the largest component of `spacing` (3 voxels at
@@ -600,8 +600,25 @@ impl NormalEstimator for IntegralInvariant {
     }
 
     fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
+        self.estimate_interruptible(surface, &Interrupt::never())
+    }
+
+    /// Polls `interrupt` once per surfel.
+    fn estimate_interruptible(
+        &self,
+        surface: &DigitalSurface,
+        interrupt: &Interrupt,
+    ) -> Result<NormalField, NormalError> {
+        interrupt.check()?;
         let ctx = Context::new(surface, self.radius_for(surface))?;
-        Ok(NormalField::new(surface.surfels().par_iter().map(|s| ctx.normal(s)).collect()))
+        interrupt.check()?;
+        let field = surface
+            .surfels()
+            .par_iter()
+            .map(|s| if interrupt.is_raised() { DVec3::ZERO } else { ctx.normal(s) })
+            .collect();
+        interrupt.check()?;
+        Ok(NormalField::new(field))
     }
 }
 

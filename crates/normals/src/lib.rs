@@ -13,6 +13,11 @@
 //!   multigrid convergent, error `O(h^{2/3})` with the default radius
 //!   [`multigrid_radius`] `= 3 h^{1/3}`. Exact digital moments in `O(r^2)` per surfel.
 //! - [`ConvolvedTrivial`]: trivial normals averaged over a geodesic disc of the surface.
+//! - [`Refined`]: normals re-estimated from given vertex positions (the front door's
+//!   refinement rounds).
+//!
+//! [`NormalEstimator::estimate_interruptible`] stops an estimate early when the caller
+//! raises an [`Interrupt`] (an interactive front end replacing a run).
 //!
 //! On multi-label volumes the ball-based and convolution estimators follow the paper's
 //! sec. 3.1: each surfel is estimated once from each of its two regions, treated as the
@@ -43,6 +48,7 @@ mod convolved;
 mod eigen;
 mod field;
 mod ii;
+mod interrupt;
 mod refined;
 mod runs;
 mod sides;
@@ -52,6 +58,7 @@ pub use at::{AmbrosioTortorelli, AtInfo, AtLinearSolver, AtParams, AtSolver, Fea
 pub use convolved::ConvolvedTrivial;
 pub use field::NormalField;
 pub use ii::{default_radius, multigrid_radius, IntegralInvariant, MAX_DEFAULT_RADIUS_VOXELS};
+pub use interrupt::Interrupt;
 pub use refined::{anisotropic_fit_weight, Refined, JUNCTION_DISC_FACTOR};
 pub use trivial::Trivial;
 
@@ -67,6 +74,9 @@ pub enum NormalError {
     /// definite).
     #[error("linear solver failed: {0}")]
     Solver(String),
+    /// The caller raised the estimate's [`Interrupt`].
+    #[error("interrupted")]
+    Interrupted,
 }
 
 /// A way of estimating one normal per surfel.
@@ -76,4 +86,17 @@ pub trait NormalEstimator {
 
     /// The normal field of `surface`: one unit vector per surfel, in surfel order.
     fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError>;
+
+    /// [`NormalEstimator::estimate`], returning [`NormalError::Interrupted`] soon after
+    /// `interrupt` is raised (from another thread) instead of finishing. The estimators
+    /// of this crate poll it inside their loops over surfels or iterations; the default
+    /// polls it only before starting.
+    fn estimate_interruptible(
+        &self,
+        surface: &DigitalSurface,
+        interrupt: &Interrupt,
+    ) -> Result<NormalField, NormalError> {
+        interrupt.check()?;
+        self.estimate(surface)
+    }
 }

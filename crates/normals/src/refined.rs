@@ -5,7 +5,7 @@ use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
 
 use crate::eigen::symmetric_eigen;
-use crate::{NormalError, NormalEstimator, NormalField};
+use crate::{Interrupt, NormalError, NormalEstimator, NormalField};
 
 /// Normals re-estimated from positions of the surface's vertices (typically a
 /// regularized surface): for each surfel `f`, the normalized, tent-weighted average of
@@ -73,6 +73,15 @@ impl NormalEstimator for Refined<'_> {
     }
 
     fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
+        self.estimate_interruptible(surface, &Interrupt::never())
+    }
+
+    /// Polls `interrupt` once per surfel: a raised one skips the remaining discs.
+    fn estimate_interruptible(
+        &self,
+        surface: &DigitalSurface,
+        interrupt: &Interrupt,
+    ) -> Result<NormalField, NormalError> {
         if self.positions.len() != surface.num_vertices() || self.previous.len() != surface.num_surfels() {
             return Err(NormalError::InvalidParameter(format!(
                 "refinement needs {} positions and {} normals, got {} and {}",
@@ -90,7 +99,20 @@ impl NormalEstimator for Refined<'_> {
         }
         let blend = anisotropic_fit_weight(surface.spacing());
         let near = near_junction_surfels(surface);
-        Ok(refined(surface, self.positions, self.previous, self.radius, self.feature_angle_deg, blend, &near))
+        interrupt.check()?;
+        let field = refined_interruptible(
+            surface,
+            self.positions,
+            self.previous,
+            self.radius,
+            self.feature_angle_deg,
+            blend,
+            &near,
+            interrupt,
+        );
+        // A raised interrupt left the surfels after it unestimated.
+        interrupt.check()?;
+        Ok(field)
     }
 }
 
@@ -181,6 +203,8 @@ fn junction_surfels(surface: &DigitalSurface) -> Vec<bool> {
     surface.surfels().par_iter().map(|s| s.vertices.iter().any(|v| junction[v.index()])).collect()
 }
 
+/// [`refined_interruptible`] never interrupted.
+#[cfg(test)]
 fn refined(
     surface: &DigitalSurface,
     positions: &[DVec3],
@@ -189,6 +213,23 @@ fn refined(
     feature_angle_deg: f64,
     blend: f64,
     near_junction: &[bool],
+) -> NormalField {
+    let never = Interrupt::never();
+    refined_interruptible(surface, positions, field, radius, feature_angle_deg, blend, near_junction, &never)
+}
+
+/// The estimate; once `interrupt` is raised, the surfels not yet done keep `field`'s
+/// normal (the caller reports the interruption).
+#[allow(clippy::too_many_arguments)]
+fn refined_interruptible(
+    surface: &DigitalSurface,
+    positions: &[DVec3],
+    field: &NormalField,
+    radius: f64,
+    feature_angle_deg: f64,
+    blend: f64,
+    near_junction: &[bool],
+    interrupt: &Interrupt,
 ) -> NormalField {
     let n = surface.num_surfels();
     let h = surface.spacing().max_element();
@@ -229,6 +270,9 @@ fn refined(
         .map_init(
             || (vec![false; n], Vec::new()),
             |(seen, queue): &mut (Vec<bool>, Vec<(u32, u32, f64)>), f| {
+                if interrupt.is_raised() {
+                    return normals[f];
+                }
                 let nf = normals[f];
                 let cf = nodes[f].centre;
                 let regions_f = nodes[f].regions;

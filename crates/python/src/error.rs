@@ -48,7 +48,11 @@ impl Error {
             RegularizeError::Normals(_)
             | RegularizeError::InvalidParams(_)
             | RegularizeError::NotFinite(_) => Kind::Parameter,
-            RegularizeError::Factorization(_) | RegularizeError::OutOfMemory(_) => Kind::Voxreg,
+            // The binding never raises the regularizer's interrupt (it cancels through
+            // the progress callback).
+            RegularizeError::Factorization(_)
+            | RegularizeError::OutOfMemory(_)
+            | RegularizeError::Interrupted => Kind::Voxreg,
         };
         Self::new(kind, format!("{context}{e}"))
     }

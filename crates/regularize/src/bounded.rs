@@ -15,7 +15,7 @@ use crate::iterative::{Preconditioner, Prepared, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
 use crate::vecops::{dot, norm, tail_estimate};
-use crate::{Energy, MatrixFreeOperator, Progress, RegularizeError};
+use crate::{Energy, Interrupt, MatrixFreeOperator, Progress, RegularizeError};
 
 /// Parameters of [`BoundedSolver`].
 #[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]
@@ -103,6 +103,8 @@ pub struct BoundedSolver {
     setup: Setup,
     /// The boxes when clamping.
     boxes: Option<Boxes>,
+    /// Polled by the multigrid setup and before each iteration (of every phase).
+    interrupt: Interrupt,
 }
 
 impl BoundedSolver {
@@ -138,12 +140,19 @@ impl BoundedSolver {
         let setup = Setup::new(operator, params.preconditioner, params.multigrid)?;
         let boxes =
             params.clamp.map(|eps| Boxes::uniform(setup.stencil.len(), (1.0 - eps) * 0.5 * setup.voxel));
-        Ok(BoundedSolver { params, setup, boxes })
+        Ok(BoundedSolver { params, setup, boxes, interrupt: Interrupt::never() })
     }
 
     /// The parameters.
     pub fn params(&self) -> &BoundedParams {
         &self.params
+    }
+
+    /// The flag the next solves poll: once raised, a solve returns
+    /// [`RegularizeError::Interrupted`] at its next multigrid level or iteration.
+    /// Default: [`Interrupt::never`].
+    pub(crate) fn set_interrupt(&mut self, interrupt: Interrupt) {
+        self.interrupt = interrupt;
     }
 
     /// Minimizes `energy` from its input positions.
@@ -190,7 +199,7 @@ impl BoundedSolver {
         start: Option<&[DVec3]>,
         progress: &mut dyn FnMut(&Progress),
     ) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
-        let mut prepared = self.setup.prepare(energy, false)?;
+        let mut prepared = self.setup.prepare(energy, false, &self.interrupt)?;
         let stencil = &self.setup.stencil;
         let n = stencil.len();
         let input = energy.input();
@@ -213,6 +222,7 @@ impl BoundedSolver {
             r0: norm(&rhs),
             alpha_min: energy.min_alpha(),
             h,
+            interrupt: &self.interrupt,
         };
         s.energy = problem.energy0;
         s.applications = 1;
@@ -239,6 +249,8 @@ impl BoundedSolver {
             (Some(w), true) => self.mprgp(energy, &problem, &mut prepared, w, warm, &mut s, progress),
             _ => self.projected_descent(&problem, &mut prepared, half, &mut s, progress),
         }
+        // Each phase stopped at its next iteration.
+        self.interrupt.check()?;
         let (r0, alpha_min) = (problem.r0, problem.alpha_min);
         let (u, mut r) = (s.u, s.r);
         let (mut applications, iterations, estimate) = (s.applications, s.iterations, s.estimate);
@@ -388,7 +400,7 @@ impl BoundedSolver {
                 });
             }
             let done = rp_norm == 0.0 || (half.is_none() && rp_norm <= alpha_min * tol) || s.estimate <= tol;
-            if done || s.iterations >= self.params.max_iterations {
+            if done || s.iterations >= self.params.max_iterations || problem.interrupt.is_raised() {
                 break;
             }
             prepared.pre.apply(stencil, &rp, &mut z);

@@ -23,7 +23,7 @@ use rayon::prelude::*;
 use crate::iterative::Prepared;
 use crate::stencil::{Stencil, CHUNK};
 use crate::vecops::{cg_update, dot, tail_estimate};
-use crate::Progress;
+use crate::{Interrupt, Progress};
 
 /// Per-vertex boxes of the displacement from the input: `lo <= u <= hi` coordinate-wise,
 /// with `lo <= 0 <= hi` (the input is feasible).
@@ -208,6 +208,8 @@ pub(crate) struct BoxProblem<'a> {
     /// The smallest attachment weight and the smallest spacing, for the error bounds.
     pub(crate) alpha_min: f64,
     pub(crate) h: f64,
+    /// Every phase stops at its next iteration once it is raised (the caller reports it).
+    pub(crate) interrupt: &'a Interrupt,
 }
 
 /// Minimizes `E(input + u)` over the boxes `b` (MPRGP), from `u` (feasible), where
@@ -220,7 +222,7 @@ pub(crate) fn minimize_in_boxes(
     r: &mut [DVec3],
     progress: &mut dyn FnMut(&Progress),
 ) -> BoxStats {
-    let BoxProblem { stencil, rhs, tol, max_iterations, energy0, r0, alpha_min, h } = *problem;
+    let BoxProblem { stencil, rhs, tol, max_iterations, energy0, r0, alpha_min, h, interrupt } = *problem;
     let n = u.len();
     let coef = &prepared.coef;
     let zero = || vec![DVec3::ZERO; n];
@@ -250,7 +252,7 @@ pub(crate) fn minimize_in_boxes(
                 displacement: u,
             });
         }
-        if rp == 0.0 || estimate <= tol || iterations >= max_iterations {
+        if rp == 0.0 || estimate <= tol || iterations >= max_iterations || interrupt.is_raised() {
             break;
         }
         iterations += 1;
@@ -404,7 +406,7 @@ pub(crate) fn active_set(
     u: &mut [DVec3],
     r: &mut [DVec3],
 ) -> ActiveSetStats {
-    let BoxProblem { stencil, rhs, tol, max_iterations, .. } = *problem;
+    let BoxProblem { stencil, rhs, tol, max_iterations, interrupt, .. } = *problem;
     let n = u.len();
     let coef = &prepared.coef;
     let zero = || vec![DVec3::ZERO; n];
@@ -422,7 +424,7 @@ pub(crate) fn active_set(
     const LOOSE: f64 = ACTIVE_SET_LOOSE;
     let mut loose = LOOSE;
     let mut face = vec![Vec3A::ONE; n];
-    while stats.rounds < max_rounds && stats.iterations < max_iterations {
+    while stats.rounds < max_rounds && stats.iterations < max_iterations && !interrupt.is_raised() {
         stats.rounds += 1;
         hold_on_bounds(&hold, w, u);
         face_of(&hold, &mut face);
@@ -436,7 +438,7 @@ pub(crate) fn active_set(
         let mut residuals = vec![dot(&t, &t).sqrt()];
         prepared.pre.apply_on_face(stencil, &t, &mut p, &face);
         let mut rz = dot(r, &p);
-        while rz > 0.0 && stats.iterations < max_iterations {
+        while rz > 0.0 && stats.iterations < max_iterations && !interrupt.is_raised() {
             stencil.apply(coef, &p, &mut q, &mut t, true);
             stats.applications += 1;
             let pq = dot(&p, &q);

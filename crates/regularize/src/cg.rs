@@ -11,7 +11,7 @@ use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
 use crate::vecops::{cg_update, dot, norm, scale_add, tail_estimate};
-use crate::{Energy, MatrixFreeOperator, Progress, RegularizeError};
+use crate::{Energy, Interrupt, MatrixFreeOperator, Progress, RegularizeError};
 
 /// When an iterative solver stops.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default, serde::Serialize)]
@@ -81,6 +81,8 @@ pub struct CgSolver {
     /// Whether solves from a given start begin on the last solve's multigrid cycle
     /// ([`CgSolver::set_quick_start`]).
     quick_start: bool,
+    /// Polled by the multigrid setup (between levels) and before each iteration.
+    interrupt: Interrupt,
 }
 
 /// Work vectors of one solve.
@@ -117,6 +119,7 @@ impl CgSolver {
             params,
             setup: Setup::new(operator, params.preconditioner, params.multigrid)?,
             quick_start: false,
+            interrupt: Interrupt::never(),
         })
     }
 
@@ -142,6 +145,13 @@ impl CgSolver {
     /// differ by one or two. Off by default.
     pub(crate) fn set_quick_start(&mut self, on: bool) {
         self.quick_start = on;
+    }
+
+    /// The flag the next solves poll: once raised, a solve returns
+    /// [`RegularizeError::Interrupted`] at its next multigrid level or iteration, keeping
+    /// its cycle for the next quick start. Default: [`Interrupt::never`].
+    pub(crate) fn set_interrupt(&mut self, interrupt: Interrupt) {
+        self.interrupt = interrupt;
     }
 
     /// Number of multigrid levels, the surface included (1 without multigrid).
@@ -192,7 +202,11 @@ impl CgSolver {
         mut progress: Option<&mut dyn FnMut(&Progress)>,
     ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
         let quick = self.quick_start && start.is_some() && progress.is_some();
-        let mut prepared = self.setup.prepare(energy, quick)?;
+        let mut prepared = self.setup.prepare(energy, quick, &self.interrupt)?;
+        if self.interrupt.is_raised() {
+            self.setup.keep(prepared);
+            return Err(RegularizeError::Interrupted);
+        }
         let stencil = &self.setup.stencil;
         let n = stencil.len();
         let input = energy.input();
@@ -227,11 +241,16 @@ impl CgSolver {
         let mut estimate = f64::INFINITY;
         let mut residuals = vec![rnorm];
         let mut restarts = 0;
+        let mut interrupted = false;
         'outer: while rnorm > guaranteed && iterations < self.params.max_iterations {
             prepared.pre.apply(stencil, &b.r, &mut b.z);
             scale_add(&mut b.p, 0.0, &b.z);
             let mut rz = dot(&b.r, &b.z);
             loop {
+                if self.interrupt.is_raised() {
+                    interrupted = true;
+                    break 'outer;
+                }
                 let pq = stencil.apply_dot(&prepared.coef, &b.p, &mut b.q, &mut b.t);
                 applications += 1;
                 if !(pq > 0.0 && rz > 0.0) {
@@ -276,7 +295,11 @@ impl CgSolver {
                     // The first iterate is out: this energy's own cycle, and a restart
                     // (the directions so far are conjugate for the stale one).
                     stale_iterations = iterations;
-                    self.setup.renew(&mut prepared)?;
+                    if self.interrupt.is_raised() {
+                        interrupted = true;
+                        break 'outer;
+                    }
+                    self.setup.renew(&mut prepared, &self.interrupt)?;
                     continue 'outer;
                 }
                 prepared.pre.apply(stencil, &b.r, &mut b.z);
@@ -284,6 +307,11 @@ impl CgSolver {
                 scale_add(&mut b.p, rz_new / rz, &b.z);
                 rz = rz_new;
             }
+        }
+        if interrupted {
+            // The cycle stays valid for the next quick start.
+            self.setup.keep(prepared);
+            return Err(RegularizeError::Interrupted);
         }
         let x: Vec<DVec3> = input.par_iter().zip(&b.u).map(|(p, u)| *p + *u).collect();
         let solve_seconds = t.elapsed().as_secs_f64();
@@ -395,10 +423,10 @@ mod kernel_timings {
         eprintln!(
             "multigrid numeric: {:.3} ms",
             time(&mut || {
-                std::hint::black_box(h.numeric(&st, &c).unwrap());
+                std::hint::black_box(h.numeric(&st, &c, &Interrupt::never()).unwrap());
             })
         );
-        let mut v = h.numeric(&st, &c).unwrap();
+        let mut v = h.numeric(&st, &c, &Interrupt::never()).unwrap();
         eprintln!("v-cycle: {:.3} ms ({} levels)", time(&mut || v.apply(&st, &y, &mut t)), h.levels());
     }
 }

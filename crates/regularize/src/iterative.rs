@@ -9,7 +9,7 @@ use rayon::prelude::*;
 use crate::multigrid::{Hierarchy, MultigridParams, Vcycle};
 use crate::stencil::{Coefficients, MatrixFreeOperator, Stencil, CHUNK};
 use crate::vecops::{sym_inverse, sym_mul};
-use crate::{Energy, FairnessMask, RegularizeError, SolveTimings};
+use crate::{Energy, FairnessMask, Interrupt, RegularizeError, SolveTimings};
 
 /// The preconditioner of the iterative solvers ([`crate::CgSolver`],
 /// [`crate::BoundedSolver`]).
@@ -122,11 +122,13 @@ impl Setup {
     /// energy's own cycle later ([`Setup::renew`]). Any symmetric positive definite
     /// preconditioner leaves the conjugate gradient's minimizer unchanged; only its rate
     /// depends on how far the energy moved. Otherwise a kept cycle is dropped before the
-    /// new one is built (one in memory at a time).
+    /// new one is built (one in memory at a time). The multigrid setup polls `interrupt`
+    /// between levels.
     pub(crate) fn prepare<'a>(
         &mut self,
         energy: &Energy<'a>,
         quick: bool,
+        interrupt: &Interrupt,
     ) -> Result<Prepared<'a>, RegularizeError> {
         let surface = energy.surface();
         let n = self.stencil.len();
@@ -168,7 +170,7 @@ impl Setup {
             }
             Preconditioner::Multigrid => {
                 let h = self.hierarchy.get_or_insert_with(|| Hierarchy::new(&self.stencil, &self.multigrid));
-                Pre::Multigrid(Box::new(h.numeric(&self.stencil, &coef)?))
+                Pre::Multigrid(Box::new(h.numeric(&self.stencil, &coef, interrupt)?))
             }
         };
         let factor_seconds = match &pre {
@@ -187,13 +189,17 @@ impl Setup {
     /// Replaces a quick start's stale cycle by `prepared`'s energy's own (the setup
     /// [`Setup::prepare`] deferred), its seconds added to `prepared`'s; the stale cycle
     /// is dropped first.
-    pub(crate) fn renew(&self, prepared: &mut Prepared<'_>) -> Result<(), RegularizeError> {
+    pub(crate) fn renew(
+        &self,
+        prepared: &mut Prepared<'_>,
+        interrupt: &Interrupt,
+    ) -> Result<(), RegularizeError> {
         let Some(h) = self.hierarchy.as_ref().filter(|_| prepared.stale) else {
             return Ok(());
         };
         let t = Instant::now();
         prepared.pre = Pre::Identity;
-        let v = h.numeric(&self.stencil, &prepared.coef)?;
+        let v = h.numeric(&self.stencil, &prepared.coef, interrupt)?;
         prepared.factor_seconds += v.factor_seconds;
         prepared.assemble_seconds += t.elapsed().as_secs_f64() - v.factor_seconds;
         prepared.pre = Pre::Multigrid(Box::new(v));

@@ -17,7 +17,9 @@
 //! - [`regularize`]: a labelled volume in, regularized positions and a [`Report`] out
 //!   ([`Output`]).
 //! - [`Regularizer`]: the same, reusable: it keeps the surface, the solver's analysis and
-//!   the initial normals across runs (parameter sweeps, interactive use).
+//!   the initial normals across runs (parameter sweeps, interactive use). An
+//!   [`Interrupt`] raised from another thread ([`Regularizer::set_interrupt`]) stops a run
+//!   early with [`RegularizeError::Interrupted`] (an interactive front end replacing it).
 //! - [`Params`], with three presets: [`Params::default`] (the fidelity pipeline: solve,
 //!   then refine the normals from the result and solve again, re-centring the targets),
 //!   [`Params::papers`] (the papers' single solve) and [`Params::voxel_art`] (one solve
@@ -95,6 +97,9 @@ pub use regularizer::{regularize, Event, Output, Regularizer, Stage, BYTES_PER_S
 pub use report::{EnergyReport, NormalsReport, Report, StageTimes};
 pub use solver::{estimate_factor_nnz, ClampOverride, OverrideError, Solver, SolverChoice, SolverParams};
 pub use stencil::MatrixFreeOperator;
+/// The flag that stops a run early ([`Regularizer::set_interrupt`]), from
+/// `voxreg-normals`, whose estimators poll it too.
+pub use voxreg_normals::Interrupt;
 pub use weights::{colour_discontinuities, junction_vertices, FairnessMask, Weights};
 
 use glam::DVec3;
@@ -109,7 +114,7 @@ pub enum RegularizeError {
     Surface(#[from] SurfaceError),
     /// The normal estimator failed or was given invalid parameters.
     #[error(transparent)]
-    Normals(#[from] NormalError),
+    Normals(NormalError),
     /// A weight is out of range.
     #[error("invalid parameters: {0}")]
     InvalidParams(String),
@@ -126,6 +131,21 @@ pub enum RegularizeError {
     /// double-precision arithmetic cannot hold): never reported as converged.
     #[error("numerical failure: {0}")]
     NotFinite(String),
+    /// The run's [`Interrupt`] was raised ([`Regularizer::set_interrupt`]): it stopped
+    /// before its end, and returned nothing.
+    #[error("interrupted")]
+    Interrupted,
+}
+
+impl From<NormalError> for RegularizeError {
+    /// [`NormalError::Interrupted`] becomes [`RegularizeError::Interrupted`]; the others
+    /// are wrapped.
+    fn from(e: NormalError) -> Self {
+        match e {
+            NormalError::Interrupted => RegularizeError::Interrupted,
+            e => RegularizeError::Normals(e),
+        }
+    }
 }
 
 /// What an iterative solver reports after each iteration (for progress bars, and for

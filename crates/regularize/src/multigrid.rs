@@ -30,7 +30,7 @@ use rayon::prelude::*;
 
 use crate::stencil::{Coefficients, Stencil, CHUNK};
 use crate::vecops::sym_inverse;
-use crate::RegularizeError;
+use crate::{Interrupt, RegularizeError};
 
 /// Settings of the multigrid preconditioner.
 #[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]
@@ -147,11 +147,13 @@ impl Hierarchy {
         self.aggregations.len() + 1
     }
 
-    /// The coarse operators, smoothers and coarsest factorization of one energy.
+    /// The coarse operators, smoothers and coarsest factorization of one energy;
+    /// [`RegularizeError::Interrupted`] if `interrupt` is raised before a level.
     pub(crate) fn numeric(
         &self,
         stencil: &Stencil,
         coef: &Coefficients<'_>,
+        interrupt: &Interrupt,
     ) -> Result<Vcycle, RegularizeError> {
         #[cfg(test)]
         tests::SETUPS.with(|c| c.set(c.get() + 1));
@@ -164,6 +166,7 @@ impl Hierarchy {
         let mut levels = Vec::with_capacity(self.aggregations.len());
         let mut rows: Option<Rows> = None;
         for (l, agg) in self.aggregations.iter().enumerate() {
+            interrupt.check()?;
             let coarse_rows = match &rows {
                 None => galerkin_from_stencil(stencil, coef, agg),
                 Some(finer) => galerkin_from_rows(finer, agg),
@@ -183,6 +186,7 @@ impl Hierarchy {
             ));
             levels.push(Level { matrix: Bsr::default(), smoother: Vec::new(), n: agg.len() });
         }
+        interrupt.check()?;
         let t = Instant::now();
         let coarsest = match rows {
             Some(rows) => {
@@ -1254,10 +1258,10 @@ pub(crate) mod tests {
         let many = random_face(st.len(), &mut rng);
         let r: Vec<DVec3> = (0..st.len()).map(|_| rng.vec3(-1.0, 1.0)).collect();
         for next in [few, many] {
-            let mut updated = h.numeric(&st, &c).unwrap();
+            let mut updated = h.numeric(&st, &c, &Interrupt::never()).unwrap();
             updated.set_face(&st, &c, &first, false);
             updated.set_face(&st, &c, &next, true);
-            let mut fresh = h.numeric(&st, &c).unwrap();
+            let mut fresh = h.numeric(&st, &c, &Interrupt::never()).unwrap();
             fresh.set_face(&st, &c, &next, false);
             let (a, b) = (updated.face_levels.as_ref().unwrap(), fresh.face_levels.as_ref().unwrap());
             assert_eq!(a.rows.cols, b.rows.cols);

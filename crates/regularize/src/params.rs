@@ -4,7 +4,7 @@ use serde::Serialize;
 use voxreg_digisurf::{DigitalSurface, RegionMap};
 use voxreg_normals::{
     default_radius, AmbrosioTortorelli, AtInfo, AtParams, ConvolvedTrivial, FeatureField, IntegralInvariant,
-    NormalEstimator, NormalField, Trivial,
+    Interrupt, NormalEstimator, NormalField, Trivial,
 };
 
 use crate::{EnergyParams, RegularizeError, SolverChoice, SolverParams};
@@ -110,15 +110,28 @@ impl NormalsParams {
 
     /// Estimates the field on `surface`.
     pub fn estimate(&self, surface: &DigitalSurface) -> Result<EstimatedNormals, RegularizeError> {
+        self.estimate_interruptible(surface, &Interrupt::never())
+    }
+
+    /// [`NormalsParams::estimate`], returning [`RegularizeError::Interrupted`] soon after
+    /// `interrupt` is raised ([`NormalEstimator::estimate_interruptible`]).
+    pub fn estimate_interruptible(
+        &self,
+        surface: &DigitalSurface,
+        interrupt: &Interrupt,
+    ) -> Result<EstimatedNormals, RegularizeError> {
         self.validate()?;
         Ok(match self.estimator {
             Estimator::At => {
-                let (field, features, info) = self.at_estimator().estimate_with_info(surface)?;
+                let (field, features, info) =
+                    self.at_estimator().estimate_with_info_interruptible(surface, interrupt)?;
                 EstimatedNormals { field, features: Some(features), at_info: Some(info) }
             }
-            _ => {
-                EstimatedNormals { field: self.estimator().estimate(surface)?, features: None, at_info: None }
-            }
+            _ => EstimatedNormals {
+                field: self.estimator().estimate_interruptible(surface, interrupt)?,
+                features: None,
+                at_info: None,
+            },
         })
     }
 }

@@ -4,7 +4,9 @@
 use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
-use voxreg_normals::NormalField;
+use voxreg_normals::{Interrupt, NormalField};
+
+use crate::RegularizeError;
 
 /// Per-surfel alignment multipliers: `weight` for the quads whose normal in `field` is
 /// more than `feature_angle_deg` from the normal of an edge-adjacent quad of the same
@@ -58,15 +60,18 @@ fn straddling_quads(surface: &DigitalSurface, field: &NormalField, feature_angle
 /// which is a Gaussian of standard deviation `sigma` voxels on a flat grid (each step
 /// adds a variance of 1/4 voxel^2 per axis). Diffusion follows the surface, so the
 /// two sheets of a thin shape never mix; at junctions it runs across interfaces.
+/// `interrupt` is polled before each step.
 pub(crate) fn smoothed_displacements(
     surface: &DigitalSurface,
     displacements: &[DVec3],
     sigma: f64,
-) -> Vec<DVec3> {
+    interrupt: &Interrupt,
+) -> Result<Vec<DVec3>, RegularizeError> {
     let steps = (4.0 * sigma * sigma).round() as usize;
     let mut u = displacements.to_vec();
     let mut next = vec![DVec3::ZERO; u.len()];
     for _ in 0..steps {
+        interrupt.check()?;
         next.par_iter_mut().enumerate().for_each(|(v, out)| {
             let nb = surface.vertex_neighbours(VertexId(v as u32));
             let mean = if nb.is_empty() {
@@ -78,7 +83,7 @@ pub(crate) fn smoothed_displacements(
         });
         std::mem::swap(&mut u, &mut next);
     }
-    u
+    Ok(u)
 }
 
 /// Whether each vertex's staircase position is informative about where the true surface
@@ -114,14 +119,16 @@ pub(crate) fn informative_vertices(surface: &DigitalSurface) -> Vec<bool> {
 /// Far from any weighted vertex (deep inside a large flat face), it falls back
 /// continuously to the plain smoothed drift. An empty `weight`, or one that is the same
 /// positive value everywhere, trusts every vertex equally: the plain smoothed drift.
+/// `interrupt` is polled before each diffusion step.
 pub(crate) fn trusted_drift(
     surface: &DigitalSurface,
     drift: &[DVec3],
     weight: &[f64],
     sigma: f64,
-) -> Vec<DVec3> {
+    interrupt: &Interrupt,
+) -> Result<Vec<DVec3>, RegularizeError> {
     if weight.first().is_none_or(|&w0| w0 > 0.0 && weight.iter().all(|&w| w == w0)) {
-        return smoothed_displacements(surface, drift, sigma);
+        return smoothed_displacements(surface, drift, sigma, interrupt);
     }
     // The plain drift, the weighted drift and the weight diffused together: one pass
     // over the neighbour lists per step instead of three, each channel summed in the
@@ -134,6 +141,7 @@ pub(crate) fn trusted_drift(
         .collect();
     let mut next = u.clone();
     for _ in 0..steps {
+        interrupt.check()?;
         next.par_iter_mut().enumerate().for_each(|(v, out)| {
             let nb = surface.vertex_neighbours(VertexId(v as u32));
             let c = u[v];
@@ -158,7 +166,7 @@ pub(crate) fn trusted_drift(
         std::mem::swap(&mut u, &mut next);
     }
     const EPS: f64 = 1e-3;
-    u.iter().map(|c| (c.masked + EPS * c.plain) / (c.weight + EPS)).collect()
+    Ok(u.iter().map(|c| (c.masked + EPS * c.plain) / (c.weight + EPS)).collect())
 }
 
 /// The three quantities [`trusted_drift`] diffuses.
@@ -346,15 +354,16 @@ mod tests {
         let binary: Vec<f64> = trusted.iter().map(|&t| if t { 1.0 } else { 0.0 }).collect();
         let graded: Vec<f64> =
             trusted.iter().map(|&t| if t { 0.5 + rng.vec3(0.0, 1.0).x } else { 0.0 }).collect();
+        let never = Interrupt::never();
         for weight in [binary, graded] {
             let masked: Vec<DVec3> = drift.iter().zip(&weight).map(|(d, w)| *d * *w).collect();
             let splat: Vec<DVec3> = weight.iter().map(|w| DVec3::splat(*w)).collect();
-            let plain = smoothed_displacements(&surface, &drift, 3.0);
-            let num = smoothed_displacements(&surface, &masked, 3.0);
-            let den = smoothed_displacements(&surface, &splat, 3.0);
+            let plain = smoothed_displacements(&surface, &drift, 3.0, &never).unwrap();
+            let num = smoothed_displacements(&surface, &masked, 3.0, &never).unwrap();
+            let den = smoothed_displacements(&surface, &splat, 3.0, &never).unwrap();
             let expected: Vec<DVec3> =
                 num.iter().zip(&den).zip(&plain).map(|((n, w), p)| (*n + 1e-3 * *p) / (w.x + 1e-3)).collect();
-            assert_eq!(trusted_drift(&surface, &drift, &weight, 3.0), expected);
+            assert_eq!(trusted_drift(&surface, &drift, &weight, 3.0, &never).unwrap(), expected);
         }
     }
 

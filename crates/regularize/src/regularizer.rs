@@ -5,7 +5,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
-use voxreg_normals::{anisotropic_fit_weight, FeatureField, NormalEstimator, NormalField, Refined};
+use voxreg_normals::{
+    anisotropic_fit_weight, FeatureField, Interrupt, NormalEstimator, NormalField, Refined,
+};
 
 use crate::pipeline::{
     crease_weights, informative_vertices, plateau_weights, sagitta_lift, sample_weights, surfel_drift,
@@ -104,6 +106,12 @@ pub const BYTES_PER_SURFEL: u64 = 2_400;
 /// analysis, multigrid hierarchy) and the initial normal field across runs, for
 /// parameter sweeps and interactive use. A run whose solver settings or initial-normal
 /// settings differ from the last run's rebuilds only those.
+///
+/// A run polls the regularizer's [`Interrupt`] ([`Regularizer::set_interrupt`]) in every
+/// stage that takes long (the normal estimators, the refinement's re-centring, the
+/// solver's setup and iterations) and returns [`RegularizeError::Interrupted`] soon after
+/// it is raised; what the regularizer keeps (the solver, its last multigrid cycle, the
+/// initial normals) stays usable by the next run.
 #[derive(Debug)]
 pub struct Regularizer {
     surface: Arc<DigitalSurface>,
@@ -116,6 +124,7 @@ pub struct Regularizer {
     recentring: Option<Recentring>,
     /// Vertices the re-centring must not measure its drift at (a block's cut sides).
     pub(crate) untrusted: Option<Vec<bool>>,
+    interrupt: Interrupt,
 }
 
 impl Regularizer {
@@ -128,6 +137,7 @@ impl Regularizer {
             normals: None,
             recentring: None,
             untrusted: None,
+            interrupt: Interrupt::never(),
         }
     }
 
@@ -166,6 +176,15 @@ impl Regularizer {
     /// The digital surface.
     pub fn surface(&self) -> &Arc<DigitalSurface> {
         &self.surface
+    }
+
+    /// The flag the next runs poll: once it is raised (from another thread, through a
+    /// clone), a run returns [`RegularizeError::Interrupted`] within one chunk of its
+    /// current stage's work (a solver iteration, a multigrid level, a diffusion step, a
+    /// surfel of a normal estimate). A raised flag stays raised: give each run its own.
+    /// Default: [`Interrupt::never`].
+    pub fn set_interrupt(&mut self, interrupt: Interrupt) {
+        self.interrupt = interrupt;
     }
 
     /// Runs `params` from the initial normals `params.normals` describes.
@@ -227,6 +246,8 @@ impl Regularizer {
             )));
         }
         let surface = Arc::clone(&self.surface);
+        let interrupt = self.interrupt.clone();
+        interrupt.check()?;
         let stages_total = 1.0 + (params.refine as f64) * 2.0 + 1.0;
         let mut times = StageTimes { surface: self.surface_seconds, ..Default::default() };
 
@@ -247,7 +268,7 @@ impl Regularizer {
             None => {
                 let cached = self.normals.as_ref().filter(|(p, _)| *p == params.normals);
                 if cached.is_none() {
-                    let estimated = params.normals.estimate(&surface)?;
+                    let estimated = params.normals.estimate_interruptible(&surface, &interrupt)?;
                     self.normals = Some((params.normals.clone(), estimated));
                 }
                 let (_, n) = self.normals.as_ref().expect("estimated above");
@@ -257,10 +278,12 @@ impl Regularizer {
         times.normals = t.elapsed().as_secs_f64();
 
         // The solver, kept while its settings do not change.
+        interrupt.check()?;
         if self.solver.as_ref().is_none_or(|(p, _)| *p != params.solver) {
             self.solver = Some((params.solver, Solver::new(&surface, &params.solver)?));
         }
         let solver = &mut self.solver.as_mut().expect("built above").1;
+        solver.set_interrupt(interrupt.clone());
         let clamps = solver.clamp().is_some();
         let recentre = params.preserve_size && !clamps && params.refine > 0;
         if recentre && self.recentring.is_none() {
@@ -312,7 +335,7 @@ impl Regularizer {
                     radius: params.refine_radius,
                     feature_angle_deg: params.feature_angle_deg,
                 }
-                .estimate(&surface)?;
+                .estimate_interruptible(&surface, &interrupt)?;
                 if let Some(r) = recentring {
                     let lift = (lift_weight > 0.0).then(|| {
                         let mut lift = sagitta_lift(&surface, &positions, &field);
@@ -323,12 +346,13 @@ impl Regularizer {
                         surfel_drift(&surface, &positions, &input, r.samples.as_deref(), lift.as_deref());
                     let weight: Vec<f64> =
                         sampled.iter().zip(&r.trusted).map(|(w, &t)| if t { *w } else { 0.0 }).collect();
-                    let drift = trusted_drift(&surface, &drift, &weight, params.recentre_sigma);
+                    let drift = trusted_drift(&surface, &drift, &weight, params.recentre_sigma, &interrupt)?;
                     targets.iter_mut().zip(&drift).for_each(|(t, d)| *t -= *d);
                 }
                 times.refine += t.elapsed().as_secs_f64();
                 done += 1.0;
             }
+            interrupt.check()?;
             let creased = (params.refine > 0 && params.crease_alignment < 1.0).then(|| {
                 let crease = crease_weights(
                     &surface,
@@ -344,6 +368,7 @@ impl Regularizer {
                 });
                 w
             });
+            interrupt.check()?;
             let energy = Energy::new(&surface, &field, &targets, params.energy)?;
             let energy = match creased.as_ref().or(weights.as_ref()) {
                 Some(w) => energy.with_weights(w)?,
@@ -402,6 +427,7 @@ impl Regularizer {
             done += 1.0;
         }
 
+        interrupt.check()?;
         if params.fold_free {
             crate::unfold::unfold(&surface, &input, &mut positions);
         }

@@ -7,8 +7,8 @@ use voxreg_digisurf::DigitalSurface;
 use serde::Serialize;
 
 use crate::{
-    BoundedParams, BoundedSolver, CgParams, CgSolver, DirectSolver, Energy, Progress, RegularizeError,
-    SolveInfo,
+    BoundedParams, BoundedSolver, CgParams, CgSolver, DirectSolver, Energy, Interrupt, Progress,
+    RegularizeError, SolveInfo,
 };
 
 /// Which solver [`Solver::new`] builds.
@@ -236,6 +236,16 @@ impl Solver {
     pub(crate) fn set_quick_start(&mut self, on: bool) {
         if let Solver::Cg(s) = self {
             s.set_quick_start(on);
+        }
+    }
+
+    /// The flag the iterative solvers poll in their setup and iterations (the direct
+    /// solver's factorization cannot be stopped, and is small).
+    pub(crate) fn set_interrupt(&mut self, interrupt: Interrupt) {
+        match self {
+            Solver::Cg(s) => s.set_interrupt(interrupt),
+            Solver::Bounded(s) => s.set_interrupt(interrupt),
+            Solver::Direct(_) => {}
         }
     }
 

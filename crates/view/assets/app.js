@@ -5,10 +5,15 @@ import { OrbitControls } from '/three/OrbitControls.js';
 
 const $ = (id) => document.getElementById(id);
 // What the browser test reads.
-const view = (window.voxregView = { frames: 0, modelId: 0, state: null, solvePostedAt: null, solveLatencyMs: null, solveFrames: 0, marks: {}, edits: 0, solves: 0, solveJob: null });
+const view = (window.voxregView = { frames: 0, modelId: 0, state: null, solveAskedAt: null, solveLatencyMs: null, solveFrames: 0, marks: {}, edits: 0, solves: 0, solveJob: null });
 // Milliseconds since navigation of the first time each step happened (the browser test prints them).
-const mark = (k) => { if (!(k in view.marks)) view.marks[k] = Math.round(performance.now()); };
+const mark = (k, at = performance.now()) => { if (!(k in view.marks)) view.marks[k] = Math.round(at); };
 mark('module');
+// index.html's first picture (a 2D canvas) comes first: WebGL's start blocks the page for
+// a while with software rendering. Not more than 2 s, if the server is slow to answer.
+const early = window.voxregEarly ?? {};
+await Promise.race([early.preview, new Promise((done) => setTimeout(done, 2000))]);
+if (early.previewed) mark('preview drawn', early.previewed);
 
 const renderer = new THREE.WebGLRenderer({ canvas: $('canvas'), antialias: true, preserveDrawingBuffer: true });
 renderer.setPixelRatio(window.devicePixelRatio);
@@ -25,18 +30,11 @@ camera.add(sun);
 scene.add(camera);
 const clipPlane = new THREE.Plane(new THREE.Vector3(0, 0, -1), 0);
 const material = new THREE.MeshLambertMaterial({ vertexColors: true, side: THREE.DoubleSide });
-const geometry = new THREE.BufferGeometry();
-const mesh = new THREE.Mesh(geometry, material);
+const mesh = new THREE.Mesh(new THREE.BufferGeometry(), material);
 const wire = new THREE.LineSegments(new THREE.BufferGeometry(), new THREE.LineBasicMaterial({ color: 0x202020, transparent: true, opacity: 0.5 }));
 const arrows = new THREE.LineSegments(new THREE.BufferGeometry(), new THREE.LineBasicMaterial({ color: 0x1060d0 }));
 scene.add(mesh, wire, arrows);
-// Compile the surface's shaders while the first state and arrays are on their way (with
-// KHR_parallel_shader_compile, off the page's thread): a placeholder triangle with the
-// attributes the surface will have, so the program is the one it draws with.
-if (!location.search.includes('nowarm')) {
-  for (const [name, n] of [['position', 3], ['normal', 3], ['color', 3]]) geometry.setAttribute(name, new THREE.BufferAttribute(new Float32Array(9), n));
-  renderer.compileAsync(mesh, camera, scene).then(() => mark('compiled'));
-}
+mark('webgl');
 
 let model = null; // { quads, faceGroups, faceColors, stair, groups, colors, visible, lo, hi }
 let result = null; // latest positions (Float32Array)
@@ -71,22 +69,28 @@ function showError(message) {
   $('error').textContent = message || '';
 }
 
+// The arrays of surface `id` (the one fetched as the page opened, if it is that one).
+async function surface(id) {
+  const first = await early.surface?.catch(() => null);
+  if (first?.id === id) return first;
+  const { r, body } = await get('/api/surface');
+  if (!r.ok) throw new Error(JSON.parse(new TextDecoder().decode(body)).error);
+  return early.unpack(body, Number(r.headers.get('X-Model')));
+}
+
 async function loadModel(s) {
   const id = s.model_id;
   loadingModel = id;
-  const early = window.voxregEarly?.arrays;
-  let arrays = early && early.id === id ? await early.bytes.catch(() => null) : null;
-  if (!arrays || arrays.includes(null)) arrays = await Promise.all(['quads', 'face-groups', 'face-colors', 'staircase'].map((n) => bytes('/api/' + n)));
-  const [q, g, c, p] = arrays;
+  const { quads, faceGroups, faceColors, stair, id: got } = await surface(id);
   if (loadingModel !== id) return;
+  if (got !== id) { loadingModel = 0; return; } // replaced meanwhile: the next event loads it
   mark('arrays');
-  const stair = new Float32Array(p);
   const lo = [Infinity, Infinity, Infinity], hi = [-Infinity, -Infinity, -Infinity];
   for (let i = 0; i < stair.length; i++) { lo[i % 3] = Math.min(lo[i % 3], stair[i]); hi[i % 3] = Math.max(hi[i % 3], stair[i]); }
   // A voxel edit of the surface shown keeps the view: the camera, and the groups' settings
   // where the groups are the same.
   const previous = s.edited && model && model.groups.map((x) => x.name).join('\n') === s.groups.map((x) => x.name).join('\n') ? model : null;
-  model = { id, quads: new Uint32Array(q), faceGroups: new Uint32Array(g), faceColors: new Uint8Array(c), stair, lo, hi,
+  model = { id, quads, faceGroups, faceColors, stair, lo, hi,
     groups: s.groups, colors: s.groups.map((x) => x.color.slice()), visible: s.groups.map(() => true), custom: s.groups.map(() => false) };
   if (previous) Object.assign(model, { colors: previous.colors, visible: previous.visible, custom: previous.custom });
   result = stair; normals = null; features = null;
@@ -94,14 +98,16 @@ async function loadModel(s) {
     // Drawn first as the shape shown before the edit (the server maps it onto the new surface).
     const { r, body } = await get('/api/positions');
     if (loadingModel !== id) return;
-    if (r.ok && body.byteLength === p.byteLength) result = new Float32Array(body);
+    if (r.ok && body.byteLength === stair.byteLength) result = new Float32Array(body);
   }
   view.modelId = id;
   $('name').textContent = s.name;
   listGroups();
   if (!s.edited) frameCamera();
   rebuild();
-  mark('staircase drawn');
+  mark(s.edited ? 'edit drawn' : 'staircase drawn');
+  // WebGL's picture replaces index.html's in the next frame.
+  requestAnimationFrame(() => $('preview')?.remove());
 }
 
 function frameCamera() {
@@ -290,6 +296,7 @@ function refresh() {
 }
 
 function draw() {
+  if (!layout) return; // nothing to draw yet
   const c = renderer.domElement, w = c.clientWidth, h = c.clientHeight;
   if (c.width !== Math.floor(w * renderer.getPixelRatio()) || c.height !== Math.floor(h * renderer.getPixelRatio())) {
     renderer.setSize(w, h, false);
@@ -300,56 +307,77 @@ function draw() {
 }
 window.addEventListener('resize', draw);
 
-async function fetchPositions(s) {
+// Frames: while a run is under way (or a re-solve was posted and none of its frames came
+// yet), one request for the next frame is always out (/api/positions?after=FRAME, which
+// the server answers as soon as a newer frame is published), so a streamed iterate is
+// drawn without waiting for the state event that announces it.
+let fetchedJob = 0, lastJob = 0, lastDrawnAt = 0, lastFinal = false;
+const framesWanted = () => {
+  const s = view.state;
+  return model && s.model_id === model.id && (frame !== s.frame || s.busy || (view.solveJob !== null && fetchedJob < view.solveJob && !s.error));
+};
+async function fetchPositions() {
   if (fetching) return;
   fetching = true;
   try {
-    while (frame !== view.state.frame && model && view.state.model_id === model.id) {
-      const want = view.state;
+    while (framesWanted()) {
       const asked = performance.now();
-      const { r, body } = await get('/api/positions');
+      const { r, body } = await get(`/api/positions?after=${frame}`);
       if (!r.ok) break;
-      view.lastFetchMs = Math.round(performance.now() - asked);
       const got = parseInt(r.headers.get('X-Frame')), job = parseInt(r.headers.get('X-Job'));
+      if (parseInt(r.headers.get('X-Model')) !== model?.id) break; // a new surface: onState loads it
+      if (got === frame) continue; // none came yet: ask again
+      view.lastFetchMs = Math.round(performance.now() - asked);
+      const final = r.headers.get('X-Final') === '1';
       result = new Float32Array(body);
-      frame = got;
+      [frame, fetchedJob] = [got, job];
       view.frames++;
-      if (want.final && got === want.frame) {
-        await loadResult(want);
+      if (final) {
+        await loadResult();
         // The feature field colours the vertices: a new layout.
         if ($('features').checked) layout = null;
       }
-      refresh();
-      mark(want.final ? 'result drawn' : 'iterate drawn');
-      if (view.editPostedAt != null && view.editDrawnMs == null && want.edited && want.model_id === model.id) {
-        view.editDrawnMs = performance.now() - view.editPostedAt;
-      }
-      if (view.solvePostedAt !== null && view.solveJob !== null && job >= view.solveJob) {
-        // The first frame drawn after a re-solve was posted: its latency, and whether it
-        // was an iterate (streamed) or already the final result.
-        view.solveFrames++;
-        if (view.solveLatencyMs === null) {
-          view.solveLatencyMs = performance.now() - view.solvePostedAt;
-          view.firstSolveFrameFinal = want.final;
-        }
-      }
+      drawFrame(job, final);
     }
   } finally {
     fetching = false;
   }
 }
 
-async function loadResult(s) {
-  normals = new Float32Array(await bytes('/api/normals'));
-  features = s.has_features ? new Float32Array(await bytes('/api/features')) : null;
+// Draws the frame just fetched (at once: it is what a change waits for).
+function drawFrame(job, final) {
+  refresh();
+  [lastJob, lastDrawnAt, lastFinal] = [job, performance.now(), final];
+  mark(final ? 'result drawn' : 'iterate drawn');
+  if (view.editPostedAt != null && view.editDrawnMs == null && view.state.edited) {
+    view.editDrawnMs = lastDrawnAt - view.editPostedAt;
+  }
+  if (view.solveJob !== null && job >= view.solveJob) solveFrameDrawn(final);
+}
+
+// A frame of the posted re-solve's run (or a later one's) was drawn: the first one's
+// latency from the change, and whether it was a streamed iterate or already the result.
+function solveFrameDrawn(final) {
+  view.solveFrames++;
+  if (view.solveAskedAt === null) return;
+  if (view.solveLatencyMs === null) {
+    view.solveLatencyMs = lastDrawnAt - view.solveAskedAt;
+    view.firstSolveFrameFinal = final;
+  }
+  if (final && view.solveDoneMs === null) view.solveDoneMs = lastDrawnAt - view.solveAskedAt;
+}
+
+async function loadResult() {
+  const [n, f, report] = await Promise.all([bytes('/api/normals'), get('/api/features'), get('/api/report')]);
+  normals = new Float32Array(n);
+  features = f.r.ok ? new Float32Array(f.body) : null;
   $('features').disabled = !features;
-  const r = JSON.parse(new TextDecoder().decode((await get('/api/report')).body));
+  const r = JSON.parse(new TextDecoder().decode(report.body));
   const rep = r.report, times = rep.stages;
   $('report').textContent = [r.summary,
     `normals: ${rep.normals.estimator}`,
     `stages (s): ${Object.entries(times).map(([k, v]) => `${k} ${v.toFixed(3)}`).join(', ')}`,
-    `solves: ${rep.solves.length}`,
-    s.total_ms !== null ? `last solve on the page: ${(s.total_ms / 1000).toFixed(2)} s` : ''].join('\n');
+    `solves: ${rep.solves.length}`].join('\n');
 }
 
 // The voxel-art smoothness S is another view of the clamping margin (1 - 0.99 S, the
@@ -408,7 +436,7 @@ async function onState(s) {
       frame = -1;
     } else return;
   }
-  fetchPositions(s);
+  fetchPositions();
 }
 
 // The stream index.html opened; its latest event, if one came while this module loaded.
@@ -417,21 +445,21 @@ events.onmessage = (e) => onState(JSON.parse(e.data)).catch((err) => showError(`
 if (window.voxregEarly?.last) events.onmessage(window.voxregEarly.last);
 mark('module done');
 
-let pending = null;
-async function solve() {
-  view.solvePostedAt = performance.now(); view.solveLatencyMs = null; view.solveFrames = 0; view.solveJob = null; view.solves++;
-  const r = await fetch('/api/solve', { method: 'POST', body: JSON.stringify(tuning()) });
-  if (!r.ok) { view.solvePostedAt = null; showError((await r.json()).error); return; }
-  view.solveJob = (await r.json()).job;
-  showError(null);
-}
+// A change re-solves at once (a running solve is replaced): inputs fire 'change' when a
+// value is committed, not on every keystroke or slider step.
 $('tuning').addEventListener('change', async (e) => {
+  view.solveAskedAt = performance.now(); view.solveLatencyMs = null; view.solveDoneMs = null; view.solveFrames = 0; view.solveJob = null; view.solves++;
   if (e.target.id === 'preset') {
     const r = await fetch('/api/preset?name=' + $('preset').value);
     if (r.ok) setTuning(await r.json());
   }
-  clearTimeout(pending);
-  pending = setTimeout(solve, 100);
+  const r = await fetch('/api/solve', { method: 'POST', body: JSON.stringify(tuning()) });
+  if (!r.ok) { view.solveAskedAt = null; showError((await r.json()).error); return; }
+  view.solveJob = (await r.json()).job;
+  showError(null);
+  // Its first frame may have been drawn before the reply came.
+  if (lastJob >= view.solveJob) solveFrameDrawn(lastFinal);
+  fetchPositions();
 });
 $('tuning').addEventListener('submit', (e) => e.preventDefault());
 for (const id of ['blend', 'wireframe', 'smooth', 'normals', 'clip', 'clip-axis', 'clip-at']) $(id).addEventListener('input', refresh);

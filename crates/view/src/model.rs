@@ -68,6 +68,23 @@ pub(crate) fn f32_bytes(values: impl IntoIterator<Item = f64>) -> Vec<u8> {
 }
 
 impl Model {
+    /// Everything the page needs to draw the surface, in one response (`/api/surface`):
+    /// the face and vertex counts (`u32`), then the quads (4 `u32` vertex ids per face),
+    /// the face groups (`u32`), the staircase positions (3 `f32` per vertex) and the face
+    /// colours (3 `u8` per face), little-endian; the colours last so that every `u32` and
+    /// `f32` array starts 4-byte aligned.
+    pub(crate) fn surface_bytes(&self) -> Vec<u8> {
+        let mut out = Vec::with_capacity(
+            8 + self.quads.len() + self.face_groups.len() + self.staircase.len() + self.face_colors.len(),
+        );
+        out.extend_from_slice(&(self.faces as u32).to_le_bytes());
+        out.extend_from_slice(&(self.vertices as u32).to_le_bytes());
+        for part in [&self.quads, &self.face_groups, &self.staircase, &self.face_colors] {
+            out.extend_from_slice(part);
+        }
+        out
+    }
+
     pub(crate) fn new(surface: &DigitalSurface, palette: Option<&Palette>) -> Model {
         let surfels = surface.surfels();
         let color_of = |label: u32| match palette.and_then(|p| p.material(label)) {

@@ -27,6 +27,10 @@ const MAX_UPLOAD: u64 = 1 << 30;
 /// How often an idle event stream sends a keep-alive comment (and notices a closed page).
 const KEEP_ALIVE: Duration = Duration::from_secs(10);
 
+/// The longest a request for a newer frame (`/api/positions?after=F`) waits for one; the
+/// page asks again (its requests give up on a stalled connection after 4 s).
+const FRAME_WAIT: Duration = Duration::from_secs(2);
+
 struct Asset {
     path: &'static str,
     mime: &'static str,
@@ -189,16 +193,24 @@ impl Viewer {
         match (&method, path) {
             (Method::Get, "/favicon.ico") => Response::from_data(Vec::new()).with_status_code(204),
             (Method::Get, "/api/state") => json_response(200, &self.state_json()),
-            (Method::Get, "/api/quads") => self.model_bytes(|m| m.quads.clone()),
-            (Method::Get, "/api/face-groups") => self.model_bytes(|m| m.face_groups.clone()),
-            (Method::Get, "/api/face-colors") => self.model_bytes(|m| m.face_colors.clone()),
-            (Method::Get, "/api/staircase") => self.model_bytes(|m| m.staircase.clone()),
+            (Method::Get, "/api/surface") => self.model_bytes(|m| m.surface_bytes()),
             (Method::Get, "/api/positions") => {
                 let s = self.shared.lock();
+                // `after=F`: wait (a while) for a frame newer than F, so that a streamed
+                // iterate goes out as soon as it is published, without the page's round
+                // trip from the state event.
+                let after = query_value(query, "after").and_then(|f| f.parse::<u64>().ok());
+                let (s, _) = self
+                    .shared
+                    .changed
+                    .wait_timeout_while(s, FRAME_WAIT, |s| after.is_some_and(|f| s.frame <= f) && !s.shutdown)
+                    .unwrap_or_else(|e| e.into_inner());
                 match &s.positions {
                     Some(p) => binary(p.to_vec())
                         .with_header(header("X-Frame", &s.frame.to_string()))
-                        .with_header(header("X-Job", &s.job.to_string())),
+                        .with_header(header("X-Job", &s.job.to_string()))
+                        .with_header(header("X-Model", &s.model_id.to_string()))
+                        .with_header(header("X-Final", if s.frame_final { "1" } else { "0" })),
                     None => error(404, "no surface yet"),
                 }
             }

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 use voxreg_digisurf::{LabelVolume, RegionMap};
 use voxreg_io::{Palette, QuadMesh};
-use voxreg_regularize::{Output, Params, Regularizer, Stage};
+use voxreg_regularize::{Interrupt, Output, Params, RegularizeError, Regularizer, Stage};
 
 use crate::model::{f32_bytes, Model};
 use crate::tuning::Tuning;
@@ -103,26 +103,39 @@ pub(crate) struct State {
 pub(crate) struct Shared {
     state: Mutex<State>,
     pub(crate) changed: Condvar,
-    /// Counts the jobs queued: a run whose job is older than the latest stops at its next
-    /// iteration (the job that replaced it runs next).
+    /// Counts the jobs queued: a run whose job is older than the latest is interrupted
+    /// (the job that replaced it runs next).
     jobs: AtomicU64,
     /// The latest job and when its request came (a job's times count from there, the
     /// wait for the run it replaces included).
     arrival: Mutex<Option<(u64, Instant)>>,
+    /// The running job and the interrupt its run polls, raised when a newer job comes.
+    running: Mutex<Option<(u64, Interrupt)>>,
 }
 
-/// The panic payload that stops a superseded run (through the progress callback, the
-/// front door's only way out of a run; it stops between iterations, where the solver's
-/// state is whole).
-struct Superseded;
-
 impl Shared {
-    /// Numbers a new job (and so supersedes the running one).
+    /// Numbers a new job, and interrupts the running one (it stops within a chunk of its
+    /// current stage: an iteration, a multigrid level, a surfel of the normals).
     pub(crate) fn next_job(&self) -> u64 {
         let mut arrival = self.arrival.lock().unwrap_or_else(|e| e.into_inner());
         let job = self.jobs.fetch_add(1, Ordering::SeqCst) + 1;
         *arrival = Some((job, Instant::now()));
+        drop(arrival);
+        if let Some((_, interrupt)) = &*self.running.lock().unwrap_or_else(|e| e.into_inner()) {
+            interrupt.raise();
+        }
         job
+    }
+
+    /// The interrupt of job `job`'s run, raised already if a newer job came.
+    fn start(&self, job: u64) -> Interrupt {
+        let interrupt = Interrupt::new();
+        *self.running.lock().unwrap_or_else(|e| e.into_inner()) = Some((job, interrupt.clone()));
+        // A job numbered between this one's and the registration raised no interrupt.
+        if self.superseded(job) {
+            interrupt.raise();
+        }
+        interrupt
     }
 
     /// When job `job`'s request came, if it is the latest.
@@ -178,13 +191,9 @@ pub(crate) fn worker(shared: Arc<Shared>, jobs: Receiver<Job>) {
             Job::Open(_, _, id) | Job::Solve(_, id) | Job::Edit(_, id) => *id,
         };
         let t = shared.arrival(id).unwrap_or_else(Instant::now);
-        let result = catch_unwind(AssertUnwindSafe(|| run(&shared, &mut current, job, t)));
+        let interrupt = shared.start(id);
+        let result = catch_unwind(AssertUnwindSafe(|| run(&shared, &mut current, job, t, &interrupt)));
         if let Err(panic) = result {
-            if panic.is::<Superseded>() {
-                // A newer job is queued: it runs next and publishes its own state.
-                shared.update(|s| s.superseded += 1);
-                continue;
-            }
             let message = panic_message(&*panic);
             current = None;
             shared.update(|s| {
@@ -204,7 +213,7 @@ pub(crate) fn panic_message(panic: &(dyn std::any::Any + Send)) -> String {
     }
 }
 
-fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
+fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, interrupt: &Interrupt) {
     match job {
         Job::Open(loaded, reply, job) => {
             let loaded = *loaded;
@@ -223,7 +232,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                     if let Some(reply) = reply {
                         let _ = reply.send(Ok(()));
                     }
-                    solve(shared, c, tuning, params, t, job);
+                    solve(shared, c, tuning, params, t, job, interrupt);
                 }
                 Err(message) => {
                     shared.update(|s| {
@@ -263,7 +272,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                     }
                 }
             }
-            solve(shared, c, tuning, params, t, job);
+            solve(shared, c, tuning, params, t, job, interrupt);
         }
         Job::Edit(edit, job) => {
             let Some(c) = current.as_mut() else {
@@ -293,7 +302,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant) {
                 return;
             }
             shared.update(|s| s.edit_ms = Some(t.elapsed().as_secs_f64() * 1e3));
-            solve(shared, c, tuning, params, t, job);
+            solve(shared, c, tuning, params, t, job, interrupt);
         }
     }
 }
@@ -403,7 +412,15 @@ fn publish_model(shared: &Shared, c: &Current, positions: Option<&[DVec3]>) {
     });
 }
 
-fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: Instant, job: u64) {
+fn solve(
+    shared: &Shared,
+    c: &mut Current,
+    tuning: Tuning,
+    params: Params,
+    t: Instant,
+    job: u64,
+    interrupt: &Interrupt,
+) {
     c.tuned = Some((tuning.clone(), params.clone()));
     shared.update(|s| {
         s.busy = true;
@@ -417,10 +434,8 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
     // iterations); this run's rounds are kept for the next.
     let warm = c.last.clone();
     let mut rounds: Vec<Vec<DVec3>> = Vec::new();
+    c.regularizer.set_interrupt(interrupt.clone());
     let result = c.regularizer.run_warm(&params, None, &warm, &mut |e| {
-        if shared.superseded(job) {
-            std::panic::resume_unwind(Box::new(Superseded));
-        }
         if let (Stage::Solve { round }, Some(p), Some(input)) = (e.stage, e.iteration, e.input) {
             if rounds.len() <= round {
                 rounds.resize(round + 1, Vec::new());
@@ -494,6 +509,8 @@ fn solve(shared: &Shared, c: &mut Current, tuning: Tuning, params: Params, t: In
                 s.finished = Some(finished);
             });
         }
+        // A newer job is queued: it runs next and publishes its own state.
+        Err(RegularizeError::Interrupted) => shared.update(|s| s.superseded += 1),
         Err(e) => {
             let message = format!("{}: cannot regularize: {e}", c.loaded.name);
             shared.update(|s| {
@@ -543,5 +560,113 @@ mod tests {
         assert!(message.starts_with("noise.vox: the regularization of its"), "{message}");
         assert!(message.contains("memory limit"), "{message}");
         assert!(build(&volume, &regions, "noise.vox").is_ok());
+    }
+
+    /// How long a replaced run takes to stop on bunny-128 (the default preset, warm
+    /// re-solves as the worker runs them). For each raise time `STEP_MS` (default 10)
+    /// apart through a run, `RUNS` times (default 1) with offsets between: a run whose
+    /// interrupt is raised then (the wait from the raise to its return), and the same run
+    /// not interrupted (the wait from then to its next progress event, where a run
+    /// stopped before the interrupt). Prints both per stage under way at the raise
+    /// (median, max). Ignored: a measurement.
+    ///
+    /// ```text
+    /// cargo test --release -p voxreg-view --lib interrupt_latency -- --ignored --nocapture
+    /// ```
+    #[test]
+    #[ignore]
+    fn interrupt_latency() {
+        use std::collections::BTreeMap;
+        let env = |k: &str, d: u64| std::env::var(k).map(|v| v.parse().unwrap()).unwrap_or(d);
+        let (step, runs) = (env("STEP_MS", 10), env("RUNS", 1));
+        let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data/bunny-128.vol");
+        let v = voxreg_io::read_volume(&path).unwrap();
+        let mut params = Params::default();
+        let mut r = Regularizer::from_volume(&v.volume, &params.regions).unwrap();
+        // Each round's last iterate, the warm starts the worker keeps.
+        let mut warm: Vec<Vec<DVec3>> = Vec::new();
+        r.run_warm(&params, None, &[], &mut |e| {
+            if let (Stage::Solve { round }, Some(x)) = (e.stage, e.iterate()) {
+                warm.resize(warm.len().max(round + 1), Vec::new());
+                warm[round] = x;
+            }
+        })
+        .unwrap();
+        // The stage under way, finer than the events' stages: a solve's setup (before its
+        // first iterate) apart from its iterations.
+        let label = |e: &voxreg_regularize::Event, params: &Params| match (e.stage, e.iteration) {
+            (Stage::Solve { .. }, None) => format!("{} setup", e.stage.label(params)),
+            (Stage::Solve { .. }, Some(_)) => format!("{} iterations", e.stage.label(params)),
+            _ => e.stage.label(params),
+        };
+        // One run raising `interrupt` (if any) `at` into it: the stage under way then, the
+        // wait for the run's return (interrupted) or next event (not), and the run's time.
+        let mut run = |params: &Params, at: Duration, interrupted: bool| {
+            let interrupt = if interrupted { Interrupt::new() } else { Interrupt::never() };
+            r.set_interrupt(interrupt.clone());
+            let stage = Mutex::new((String::from("start"), None::<Instant>));
+            let raised = Mutex::new(None::<(Instant, String)>);
+            let start = Instant::now();
+            let result = std::thread::scope(|scope| {
+                scope.spawn(|| {
+                    std::thread::sleep(at);
+                    let mut s = stage.lock().unwrap();
+                    *raised.lock().unwrap() = Some((Instant::now(), s.0.clone()));
+                    s.1 = None;
+                    interrupt.raise();
+                });
+                r.run_warm(params, None, &warm, &mut |e| {
+                    let mut s = stage.lock().unwrap();
+                    let now = Instant::now();
+                    if raised.lock().unwrap().is_some() && s.1.is_none() {
+                        s.1 = Some(now);
+                    }
+                    s.0 = label(e, params);
+                })
+            });
+            let end = Instant::now();
+            let (when, under_way) = raised.lock().unwrap().take().expect("raised");
+            let next = stage.lock().unwrap().1;
+            let wait = match (&result, interrupted) {
+                (Err(RegularizeError::Interrupted), true) => Some(end - when),
+                (Ok(_), false) => next.map(|n| n - when),
+                (Ok(_), true) => None, // done before the raise
+                (Err(e), _) => panic!("{e}"),
+            };
+            (under_way, wait.map(|w| w.as_secs_f64() * 1e3), (end - start).as_secs_f64() * 1e3)
+        };
+        let (_, _, whole) = run(&params, Duration::ZERO, false);
+        eprintln!("warm re-solve {whole:.0} ms");
+        let mut waits: BTreeMap<String, [Vec<f64>; 2]> = BTreeMap::new();
+        for k in 0..runs {
+            let mut at = Duration::from_millis(step * k / runs.max(1));
+            let mut factor = 1.1;
+            while at.as_secs_f64() * 1e3 < whole {
+                params.energy.gamma *= factor;
+                factor = 1.0 / factor;
+                for interrupted in [true, false] {
+                    if let (stage, Some(w), _) = run(&params, at, interrupted) {
+                        waits.entry(stage).or_default()[usize::from(!interrupted)].push(w);
+                    }
+                }
+                at += Duration::from_millis(step);
+            }
+        }
+        r.set_interrupt(Interrupt::never());
+        let summary = |w: &[f64]| {
+            let mut w = w.to_vec();
+            w.sort_by(f64::total_cmp);
+            match w.len() {
+                0 => "-".to_string(),
+                n => format!("{n} raises, median {:.1} ms, max {:.1} ms", w[n / 2], w[n - 1]),
+            }
+        };
+        let mut all = [Vec::new(), Vec::new()];
+        for (stage, [now, before]) in &waits {
+            eprintln!("{stage}: interrupted {}; next event {}", summary(now), summary(before));
+            all[0].extend(now);
+            all[1].extend(before);
+        }
+        eprintln!("all: interrupted {}; next event {}", summary(&all[0]), summary(&all[1]));
     }
 }

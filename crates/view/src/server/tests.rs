@@ -8,6 +8,7 @@ use std::time::{Duration, Instant};
 
 use voxreg_digisurf::LabelVolume;
 
+use super::FRAME_WAIT;
 use crate::{Loaded, Preset, StopHandle, Viewer};
 
 /// A digital ball of radius 4 (papers preset: one quick solve).
@@ -68,6 +69,18 @@ fn start_with(loaded: Loaded) -> Running {
 
 /// One request (`Connection: close`): the status and the body.
 fn request(addr: SocketAddr, method: &str, path: &str, host: Option<&str>, body: &[u8]) -> (u16, Vec<u8>) {
+    let (status, _, body) = exchange(addr, method, path, host, body);
+    (status, body)
+}
+
+/// One request: the status, the head and the body.
+fn exchange(
+    addr: SocketAddr,
+    method: &str,
+    path: &str,
+    host: Option<&str>,
+    body: &[u8],
+) -> (u16, String, Vec<u8>) {
     let mut s = TcpStream::connect(addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(60))).unwrap();
     let host = host.map(|h| format!("Host: {h}\r\n")).unwrap_or_default();
@@ -81,7 +94,7 @@ fn request(addr: SocketAddr, method: &str, path: &str, host: Option<&str>, body:
     s.read_to_end(&mut out).unwrap();
     let end = out.windows(4).position(|w| w == b"\r\n\r\n").expect("a response head") + 4;
     let status = String::from_utf8_lossy(&out[9..12]).parse().unwrap();
-    (status, decode_body(&out[..end], &out[end..]))
+    (status, String::from_utf8_lossy(&out[..end]).into_owned(), decode_body(&out[..end], &out[end..]))
 }
 
 fn decode_body(head: &[u8], body: &[u8]) -> Vec<u8> {
@@ -161,8 +174,9 @@ fn a_solve_streams_its_state_and_its_result_downloads_in_every_format() {
     let faces = state["faces"].as_u64().unwrap() as usize;
     assert!(state["summary"].as_str().unwrap().contains(&format!("{faces} quads")));
     assert_eq!(get(&r, "/api/positions").1.len(), 12 * vertices);
-    assert_eq!(get(&r, "/api/staircase").1.len(), 12 * vertices);
-    assert_eq!(get(&r, "/api/quads").1.len(), 16 * faces);
+    let surface = get(&r, "/api/surface").1;
+    assert_eq!(surface.len(), 8 + (16 + 4 + 3) * faces + 12 * vertices);
+    assert_eq!(surface[..8], [(faces as u32).to_le_bytes(), (vertices as u32).to_le_bytes()].concat());
     assert_eq!(get(&r, "/api/normals").1.len(), 12 * faces);
     assert!(state["command"]
         .as_str()
@@ -243,9 +257,51 @@ fn a_dropped_file_replaces_the_surface() {
     let state = wait_for(&r, |s| s["final"] == true && s["name"] == "axes.vox");
     assert!(state["model_id"].as_u64() > first["model_id"].as_u64());
     assert_ne!(state["faces"], first["faces"]);
-    // The .vox palette colours the faces.
-    let colors = get(&r, "/api/face-colors").1;
-    assert_eq!(colors.len(), 3 * state["faces"].as_u64().unwrap() as usize);
+    let surface = get(&r, "/api/surface").1;
+    let (faces, vertices) =
+        (state["faces"].as_u64().unwrap() as usize, state["vertices"].as_u64().unwrap() as usize);
+    assert_eq!(surface.len(), 8 + (16 + 4 + 3) * faces + 12 * vertices);
+    // The .vox palette colours the faces (the last array): several colours.
+    let colors: std::collections::HashSet<_> = surface[surface.len() - 3 * faces..].chunks(3).collect();
+    assert!(colors.len() > 1, "{colors:?}");
+}
+
+#[test]
+fn a_request_for_a_newer_frame_waits_for_it() {
+    let r = start();
+    let done = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
+    let frame = done["frame"].as_u64().unwrap();
+    let host = format!("127.0.0.1:{}", r.addr.port());
+    let frame_of = |head: &str| -> u64 {
+        let line = head.lines().find(|l| l.to_ascii_lowercase().starts_with("x-frame:")).expect("X-Frame");
+        line[8..].trim().parse().unwrap()
+    };
+    // A frame newer than one already there: at once.
+    let t = Instant::now();
+    let (status, head, _) =
+        exchange(r.addr, "GET", &format!("/api/positions?after={}", frame - 1), Some(&host), b"");
+    assert_eq!((status, frame_of(&head)), (200, frame));
+    assert!(t.elapsed() < Duration::from_millis(500));
+    // One still to come: answered when the re-solve publishes it.
+    let mut tuning = done["tuning"].clone();
+    tuning["gamma"] = serde_json::json!(0.5);
+    let posted = std::thread::spawn({
+        let addr = r.addr;
+        let host = host.clone();
+        move || {
+            std::thread::sleep(Duration::from_millis(200));
+            request(addr, "POST", "/api/solve", Some(&host), tuning.to_string().as_bytes()).0
+        }
+    });
+    let t = Instant::now();
+    let (status, head, body) =
+        exchange(r.addr, "GET", &format!("/api/positions?after={frame}"), Some(&host), b"");
+    let waited = t.elapsed();
+    assert_eq!(posted.join().unwrap(), 202);
+    assert_eq!(status, 200);
+    assert!(frame_of(&head) > frame, "{head}");
+    assert!(waited >= Duration::from_millis(150) && waited < FRAME_WAIT, "{waited:?}");
+    assert_eq!(body.len(), 12 * done["vertices"].as_u64().unwrap() as usize);
 }
 
 #[test]
@@ -370,8 +426,11 @@ fn a_voxel_edit_rebuilds_the_surface_and_re_solves_from_the_shape_shown() {
     assert_ne!(edited["faces"].as_u64().unwrap(), faces, "{edited}");
     assert!(edited["edit_ms"].as_f64().is_some(), "{edited}");
     let model = edited["model_id"].as_u64().unwrap();
-    let quads = get(&r, "/api/quads").1;
-    assert_eq!(quads.len() as u64, 16 * edited["faces"].as_u64().unwrap());
+    let surface = get(&r, "/api/surface").1;
+    assert_eq!(
+        u64::from(u32::from_le_bytes(surface[..4].try_into().unwrap())),
+        edited["faces"].as_u64().unwrap()
+    );
     // Bad edits: a stale surface, a face out of range, a voxel outside the volume, junk.
     let stale = serde_json::json!({ "model": model - 1, "face": 0 });
     let (status, message) = error_of(post(&r, "/api/edit", stale.to_string().as_bytes()));
