@@ -218,7 +218,10 @@ fn stitched_deviation() {
     let preserve = std::env::var("VOXREG_DIAG_PRESERVE").map(|v| v != "0").unwrap_or(true);
     let volume = read_npy(&path);
     let dims = volume.dims();
-    let params = Params { preserve_size: preserve, ..Params::default() };
+    let mut params = Params { preserve_size: preserve, ..Params::default() };
+    if let Some(tol) = std::env::var("VOXREG_DIAG_TOL").ok().and_then(|v| v.parse::<f64>().ok()) {
+        params.solver = params.solver.with_tolerance(tol);
+    }
     let margin = env("VOXREG_DIAG_MARGIN", super::CUT_MARGIN);
     let t = std::time::Instant::now();
     let whole = crate::regularize(&volume, &params).unwrap();
@@ -260,6 +263,16 @@ fn stitched_deviation() {
     eprintln!("chunked: {quads} quads, {:.1} s", t.elapsed().as_secs_f64());
     assert_eq!(quads, whole.surface.num_surfels());
     assert_eq!(got.len(), expected.len());
+    {
+        let mut worst: Vec<(f64, u64)> = expected.iter().map(|(id, p)| ((got[id] - *p).length(), *id)).collect();
+        worst.sort_by(|a, b| b.0.partial_cmp(&a.0).unwrap());
+        for (d, id) in worst.iter().take(8) {
+            let x = id % (dims[0] as u64 + 1);
+            let y = (id / (dims[0] as u64 + 1)) % (dims[1] as u64 + 1);
+            let z = id / ((dims[0] as u64 + 1) * (dims[1] as u64 + 1));
+            eprintln!("worst {d:.3e} at {:?} ", [x, y, z]);
+        }
+    }
     let mut rows: Vec<(f64, usize)> = Vec::new();
     for (id, p) in &expected {
         let x = (id % (dims[0] as u64 + 1)) as usize;
