@@ -264,7 +264,8 @@ fn stitched_deviation() {
     assert_eq!(quads, whole.surface.num_surfels());
     assert_eq!(got.len(), expected.len());
     {
-        let mut worst: Vec<(f64, u64)> = expected.iter().map(|(id, p)| ((got[id] - *p).length(), *id)).collect();
+        let mut worst: Vec<(f64, u64)> =
+            expected.iter().map(|(id, p)| ((got[id] - *p).length(), *id)).collect();
         worst.sort_by(|a, b| b.0.partial_cmp(&a.0).unwrap());
         for (d, id) in worst.iter().take(8) {
             let x = id % (dims[0] as u64 + 1);
