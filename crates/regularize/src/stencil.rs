@@ -11,8 +11,7 @@ use voxreg_digisurf::{DigitalSurface, VertexId};
 
 use crate::{Energy, FairnessMask, RegularizeError};
 
-/// Vertices per parallel task: small enough to balance, large enough to amortize.
-pub(crate) const CHUNK: usize = 2048;
+pub(crate) use crate::vecops::CHUNK;
 
 /// A vertex's slot in an incident face: the face and the face's two vertices next to it.
 #[derive(Copy, Clone, Debug, Default)]

@@ -3,7 +3,8 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::stencil::CHUNK;
+/// Vertices per parallel task: small enough to balance, large enough to amortize.
+pub(crate) const CHUNK: usize = 2048;
 
 /// `sum_i a_i . b_i`.
 ///
