@@ -7,37 +7,17 @@
 // drawn. With --running, the browser first shows a blank page for a second (a browser
 // already running, as a user's is, rather than one starting with the page). With
 // --against, the runs alternate A, B, A, B... so that load drifts hit both.
-import { spawn } from 'node:child_process';
-import { dirname, join, resolve } from 'node:path';
-import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
+import { join, resolve } from 'node:path';
+import { arg, launchBrowser, root, startView } from './common.mjs';
 
-const root = resolve(dirname(fileURLToPath(import.meta.url)), '../..');
-const arg = (name, fallback) => {
-  const i = process.argv.indexOf(name);
-  return i > 0 ? process.argv[i + 1] : fallback;
-};
 const builds = [arg('--voxreg', join(root, 'target/release/voxreg')), arg('--against', null)].filter(Boolean).map((b) => resolve(b));
 const input = resolve(root, arg('--input', 'data/chr_army1.vox'));
 const runs = parseInt(arg('--runs', '6'));
 const running = process.argv.includes('--running');
-const browserPath = process.env.CHROMIUM ?? '/usr/bin/chromium';
 
 async function once(voxreg) {
-  const server = spawn(voxreg, ['view', input], { stdio: ['ignore', 'ignore', 'pipe'] });
-  let log = '';
-  const url = await new Promise((res, rej) => {
-    server.stderr.on('data', (d) => {
-      log += d;
-      const m = log.match(/http:\/\/127\.0\.0\.1:\d+\//);
-      if (m) res(m[0]);
-    });
-    server.on('exit', (code) => rej(new Error(`voxreg view exited (${code}): ${log}`)));
-  });
-  const browser = await chromium.launch({
-    executablePath: browserPath,
-    args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'],
-  });
+  const { server, url } = await startView(voxreg, input);
+  const browser = await launchBrowser();
   try {
     const page = await browser.newPage({ viewport: { width: 1200, height: 720 } });
     if (running) {

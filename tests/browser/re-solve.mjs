@@ -8,39 +8,20 @@
 // its iterations. Between changes it runs `voxreg regularize INPUT -o OUT.glb` (a whole CLI
 // run, the viewer idle) and prints its wall time. With --replace MS, each change is made
 // MS milliseconds after another one, which it replaces while it runs.
-import { spawn, spawnSync } from 'node:child_process';
+import { spawnSync } from 'node:child_process';
 import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
-import { dirname, join, resolve } from 'node:path';
-import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
+import { join, resolve } from 'node:path';
+import { arg, launchBrowser, root, startView } from './common.mjs';
 
-const root = resolve(dirname(fileURLToPath(import.meta.url)), '../..');
-const arg = (name, fallback) => {
-  const i = process.argv.indexOf(name);
-  return i > 0 ? process.argv[i + 1] : fallback;
-};
 const voxreg = resolve(arg('--voxreg', join(root, 'target/release/voxreg')));
 const input = resolve(root, arg('--input', 'data/bunny-128.vol'));
 const runs = parseInt(arg('--runs', '6'));
 const replace = arg('--replace', null);
-const browserPath = process.env.CHROMIUM ?? '/usr/bin/chromium';
 
-const server = spawn(voxreg, ['view', input], { stdio: ['ignore', 'ignore', 'pipe'] });
-let log = '';
-const url = await new Promise((res, rej) => {
-  server.stderr.on('data', (d) => {
-    log += d;
-    const m = log.match(/http:\/\/127\.0\.0\.1:\d+\//);
-    if (m) res(m[0]);
-  });
-  server.on('exit', (code) => rej(new Error(`voxreg view exited (${code}): ${log}`)));
-});
+const { server, url } = await startView(voxreg, input);
 const work = mkdtempSync(join(tmpdir(), 'voxreg-re-solve-'));
-const browser = await chromium.launch({
-  executablePath: browserPath,
-  args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'],
-});
+const browser = await launchBrowser();
 const rows = { first: [], server: [], done: [], total: [], cli: [] };
 try {
   const page = await browser.newPage({ viewport: { width: 1200, height: 720 } });

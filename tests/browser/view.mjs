@@ -14,23 +14,16 @@
 //      the server and drawn within bounds (the best of three changes);
 // and saves a screenshot (default docs/figures/view.png). Prints the timings it saw.
 // With --measure, it only prints the timings (no screenshot, no time bounds).
-import { spawn, execFileSync } from 'node:child_process';
+import { execFileSync } from 'node:child_process';
 import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
-import { join, dirname, resolve } from 'node:path';
-import { fileURLToPath } from 'node:url';
-import { chromium } from 'playwright-core';
+import { join, resolve } from 'node:path';
+import { arg, launchBrowser, root, startView } from './common.mjs';
 
-const root = resolve(dirname(fileURLToPath(import.meta.url)), '../..');
-const arg = (name, fallback) => {
-  const i = process.argv.indexOf(name);
-  return i > 0 ? process.argv[i + 1] : fallback;
-};
 const measure = process.argv.includes('--measure');
 const voxreg = resolve(arg('--voxreg', process.env.VOXREG ?? join(root, 'target/release/voxreg')));
 const input = resolve(root, arg('--input', 'data/chr_army1.vox'));
 const screenshot = measure ? null : resolve(root, arg('--screenshot', 'docs/figures/view.png'));
-const browserPath = process.env.CHROMIUM ?? '/usr/bin/chromium';
 // Milliseconds from opening the page (docs/performance.md, "Viewer", has the figures). The
 // first picture's target is 1 s: its bound is what the 2-core machine met at load 9 with
 // margin, and what the WebGL picture (the first picture before) often misses there; WebGL's
@@ -53,23 +46,10 @@ function fail(message) {
 function check(ok, message) { if (!ok) fail(message); }
 
 // The server: its URL is the first line it prints.
-const server = spawn(voxreg, ['view', input], { stdio: ['ignore', 'inherit', 'pipe'] });
-let serverLog = '';
-const url = await new Promise((res, rej) => {
-  server.stderr.on('data', (d) => {
-    serverLog += d;
-    const m = serverLog.match(/http:\/\/127\.0\.0\.1:\d+\//);
-    if (m) res(m[0]);
-  });
-  server.on('exit', (code) => rej(new Error(`voxreg view exited (${code}): ${serverLog}`)));
-  setTimeout(() => rej(new Error(`no URL from voxreg view: ${serverLog}`)), 30000);
-});
+const { server, url } = await startView(voxreg, input, { stdout: 'inherit', timeoutMs: 30000 });
 
 const work = mkdtempSync(join(tmpdir(), 'voxreg-view-'));
-const browser = await chromium.launch({
-  executablePath: browserPath,
-  args: ['--no-sandbox', '--use-angle=swiftshader', '--enable-unsafe-swiftshader', '--ignore-gpu-blocklist'],
-});
+const browser = await launchBrowser();
 try {
   const page = await browser.newPage({ viewport: { width: 1200, height: 720 }, acceptDownloads: true });
   const pageErrors = [];
