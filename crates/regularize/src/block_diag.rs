@@ -29,6 +29,12 @@ fn env(name: &str, default: usize) -> usize {
     std::env::var(name).ok().and_then(|v| v.parse().ok()).unwrap_or(default)
 }
 
+/// The lattice corner of a global vertex id (the inverse of [`lattice_id`]).
+fn corner_of(id: u64, dims: [usize; 3]) -> [usize; 3] {
+    let (nx, ny) = (dims[0] as u64 + 1, dims[1] as u64 + 1);
+    [(id % nx) as usize, ((id / nx) % ny) as usize, (id / (nx * ny)) as usize]
+}
+
 fn sub(volume: &LabelVolume, start: [usize; 3], end: [usize; 3]) -> LabelVolume {
     let dims = [0, 1, 2].map(|k| end[k] - start[k]);
     LabelVolume::from_fn(dims, |p| volume.labels()[[p[0] + start[0], p[1] + start[1], p[2] + start[2]]])
@@ -147,10 +153,7 @@ fn diagnose_blocks() {
                 let block = Block { global_dims: dims, start, owned };
                 let Ok(Some(mut reg)) = block_regularizer(&sv, &block, &params, margin) else { continue };
                 let inside = |id: u64| {
-                    let x = (id % (dims[0] as u64 + 1)) as usize;
-                    let y = ((id / (dims[0] as u64 + 1)) % (dims[1] as u64 + 1)) as usize;
-                    let z = (id / ((dims[0] as u64 + 1) * (dims[1] as u64 + 1))) as usize;
-                    let c = [x, y, z];
+                    let c = corner_of(id, dims);
                     (0..3).all(|k| owned[k][0] <= c[k] && c[k] <= owned[k][1])
                 };
                 let mut line = format!("block {} owned {:?}:", b - 1, owned);
@@ -199,9 +202,7 @@ fn diagnose_blocks() {
     }
     all_dev.sort_by(|a, b| b.0.partial_cmp(&a.0).unwrap());
     for (d, id, b) in all_dev.iter().take(20) {
-        let x = id % (dims[0] as u64 + 1);
-        let y = (id / (dims[0] as u64 + 1)) % (dims[1] as u64 + 1);
-        let z = id / ((dims[0] as u64 + 1) * (dims[1] as u64 + 1));
+        let [x, y, z] = corner_of(*id, dims);
         eprintln!("top: dev {d:.3e} corner {x} {y} {z} block {b}");
     }
 }
@@ -268,18 +269,12 @@ fn stitched_deviation() {
             expected.iter().map(|(id, p)| ((got[id] - *p).length(), *id)).collect();
         worst.sort_by(|a, b| b.0.partial_cmp(&a.0).unwrap());
         for (d, id) in worst.iter().take(8) {
-            let x = id % (dims[0] as u64 + 1);
-            let y = (id / (dims[0] as u64 + 1)) % (dims[1] as u64 + 1);
-            let z = id / ((dims[0] as u64 + 1) * (dims[1] as u64 + 1));
-            eprintln!("worst {d:.3e} at {:?} ", [x, y, z]);
+            eprintln!("worst {d:.3e} at {:?}", corner_of(*id, dims));
         }
     }
     let mut rows: Vec<(f64, usize)> = Vec::new();
     for (id, p) in &expected {
-        let x = (id % (dims[0] as u64 + 1)) as usize;
-        let y = ((id / (dims[0] as u64 + 1)) % (dims[1] as u64 + 1)) as usize;
-        let z = (id / ((dims[0] as u64 + 1) * (dims[1] as u64 + 1))) as usize;
-        let c = [x, y, z];
+        let c = corner_of(*id, dims);
         let to_border = (0..3)
             .flat_map(|k| (chunk..dims[k]).step_by(chunk).map(move |b| c[k].abs_diff(b)))
             .min()
