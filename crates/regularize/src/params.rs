@@ -169,8 +169,10 @@ pub struct Params {
     /// Radius, in voxels, of the disc whose regularized quad normals are averaged into a
     /// refined normal. Default: `3`.
     pub refine_radius: f64,
-    /// Feature rule of the refinement: a quad only enters the average if its regularized
-    /// normal is within this angle (degrees) of the normal being refined. Default: `30`.
+    /// Feature rule of the refinement: a quad enters the average if its regularized
+    /// normal is within this angle (degrees) of the normal being refined, its weight
+    /// falling to 0 over a ramp of `voxreg_normals::FEATURE_RAMP_DEG` centred on it (a
+    /// continuous rule: see `voxreg_normals::Refined`). Default: `30`.
     pub feature_angle_deg: f64,
     /// Size preservation (re-centring): before each refinement solve, the attachment
     /// targets move by minus the smoothed displacement of the last solve, measured
@@ -193,7 +195,8 @@ pub struct Params {
     /// Applied when the pipeline refines (`refine > 0`); `1` keeps the uniform weight.
     /// Default: `0.015`.
     pub crease_alignment: f64,
-    /// The crease angle in degrees (see `crease_alignment`). Default: `20`.
+    /// The crease angle in degrees (see `crease_alignment`): the middle of the same ramp,
+    /// over which the weight goes from `1` to `crease_alignment`. Default: `20`.
     pub crease_angle_deg: f64,
     /// Rings of quads around the straddling ones that also get the weak alignment.
     /// Default: `1`.

@@ -4,7 +4,7 @@
 use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
-use voxreg_normals::{Interrupt, NormalField};
+use voxreg_normals::{FeatureRamp, Interrupt, NormalField};
 
 use crate::RegularizeError;
 
@@ -14,7 +14,10 @@ use crate::RegularizeError;
 /// and for the quads within `dilation` rings of them (sharing a vertex with a marked
 /// quad, ring by ring); `1` for the others. Quads that keep their axis (the faces of an
 /// axis-aligned box, whose edges run along the quads' edges) are not marked by the angle
-/// test: they lie flat unsqueezed.
+/// test: they lie flat unsqueezed. The test is continuous: a quad within the feature rule's
+/// ramp of both angles takes a weight between `weight` and 1 ([`straddling_degree`]), so
+/// a small change of the field changes the weights little (a volume solved in chunks
+/// must give the whole volume's weights to within as much).
 pub(crate) fn crease_weights(
     surface: &DigitalSurface,
     field: &NormalField,
@@ -22,35 +25,55 @@ pub(crate) fn crease_weights(
     weight: f64,
     dilation: usize,
 ) -> Vec<f64> {
-    let mut marked = straddling_quads(surface, field, feature_angle_deg);
+    let mut degree = straddling_degree(surface, field, feature_angle_deg);
     for _ in 0..dilation {
-        let mut touched = vec![false; surface.num_vertices()];
-        for (s, _) in marked.iter().enumerate().filter(|(_, &m)| m) {
-            surface.surfels()[s].vertices.iter().for_each(|v| touched[v.index()] = true);
+        let mut touched = vec![0.0f64; surface.num_vertices()];
+        for (s, &m) in degree.iter().enumerate().filter(|(_, &m)| m > 0.0) {
+            surface.surfels()[s].vertices.iter().for_each(|v| touched[v.index()] = touched[v.index()].max(m));
         }
-        marked =
-            surface.surfels().par_iter().map(|s| s.vertices.iter().any(|v| touched[v.index()])).collect();
+        degree = surface
+            .surfels()
+            .par_iter()
+            .map(|s| s.vertices.iter().map(|v| touched[v.index()]).fold(0.0, f64::max))
+            .collect();
     }
-    marked.into_iter().map(|m| if m { weight } else { 1.0 }).collect()
+    degree
+        .into_iter()
+        .map(|m| match m {
+            m if m >= 1.0 => weight,
+            m if m <= 0.0 => 1.0,
+            m => 1.0 - (1.0 - weight) * m,
+        })
+        .collect()
 }
 
-/// The quads of [`crease_weights`]'s angle test.
-fn straddling_quads(surface: &DigitalSurface, field: &NormalField, feature_angle_deg: f64) -> Vec<bool> {
-    let cos_max = feature_angle_deg.to_radians().cos();
+/// How much each quad is marked by [`crease_weights`]'s angle test, from 0 to 1: the
+/// smaller of how far its normal is tilted from its surfel's axis and how far the most
+/// tilted neighbour of its interface is from it, each through the feature rule's ramp
+/// ([`FeatureRamp`], 1 past the angle plus half the ramp).
+fn straddling_degree(surface: &DigitalSurface, field: &NormalField, feature_angle_deg: f64) -> Vec<f64> {
+    let ramp = FeatureRamp::new(feature_angle_deg);
+    let past = |c: f64| 1.0 - ramp.weight(c);
     let normals = field.as_slice();
     (0..surface.num_surfels())
         .into_par_iter()
         .map(|f| {
             let sf = surface.surfels()[f];
             // A quad in the plane of its own surfel lies flat without being squeezed.
-            let tilted = normals[f].dot(sf.normal()) < cos_max;
+            let tilted = past(normals[f].dot(sf.normal()));
+            if tilted <= 0.0 {
+                return 0.0;
+            }
             let iface = sf.interface;
-            tilted
-                && surface.surfel_edges(SurfelId(f as u32)).iter().any(|&e| {
-                    surface.edge_surfels(e).iter().any(|g| {
-                        surface.surfel(*g).interface == iface && normals[g.index()].dot(normals[f]) < cos_max
-                    })
-                })
+            let mut across = 0.0f64;
+            for &e in surface.surfel_edges(SurfelId(f as u32)).iter() {
+                for g in surface.edge_surfels(e) {
+                    if surface.surfel(*g).interface == iface {
+                        across = across.max(past(normals[g.index()].dot(normals[f])));
+                    }
+                }
+            }
+            tilted.min(across)
         })
         .collect()
 }
