@@ -363,10 +363,31 @@ fn sensitivity() {
         over(1.0),
         over(5.0)
     );
+    // A quad's area at the positions (the length of its vector area).
+    let area = |f: usize| {
+        let [a, b, c, d] = s.surfels()[f].vertices.map(|v| p[v.index()]);
+        0.5 * (c - a).cross(d - b).length()
+    };
     for (ang, i) in d.iter().take(8) {
         let sf = s.surfels()[*i];
-        eprintln!("  {ang:.3} deg: surfel {i} cell {:?} axis {} regions {:?}", sf.cell, sf.axis, sf.regions);
+        let smallest = s
+            .surfel_edges(SurfelId(*i as u32))
+            .iter()
+            .flat_map(|e| s.edge_surfels(*e).iter().map(|g| area(g.index())))
+            .fold(f64::INFINITY, f64::min);
+        eprintln!(
+            "  {ang:.3} deg: surfel {i} cell {:?} axis {} regions {:?}, area {:.3}, smallest edge neighbour {smallest:.3}",
+            sf.cell, sf.axis, sf.regions, area(*i)
+        );
     }
+    let mut areas: Vec<f64> = (0..s.num_surfels()).map(area).collect();
+    areas.sort_by(|a, b| a.partial_cmp(b).unwrap());
+    eprintln!(
+        "quad areas: 0.1 % {:.3}, 1 % {:.3}, median {:.3}",
+        areas[areas.len() / 1000],
+        areas[areas.len() / 100],
+        areas[areas.len() / 2]
+    );
     let ca = crate::pipeline::crease_weights(
         s,
         &a,

@@ -36,7 +36,7 @@ from ._mesh import Mesh
 
 #: The halo's default width in voxels: the narrowest of those measured whose stitched mesh
 #: stays within 1e-2 voxel (mean 1e-3) of the whole-volume solve with the default pipeline
-#: (the table of ``docs/scale.md``). The cut sides of a chunk's sub-volume close its
+#: on a 256^3 synthetic tissue (the table of ``docs/scale.md``). The cut sides of a chunk's sub-volume close its
 #: surfaces, and the difference reaches far through the refinement rounds and the size
 #: preservation.
 DEFAULT_HALO = 64
@@ -184,7 +184,8 @@ def regularize(array: Any, chunks: Optional[Sequence[int]] = None, halo: int = D
     halo : int >= 2, default DEFAULT_HALO (64)
         Voxels read around each chunk. The stitched mesh has the whole-volume mesh's
         quads and vertex ids at any halo; its positions approach the whole-volume solve
-        as the halo grows (within 1e-2 voxel at the default). A chunk reads
+        as the halo grows (within 1e-2 voxel at the default on a synthetic tissue; a real
+        volume can keep a few outliers of tenths of a voxel). A chunk reads
         ``(c + 2 halo)^3`` voxels for the ``c^3`` it owns: chunks of 128 to 256 keep that
         within 8 to 3.4 times; a narrower halo is faster and less exact (docs/scale.md).
     out : str or path-like, default None
