@@ -360,17 +360,30 @@ fn refined_interruptible(
                 let cf = nodes[f].centre;
                 let regions_f = nodes[f].regions;
                 let iface_f = nodes[f].interface;
+                // A quad's cosine to the normal being refined (0 for a quad of no area), and
+                // its feature weight: the ramp of that cosine, 1 for the quad itself (its
+                // own tilt is weighed once, on the result, below).
+                let cosine = |g: usize| {
+                    let Sample { area, len } = samples[g];
+                    if len > 0.0 {
+                        area.dot(nf) / len
+                    } else {
+                        0.0
+                    }
+                };
+                let feature_weight = |g: usize| if g == f { 1.0 } else { ramp.weight(cosine(g).abs()) };
                 let mut disc = |r: f64| -> (DVec3, f64) {
                     let r2 = r * r;
                     let mut sum = DVec3::ZERO;
                     let mut fit = FirstOrder::default();
                     // Weights: of the disc, of its quads next to a junction.
                     let (mut total, mut junction) = (0.0, 0.0);
-                    let mut feature = false; // the feature rule stopped at a sharp jump
-                                             // Widest first: the quads of full reach breadth first, then those of
-                                             // partial reach by decreasing reach. The queue keeps every quad reached
-                                             // (its visiting order), so the seen marks are cleared from it and the
-                                             // junctions' second pass below reads the same quads in the same order.
+                    // Whether the feature rule stopped at a sharp jump.
+                    let mut feature = false;
+                    // Widest first: the quads of full reach breadth first, then those of
+                    // partial reach by decreasing reach. The queue keeps every quad reached
+                    // (its visiting order), so the seen marks are cleared from it and the
+                    // junctions' second pass below reads the same quads in the same order.
                     queue.push((f as u32, f as u32, 0.0, 1.0));
                     seen[f] = true;
                     let mut head = 0;
@@ -392,10 +405,8 @@ fn refined_interruptible(
                         head += 1;
                         let (g, parent) = (g as usize, parent as usize);
                         let Sample { area: a, len } = samples[g];
-                        let dot = if len > 0.0 { a.dot(nf) / len } else { 0.0 };
-                        // The quad itself always counts and passes on in full (its own
-                        // tilt is weighed once, on the result, below).
-                        let phi = if g == f { 1.0 } else { ramp.weight(dot.abs()) };
+                        let dot = cosine(g);
+                        let phi = feature_weight(g);
                         if phi <= 0.0 {
                             // A sharp feature (a jump past the feature angle from the quad it
                             // was reached from, not a gradual turn of a curved surface): the
@@ -458,8 +469,8 @@ fn refined_interruptible(
                         if near_junction[g] || len <= 0.0 {
                             continue;
                         }
-                        let dot = a.dot(nf) / len;
-                        let rho = if g == f { 1.0 } else { ramp.weight(dot.abs()).min(reach) };
+                        let dot = cosine(g);
+                        let rho = feature_weight(g).min(reach);
                         if rho <= 0.0 {
                             continue;
                         }
@@ -481,10 +492,7 @@ fn refined_interruptible(
                 // The quad's own tilt from its previous normal: past the feature angle it
                 // keeps that normal (a disc of quads all past the angle says nothing), in
                 // between the two by the ramp.
-                let own = {
-                    let Sample { area: a, len } = samples[f];
-                    ramp.weight(if len > 0.0 { a.dot(nf).abs() / len } else { 0.0 })
-                };
+                let own = ramp.weight(cosine(f).abs());
                 if own <= 0.0 {
                     return nf;
                 }

@@ -329,12 +329,8 @@ fn sensitivity() {
     let out = crate::regularize(&volume, &params).unwrap();
     let s = &out.surface;
     let p = out.positions.as_slice();
-    let mut seed = 12345u64;
-    let mut rnd = || {
-        seed = seed.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        ((seed >> 11) as f64 / (1u64 << 53) as f64) * 2.0 - 1.0
-    };
-    let q: Vec<DVec3> = p.iter().map(|x| *x + eps * DVec3::new(rnd(), rnd(), rnd())).collect();
+    let mut rng = voxreg_testkit::Lcg::new(12345);
+    let q: Vec<DVec3> = p.iter().map(|x| *x + eps * rng.vec3(-1.0, 1.0)).collect();
     let est = |pos: &[DVec3]| {
         Refined {
             positions: pos,
