@@ -277,15 +277,44 @@ fn stitched_deviation() {
         assert_eq!(got.len(), expected.len());
     }
     expected.retain(|id, _| got.contains_key(id));
+    // The deviation across the surface: its largest component along the whole-volume
+    // normals of the vertex's quads (a vertex sliding within its quads' planes leaves
+    // the surface where it was).
+    let wp = whole.positions.as_slice();
+    let unit: Vec<DVec3> = whole
+        .surface
+        .surfels()
+        .iter()
+        .map(|q| {
+            let [a, b, c, d] = q.vertices.map(|v| wp[v.index()]);
+            (c - a).cross(d - b).normalize_or_zero()
+        })
+        .collect();
+    let mut across: HashMap<u64, f64> = HashMap::new();
+    for v in 0..whole.surface.num_vertices() {
+        let c = whole.surface.vertex_corner(VertexId(v as u32)).map(|c| c as usize);
+        let id = lattice_id(c, dims);
+        if let Some(g) = got.get(&id) {
+            let d = *g - wp[v];
+            let off = whole
+                .surface
+                .vertex_surfels(VertexId(v as u32))
+                .iter()
+                .map(|q| d.dot(unit[q.index()]).abs())
+                .fold(0.0, f64::max);
+            across.insert(id, off);
+        }
+    }
     {
         let mut worst: Vec<(f64, u64)> =
             expected.iter().map(|(id, p)| ((got[id] - *p).length(), *id)).collect();
         worst.sort_by(|a, b| b.0.partial_cmp(&a.0).unwrap());
         for (d, id) in worst.iter().take(8) {
-            eprintln!("worst {d:.3e} at {:?}", corner_of(*id, dims));
+            eprintln!("worst {d:.3e} (across the surface {:.3e}) at {:?}", across[id], corner_of(*id, dims));
         }
     }
     let mut rows: Vec<(f64, usize)> = Vec::new();
+    let mut offs: Vec<(f64, usize)> = Vec::new();
     for (id, p) in &expected {
         let c = corner_of(*id, dims);
         let to_border = (0..3)
@@ -293,8 +322,9 @@ fn stitched_deviation() {
             .min()
             .unwrap_or(usize::MAX);
         rows.push(((got[id] - *p).length(), to_border));
+        offs.push((across[id], to_border));
     }
-    let report = |name: &str, sel: &dyn Fn(usize) -> bool| {
+    let report = |name: &str, rows: &[(f64, usize)], sel: &dyn Fn(usize) -> bool| {
         let d: Vec<f64> = rows.iter().filter(|r| sel(r.1)).map(|r| r.0).collect();
         if d.is_empty() {
             return;
@@ -310,10 +340,11 @@ fn stitched_deviation() {
             d.iter().filter(|&&x| x > 1e-2).count()
         );
     };
-    report("all", &|_| true);
+    report("all", &rows, &|_| true);
     for (lo, hi) in [(0, 2), (2, 8), (8, 16), (16, 32), (32, usize::MAX)] {
-        report(&format!("{lo}-{hi} from a border"), &|b| b >= lo && b < hi);
+        report(&format!("{lo}-{hi} from a border"), &rows, &|b| b >= lo && b < hi);
     }
+    report("all, across the surface", &offs, &|_| true);
 }
 
 /// Sensitivity (temporary experiment): the refined normals and crease weights at the
