@@ -219,7 +219,8 @@ fn stitched_deviation() {
     let preserve = std::env::var("VOXREG_DIAG_PRESERVE").map(|v| v != "0").unwrap_or(true);
     let volume = read_npy(&path);
     let dims = volume.dims();
-    let mut params = Params { preserve_size: preserve, ..Params::default() };
+    let refine = env("VOXREG_DIAG_REFINE", Params::default().refine);
+    let mut params = Params { preserve_size: preserve, refine, ..Params::default() };
     if let Some(itol) = std::env::var("VOXREG_DIAG_ITOL").ok().and_then(|v| v.parse::<f64>().ok()) {
         params.intermediate_tolerance = itol;
     }
