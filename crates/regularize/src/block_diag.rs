@@ -193,6 +193,15 @@ fn diagnose_blocks() {
                     if r == max_refine {
                         for d in dev.iter().take(3) {
                             all_dev.push((d.0, d.1, b - 1));
+                            let c = corner_of(d.1, dims).map(|x| x as f64);
+                            let c = DVec3::from_array(c);
+                            eprintln!(
+                                "  vertex {c:?}: whole - corner {:.3?}, block - corner {:.3?}, target whole - corner {:.3?}, block {:.3?}",
+                                kw.pos[&d.1] - c,
+                                kb.pos[&d.1] - c,
+                                kw.target[&d.1] - c,
+                                kb.target[&d.1] - c
+                            );
                         }
                     }
                 }
