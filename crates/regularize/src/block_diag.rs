@@ -352,7 +352,8 @@ fn stitched_deviation() {
     };
     report("all", &rows, &|_| true);
     for (lo, hi) in [(0, 2), (2, 8), (8, 16), (16, 32), (32, usize::MAX)] {
-        report(&format!("{lo}-{hi} from a border"), &rows, &|b| b >= lo && b < hi);
+        let range = if hi == usize::MAX { format!("{lo}+") } else { format!("{lo}-{hi}") };
+        report(&format!("{range} from a border"), &rows, &|b| b >= lo && b < hi);
     }
     report("all, across the surface", &offs, &|_| true);
 }
