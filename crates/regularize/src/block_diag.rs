@@ -61,6 +61,12 @@ fn straddling(surface: &DigitalSurface, normals: &[DVec3], deg: f64) -> Vec<bool
         .collect()
 }
 
+/// The vector area of quad `f` at `positions` (half the cross product of its diagonals).
+fn vector_area(surface: &DigitalSurface, positions: &[DVec3], f: usize) -> DVec3 {
+    let [a, b, c, d] = surface.surfels()[f].vertices.map(|v| positions[v.index()]);
+    0.5 * (c - a).cross(d - b)
+}
+
 fn plateau(surface: &DigitalSurface) -> Vec<bool> {
     (0..surface.num_vertices())
         .map(|v| {
@@ -291,14 +297,8 @@ fn stitched_deviation() {
     // normals of the vertex's quads (a vertex sliding within its quads' planes leaves
     // the surface where it was).
     let wp = whole.positions.as_slice();
-    let unit: Vec<DVec3> = whole
-        .surface
-        .surfels()
-        .iter()
-        .map(|q| {
-            let [a, b, c, d] = q.vertices.map(|v| wp[v.index()]);
-            (c - a).cross(d - b).normalize_or_zero()
-        })
+    let unit: Vec<DVec3> = (0..whole.surface.num_surfels())
+        .map(|f| vector_area(&whole.surface, wp, f).normalize_or_zero())
         .collect();
     let mut across: HashMap<u64, f64> = HashMap::new();
     for v in 0..whole.surface.num_vertices() {
@@ -402,10 +402,7 @@ fn sensitivity() {
         over(5.0)
     );
     // A quad's area at the positions (the length of its vector area).
-    let area = |f: usize| {
-        let [a, b, c, d] = s.surfels()[f].vertices.map(|v| p[v.index()]);
-        0.5 * (c - a).cross(d - b).length()
-    };
+    let area = |f: usize| vector_area(s, p, f).length();
     for (ang, i) in d.iter().take(8) {
         let sf = s.surfels()[*i];
         let smallest = s
