@@ -216,7 +216,7 @@ impl Hierarchy {
                 .collect(),
             face_smoother: Vec::new(),
             face_levels: None,
-            majorant: fine_smoother,
+            majorant: Vec::new(),
             damping: self.params.damping,
             levels,
             aggregations: self.aggregations.clone(),
@@ -233,18 +233,29 @@ fn scale6(m: &[f64; 6], s: f64) -> [f64; 6] {
     m.map(|x| x * s)
 }
 
-/// A symmetric 3x3 block `[xx, yy, zz, xy, xz, yz]` as three `f32` SIMD columns.
-type Block = [Vec3A; 3];
+/// A symmetric 3x3 block `[xx, yy, zz, xy, xz, yz]` in `f32`: 24 bytes, half of three
+/// SIMD columns (the smoothers are streamed once per sweep, so their size is their cost).
+type Block = [f32; 6];
 
 fn block(m: &[f64; 6]) -> Block {
-    let m = m.map(|x| x as f32);
-    let [a, d, f, b, c, e] = m;
-    [Vec3A::new(a, b, c), Vec3A::new(b, d, e), Vec3A::new(c, e, f)]
+    m.map(|x| x as f32)
 }
 
 #[inline(always)]
 fn block_mul(m: &Block, v: Vec3A) -> Vec3A {
-    m[0] * v.x + m[1] * v.y + m[2] * v.z
+    let [a, d, f, b, c, e] = *m;
+    Vec3A::new(a, b, c) * v.x + Vec3A::new(b, d, e) * v.y + Vec3A::new(c, e, f) * v.z
+}
+
+/// A general 3x3 block, its columns one after the other, in `f32` (36 bytes: no SIMD
+/// padding).
+type Full = [f32; 9];
+
+#[inline(always)]
+fn full_mul(m: &Full, v: Vec3A) -> Vec3A {
+    Vec3A::new(m[0], m[1], m[2]) * v.x
+        + Vec3A::new(m[3], m[4], m[5]) * v.y
+        + Vec3A::new(m[6], m[7], m[8]) * v.z
 }
 
 /// The fine operator's numbers in `f32`, for the cycle's fine residuals: the whole cycle
@@ -704,8 +715,8 @@ fn l1_smoother(rows: &Rows, damping: f64) -> Vec<Block> {
 pub(crate) struct Bsr {
     offsets: Vec<u32>,
     cols: Vec<u32>,
-    /// The blocks' columns.
-    blocks: Vec<[Vec3A; 3]>,
+    /// The blocks ([`Full`]).
+    blocks: Vec<Full>,
 }
 
 impl Bsr {
@@ -724,7 +735,7 @@ impl Bsr {
                 for (k, t) in [0, 4, 8].into_iter().enumerate() {
                     m[t] += b[if W == 10 { 9 } else { 9 + k }];
                 }
-                [Vec3A::new(m[0], m[1], m[2]), Vec3A::new(m[3], m[4], m[5]), Vec3A::new(m[6], m[7], m[8])]
+                m
             })
             .collect();
         Bsr { offsets, cols, blocks }
@@ -732,7 +743,7 @@ impl Bsr {
 
     /// Bytes read by one product.
     pub(crate) fn bytes(&self) -> usize {
-        4 * self.offsets.len() + 4 * self.cols.len() + 48 * self.blocks.len()
+        4 * self.offsets.len() + 4 * self.cols.len() + 36 * self.blocks.len()
     }
 
     /// `y = b - A x`.
@@ -744,7 +755,7 @@ impl Bsr {
                 let (start, end) = (self.offsets[i] as usize, self.offsets[i + 1] as usize);
                 let mut acc = Vec3A::ZERO;
                 for (m, &c) in self.blocks[start..end].iter().zip(&self.cols[start..end]) {
-                    acc += block_mul(m, x[c as usize]);
+                    acc += full_mul(m, x[c as usize]);
                 }
                 *yi = b[i] - acc;
             }
@@ -872,7 +883,8 @@ pub(crate) struct Vcycle {
     face_smoother: Vec<Block>,
     /// The face operator's own coarse levels ([`Vcycle::set_face`]).
     face_levels: Option<FaceLevels>,
-    /// The fine majorant's blocks, for the face smoothers.
+    /// The fine majorant's blocks, for the face smoothers: computed by the first
+    /// [`Vcycle::set_face`] (48 bytes a vertex that unconstrained solves never hold).
     majorant: Vec<[f64; 6]>,
     damping: f64,
     levels: Vec<Level>,
@@ -924,18 +936,19 @@ impl Vcycle {
     pub(crate) fn memory_bytes(&self) -> usize {
         let agg: usize =
             self.aggregations.iter().map(|a| 4 * (a.parent.len() + a.members.len() + a.offsets.len())).sum();
-        let levels: usize = self.levels.iter().map(|l| l.matrix.bytes() + 48 * l.n).sum();
+        let levels: usize = self.levels.iter().map(|l| l.matrix.bytes() + 24 * l.n).sum();
         let works: usize =
             self.works.iter().map(|w| 16 * (w.r.len() + w.x.len() + w.t.len() + w.b.len())).sum();
         let coarsest = self.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len());
         let face = self.face_levels.as_ref().map_or(0, |f| {
-            let levels: usize = f.levels.iter().map(|l| l.matrix.bytes() + 48 * l.n).sum();
+            let levels: usize = f.levels.iter().map(|l| l.matrix.bytes() + 24 * l.n).sum();
             levels
                 + f.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len())
                 + f.rows.bytes()
                 + 16 * f.face.len()
         });
-        face + 48 * (self.fine_smoother.len() + self.face_smoother.len() + self.majorant.len())
+        face + 24 * (self.fine_smoother.len() + self.face_smoother.len())
+            + 48 * self.majorant.len()
             + self.fine.bytes()
             + agg
             + levels
@@ -952,10 +965,11 @@ impl Vcycle {
     /// definite and `C` (the old levels' own symmetric cycle) positive semi-definite; how
     /// close the old levels are to the new operator's only sets the rate.
     pub(crate) fn refresh_fine(&mut self, stencil: &Stencil, coef: &Coefficients<'_>) {
-        let majorant = fine_majorant(stencil, coef);
-        self.fine_smoother =
-            majorant.par_iter().map(|d| block(&scale6(&sym_inverse(d), self.damping))).collect();
-        self.majorant = majorant;
+        self.fine_smoother = fine_majorant(stencil, coef)
+            .par_iter()
+            .map(|d| block(&scale6(&sym_inverse(d), self.damping)))
+            .collect();
+        self.majorant = Vec::new();
         self.fine = FineNumbers::new(stencil, coef);
         self.face_smoother = Vec::new();
         self.face_levels = None;
@@ -967,7 +981,7 @@ impl Vcycle {
         // Fine, in f32: products (connectivity, numbers, 5 vectors), smoothing (r, M, z),
         // residual updates, conversions in and out, restriction, prolongation.
         let product = connectivity + self.fine.bytes() + 5 * 16 * n;
-        let fine = 2 * s * product + 2 * s * 80 * n + 2 * s * 48 * n + 2 * 40 * n + 40 * n;
+        let fine = 2 * s * product + 2 * s * 56 * n + 2 * s * 48 * n + 2 * 40 * n + 40 * n;
         let coarse: usize =
             self.levels.iter().map(|l| 2 * cs * (l.matrix.bytes() + 3 * 16 * l.n) + 10 * 16 * l.n).sum();
         let coarsest = self.coarsest.as_ref().map_or(0, |c| 2 * 8 * c.factor.len());
@@ -1006,6 +1020,9 @@ impl Vcycle {
         }
         .or_else(|| self.face_hierarchy(stencil, coef, face));
         let damping = self.damping;
+        if self.majorant.len() != stencil.len() {
+            self.majorant = fine_majorant(stencil, coef);
+        }
         self.face_smoother = self
             .majorant
             .par_iter()
