@@ -1,7 +1,11 @@
 //! Aggregation multigrid over the voxel hierarchy: the preconditioner of [`crate::CgSolver`].
 //!
 //! Level 0 is the surface itself, with the matrix-free operator. Level `l` groups the
-//! vertices whose lattice corners fall in one cell of `2^l` voxels; its operator is the
+//! vertices whose lattice corners fall in one cell of `2^l` voxels and are connected
+//! through the surface inside it (the two sides of a thin sheet, or two labels' surfaces
+//! that meet only outside the cell, are separate nodes: one translation for both was a
+//! poor coarse space there, and cost multi-label surfaces a third more iterations,
+//! `docs/design/connected-aggregates.md`); its operator is the
 //! Galerkin product `P^T H P` for the piecewise-constant prolongation `P` (each coarse
 //! node moves its fine vertices by one translation: the energy's near-kernel, since
 //! translations only pay the small attachment term). Coarse operators are 3x3-block
@@ -92,27 +96,109 @@ pub(crate) struct Hierarchy {
     params: MultigridParams,
 }
 
-/// Groups nodes by `cell >> 1`; returns the aggregation and the coarse cells, numbered in
-/// lexicographic (z, y, x) cell order.
-fn aggregate(cells: &[[u32; 3]]) -> (Aggregation, Vec<[u32; 3]>) {
+/// Groups nodes by `cell >> 1` and, within a cell, by connected component of
+/// `neighbours`: the two sides of a sheet thinner than the cell, or two parts of a surface
+/// that meet only outside it, move independently and get a translation each. Returns the
+/// aggregation (numbered in lexicographic (z, y, x) cell order, then by the smallest
+/// member), the coarse cells and the coarse adjacency (aggregates joined by an edge, as
+/// offsets and neighbour lists).
+fn aggregate(
+    cells: &[[u32; 3]],
+    neighbours: &Adjacency<'_>,
+) -> (Aggregation, Vec<[u32; 3]>, Vec<u32>, Vec<u32>) {
     let key = |c: &[u32; 3]| ((c[2] as u64 >> 1) << 42) | ((c[1] as u64 >> 1) << 21) | (c[0] as u64 >> 1);
-    let mut order: Vec<(u64, u32)> = cells.par_iter().enumerate().map(|(i, c)| (key(c), i as u32)).collect();
-    order.par_sort_unstable();
-    let mut parent = vec![0u32; cells.len()];
-    let mut offsets = vec![0u32];
-    let mut members = Vec::with_capacity(cells.len());
-    let mut coarse = Vec::new();
-    for group in order.chunk_by(|a, b| a.0 == b.0) {
-        let a = coarse.len() as u32;
-        let c = cells[group[0].1 as usize];
-        coarse.push([c[0] >> 1, c[1] >> 1, c[2] >> 1]);
-        for &(_, i) in group {
-            parent[i as usize] = a;
-            members.push(i);
+    let n = cells.len();
+    // Union-find within each cell, the smaller index the root: deterministic components.
+    let mut root: Vec<u32> = (0..n as u32).collect();
+    fn find(root: &mut [u32], mut i: u32) -> u32 {
+        while root[i as usize] != i {
+            let up = root[root[i as usize] as usize];
+            root[i as usize] = up;
+            i = up;
         }
-        offsets.push(members.len() as u32);
+        i
     }
-    (Aggregation { parent, offsets, members }, coarse)
+    for i in 0..n {
+        let ki = key(&cells[i]);
+        neighbours.each(i, |j| {
+            if (j as usize) > i && key(&cells[j as usize]) == ki {
+                let (a, b) = (find(&mut root, i as u32), find(&mut root, j));
+                if a != b {
+                    root[a.max(b) as usize] = a.min(b);
+                }
+            }
+        });
+    }
+    let mut order: Vec<(u64, u32)> =
+        (0..n as u32).map(|i| (key(&cells[i as usize]), find(&mut root, i))).collect();
+    drop(root);
+    // Sorting (cell, component) pairs with each node's index: the members of an aggregate
+    // in increasing order, aggregates by cell, then by their smallest member.
+    let mut sorted: Vec<u32> = (0..n as u32).collect();
+    sorted.par_sort_unstable_by_key(|&i| (order[i as usize], i));
+    let mut parent = vec![0u32; n];
+    let mut offsets = vec![0u32];
+    let mut coarse = Vec::new();
+    for group in sorted.chunk_by(|&a, &b| order[a as usize] == order[b as usize]) {
+        let a = coarse.len() as u32;
+        let c = cells[group[0] as usize];
+        coarse.push([c[0] >> 1, c[1] >> 1, c[2] >> 1]);
+        for &i in group {
+            parent[i as usize] = a;
+        }
+        offsets.push(offsets.last().copied().unwrap_or(0) + group.len() as u32);
+    }
+    order.clear();
+    order.shrink_to_fit();
+    let agg = Aggregation { parent, offsets, members: sorted };
+    // The coarse adjacency: aggregates joined by an edge, each list sorted.
+    let lists: Vec<Vec<u32>> = (0..agg.len())
+        .into_par_iter()
+        .map(|a| {
+            let mut out = Vec::new();
+            for &i in agg.members(a) {
+                neighbours.each(i as usize, |j| {
+                    let b = agg.parent[j as usize];
+                    if b as usize != a {
+                        out.push(b);
+                    }
+                });
+            }
+            out.sort_unstable();
+            out.dedup();
+            out
+        })
+        .collect();
+    let mut coarse_offsets = Vec::with_capacity(lists.len() + 1);
+    coarse_offsets.push(0u32);
+    for l in &lists {
+        coarse_offsets.push(coarse_offsets.last().copied().unwrap_or(0) + l.len() as u32);
+    }
+    let coarse_nbrs: Vec<u32> = lists.into_iter().flatten().collect();
+    (agg, coarse, coarse_offsets, coarse_nbrs)
+}
+
+/// Each node's neighbours: the surface's (across its quads' edges, from the stencil) or a
+/// coarse level's (compressed lists).
+enum Adjacency<'a> {
+    Surface(&'a Stencil),
+    Lists { offsets: Vec<u32>, nbrs: Vec<u32> },
+}
+
+impl Adjacency<'_> {
+    fn each(&self, i: usize, mut f: impl FnMut(u32)) {
+        match self {
+            Adjacency::Surface(stencil) => {
+                for s in &stencil.face_slots()[stencil.face_range(i)] {
+                    f(s.prev);
+                    f(s.next);
+                }
+            }
+            Adjacency::Lists { offsets, nbrs } => {
+                nbrs[offsets[i] as usize..offsets[i + 1] as usize].iter().for_each(|&j| f(j))
+            }
+        }
+    }
 }
 
 impl Hierarchy {
@@ -120,9 +206,11 @@ impl Hierarchy {
     pub(crate) fn new(stencil: &Stencil, params: &MultigridParams) -> Self {
         let mut aggregations = Vec::new();
         let mut cells = stencil.corners.clone();
+        let mut adjacency = Adjacency::Surface(stencil);
         while cells.len() > params.coarsest_nodes.max(1) && aggregations.len() + 1 < params.max_levels.max(1)
         {
-            let (agg, coarse) = aggregate(&cells);
+            let (agg, coarse, offsets, nbrs) = aggregate(&cells, &adjacency);
+            adjacency = Adjacency::Lists { offsets, nbrs };
             if coarse.len() * 10 > cells.len() * 9 {
                 break; // no longer coarsening
             }
