@@ -313,9 +313,11 @@ fn refined(
 
 /// The estimate; once `interrupt` is raised, the surfels not yet done keep `field`'s
 /// normal (the caller reports the interruption). With `probe`, a wide disc is searched
-/// only where a plain search first finds another interface's interior within its reach
-/// (where none is, its share is 0 and the disc is not used: the same estimate, bit for
-/// bit, for a fraction of the search where junction curves are creases).
+/// only where a plain search first finds another interface's interior within its reach,
+/// and that search only where such an interior quad near enough is within the feature
+/// angle by a per-cell bound on the normals ([`InteriorNormals`]). Where none is, its
+/// share is 0 and the disc is not used: the same estimate, bit for bit, for a fraction of
+/// the search where junction curves are creases.
 #[allow(clippy::too_many_arguments)]
 fn refined_interruptible(
     surface: &DigitalSurface,
@@ -362,6 +364,8 @@ fn refined_interruptible(
     let normals: Vec<DVec3> = order.par_iter().map(|&s| field.as_slice()[s as usize]).collect();
     // One interface: every quad the adjacency reaches shares `f`'s regions.
     let single = surface.interfaces().len() < 2;
+    let interiors = (probe && !single)
+        .then(|| InteriorNormals::new(&nodes, &samples, &near_junction, JUNCTION_DISC_FACTOR * r));
     let out: Vec<DVec3> = (0..n)
         .into_par_iter()
         .with_min_len(4096)
@@ -551,7 +555,20 @@ fn refined_interruptible(
                 // there (one-sided: a wider disc would extrapolate farther); between the
                 // two by the share of the other interfaces' interior in the wider disc.
                 // (A search without the probe always returns its disc.)
-                let wide = near_junction[f].then(|| disc(JUNCTION_DISC_FACTOR * r, probe)).flatten();
+                let wide = near_junction[f]
+                    .then(|| {
+                        // No interior quad of another interface near enough and within the
+                        // feature angle: nothing for the probe to find.
+                        let none = interiors
+                            .as_ref()
+                            .is_some_and(|b| !b.may_continue(cf, iface_f, regions_f, nf, ramp.cos_zero));
+                        if none {
+                            None
+                        } else {
+                            disc(JUNCTION_DISC_FACTOR * r, probe)
+                        }
+                    })
+                    .flatten();
                 let mut plain = || disc(r, false).map_or(DVec3::ZERO, |(m, _)| m);
                 let m = match wide {
                     Some((wide, c)) if c >= 1.0 => wide,
@@ -573,6 +590,79 @@ fn refined_interruptible(
         field[*s as usize] = m;
     }
     NormalField::new(field)
+}
+
+/// Per cell of a grid of side `side` and per interface, the largest absolute components of
+/// the unit normals of its interior quads (not next to a junction, of positive area): a
+/// bound on their cosine to any direction, so that a wide disc's probe can be skipped where
+/// no such quad within `side` of the quad being refined is within the feature angle.
+struct InteriorNormals {
+    side: f64,
+    /// Sorted by cell key: `(key, interface, regions, largest |n_x|, |n_y|, |n_z|)`.
+    entries: Vec<(u64, u32, [u32; 2], DVec3)>,
+}
+
+impl InteriorNormals {
+    fn key(&self, c: DVec3) -> [i64; 3] {
+        let k = (c / self.side).floor();
+        [k.x as i64, k.y as i64, k.z as i64]
+    }
+
+    fn pack(k: [i64; 3]) -> u64 {
+        // 21 bits an axis (cells of a few voxels: far more than any volume's extent).
+        let b = |x: i64| (x as u64) & 0x1f_ffff;
+        (b(k[2]) << 42) | (b(k[1]) << 21) | b(k[0])
+    }
+
+    fn new(nodes: &[Node], samples: &[Sample], near_junction: &[bool], side: f64) -> InteriorNormals {
+        let mut this = InteriorNormals { side, entries: Vec::new() };
+        let mut all: Vec<(u64, u32, [u32; 2], DVec3)> = (0..nodes.len())
+            .filter(|&g| !near_junction[g] && samples[g].len > 0.0)
+            .map(|g| {
+                let key = Self::pack(this.key(nodes[g].centre));
+                (key, nodes[g].interface, nodes[g].regions, (samples[g].area / samples[g].len).abs())
+            })
+            .collect();
+        all.sort_unstable_by_key(|e| (e.0, e.1));
+        for group in all.chunk_by(|a, b| a.0 == b.0 && a.1 == b.1) {
+            let m = group.iter().fold(DVec3::ZERO, |m, e| m.max(e.3));
+            this.entries.push((group[0].0, group[0].1, group[0].2, m));
+        }
+        this
+    }
+
+    /// Whether an interior quad of an interface other than `interface`, sharing one of
+    /// `regions`, with a centre within `side` of `centre`, may have a cosine to `normal`
+    /// (a unit vector) above `cos_zero` in absolute value.
+    fn may_continue(
+        &self,
+        centre: DVec3,
+        interface: u32,
+        regions: [u32; 2],
+        normal: DVec3,
+        cos_zero: f64,
+    ) -> bool {
+        let [x, y, z] = self.key(centre);
+        let a = normal.abs();
+        for dz in -1..=1 {
+            for dy in -1..=1 {
+                for dx in -1..=1 {
+                    let key = Self::pack([x + dx, y + dy, z + dz]);
+                    let start = self.entries.partition_point(|e| e.0 < key);
+                    for e in self.entries[start..].iter().take_while(|e| e.0 == key) {
+                        // A margin over the rounding of the search's own cosines.
+                        if e.1 != interface
+                            && e.2.iter().any(|r| regions.contains(r))
+                            && e.3.dot(a) > cos_zero - 1e-9
+                        {
+                            return true;
+                        }
+                    }
+                }
+            }
+        }
+        false
+    }
 }
 
 /// The surfels sorted along a Morton (Z-order) curve of their cells, then by axis.
