@@ -391,6 +391,9 @@ fn refined_interruptible(
                     }
                 };
                 let feature_weight = |g: usize| if g == f { 1.0 } else { ramp.weight(cosine(g).abs()) };
+                // Whether the search may cross into quad `k`: its interface shares a
+                // region with `f`'s.
+                let shares = |k: usize| single || nodes[k].regions.iter().any(|r| regions_f.contains(r));
                 let mut disc = |r: f64, probe: bool| -> Option<(DVec3, f64)> {
                     let r2 = r * r;
                     if probe {
@@ -414,10 +417,7 @@ fn refined_interruptible(
                             }
                             for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
                                 let ku = k as usize;
-                                if !seen[ku]
-                                    && (single || nodes[ku].regions.iter().any(|r| regions_f.contains(r)))
-                                    && nodes[ku].centre.distance_squared(cf) < r2
-                                {
+                                if !seen[ku] && shares(ku) && nodes[ku].centre.distance_squared(cf) < r2 {
                                     seen[ku] = true;
                                     queue.push((k, 0, 0.0, 0.0));
                                 }
@@ -489,9 +489,7 @@ fn refined_interruptible(
                         }
                         for &k in &adjacent[starts[g] as usize..starts[g + 1] as usize] {
                             let ku = k as usize;
-                            if !seen[ku]
-                                && (single || nodes[ku].regions.iter().any(|r| regions_f.contains(r)))
-                            {
+                            if !seen[ku] && shares(ku) {
                                 let dk = nodes[ku].centre.distance_squared(cf);
                                 if dk < r2 {
                                     if pass >= 1.0 {
