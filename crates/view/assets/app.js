@@ -311,7 +311,7 @@ window.addEventListener('resize', draw);
 // yet), one request for the next frame is always out (/api/positions?after=FRAME, which
 // the server answers as soon as a newer frame is published), so a streamed iterate is
 // drawn without waiting for the state event that announces it.
-let fetchedJob = 0, lastJob = 0, lastDrawnAt = 0, lastFinal = false;
+let fetchedJob = 0, lastDrawnAt = 0;
 const framesWanted = () => {
   const s = view.state;
   return model && s.model_id === model.id && (frame !== s.frame || s.busy || (view.solveJob !== null && fetchedJob < view.solveJob && !s.error));
@@ -347,24 +347,28 @@ async function fetchPositions() {
 // Draws the frame just fetched (at once: it is what a change waits for).
 function drawFrame(job, final) {
   refresh();
-  [lastJob, lastDrawnAt, lastFinal] = [job, performance.now(), final];
+  lastDrawnAt = performance.now();
   mark(final ? 'result drawn' : 'iterate drawn');
   if (view.editPostedAt != null && view.editDrawnMs == null && view.state.edited) {
     view.editDrawnMs = lastDrawnAt - view.editPostedAt;
   }
-  if (view.solveJob !== null && job >= view.solveJob) solveFrameDrawn(final);
+  if (view.solveJob !== null && job >= view.solveJob) solveFrameDrawn(final, lastDrawnAt);
+  // Before the re-solve's reply names its job, every frame drawn is kept: the first of
+  // them that belongs to the posted run is its first frame.
+  else if (view.solveAskedAt !== null && view.solveJob === null) drawnBeforeReply.push([job, final, lastDrawnAt]);
 }
+let drawnBeforeReply = [];
 
 // A frame of the posted re-solve's run (or a later one's) was drawn: the first one's
 // latency from the change, and whether it was a streamed iterate or already the result.
-function solveFrameDrawn(final) {
+function solveFrameDrawn(final, at) {
   view.solveFrames++;
   if (view.solveAskedAt === null) return;
   if (view.solveLatencyMs === null) {
-    view.solveLatencyMs = lastDrawnAt - view.solveAskedAt;
+    view.solveLatencyMs = at - view.solveAskedAt;
     view.firstSolveFrameFinal = final;
   }
-  if (final && view.solveDoneMs === null) view.solveDoneMs = lastDrawnAt - view.solveAskedAt;
+  if (final && view.solveDoneMs === null) view.solveDoneMs = at - view.solveAskedAt;
 }
 
 async function loadResult() {
@@ -449,6 +453,7 @@ mark('module done');
 // value is committed, not on every keystroke or slider step.
 $('tuning').addEventListener('change', async (e) => {
   view.solveAskedAt = performance.now(); view.solveLatencyMs = null; view.solveDoneMs = null; view.solveFrames = 0; view.solveJob = null; view.solves++;
+  drawnBeforeReply = [];
   if (e.target.id === 'preset') {
     const r = await fetch('/api/preset?name=' + $('preset').value);
     if (r.ok) setTuning(await r.json());
@@ -457,8 +462,10 @@ $('tuning').addEventListener('change', async (e) => {
   if (!r.ok) { view.solveAskedAt = null; showError((await r.json()).error); return; }
   view.solveJob = (await r.json()).job;
   showError(null);
-  // Its first frame may have been drawn before the reply came.
-  if (lastJob >= view.solveJob) solveFrameDrawn(lastFinal);
+  // Its first frames may have been drawn before the reply came (a busy server answers
+  // the post late, not the frames).
+  for (const [job, final, at] of drawnBeforeReply) if (job >= view.solveJob) solveFrameDrawn(final, at);
+  drawnBeforeReply = [];
   fetchPositions();
 });
 $('tuning').addEventListener('submit', (e) => e.preventDefault());
