@@ -145,6 +145,11 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         Regularizer::from_volume(&volume, &params.regions)
             .with_context(|| format!("{}: no surface to regularize", path.display()))
     })?;
+    // What the run needs of the volume is in the surface now: unless the output is a
+    // volume, its memory goes back before the solves (the run's peak).
+    let labels =
+        args.report.as_ref().map(|_| report::named_labels(&volume, palette.as_ref())).unwrap_or_default();
+    let volume = matches!(product, Product::Volume { .. }).then_some(volume);
     let out = stages.pipeline(&params, |progress| {
         regularizer
             .run_with(&params, None, progress)
@@ -173,12 +178,13 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
             written
         }
         Product::Volume { factor } => {
+            let volume = volume.as_ref().expect("the input volume is kept for an upscale");
             let (fine, secs) = stages.run(&format!("upscale x{factor}"), || {
-                upscale(surface, &out.positions, &volume, &UpscaleParams { factor })
+                upscale(surface, &out.positions, volume, &UpscaleParams { factor })
                     .with_context(|| format!("{}: cannot upscale", path.display()))
             })?;
             io.upscale = Some(secs);
-            output::check_upscaled(args, &volume, &fine, factor)?;
+            output::check_upscaled(args, volume, &fine, factor)?;
             let ((), secs) =
                 stages.run("write volume", || Ok(write_volume(&args.output, &fine, palette.as_ref())?))?;
             io.write = secs;
@@ -193,7 +199,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         let full = CliReport {
             input: path.display().to_string(),
             output: args.output.display().to_string(),
-            labels: report::named_labels(&volume, palette.as_ref()),
+            labels,
             io,
             run: r,
         };

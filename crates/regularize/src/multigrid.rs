@@ -803,47 +803,93 @@ fn l1_smoother(rows: &Rows, damping: f64) -> Vec<Block> {
 pub(crate) struct Bsr {
     offsets: Vec<u32>,
     cols: Vec<u32>,
-    /// The blocks ([`Full`]).
-    blocks: Vec<Full>,
+    blocks: Blocks,
+}
+
+/// A level's blocks: symmetric ([`Block`], 24 bytes) for the whole operator, whose
+/// blocks are sums of `n n^T` and multiples of the identity, or general ([`Full`], 36
+/// bytes) for a face's operator, whose masks differ at a block's two ends.
+#[derive(Clone, Debug)]
+enum Blocks {
+    Sym(Vec<Block>),
+    Full(Vec<Full>),
+}
+
+impl Default for Blocks {
+    fn default() -> Self {
+        Blocks::Sym(Vec::new())
+    }
 }
 
 impl Bsr {
     /// The blocks of a level: the alignment part (`b[..9]`) plus the diagonal part, one
-    /// value for the three coordinates (the whole operator's rows, `W = 10`) or one per
-    /// coordinate (a face's rows, `W = FACE`, from `b[9]`).
+    /// value for the three coordinates (the whole operator's rows, `W = 10`, symmetric
+    /// blocks) or one per coordinate (a face's rows, `W = FACE`, from `b[9]`).
     fn from_rows<const W: usize>(rows: &Rows<W>) -> Self {
         let offsets = rows.offsets.iter().map(|&o| o as u32).collect();
         let cols = rows.cols.clone();
-        let blocks = rows
-            .vals
-            .par_iter()
-            .map(|b| {
-                let mut m = [0.0f32; 9];
-                m.copy_from_slice(&b[..9]);
-                for (k, t) in [0, 4, 8].into_iter().enumerate() {
-                    m[t] += b[if W == 10 { 9 } else { 9 + k }];
-                }
-                m
-            })
-            .collect();
+        let full = |b: &[f32; W]| {
+            let mut m = [0.0f32; 9];
+            m.copy_from_slice(&b[..9]);
+            for (k, t) in [0, 4, 8].into_iter().enumerate() {
+                m[t] += b[if W == 10 { 9 } else { 9 + k }];
+            }
+            m
+        };
+        let blocks = if W == 10 {
+            // The same numbers as the full block's (its entries are exactly symmetric:
+            // each is accumulated from the same products in the same order), so the
+            // products are the same to the bit.
+            Blocks::Sym(
+                rows.vals
+                    .par_iter()
+                    .map(|b| {
+                        let m = full(b);
+                        debug_assert!(m[1] == m[3] && m[2] == m[6] && m[5] == m[7], "an asymmetric block");
+                        [m[0], m[4], m[8], m[3], m[6], m[7]]
+                    })
+                    .collect(),
+            )
+        } else {
+            Blocks::Full(rows.vals.par_iter().map(full).collect())
+        };
         Bsr { offsets, cols, blocks }
     }
 
     /// Bytes read by one product.
     pub(crate) fn bytes(&self) -> usize {
-        4 * self.offsets.len() + 4 * self.cols.len() + 36 * self.blocks.len()
+        let blocks = match &self.blocks {
+            Blocks::Sym(b) => 24 * b.len(),
+            Blocks::Full(b) => 36 * b.len(),
+        };
+        4 * self.offsets.len() + 4 * self.cols.len() + blocks
     }
 
     /// `y = b - A x`.
     fn residual(&self, x: &[Vec3A], b: &[Vec3A], y: &mut [Vec3A]) {
+        match &self.blocks {
+            Blocks::Sym(blocks) => self.residual_with(blocks, block_mul, x, b, y),
+            Blocks::Full(blocks) => self.residual_with(blocks, full_mul, x, b, y),
+        }
+    }
+
+    #[inline(always)]
+    fn residual_with<B: Sync>(
+        &self,
+        blocks: &[B],
+        mul: impl Fn(&B, Vec3A) -> Vec3A + Sync,
+        x: &[Vec3A],
+        b: &[Vec3A],
+        y: &mut [Vec3A],
+    ) {
         y.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
             let base = k * CHUNK;
             for (o, yi) in out.iter_mut().enumerate() {
                 let i = base + o;
                 let (start, end) = (self.offsets[i] as usize, self.offsets[i + 1] as usize);
                 let mut acc = Vec3A::ZERO;
-                for (m, &c) in self.blocks[start..end].iter().zip(&self.cols[start..end]) {
-                    acc += full_mul(m, x[c as usize]);
+                for (m, &c) in blocks[start..end].iter().zip(&self.cols[start..end]) {
+                    acc += mul(m, x[c as usize]);
                 }
                 *yi = b[i] - acc;
             }
@@ -1339,6 +1385,54 @@ pub(crate) mod tests {
                 Vec3A::new(f32::from(v.x > 0.2), f32::from(v.y > 0.2), f32::from(v.z > 0.2))
             })
             .collect()
+    }
+
+    /// The whole operator's coarse blocks are stored as symmetric blocks: they must be
+    /// exactly symmetric at every level, and their products those of the full blocks to
+    /// the bit.
+    #[test]
+    fn whole_operator_blocks_are_exactly_symmetric() {
+        let torus = Torus { major: 8.0, minor: 3.0 };
+        let s = DigitalSurface::from_volume(&digitize(&torus, 1.0)).unwrap();
+        // Noisy normals and uneven weights: no symmetry from the shape itself.
+        let mut rng = Lcg::new(5);
+        let normals: Vec<DVec3> =
+            true_normals(&s, &torus).iter().map(|n| (*n + rng.vec3(-0.3, 0.3)).normalize()).collect();
+        let normals = voxreg_normals::NormalField::new(normals);
+        let input = s.positions();
+        let e = Energy::new(&s, &normals, &input, EnergyParams::default()).unwrap();
+        let st = Stencil::new(&s, None).unwrap();
+        let c = st.coefficients(&e);
+        let h = Hierarchy::new(&st, &MultigridParams { coarsest_nodes: 20, ..Default::default() });
+        assert!(h.levels() > 2);
+        let mut rows = galerkin_from_stencil(&st, &c, &h.aggregations[0]);
+        for agg in &h.aggregations[1..] {
+            assert!(rows.vals.iter().all(|b| b[1] == b[3] && b[2] == b[6] && b[5] == b[7]));
+            let sym = Bsr::from_rows(&rows);
+            assert!(matches!(sym.blocks, Blocks::Sym(_)));
+            let full = Bsr {
+                blocks: Blocks::Full(
+                    rows.vals
+                        .iter()
+                        .map(|b| {
+                            let mut m = [0.0f32; 9];
+                            m.copy_from_slice(&b[..9]);
+                            [0, 4, 8].into_iter().for_each(|t| m[t] += b[9]);
+                            m
+                        })
+                        .collect(),
+                ),
+                ..sym.clone()
+            };
+            let x: Vec<Vec3A> = (0..rows.len()).map(|_| rng.vec3(-1.0, 1.0).as_vec3a()).collect();
+            let b: Vec<Vec3A> = (0..rows.len()).map(|_| rng.vec3(-1.0, 1.0).as_vec3a()).collect();
+            let (mut ys, mut yf) = (vec![Vec3A::ZERO; rows.len()], vec![Vec3A::ZERO; rows.len()]);
+            sym.residual(&x, &b, &mut ys);
+            full.residual(&x, &b, &mut yf);
+            assert_eq!(ys, yf);
+            assert_eq!(full.bytes() - sym.bytes(), 12 * rows.vals.len());
+            rows = galerkin_from_rows(&rows, agg);
+        }
     }
 
     #[test]
