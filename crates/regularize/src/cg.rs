@@ -89,10 +89,11 @@ pub struct CgSolver {
 struct Buffers {
     u: Vec<DVec3>,
     r: Vec<DVec3>,
+    /// The preconditioned residual, and the operator's scratch once `p` has taken it in
+    /// (one vector fewer held during the solve).
     z: Vec<DVec3>,
     p: Vec<DVec3>,
     q: Vec<DVec3>,
-    t: Vec<DVec3>,
 }
 
 pub(crate) fn check_tolerance(tolerance: f64) -> Result<(), RegularizeError> {
@@ -213,9 +214,9 @@ impl CgSolver {
 
         let t = Instant::now();
         let zero = || vec![DVec3::ZERO; n];
-        let mut b = Buffers { u: zero(), r: zero(), z: zero(), p: zero(), q: zero(), t: zero() };
+        let mut b = Buffers { u: zero(), r: zero(), z: zero(), p: zero(), q: zero() };
         // r = alpha p - H p = -(H - diag(alpha)) p: only differences of positions, exact.
-        stencil.apply(&prepared.coef, input, &mut b.r, &mut b.t, false);
+        stencil.apply(&prepared.coef, input, &mut b.r, &mut b.z, false);
         b.r.par_chunks_mut(CHUNK).for_each(|c| c.iter_mut().for_each(|x| *x = -*x));
         let rhs = b.r.clone();
         let r0 = norm(&b.r);
@@ -226,7 +227,7 @@ impl CgSolver {
             b.u.par_chunks_mut(CHUNK).zip(input.par_chunks(CHUNK).zip(start.par_chunks(CHUNK))).for_each(
                 |(u, (p, s))| u.iter_mut().zip(p.iter().zip(s)).for_each(|(u, (p, s))| *u = *s - *p),
             );
-            stencil.residual(&prepared.coef, &b.u, &rhs, &mut b.r, &mut b.t);
+            stencil.residual(&prepared.coef, &b.u, &rhs, &mut b.r, &mut b.z);
             applications += 1;
             rnorm = norm(&b.r);
         }
@@ -251,7 +252,7 @@ impl CgSolver {
                     interrupted = true;
                     break 'outer;
                 }
-                let pq = stencil.apply_dot(&prepared.coef, &b.p, &mut b.q, &mut b.t);
+                let pq = stencil.apply_dot(&prepared.coef, &b.p, &mut b.q, &mut b.z);
                 applications += 1;
                 if !(pq > 0.0 && rz > 0.0) {
                     break 'outer; // converged to rounding
@@ -268,7 +269,7 @@ impl CgSolver {
                 };
                 if done || iterations >= self.params.max_iterations {
                     // The recursive residual drifts from the true one: report the latter.
-                    stencil.residual(&prepared.coef, &b.u, &rhs, &mut b.r, &mut b.t);
+                    stencil.residual(&prepared.coef, &b.u, &rhs, &mut b.r, &mut b.z);
                     applications += 1;
                     rnorm = norm(&b.r);
                     let drifted = self.params.stopping == StoppingRule::Guaranteed && rnorm > guaranteed;
@@ -326,7 +327,7 @@ impl CgSolver {
         // Per iteration: one product, dot(p, q), the update (u, r, p, q), dot(r, z), p's
         // update (p, z), and the preconditioner.
         let traffic = self.setup.traffic_model(&prepared, 1, 2 + 6 + 2 + 3);
-        let memory = self.setup.memory_bytes(&prepared) + 7 * 24 * n;
+        let memory = self.setup.memory_bytes(&prepared) + 6 * 24 * n;
         if prepared.stale {
             stale_iterations = iterations;
         }
