@@ -456,6 +456,32 @@ impl<const W: usize> Rows<W> {
         self.offsets.len() - 1
     }
 
+    /// Rows `dirty` computed anew by `f` (as [`Rows::build`] does, so to the bit), in
+    /// place; `false` if a row's columns differ (its pattern is not this one's).
+    fn recompute(&mut self, dirty: &[usize], f: impl Fn(&mut Accumulator<W>, usize) + Sync) -> bool {
+        let n = self.len();
+        let fresh: Vec<(usize, Vec<u32>, Vec<[f32; W]>)> = dirty
+            .par_iter()
+            .map_init(
+                || Accumulator { slot: vec![u32::MAX; n], row: Vec::with_capacity(64) },
+                |acc, &a| {
+                    f(acc, a);
+                    let (mut cols, mut vals) = (Vec::new(), Vec::new());
+                    acc.flush_into(&mut cols, &mut vals);
+                    (a, cols, vals)
+                },
+            )
+            .collect();
+        for (a, cols, vals) in fresh {
+            let r = self.offsets[a]..self.offsets[a + 1];
+            if self.cols[r.clone()] != cols[..] {
+                return false;
+            }
+            self.vals[r].copy_from_slice(&vals);
+        }
+        true
+    }
+
     fn nnz(&self) -> usize {
         self.cols.len()
     }
@@ -606,16 +632,19 @@ fn galerkin_from_stencil(stencil: &Stencil, coef: &Coefficients<'_>, agg: &Aggre
 /// `P^T A P` of an assembled level.
 fn galerkin_from_rows<const W: usize>(rows: &Rows<W>, agg: &Aggregation) -> Rows<W> {
     let nc = agg.len();
-    Rows::build(nc, nc, |acc, a| {
-        for &i in agg.members(a) {
-            for (j, block) in rows.row(i as usize) {
-                let e = acc.entry(agg.parent[j as usize]);
-                for t in 0..W {
-                    e[t] += block[t];
-                }
+    Rows::build(nc, nc, |acc, a| galerkin_row(acc, rows, agg, a))
+}
+
+/// Row `a` of `P^T A P`: the rows of aggregate `a`'s members, summed by aggregate.
+fn galerkin_row<const W: usize>(acc: &mut Accumulator<W>, rows: &Rows<W>, agg: &Aggregation, a: usize) {
+    for &i in agg.members(a) {
+        for (j, block) in rows.row(i as usize) {
+            let e = acc.entry(agg.parent[j as usize]);
+            for t in 0..W {
+                e[t] += block[t];
             }
         }
-    })
+    }
 }
 
 /// The numbers of a block of a face's operator `P^T D H D P` (`D` the 0/1 diagonal of the
@@ -729,37 +758,36 @@ fn face_row_reads(stencil: &Stencil, changed: &[bool], i: usize) -> bool {
 /// majorant part, `d` the diagonal part of [`FACE`]); a coordinate that no free vertex
 /// moves (a zero row) gets the identity.
 fn l1_face_smoother(rows: &Rows<FACE>, damping: f64) -> Vec<Block> {
-    (0..rows.len())
-        .into_par_iter()
-        .map(|i| {
-            let mut d = [0.0; 6];
-            for (j, b) in rows.row(i) {
-                if j as usize == i {
-                    let sym =
-                        [b[0], b[4], b[8], 0.5 * (b[3] + b[1]), 0.5 * (b[6] + b[2]), 0.5 * (b[7] + b[5])];
-                    for t in 0..6 {
-                        d[t] += sym[t];
-                    }
-                    for t in 0..3 {
-                        d[t] += b[9 + t];
-                    }
-                } else {
-                    for t in 0..6 {
-                        d[t] += b[12 + t];
-                    }
-                    for t in 0..3 {
-                        d[t] += b[9 + t].abs();
-                    }
-                }
+    (0..rows.len()).into_par_iter().map(|i| l1_face_block(rows, i, damping)).collect()
+}
+
+/// Row `i`'s block of [`l1_face_smoother`].
+fn l1_face_block(rows: &Rows<FACE>, i: usize, damping: f64) -> Block {
+    let mut d = [0.0; 6];
+    for (j, b) in rows.row(i) {
+        if j as usize == i {
+            let sym = [b[0], b[4], b[8], 0.5 * (b[3] + b[1]), 0.5 * (b[6] + b[2]), 0.5 * (b[7] + b[5])];
+            for t in 0..6 {
+                d[t] += sym[t];
             }
             for t in 0..3 {
-                if d[t] == 0.0 {
-                    d[t] = 1.0;
-                }
+                d[t] += b[9 + t];
             }
-            block(&scale6(&sym_inverse(&d), damping))
-        })
-        .collect()
+        } else {
+            for t in 0..6 {
+                d[t] += b[12 + t];
+            }
+            for t in 0..3 {
+                d[t] += b[9 + t].abs();
+            }
+        }
+    }
+    for t in 0..3 {
+        if d[t] == 0.0 {
+            d[t] = 1.0;
+        }
+    }
+    block(&scale6(&sym_inverse(&d), damping))
 }
 
 /// The coarse levels of a face's operator ([`Vcycle::set_face`]).
@@ -767,9 +795,10 @@ fn l1_face_smoother(rows: &Rows<FACE>, damping: f64) -> Vec<Block> {
 struct FaceLevels {
     levels: Vec<Level>,
     coarsest: Option<Coarsest>,
-    /// The first coarse level's rows, and the face they were built for, to update them
-    /// for the next face ([`Vcycle::updated_face_hierarchy`]).
-    rows: Rows<FACE>,
+    /// Every coarse level's rows (the first coarse level's first), and the face they
+    /// were built for, to update them for the next face
+    /// ([`Vcycle::updated_face_hierarchy`]).
+    rows: Vec<Rows<FACE>>,
     face: Vec<Vec3A>,
 }
 
@@ -828,14 +857,7 @@ impl Bsr {
     fn from_rows<const W: usize>(rows: &Rows<W>) -> Self {
         let offsets = rows.offsets.iter().map(|&o| o as u32).collect();
         let cols = rows.cols.clone();
-        let full = |b: &[f32; W]| {
-            let mut m = [0.0f32; 9];
-            m.copy_from_slice(&b[..9]);
-            for (k, t) in [0, 4, 8].into_iter().enumerate() {
-                m[t] += b[if W == 10 { 9 } else { 9 + k }];
-            }
-            m
-        };
+        let full = full_block::<W>;
         let blocks = if W == 10 {
             // The same numbers as the full block's (its entries are exactly symmetric:
             // each is accumulated from the same products in the same order), so the
@@ -854,6 +876,18 @@ impl Bsr {
             Blocks::Full(rows.vals.par_iter().map(full).collect())
         };
         Bsr { offsets, cols, blocks }
+    }
+
+    /// Rows `dirty` of a face's level (general blocks) from `rows` (the same pattern).
+    fn set_rows<const W: usize>(&mut self, rows: &Rows<W>, dirty: &[usize]) {
+        let Blocks::Full(blocks) = &mut self.blocks else {
+            unreachable!("a face's level has general blocks")
+        };
+        for &i in dirty {
+            for k in rows.offsets[i]..rows.offsets[i + 1] {
+                blocks[k] = full_block(&rows.vals[k]);
+            }
+        }
     }
 
     /// Bytes read by one product.
@@ -895,6 +929,17 @@ impl Bsr {
             }
         });
     }
+}
+
+/// A level's block from its row entry: the alignment part (`b[..9]`) plus the diagonal
+/// part, one value for the three coordinates (`W = 10`) or one per coordinate (`W = FACE`).
+fn full_block<const W: usize>(b: &[f32; W]) -> Full {
+    let mut m = [0.0f32; 9];
+    m.copy_from_slice(&b[..9]);
+    for (k, t) in [0, 4, 8].into_iter().enumerate() {
+        m[t] += b[if W == 10 { 9 } else { 9 + k }];
+    }
+    m
 }
 
 /// Sparse Cholesky of the coarsest level.
@@ -1078,7 +1123,7 @@ impl Vcycle {
             let levels: usize = f.levels.iter().map(|l| l.matrix.bytes() + 24 * l.n).sum();
             levels
                 + f.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len())
-                + f.rows.bytes()
+                + f.rows.iter().map(Rows::bytes).sum::<usize>()
                 + 16 * f.face.len()
         });
         face + 24 * (self.fine_smoother.len() + self.face_smoother.len())
@@ -1196,25 +1241,33 @@ impl Vcycle {
 
     /// The face's levels from its first coarse level's rows.
     fn face_levels_from(&self, rows: Rows<FACE>, face: Vec<Vec3A>) -> Option<FaceLevels> {
-        let mut levels = vec![Level { matrix: Bsr::default(), smoother: Vec::new(), n: rows.len() }];
-        let mut owned: Option<Rows<FACE>> = None;
+        let mut all = vec![rows];
         for agg in &self.aggregations[1..] {
-            let finer = owned.as_ref().unwrap_or(&rows);
-            let coarse = galerkin_from_rows(finer, agg);
-            let last = levels.last_mut().expect("a previous level");
-            last.matrix = Bsr::from_rows(finer);
-            last.smoother = l1_face_smoother(finer, self.damping);
-            levels.push(Level { matrix: Bsr::default(), smoother: Vec::new(), n: agg.len() });
-            owned = Some(coarse);
+            let coarse = galerkin_from_rows(all.last().expect("a finer level"), agg);
+            all.push(coarse);
         }
-        let coarsest = Coarsest::face(owned.as_ref().unwrap_or(&rows)).ok()?;
-        Some(FaceLevels { levels, coarsest: Some(coarsest), rows, face })
+        // Every level but the coarsest (factored) is smoothed and multiplied.
+        let levels = all
+            .iter()
+            .enumerate()
+            .map(|(k, r)| match k + 1 < all.len() {
+                true => Level {
+                    matrix: Bsr::from_rows(r),
+                    smoother: l1_face_smoother(r, self.damping),
+                    n: r.len(),
+                },
+                false => Level { matrix: Bsr::default(), smoother: Vec::new(), n: r.len() },
+            })
+            .collect();
+        let coarsest = Coarsest::face(all.last().expect("a coarse level")).ok()?;
+        Some(FaceLevels { levels, coarsest: Some(coarsest), rows: all, face })
     }
 
     /// The face's levels for `face`, updated from `built` (those of another face of the
     /// same operator): only the rows of the first coarse level that read a vertex whose
-    /// free coordinates changed are recomputed ([`face_row_reads`]), the coarser levels
-    /// are rebuilt from them. The same levels as [`Vcycle::face_hierarchy`], at a cost
+    /// free coordinates changed are recomputed ([`face_row_reads`]), then on each coarser
+    /// level the rows of the aggregates holding a recomputed row, with their blocks and
+    /// smoother blocks. The same levels as [`Vcycle::face_hierarchy`], at a cost
     /// that follows the number of changed vertices instead of the surface's size. `None`
     /// where the change is too large to gain (a quarter of the vertices or more) or a
     /// row's pattern differs (it cannot: which entries a row has does not depend on the
@@ -1236,27 +1289,32 @@ impl Vcycle {
             .into_par_iter()
             .filter(|&a| agg.members(a).iter().any(|&i| face_row_reads(stencil, &changed, i as usize)))
             .collect();
-        let FaceLevels { mut rows, .. } = built;
-        let fresh: Vec<(usize, Vec<u32>, Vec<[f32; FACE]>)> = dirty
-            .par_iter()
-            .map_init(
-                || Accumulator { slot: vec![u32::MAX; agg.len()], row: Vec::with_capacity(64) },
-                |acc, &a| {
-                    face_row(acc, stencil, coef, agg, face, a);
-                    let (mut cols, mut vals) = (Vec::new(), Vec::new());
-                    acc.flush_into(&mut cols, &mut vals);
-                    (a, cols, vals)
-                },
-            )
-            .collect();
-        for (a, cols, vals) in fresh {
-            let r = rows.offsets[a]..rows.offsets[a + 1];
-            if rows.cols[r.clone()] != cols[..] {
+        let FaceLevels { mut levels, mut rows, .. } = built;
+        let mut dirty = dirty;
+        if rows.len() != levels.len()
+            || !rows[0].recompute(&dirty, |acc, a| face_row(acc, stencil, coef, agg, face, a))
+        {
+            return None;
+        }
+        for k in 0..rows.len() - 1 {
+            let level = &mut levels[k];
+            level.matrix.set_rows(&rows[k], &dirty);
+            for &i in &dirty {
+                level.smoother[i] = l1_face_block(&rows[k], i, self.damping);
+            }
+            let coarser = &self.aggregations[k + 1];
+            let mut next: Vec<usize> = dirty.iter().map(|&i| coarser.parent[i] as usize).collect();
+            next.sort_unstable();
+            next.dedup();
+            let (finer, rest) = rows.split_at_mut(k + 1);
+            let finer = &finer[k];
+            if !rest[0].recompute(&next, |acc, a| galerkin_row(acc, finer, coarser, a)) {
                 return None;
             }
-            rows.vals[r].copy_from_slice(&vals);
+            dirty = next;
         }
-        self.face_levels_from(rows, face.to_vec())
+        let coarsest = Coarsest::face(rows.last().expect("a coarse level")).ok()?;
+        Some(FaceLevels { levels, coarsest: Some(coarsest), rows, face: face.to_vec() })
     }
 
     /// [`Vcycle::apply`] for the operator restricted to a face (the coordinates where
@@ -1463,8 +1521,15 @@ pub(crate) mod tests {
             let mut fresh = h.numeric(&st, &c, &Interrupt::never()).unwrap();
             fresh.set_face(&st, &c, &next, false);
             let (a, b) = (updated.face_levels.as_ref().unwrap(), fresh.face_levels.as_ref().unwrap());
-            assert_eq!(a.rows.cols, b.rows.cols);
-            assert_eq!(a.rows.vals, b.rows.vals);
+            assert_eq!(a.rows.len(), b.rows.len());
+            for (ra, rb) in a.rows.iter().zip(&b.rows) {
+                assert_eq!(ra.cols, rb.cols);
+                assert_eq!(ra.vals, rb.vals);
+            }
+            for (la, lb) in a.levels.iter().zip(&b.levels) {
+                assert_eq!(la.smoother, lb.smoother);
+                assert_eq!(la.matrix.bytes(), lb.matrix.bytes());
+            }
             let (mut za, mut zb) = (vec![DVec3::ZERO; st.len()], vec![DVec3::ZERO; st.len()]);
             updated.apply_on_face(&st, &r, &mut za, Some(&next));
             fresh.apply_on_face(&st, &r, &mut zb, Some(&next));
