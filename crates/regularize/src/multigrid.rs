@@ -857,7 +857,6 @@ impl Bsr {
     fn from_rows<const W: usize>(rows: &Rows<W>) -> Self {
         let offsets = rows.offsets.iter().map(|&o| o as u32).collect();
         let cols = rows.cols.clone();
-        let full = full_block::<W>;
         let blocks = if W == 10 {
             // The same numbers as the full block's (its entries are exactly symmetric:
             // each is accumulated from the same products in the same order), so the
@@ -866,14 +865,14 @@ impl Bsr {
                 rows.vals
                     .par_iter()
                     .map(|b| {
-                        let m = full(b);
+                        let m = full_block(b);
                         debug_assert!(m[1] == m[3] && m[2] == m[6] && m[5] == m[7], "an asymmetric block");
                         [m[0], m[4], m[8], m[3], m[6], m[7]]
                     })
                     .collect(),
             )
         } else {
-            Blocks::Full(rows.vals.par_iter().map(full).collect())
+            Blocks::Full(rows.vals.par_iter().map(full_block).collect())
         };
         Bsr { offsets, cols, blocks }
     }
@@ -1250,13 +1249,16 @@ impl Vcycle {
         let levels = all
             .iter()
             .enumerate()
-            .map(|(k, r)| match k + 1 < all.len() {
-                true => Level {
-                    matrix: Bsr::from_rows(r),
-                    smoother: l1_face_smoother(r, self.damping),
-                    n: r.len(),
-                },
-                false => Level { matrix: Bsr::default(), smoother: Vec::new(), n: r.len() },
+            .map(|(k, r)| {
+                if k + 1 < all.len() {
+                    Level {
+                        matrix: Bsr::from_rows(r),
+                        smoother: l1_face_smoother(r, self.damping),
+                        n: r.len(),
+                    }
+                } else {
+                    Level { matrix: Bsr::default(), smoother: Vec::new(), n: r.len() }
+                }
             })
             .collect();
         let coarsest = Coarsest::face(all.last().expect("a coarse level")).ok()?;
@@ -1285,12 +1287,11 @@ impl Vcycle {
         if 4 * count >= face.len() {
             return None;
         }
-        let dirty: Vec<usize> = (0..agg.len())
+        let mut dirty: Vec<usize> = (0..agg.len())
             .into_par_iter()
             .filter(|&a| agg.members(a).iter().any(|&i| face_row_reads(stencil, &changed, i as usize)))
             .collect();
         let FaceLevels { mut levels, mut rows, .. } = built;
-        let mut dirty = dirty;
         if rows.len() != levels.len()
             || !rows[0].recompute(&dirty, |acc, a| face_row(acc, stencil, coef, agg, face, a))
         {
@@ -1445,17 +1446,18 @@ pub(crate) mod tests {
             .collect()
     }
 
-    /// The whole operator's coarse blocks are stored as symmetric blocks: they must be
-    /// exactly symmetric at every level, and their products those of the full blocks to
-    /// the bit.
-    #[test]
-    fn whole_operator_blocks_are_exactly_symmetric() {
+    /// Runs `test` on the default energy of a digitized torus (its true normals, each
+    /// moved by up to `noise` per coordinate and normalized when `noise > 0`): the
+    /// stencil, the coefficients and a hierarchy of at least three levels, with a random
+    /// generator seeded with `seed`.
+    fn on_torus(noise: f64, seed: u64, test: impl FnOnce(&Stencil, &Coefficients<'_>, &Hierarchy, &mut Lcg)) {
         let torus = Torus { major: 8.0, minor: 3.0 };
         let s = DigitalSurface::from_volume(&digitize(&torus, 1.0)).unwrap();
-        // Noisy normals and uneven weights: no symmetry from the shape itself.
-        let mut rng = Lcg::new(5);
-        let normals: Vec<DVec3> =
-            true_normals(&s, &torus).iter().map(|n| (*n + rng.vec3(-0.3, 0.3)).normalize()).collect();
+        let mut rng = Lcg::new(seed);
+        let mut normals = true_normals(&s, &torus);
+        if noise > 0.0 {
+            normals.iter_mut().for_each(|n| *n = (*n + rng.vec3(-noise, noise)).normalize());
+        }
         let normals = voxreg_normals::NormalField::new(normals);
         let input = s.positions();
         let e = Energy::new(&s, &normals, &input, EnergyParams::default()).unwrap();
@@ -1463,77 +1465,68 @@ pub(crate) mod tests {
         let c = st.coefficients(&e);
         let h = Hierarchy::new(&st, &MultigridParams { coarsest_nodes: 20, ..Default::default() });
         assert!(h.levels() > 2);
-        let mut rows = galerkin_from_stencil(&st, &c, &h.aggregations[0]);
-        for agg in &h.aggregations[1..] {
-            assert!(rows.vals.iter().all(|b| b[1] == b[3] && b[2] == b[6] && b[5] == b[7]));
-            let sym = Bsr::from_rows(&rows);
-            assert!(matches!(sym.blocks, Blocks::Sym(_)));
-            let full = Bsr {
-                blocks: Blocks::Full(
-                    rows.vals
-                        .iter()
-                        .map(|b| {
-                            let mut m = [0.0f32; 9];
-                            m.copy_from_slice(&b[..9]);
-                            [0, 4, 8].into_iter().for_each(|t| m[t] += b[9]);
-                            m
-                        })
-                        .collect(),
-                ),
-                ..sym.clone()
-            };
-            let x: Vec<Vec3A> = (0..rows.len()).map(|_| rng.vec3(-1.0, 1.0).as_vec3a()).collect();
-            let b: Vec<Vec3A> = (0..rows.len()).map(|_| rng.vec3(-1.0, 1.0).as_vec3a()).collect();
-            let (mut ys, mut yf) = (vec![Vec3A::ZERO; rows.len()], vec![Vec3A::ZERO; rows.len()]);
-            sym.residual(&x, &b, &mut ys);
-            full.residual(&x, &b, &mut yf);
-            assert_eq!(ys, yf);
-            assert_eq!(full.bytes() - sym.bytes(), 12 * rows.vals.len());
-            rows = galerkin_from_rows(&rows, agg);
-        }
+        test(&st, &c, &h, &mut rng);
+    }
+
+    /// The whole operator's coarse blocks are stored as symmetric blocks: they must be
+    /// exactly symmetric at every level, and their products those of the full blocks to
+    /// the bit.
+    #[test]
+    fn whole_operator_blocks_are_exactly_symmetric() {
+        // Noisy normals: no symmetry from the shape itself.
+        on_torus(0.3, 5, |st, c, h, rng| {
+            let mut rows = galerkin_from_stencil(st, c, &h.aggregations[0]);
+            for agg in &h.aggregations[1..] {
+                assert!(rows.vals.iter().all(|b| b[1] == b[3] && b[2] == b[6] && b[5] == b[7]));
+                let sym = Bsr::from_rows(&rows);
+                assert!(matches!(sym.blocks, Blocks::Sym(_)));
+                let full =
+                    Bsr { blocks: Blocks::Full(rows.vals.iter().map(full_block).collect()), ..sym.clone() };
+                let x: Vec<Vec3A> = (0..rows.len()).map(|_| rng.vec3(-1.0, 1.0).as_vec3a()).collect();
+                let b: Vec<Vec3A> = (0..rows.len()).map(|_| rng.vec3(-1.0, 1.0).as_vec3a()).collect();
+                let (mut ys, mut yf) = (vec![Vec3A::ZERO; rows.len()], vec![Vec3A::ZERO; rows.len()]);
+                sym.residual(&x, &b, &mut ys);
+                full.residual(&x, &b, &mut yf);
+                assert_eq!(ys, yf);
+                assert_eq!(full.bytes() - sym.bytes(), 12 * rows.vals.len());
+                rows = galerkin_from_rows(&rows, agg);
+            }
+        });
     }
 
     #[test]
     fn updated_face_levels_are_those_built_anew() {
-        let torus = Torus { major: 8.0, minor: 3.0 };
-        let s = DigitalSurface::from_volume(&digitize(&torus, 1.0)).unwrap();
-        let normals = voxreg_normals::NormalField::new(true_normals(&s, &torus));
-        let input = s.positions();
-        let e = Energy::new(&s, &normals, &input, EnergyParams::default()).unwrap();
-        let st = Stencil::new(&s, None).unwrap();
-        let c = st.coefficients(&e);
-        let h = Hierarchy::new(&st, &MultigridParams { coarsest_nodes: 20, ..Default::default() });
-        assert!(h.levels() > 2);
-        let mut rng = Lcg::new(3);
-        let first = random_face(st.len(), &mut rng);
-        // The next face: the first one with a few vertices changed (an update), then one
-        // with most of them changed (built anew).
-        let mut few = first.clone();
-        for i in (0..st.len()).step_by(37) {
-            few[i] = Vec3A::new(1.0, 0.0, 1.0) - few[i] * Vec3A::new(1.0, 0.0, 1.0);
-        }
-        let many = random_face(st.len(), &mut rng);
-        let r: Vec<DVec3> = (0..st.len()).map(|_| rng.vec3(-1.0, 1.0)).collect();
-        for next in [few, many] {
-            let mut updated = h.numeric(&st, &c, &Interrupt::never()).unwrap();
-            updated.set_face(&st, &c, &first, false);
-            updated.set_face(&st, &c, &next, true);
-            let mut fresh = h.numeric(&st, &c, &Interrupt::never()).unwrap();
-            fresh.set_face(&st, &c, &next, false);
-            let (a, b) = (updated.face_levels.as_ref().unwrap(), fresh.face_levels.as_ref().unwrap());
-            assert_eq!(a.rows.len(), b.rows.len());
-            for (ra, rb) in a.rows.iter().zip(&b.rows) {
-                assert_eq!(ra.cols, rb.cols);
-                assert_eq!(ra.vals, rb.vals);
+        on_torus(0.0, 3, |st, c, h, rng| {
+            let first = random_face(st.len(), rng);
+            // The next face: the first one with a few vertices changed (an update), then one
+            // with most of them changed (built anew).
+            let mut few = first.clone();
+            for i in (0..st.len()).step_by(37) {
+                few[i] = Vec3A::new(1.0, 0.0, 1.0) - few[i] * Vec3A::new(1.0, 0.0, 1.0);
             }
-            for (la, lb) in a.levels.iter().zip(&b.levels) {
-                assert_eq!(la.smoother, lb.smoother);
-                assert_eq!(la.matrix.bytes(), lb.matrix.bytes());
+            let many = random_face(st.len(), rng);
+            let r: Vec<DVec3> = (0..st.len()).map(|_| rng.vec3(-1.0, 1.0)).collect();
+            for next in [few, many] {
+                let mut updated = h.numeric(st, c, &Interrupt::never()).unwrap();
+                updated.set_face(st, c, &first, false);
+                updated.set_face(st, c, &next, true);
+                let mut fresh = h.numeric(st, c, &Interrupt::never()).unwrap();
+                fresh.set_face(st, c, &next, false);
+                let (a, b) = (updated.face_levels.as_ref().unwrap(), fresh.face_levels.as_ref().unwrap());
+                assert_eq!(a.rows.len(), b.rows.len());
+                for (ra, rb) in a.rows.iter().zip(&b.rows) {
+                    assert_eq!(ra.cols, rb.cols);
+                    assert_eq!(ra.vals, rb.vals);
+                }
+                for (la, lb) in a.levels.iter().zip(&b.levels) {
+                    assert_eq!(la.smoother, lb.smoother);
+                    assert_eq!(la.matrix.bytes(), lb.matrix.bytes());
+                }
+                let (mut za, mut zb) = (vec![DVec3::ZERO; st.len()], vec![DVec3::ZERO; st.len()]);
+                updated.apply_on_face(st, &r, &mut za, Some(&next));
+                fresh.apply_on_face(st, &r, &mut zb, Some(&next));
+                assert_eq!(za, zb);
             }
-            let (mut za, mut zb) = (vec![DVec3::ZERO; st.len()], vec![DVec3::ZERO; st.len()]);
-            updated.apply_on_face(&st, &r, &mut za, Some(&next));
-            fresh.apply_on_face(&st, &r, &mut zb, Some(&next));
-            assert_eq!(za, zb);
-        }
+        });
     }
 }

@@ -312,6 +312,9 @@ window.addEventListener('resize', draw);
 // the server answers as soon as a newer frame is published), so a streamed iterate is
 // drawn without waiting for the state event that announces it.
 let fetchedJob = 0, lastDrawnAt = 0;
+// Frames drawn after a change was posted and before its reply named the run's job:
+// [job, final, drawn at].
+let drawnBeforeReply = [];
 const framesWanted = () => {
   const s = view.state;
   return model && s.model_id === model.id && (frame !== s.frame || s.busy || (view.solveJob !== null && fetchedJob < view.solveJob && !s.error));
@@ -357,7 +360,6 @@ function drawFrame(job, final) {
   // them that belongs to the posted run is its first frame.
   else if (view.solveAskedAt !== null && view.solveJob === null) drawnBeforeReply.push([job, final, lastDrawnAt]);
 }
-let drawnBeforeReply = [];
 
 // A frame of the posted re-solve's run (or a later one's) was drawn: the first one's
 // latency from the change, and whether it was a streamed iterate or already the result.
