@@ -369,8 +369,17 @@ impl FineNumbers {
         4 * (self.alpha.len() + self.fair.len()) + 16 * self.slot_normals.len()
     }
 
-    /// `y = b - H x` in `f32`, in the two passes of the `f64` product (`t` is scratch).
-    fn residual(&self, stencil: &Stencil, x: &[Vec3A], b: &[Vec3A], y: &mut [Vec3A], t: &mut [Vec3A]) {
+    /// `y = b - H x` in `f32`, in the two passes of the `f64` product (`t` is scratch),
+    /// masked by `face` when given.
+    fn residual(
+        &self,
+        stencil: &Stencil,
+        x: &[Vec3A],
+        b: &[Vec3A],
+        y: &mut [Vec3A],
+        t: &mut [Vec3A],
+        face: Option<&[Vec3A]>,
+    ) {
         t.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
             let base = k * CHUNK;
             for (o, ti) in out.iter_mut().enumerate() {
@@ -399,7 +408,7 @@ impl FineNumbers {
                 }
                 let nb = stencil.fair_neighbours(i);
                 let sum: Vec3A = nb.iter().map(|&j| t[j as usize]).sum();
-                *yi = b[i] - (acc + nb.len() as f32 * t[i] - sum);
+                *yi = masked(face, i, b[i] - (acc + nb.len() as f32 * t[i] - sum));
             }
         });
     }
@@ -1075,21 +1084,44 @@ pub(crate) struct Vcycle {
     pub(crate) factor_seconds: f64,
 }
 
-fn smooth(m: &[Block], r: &[Vec3A], x: &mut [Vec3A], add: bool) {
-    x.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(m.par_chunks(CHUNK)).for_each(|((x, r), m)| {
-        for i in 0..x.len() {
-            let d = block_mul(&m[i], r[i]);
-            x[i] = if add { x[i] + d } else { d };
-        }
-    });
+/// The fine smoother's block of a vertex on a face: the damped inverse of its majorant
+/// `m` on the free coordinates (`face` 1), the identity on the held ones.
+fn face_smoother_block(m: &[f64; 6], face: Vec3A, damping: f64) -> Block {
+    let keep = [face.x != 0.0, face.y != 0.0, face.z != 0.0];
+    // [xx, yy, zz, xy, xz, yz]
+    let pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)];
+    let mut b = [0.0; 6];
+    for (k, &(i, j)) in pairs.iter().enumerate() {
+        b[k] = if keep[i] && keep[j] {
+            m[k]
+        } else if i == j {
+            1.0
+        } else {
+            0.0
+        };
+    }
+    block(&scale6(&sym_inverse(&b), damping))
 }
 
-/// `v *= face` coordinate-wise (nothing without a face).
-fn mask(face: Option<&[Vec3A]>, v: &mut [Vec3A]) {
-    if let Some(f) = face {
-        v.par_chunks_mut(CHUNK).zip(f.par_chunks(CHUNK)).for_each(|(v, f)| {
-            v.iter_mut().zip(f).for_each(|(v, f)| *v *= *f);
-        });
+/// `x = m r` (or `x += m r` with `add`), masked by `face` when given.
+fn smooth(m: &[Block], r: &[Vec3A], x: &mut [Vec3A], add: bool, face: Option<&[Vec3A]>) {
+    x.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(m.par_chunks(CHUNK)).enumerate().for_each(
+        |(k, ((x, r), m))| {
+            for i in 0..x.len() {
+                let d = block_mul(&m[i], r[i]);
+                x[i] = masked(face, k * CHUNK + i, if add { x[i] + d } else { d });
+            }
+        },
+    );
+}
+
+/// `v * face[i]` coordinate-wise (`v` without a face): the cycle's masks, applied where
+/// each value is written rather than in passes of their own.
+#[inline(always)]
+fn masked(face: Option<&[Vec3A]>, i: usize, v: Vec3A) -> Vec3A {
+    match face {
+        Some(f) => v * f[i],
+        None => v,
     }
 }
 
@@ -1101,10 +1133,11 @@ fn restrict(agg: &Aggregation, fine: &[Vec3A], coarse: &mut [Vec3A]) {
     });
 }
 
-fn prolong_add(parent: &[u32], coarse: &[Vec3A], fine: &mut [Vec3A]) {
-    fine.par_chunks_mut(CHUNK).zip(parent.par_chunks(CHUNK)).for_each(|(f, p)| {
+/// `fine += P coarse`, masked by `face` when given.
+fn prolong_add(parent: &[u32], coarse: &[Vec3A], fine: &mut [Vec3A], face: Option<&[Vec3A]>) {
+    fine.par_chunks_mut(CHUNK).zip(parent.par_chunks(CHUNK)).enumerate().for_each(|(k, (f, p))| {
         for i in 0..f.len() {
-            f[i] += coarse[p[i] as usize];
+            f[i] = masked(face, k * CHUNK + i, f[i] + coarse[p[i] as usize]);
         }
     });
 }
@@ -1192,36 +1225,37 @@ impl Vcycle {
     ) {
         // The former face's levels go first: one face hierarchy in memory at a time.
         let built = self.face_levels.take();
+        let damping = self.damping;
+        if self.majorant.len() != stencil.len() {
+            self.majorant = fine_majorant(stencil, coef);
+        }
+        // The fine smoother: its blocks change only where the face does.
+        let former = built.as_ref().map(|b| &b.face[..]);
+        match former {
+            Some(former) if update && self.face_smoother.len() == face.len() && former.len() == face.len() => {
+                self.face_smoother
+                    .par_iter_mut()
+                    .zip(self.majorant.par_iter().zip(face.par_iter().zip(former)))
+                    .for_each(|(s, (m, (f, g)))| {
+                        if f != g {
+                            *s = face_smoother_block(m, *f, damping);
+                        }
+                    });
+            }
+            _ => {
+                self.face_smoother = self
+                    .majorant
+                    .par_iter()
+                    .zip(face.par_iter())
+                    .map(|(m, f)| face_smoother_block(m, *f, damping))
+                    .collect();
+            }
+        }
         self.face_levels = match built {
             Some(b) if update => self.updated_face_hierarchy(stencil, coef, face, b),
             _ => None,
         }
         .or_else(|| self.face_hierarchy(stencil, coef, face));
-        let damping = self.damping;
-        if self.majorant.len() != stencil.len() {
-            self.majorant = fine_majorant(stencil, coef);
-        }
-        self.face_smoother = self
-            .majorant
-            .par_iter()
-            .zip(face.par_iter())
-            .map(|(m, f)| {
-                let keep = [f.x != 0.0, f.y != 0.0, f.z != 0.0];
-                // [xx, yy, zz, xy, xz, yz]
-                let pairs = [(0, 0), (1, 1), (2, 2), (0, 1), (0, 2), (1, 2)];
-                let mut b = [0.0; 6];
-                for (k, &(i, j)) in pairs.iter().enumerate() {
-                    b[k] = if keep[i] && keep[j] {
-                        m[k]
-                    } else if i == j {
-                        1.0
-                    } else {
-                        0.0
-                    };
-                }
-                block(&scale6(&sym_inverse(&b), damping))
-            })
-            .collect();
     }
 
     /// The coarse levels of the face's operator; `None` when its coarsest level does not
@@ -1336,9 +1370,9 @@ impl Vcycle {
         let mut works = std::mem::take(&mut self.works);
         let (fine, rest) = works.split_at_mut(1);
         let w = &mut fine[0];
-        w.b.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).for_each(|(b, r)| {
-            for (b, r) in b.iter_mut().zip(r) {
-                *b = r.as_vec3a();
+        w.b.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).enumerate().for_each(|(k, (b, r))| {
+            for (i, (b, r)) in b.iter_mut().zip(r).enumerate() {
+                *b = masked(face, k * CHUNK + i, r.as_vec3a());
             }
         });
         // Fine level: pre-smooth from zero, restrict the residual.
@@ -1348,16 +1382,12 @@ impl Vcycle {
         } else {
             &self.fine_smoother
         };
-        mask(face, &mut w.b);
-        smooth(smoother, &w.b, &mut w.x, false);
-        mask(face, &mut w.x);
+        smooth(smoother, &w.b, &mut w.x, false, face);
         if !self.levels.is_empty() {
             for s in 0..steps {
-                self.fine.residual(stencil, &w.x, &w.b, &mut w.r, &mut w.t);
-                mask(face, &mut w.r);
+                self.fine.residual(stencil, &w.x, &w.b, &mut w.r, &mut w.t, face);
                 if s + 1 < steps {
-                    smooth(smoother, &w.r, &mut w.x, true);
-                    mask(face, &mut w.x);
+                    smooth(smoother, &w.r, &mut w.x, true, face);
                 }
             }
             restrict(&self.aggregations[0], &w.r, &mut rest[0].r);
@@ -1365,13 +1395,10 @@ impl Vcycle {
                 (Some(_), Some(f)) => self.coarse_cycle(&f.levels, f.coarsest.as_ref(), 0, rest),
                 _ => self.coarse_cycle(&self.levels, self.coarsest.as_ref(), 0, rest),
             }
-            prolong_add(&self.aggregations[0].parent, &rest[0].x, &mut w.x);
-            mask(face, &mut w.x);
+            prolong_add(&self.aggregations[0].parent, &rest[0].x, &mut w.x, face);
             for _ in 0..steps {
-                self.fine.residual(stencil, &w.x, &w.b, &mut w.r, &mut w.t);
-                mask(face, &mut w.r);
-                smooth(smoother, &w.r, &mut w.x, true);
-                mask(face, &mut w.x);
+                self.fine.residual(stencil, &w.x, &w.b, &mut w.r, &mut w.t, face);
+                smooth(smoother, &w.r, &mut w.x, true, face);
             }
         }
         self.face_smoother = face_smoother;
@@ -1395,11 +1422,11 @@ impl Vcycle {
         let (here, rest) = works.split_at_mut(1);
         let w = &mut here[0];
         let level = &levels[l];
-        smooth(&level.smoother, &w.r, &mut w.x, false);
+        smooth(&level.smoother, &w.r, &mut w.x, false, None);
         for s in 0..steps {
             level.matrix.residual(&w.x, &w.r, &mut w.t);
             if s + 1 < steps {
-                smooth(&level.smoother, &w.t, &mut w.x, true);
+                smooth(&level.smoother, &w.t, &mut w.x, true, None);
             }
         }
         restrict(&self.aggregations[l + 1], &w.t, &mut rest[0].r);
@@ -1407,10 +1434,10 @@ impl Vcycle {
         let level = &levels[l];
         let (here, rest) = works.split_at_mut(1);
         let w = &mut here[0];
-        prolong_add(&self.aggregations[l + 1].parent, &rest[0].x, &mut w.x);
+        prolong_add(&self.aggregations[l + 1].parent, &rest[0].x, &mut w.x, None);
         for _ in 0..steps {
             level.matrix.residual(&w.x, &w.r, &mut w.t);
-            smooth(&level.smoother, &w.t, &mut w.x, true);
+            smooth(&level.smoother, &w.t, &mut w.x, true, None);
         }
     }
 }
