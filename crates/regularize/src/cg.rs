@@ -314,7 +314,9 @@ impl CgSolver {
             self.setup.keep(prepared);
             return Err(RegularizeError::Interrupted);
         }
-        let x: Vec<DVec3> = input.par_iter().zip(&b.u).map(|(p, u)| *p + *u).collect();
+        // The positions in the displacement's own vector: no new one at the solve's peak.
+        let mut x = std::mem::take(&mut b.u);
+        x.par_iter_mut().zip(input.par_iter()).for_each(|(u, p)| *u = *p + *u);
         let solve_seconds = t.elapsed().as_secs_f64();
         let relative = if r0 > 0.0 { rnorm / r0 } else { 0.0 };
         let bound = rnorm / alpha_min / h;

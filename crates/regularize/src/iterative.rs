@@ -224,7 +224,7 @@ impl Setup {
     /// passes over `n` 3-vectors, and the preconditioner.
     pub(crate) fn traffic_model(&self, prepared: &Prepared<'_>, products: usize, streams: usize) -> usize {
         let n = self.stencil.len();
-        let product = self.stencil.bytes() + prepared.coef.slot_normals.len() * 24 + 8 * n + 5 * 24 * n;
+        let product = self.stencil.bytes() + prepared.coef.face_normals.len() * 24 + 8 * n + 5 * 24 * n;
         products * product + streams * 24 * n + prepared.pre.traffic(self.stencil.bytes(), n)
     }
 }

@@ -352,8 +352,8 @@ fn full_mul(m: &Full, v: Vec3A) -> Vec3A {
 struct FineNumbers {
     alpha: Vec<f32>,
     fair: Vec<f32>,
-    /// `sqrt(beta_f) n_f` per face slot, as [`Coefficients::slot_normals`].
-    slot_normals: Vec<Vec3A>,
+    /// `sqrt(beta_f) n_f` per face, as [`Coefficients::face_normals`].
+    face_normals: Vec<Vec3A>,
 }
 
 impl FineNumbers {
@@ -361,12 +361,12 @@ impl FineNumbers {
         FineNumbers {
             alpha: (0..stencil.len()).into_par_iter().map(|i| coef.alpha.get(i) as f32).collect(),
             fair: coef.fair.par_iter().map(|&c| c as f32).collect(),
-            slot_normals: coef.slot_normals.par_iter().map(|m| m.as_vec3a()).collect(),
+            face_normals: coef.face_normals.par_iter().map(|m| m.as_vec3a()).collect(),
         }
     }
 
     fn bytes(&self) -> usize {
-        4 * (self.alpha.len() + self.fair.len()) + 16 * self.slot_normals.len()
+        4 * (self.alpha.len() + self.fair.len()) + 16 * self.face_normals.len()
     }
 
     /// `y = b - H x` in `f32`, in the two passes of the `f64` product (`t` is scratch),
@@ -403,8 +403,9 @@ impl FineNumbers {
                 let xi = x[i];
                 let mut acc = self.alpha[i] * xi;
                 let range = stencil.face_range(i);
-                for (s, m) in slots[range.clone()].iter().zip(&self.slot_normals[range]) {
-                    acc += (2.0 * xi - x[s.prev as usize] - x[s.next as usize]).dot(*m) * *m;
+                for s in &slots[range] {
+                    let m = self.face_normals[s.face as usize];
+                    acc += (2.0 * xi - x[s.prev as usize] - x[s.next as usize]).dot(m) * m;
                 }
                 let nb = stencil.fair_neighbours(i);
                 let sum: Vec3A = nb.iter().map(|&j| t[j as usize]).sum();
@@ -1232,7 +1233,9 @@ impl Vcycle {
         // The fine smoother: its blocks change only where the face does.
         let former = built.as_ref().map(|b| &b.face[..]);
         match former {
-            Some(former) if update && self.face_smoother.len() == face.len() && former.len() == face.len() => {
+            Some(former)
+                if update && self.face_smoother.len() == face.len() && former.len() == face.len() =>
+            {
                 self.face_smoother
                     .par_iter_mut()
                     .zip(self.majorant.par_iter().zip(face.par_iter().zip(former)))
