@@ -246,6 +246,14 @@ fn stitched_deviation() {
         params.solver = params.solver.with_tolerance(tol);
     }
     let margin = env("VOXREG_DIAG_MARGIN", super::CUT_MARGIN);
+    // The blocks' own solver tolerances, when they differ from the whole volume's.
+    let mut block_params = params.clone();
+    if let Some(tol) = std::env::var("VOXREG_DIAG_BLOCK_TOL").ok().and_then(|v| v.parse::<f64>().ok()) {
+        block_params.solver = block_params.solver.with_tolerance(tol);
+    }
+    if let Some(itol) = std::env::var("VOXREG_DIAG_BLOCK_ITOL").ok().and_then(|v| v.parse::<f64>().ok()) {
+        block_params.intermediate_tolerance = itol;
+    }
     let t = std::time::Instant::now();
     let whole = crate::regularize(&volume, &params).unwrap();
     eprintln!("whole: {} quads, {:.1} s", whole.surface.num_surfels(), t.elapsed().as_secs_f64());
@@ -272,11 +280,11 @@ fn stitched_deviation() {
                 let end = [0, 1, 2].map(|k| (owned[k][1] + halo).min(dims[k]));
                 let block = Block { global_dims: dims, start, owned };
                 let Some(mut reg) =
-                    block_regularizer(&sub(&volume, start, end), &block, &params, margin).unwrap()
+                    block_regularizer(&sub(&volume, start, end), &block, &block_params, margin).unwrap()
                 else {
                     continue;
                 };
-                let out = reg.run(&params).unwrap();
+                let out = reg.run(&block_params).unwrap();
                 let part = super::owned_part(&out.surface, out.positions.as_slice(), &block, None);
                 quads += part.quads.len();
                 for (v, &id) in part.vertex_ids.iter().enumerate() {
