@@ -337,7 +337,7 @@ pub(crate) struct RegularizeArgs {
     pub(crate) refine: Option<usize>,
     /// The solves before the last refinement round stop at F times --tolerance (their
     /// positions only feed the refined normals): larger is faster, 1 solves every round
-    /// to the tolerance [default: 3].
+    /// to the tolerance [default: 2].
     #[arg(long, value_name = "F")]
     pub(crate) intermediate_tolerance: Option<f64>,
     /// Do not re-centre the attachment targets between refinement rounds (the papers'

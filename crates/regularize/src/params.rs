@@ -161,10 +161,12 @@ pub struct Params {
     /// Tolerance of the solves whose result only feeds a refinement round (every solve
     /// but the last), as a multiple of the iterative solver's tolerance; the last solve
     /// stops at the tolerance itself. Their positions only go into the refined normals
-    /// and the re-centring: at `3` the output stays within the tolerance of the one with
-    /// every round solved to it (`1`), while larger factors save more iterations but let
-    /// a few quads cross the crease and feature thresholds (up to a tenth of a voxel at
-    /// `10` on bunny-128; `docs/design/intermediate-tolerance.md`). Default: `3`.
+    /// and the re-centring, which can amplify what they leave: at `2` the output stays
+    /// within the tolerance of the one with every round solved to it (`1`), and a chunked
+    /// run stays within 1e-2 voxel of the whole volume's, while larger factors save a few
+    /// iterations but let some vertices move further (at `3`, 1.2e-2 voxel between a
+    /// chunked and a whole run of the synthetic tissue; at `10` a tenth of a voxel on
+    /// bunny-128; `docs/design/intermediate-tolerance.md`). Default: `2`.
     pub intermediate_tolerance: f64,
     /// Radius, in voxels, of the disc whose regularized quad normals are averaged into a
     /// refined normal. Default: `3`.
@@ -322,7 +324,7 @@ impl Default for Params {
             normals: NormalsParams::default(),
             energy: Self::ENERGY,
             refine: 3,
-            intermediate_tolerance: 3.0,
+            intermediate_tolerance: 2.0,
             refine_radius: 3.0,
             feature_angle_deg: 30.0,
             preserve_size: true,
