@@ -7,7 +7,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
-use crate::boxqp::{active_set, minimize_in_boxes, place, BoxProblem, Boxes, Place, ACTIVE_SET_LOOSE};
+use crate::boxqp::{
+    active_set, minimize_free, minimize_in_boxes, place, BoxProblem, Boxes, Place, ACTIVE_SET_LOOSE,
+};
 use crate::cg::check_tolerance;
 use crate::clamping::clamp_boxes;
 use crate::info::BoundedInfo;
@@ -315,12 +317,10 @@ impl BoundedSolver {
         let input = energy.input();
         let rounds = self.params.active_set_rounds;
         if !warm {
-            let unbounded = Boxes::unbounded(s.u.len());
             // The rounds only need the unconstrained minimizer's binding coordinates, not
             // its last digits: a start as loose as their own first solves.
             let loose = if rounds > 0 { ACTIVE_SET_LOOSE } else { 1.0 };
-            let first = BoxProblem { tol: problem.tol * loose, ..*problem };
-            let free = minimize_in_boxes(&first, prepared, &unbounded, &mut s.u, &mut s.r, &mut |_| {});
+            let free = minimize_free(problem, prepared, problem.tol * loose, &mut s.u, &mut s.r);
             s.applications += free.applications;
             s.start_applications = free.applications;
         }

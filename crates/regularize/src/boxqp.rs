@@ -39,11 +39,6 @@ impl Boxes {
         Boxes { lo: vec![-w; n], hi: vec![w; n] }
     }
 
-    /// No bounds.
-    pub(crate) fn unbounded(n: usize) -> Boxes {
-        Self::uniform(n, DVec3::splat(f64::INFINITY))
-    }
-
     /// `u` projected into the boxes.
     pub(crate) fn project(&self, u: &mut [DVec3]) {
         u.par_chunks_mut(CHUNK).zip(self.chunks()).for_each(|(u, (lo, hi))| {
@@ -352,6 +347,55 @@ pub(crate) fn minimize_in_boxes(
         }
     }
     BoxStats { iterations, applications, estimate, energy_change: de_total }
+}
+
+/// Minimizes `E(input + u)` without bounds from `u` (`r = rhs - H u` on entry) by
+/// preconditioned CG, to `tol` (the stopping rule of [`minimize_in_boxes`]): the
+/// unconstrained start of the active-set rounds. The same iteration as
+/// [`minimize_in_boxes`] in boxes that never bind, without its passes over the boxes.
+pub(crate) fn minimize_free(
+    problem: &BoxProblem<'_>,
+    prepared: &mut Prepared<'_>,
+    tol: f64,
+    u: &mut [DVec3],
+    r: &mut [DVec3],
+) -> BoxStats {
+    let BoxProblem { stencil, max_iterations, interrupt, .. } = *problem;
+    let n = u.len();
+    let coef = &prepared.coef;
+    let zero = || vec![DVec3::ZERO; n];
+    let (mut z, mut p, mut q, mut t) = (zero(), zero(), zero(), zero());
+    let mut stats = BoxStats { iterations: 0, applications: 0, estimate: f64::INFINITY, energy_change: 0.0 };
+    let mut residuals = vec![dot(r, r).sqrt()];
+    prepared.pre.apply(stencil, r, &mut p);
+    let mut rz = dot(r, &p);
+    while rz > 0.0 && stats.iterations < max_iterations && !interrupt.is_raised() {
+        stencil.apply(coef, &p, &mut q, &mut t, true);
+        stats.applications += 1;
+        let pq = dot(&p, &q);
+        if pq.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+            break;
+        }
+        let a = rz / pq;
+        // E changes by -2 a (r . p) + a^2 (p . q), with r . p = r . z = rz.
+        stats.energy_change += -2.0 * a * rz + a * a * pq;
+        let (r2, p2) = cg_update(u, r, a, &p, &q);
+        stats.iterations += 1;
+        // As in `minimize_in_boxes`: the rate from the residuals before this step.
+        stats.estimate = 2.0 * tail_estimate(a * p2.sqrt(), &residuals);
+        residuals.push(r2.sqrt());
+        if stats.estimate <= tol {
+            break;
+        }
+        prepared.pre.apply(stencil, r, &mut z);
+        let rz_new = dot(r, &z);
+        let s = rz_new / rz;
+        p.par_chunks_mut(CHUNK).zip(z.par_chunks(CHUNK)).for_each(|(p, z)| {
+            p.iter_mut().zip(z).for_each(|(p, z)| *p = *p * s + *z);
+        });
+        rz = rz_new;
+    }
+    stats
 }
 
 /// The factor of the tolerance at which the active-set rounds stop their CG while the
