@@ -478,9 +478,9 @@ pub(crate) fn active_set(
         stencil.residual(coef, u, rhs, r, &mut t);
         stats.applications += 1;
         // Preconditioned CG on the free coordinates.
-        mask_held(&hold, r, &mut t);
-        let mut residuals = vec![dot(&t, &t).sqrt()];
-        prepared.pre.apply_on_face(stencil, &t, &mut p, &face);
+        // The face's preconditioner masks its input: `r` goes in as it is.
+        let mut residuals = vec![free_norm(&hold, r)];
+        prepared.pre.apply_on_face(stencil, r, &mut p, &face);
         let mut rz = dot(r, &p);
         while rz > 0.0 && stats.iterations < max_iterations && !interrupt.is_raised() {
             stencil.apply(coef, &p, &mut q, &mut t, true);
@@ -492,13 +492,12 @@ pub(crate) fn active_set(
             let a = rz / pq;
             let (_, p2) = cg_update(u, r, a, &p, &q);
             stats.iterations += 1;
-            mask_held(&hold, r, &mut t);
-            residuals.push(dot(&t, &t).sqrt());
+            residuals.push(free_norm(&hold, r));
             let estimate = 2.0 * tail_estimate(a * p2.sqrt(), &residuals);
             if estimate <= tol {
                 break;
             }
-            prepared.pre.apply_on_face(stencil, &t, &mut z, &face);
+            prepared.pre.apply_on_face(stencil, r, &mut z, &face);
             let rz_new = dot(r, &z);
             let s = rz_new / rz;
             p.par_chunks_mut(CHUNK).zip(z.par_chunks(CHUNK)).for_each(|(p, z)| {
@@ -590,17 +589,22 @@ fn hold_on_bounds(hold: &[[Hold; 3]], b: &Boxes, u: &mut [DVec3]) {
     });
 }
 
-/// `out = r` with the held coordinates zeroed.
-fn mask_held(hold: &[[Hold; 3]], r: &[DVec3], out: &mut [DVec3]) {
-    out.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(hold.par_chunks(CHUNK)).for_each(
-        |((o, r), hold)| {
-            for i in 0..o.len() {
-                for a in 0..3 {
-                    o[i][a] = if hold[i][a] == Hold::Free { r[i][a] } else { 0.0 };
+/// The norm of `r` on the free coordinates (the held ones zeroed).
+fn free_norm(hold: &[[Hold; 3]], r: &[DVec3]) -> f64 {
+    crate::vecops::ordered(r.par_chunks(CHUNK).zip(hold.par_chunks(CHUNK)).map(|(r, hold)| {
+        let mut s = 0.0;
+        for i in 0..r.len() {
+            let mut m = r[i];
+            for a in 0..3 {
+                if hold[i][a] != Hold::Free {
+                    m[a] = 0.0;
                 }
             }
-        },
-    );
+            s += m.dot(m);
+        }
+        s
+    }))
+    .sqrt()
 }
 
 #[cfg(test)]

@@ -281,16 +281,27 @@ impl Pre {
     /// `z = M_F^-1 r` on the face where `face` is 1 (0 on the held coordinates): the
     /// multigrid cycle of the face's operator ([`Vcycle::apply_on_face`]); the others
     /// are diagonal, so restricting them is masking.
+    /// `r` need not be masked: each preconditioner masks its input and its output.
     pub(crate) fn apply_on_face(&mut self, stencil: &Stencil, r: &[DVec3], z: &mut [DVec3], face: &[Vec3A]) {
+        let each = |z: &mut [DVec3], f: &(dyn Fn(usize, DVec3) -> DVec3 + Sync)| {
+            z.par_chunks_mut(CHUNK)
+                .zip(r.par_chunks(CHUNK))
+                .zip(face.par_chunks(CHUNK))
+                .enumerate()
+                .for_each(|(k, ((z, r), m))| {
+                    for i in 0..z.len() {
+                        let m = m[i].as_dvec3();
+                        z[i] = f(k * CHUNK + i, r[i] * m) * m;
+                    }
+                });
+        };
         match self {
+            Pre::Identity => each(z, &|_, r| r),
+            Pre::Jacobi(d) => each(z, &|i, r| r * d[i]),
+            Pre::Block(d) => each(z, &|i, r| sym_mul(&d[i], r)),
+            // The cycle masks its input and every value it writes.
             Pre::Multigrid(v) => v.apply_on_face(stencil, r, z, Some(face)),
-            _ => self.apply(stencil, r, z),
         }
-        z.par_chunks_mut(CHUNK).zip(face.par_chunks(CHUNK)).for_each(|(z, f)| {
-            for (z, f) in z.iter_mut().zip(f) {
-                *z *= f.as_dvec3();
-            }
-        });
     }
 
     fn memory_bytes(&self) -> usize {
