@@ -614,17 +614,17 @@ impl InteriorNormals {
 
     fn new(nodes: &[Node], samples: &[Sample], near_junction: &[bool], side: f64) -> InteriorNormals {
         let mut this = InteriorNormals { side, entries: Vec::new() };
-        let mut all: Vec<(u64, u32, [u32; 2], DVec3)> = (0..nodes.len())
+        // Sorted as (cell key, interface, quad): 16 bytes a quad while sorting, the
+        // normals read from the quads (an interface's quads share its regions).
+        let mut all: Vec<(u64, u32, u32)> = (0..nodes.len())
             .filter(|&g| !near_junction[g] && samples[g].len > 0.0)
-            .map(|g| {
-                let key = Self::pack(this.key(nodes[g].centre));
-                (key, nodes[g].interface, nodes[g].regions, (samples[g].area / samples[g].len).abs())
-            })
+            .map(|g| (Self::pack(this.key(nodes[g].centre)), nodes[g].interface, g as u32))
             .collect();
-        all.sort_unstable_by_key(|e| (e.0, e.1));
+        all.sort_unstable();
+        let unit = |g: u32| (samples[g as usize].area / samples[g as usize].len).abs();
         for group in all.chunk_by(|a, b| a.0 == b.0 && a.1 == b.1) {
-            let m = group.iter().fold(DVec3::ZERO, |m, e| m.max(e.3));
-            this.entries.push((group[0].0, group[0].1, group[0].2, m));
+            let m = group.iter().fold(DVec3::ZERO, |m, e| m.max(unit(e.2)));
+            this.entries.push((group[0].0, group[0].1, nodes[group[0].2 as usize].regions, m));
         }
         this
     }

@@ -148,6 +148,12 @@ impl CgSolver {
         self.quick_start = on;
     }
 
+    /// Drops the multigrid cycle kept from the last solve for a quick start: its memory
+    /// is free for what runs before a next solve that will not quick-start.
+    pub(crate) fn forget_kept_cycle(&mut self) {
+        self.setup.forget_kept();
+    }
+
     /// The flag the next solves poll: once raised, a solve returns
     /// [`RegularizeError::Interrupted`] at its next multigrid level or iteration, keeping
     /// its cycle for the next quick start. Default: [`Interrupt::never`].

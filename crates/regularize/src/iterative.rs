@@ -207,6 +207,11 @@ impl Setup {
         Ok(())
     }
 
+    /// Drops the cycle kept for a quick start (the next solve builds its own anyway).
+    pub(crate) fn forget_kept(&mut self) {
+        self.kept = None;
+    }
+
     /// Keeps `prepared`'s multigrid cycle for the next solve's quick start.
     pub(crate) fn keep(&mut self, prepared: Prepared<'_>) {
         if let Pre::Multigrid(v) = prepared.pre {

@@ -323,6 +323,11 @@ impl Regularizer {
         let mut done = 1.0;
         for round in 0..=params.refine {
             if round > 0 {
+                if warm.get(round).is_none() {
+                    // This round's solve builds its own cycle: the last one's memory goes
+                    // to the refinement first.
+                    solver.forget_kept_cycle();
+                }
                 let t = Instant::now();
                 progress(&Event {
                     stage: Stage::Refine { round },

@@ -239,6 +239,14 @@ impl Solver {
         }
     }
 
+    /// Drops the conjugate gradient's cycle kept for a quick start
+    /// ([`CgSolver::forget_kept_cycle`]); the others keep none.
+    pub(crate) fn forget_kept_cycle(&mut self) {
+        if let Solver::Cg(s) = self {
+            s.forget_kept_cycle();
+        }
+    }
+
     /// The flag the iterative solvers poll in their setup and iterations (the direct
     /// solver's factorization cannot be stopped, and is small).
     pub(crate) fn set_interrupt(&mut self, interrupt: Interrupt) {
