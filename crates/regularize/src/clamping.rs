@@ -1,8 +1,8 @@
 //! The clamping boxes of voxel art: the papers' cubes around each vertex, shrunk around
 //! thin voxels so that one-voxel parts keep their thickness.
 
-use std::collections::HashSet;
-
+use rayon::prelude::*;
+use rustc_hash::FxHashSet as HashSet;
 use voxreg_digisurf::{DigitalSurface, VertexId};
 
 use crate::boxqp::Boxes;
@@ -21,7 +21,7 @@ type Faces = HashSet<(u8, [i64; 3])>;
 /// The thin voxels and the surfels.
 fn thin_and_faces(surface: &DigitalSurface) -> (HashSet<[i64; 3]>, Faces) {
     let faces: Faces = surface.surfels().iter().map(|s| (s.axis, s.cell.map(i64::from))).collect();
-    let mut thin = HashSet::new();
+    let mut thin = HashSet::default();
     for &(axis, cell) in &faces {
         // Surfel (axis, cell) is the lower face of voxel `cell`: is its upper face one too?
         let mut up = cell;
@@ -52,7 +52,9 @@ pub(crate) fn clamp_boxes(surface: &DigitalSurface, half: f64, thin: Option<f64>
     if thin.is_empty() {
         return boxes;
     }
-    for v in 0..n {
+    // Each vertex bounds only its own box: in parallel.
+    let Boxes { lo, hi } = &mut boxes;
+    lo.par_iter_mut().zip(hi.par_iter_mut()).enumerate().for_each(|(v, (lo, hi))| {
         let k = surface.vertex_corner(VertexId(v as u32)).map(i64::from);
         for o in 0..8usize {
             let off = [o & 1, (o >> 1) & 1, (o >> 2) & 1];
@@ -70,13 +72,13 @@ pub(crate) fn clamp_boxes(surface: &DigitalSurface, half: f64, thin: Option<f64>
                     continue;
                 }
                 if off[a] == 0 {
-                    boxes.hi[v][a] = boxes.hi[v][a].min(cap[a]);
+                    hi[a] = hi[a].min(cap[a]);
                 } else {
-                    boxes.lo[v][a] = boxes.lo[v][a].max(-cap[a]);
+                    lo[a] = lo[a].max(-cap[a]);
                 }
             }
         }
-    }
+    });
     boxes
 }
 
