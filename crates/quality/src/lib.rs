@@ -110,26 +110,36 @@ fn vector_area(p: [DVec3; 4]) -> DVec3 {
 
 /// The pairs of quads sharing an edge that no other quad shares, with their vector
 /// areas, the second one flipped when the pair runs the shared edge in the same direction
-/// (so that orientations agree). Degenerate quads are left out.
+/// (so that orientations agree), sorted by pair. Degenerate quads are left out.
 fn adjacent_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize), DVec3, DVec3)> {
+    let mut out = adjacent_pairs_unsorted(positions, quads);
+    out.par_sort_unstable_by_key(|x| x.0);
+    out
+}
+
+/// [`adjacent_pairs`] in the order of their shared edges.
+fn adjacent_pairs_unsorted(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize), DVec3, DVec3)> {
     // Every quad's edges as (undirected edge, quad, runs low to high), sorted by edge then
     // quad: a run of two entries of two quads is a pair; longer runs are edges shared by
     // more than two. A sort, not a map of edges: linear memory, no allocation per edge.
-    let mut edges: Vec<(u64, u32, bool)> = quads
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(f, q)| {
-            let ok = corners(positions, q).is_some();
-            (0..4).filter_map(move |i| {
-                let (a, b) = (q[i], q[(i + 1) % 4]);
-                (ok && a != b).then(|| ((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), f as u32, a < b))
-            })
-        })
-        .collect();
+    // Four slots a quad, written in place; the edges a quad does not have (a repeated
+    // corner, a corner out of range) get the key `u64::MAX`, sorted last and cut off.
+    const NONE: (u64, u32, bool) = (u64::MAX, u32::MAX, false);
+    let mut edges = vec![NONE; 4 * quads.len()];
+    edges.par_chunks_mut(4).zip(quads.par_iter()).enumerate().for_each(|(f, (e, q))| {
+        let ok = corners(positions, q).is_some();
+        for i in 0..4 {
+            let (a, b) = (q[i], q[(i + 1) % 4]);
+            if ok && a != b {
+                e[i] = ((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), f as u32, a < b);
+            }
+        }
+    });
     edges.par_sort_unstable();
+    edges.truncate(edges.partition_point(|e| e.0 != u64::MAX));
     let starts: Vec<usize> =
         (0..edges.len()).into_par_iter().filter(|&i| i == 0 || edges[i - 1].0 != edges[i].0).collect();
-    let mut out: Vec<((usize, usize), DVec3, DVec3)> = starts
+    let out: Vec<((usize, usize), DVec3, DVec3)> = starts
         .par_iter()
         .enumerate()
         .filter_map(|(k, &i)| {
@@ -147,7 +157,6 @@ fn adjacent_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize
             (nf.length() > 0.0 && ng.length() > 0.0).then_some(((f.min(g), f.max(g)), nf, ng))
         })
         .collect();
-    out.par_sort_unstable_by_key(|x| x.0);
     out
 }
 
@@ -157,11 +166,13 @@ fn adjacent_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize
 /// flipped first). Sorted.
 pub fn folded_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
     let cos_max = (120f64).to_radians().cos();
-    let mut out: Vec<(usize, usize)> = adjacent_pairs(positions, quads)
+    // Filtered before sorting: the folded pairs are few.
+    let mut out: Vec<(usize, usize)> = adjacent_pairs_unsorted(positions, quads)
         .into_iter()
         .filter(|(_, nf, ng)| nf.dot(*ng) < cos_max * nf.length() * ng.length())
         .map(|x| x.0)
         .collect();
+    out.sort_unstable();
     out.dedup();
     out
 }
