@@ -21,8 +21,8 @@ use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 
 use crate::iterative::Prepared;
-use crate::stencil::{Stencil, CHUNK};
-use crate::vecops::{cg_update, dot, tail_estimate};
+use crate::stencil::{Coefficients, Stencil, CHUNK};
+use crate::vecops::{cg_update, dot, scale_add, tail_estimate};
 use crate::{Interrupt, Progress};
 
 /// Per-vertex boxes of the displacement from the input: `lo <= u <= hi` coordinate-wise,
@@ -361,41 +361,103 @@ pub(crate) fn minimize_free(
     r: &mut [DVec3],
 ) -> BoxStats {
     let BoxProblem { stencil, max_iterations, interrupt, .. } = *problem;
-    let n = u.len();
-    let coef = &prepared.coef;
-    let zero = || vec![DVec3::ZERO; n];
-    let (mut z, mut p, mut q, mut t) = (zero(), zero(), zero(), zero());
-    let mut stats = BoxStats { iterations: 0, applications: 0, estimate: f64::INFINITY, energy_change: 0.0 };
-    let mut residuals = vec![dot(r, r).sqrt()];
-    prepared.pre.apply(stencil, r, &mut p);
-    let mut rz = dot(r, &p);
-    while rz > 0.0 && stats.iterations < max_iterations && !interrupt.is_raised() {
-        stencil.apply(coef, &p, &mut q, &mut t, true);
-        stats.applications += 1;
-        let pq = dot(&p, &q);
-        if pq.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-            break;
-        }
-        let a = rz / pq;
-        // E changes by -2 a (r . p) + a^2 (p . q), with r . p = r . z = rz.
-        stats.energy_change += -2.0 * a * rz + a * a * pq;
-        let (r2, p2) = cg_update(u, r, a, &p, &q);
-        stats.iterations += 1;
-        // As in `minimize_in_boxes`: the rate from the residuals before this step.
-        stats.estimate = 2.0 * tail_estimate(a * p2.sqrt(), &residuals);
-        residuals.push(r2.sqrt());
-        if stats.estimate <= tol {
-            break;
-        }
-        prepared.pre.apply(stencil, r, &mut z);
-        let rz_new = dot(r, &z);
-        let s = rz_new / rz;
-        p.par_chunks_mut(CHUNK).zip(z.par_chunks(CHUNK)).for_each(|(p, z)| {
-            p.iter_mut().zip(z).for_each(|(p, z)| *p = *p * s + *z);
-        });
-        rz = rz_new;
+    let mut work = Work::new(u.len());
+    let Prepared { coef, pre, .. } = prepared;
+    let cg = Cg { stencil, coef, tol, max_iterations, interrupt, lagged_rate: true };
+    let run = cg.run(u, r, &mut work, |r, z| pre.apply(stencil, r, z), |_, r2| r2.sqrt());
+    BoxStats {
+        iterations: run.iterations,
+        applications: run.applications,
+        estimate: run.estimate,
+        energy_change: run.energy_change,
     }
-    stats
+}
+
+/// The vectors of [`Cg::run`].
+struct Work {
+    z: Vec<DVec3>,
+    p: Vec<DVec3>,
+    q: Vec<DVec3>,
+    t: Vec<DVec3>,
+}
+
+impl Work {
+    fn new(n: usize) -> Work {
+        let zero = || vec![DVec3::ZERO; n];
+        Work { z: zero(), p: zero(), q: zero(), t: zero() }
+    }
+}
+
+/// Preconditioned CG on `H`, shared by the unconstrained start and the active-set rounds;
+/// the preconditioner and the residual's norm passed to [`Cg::run`] choose the space it
+/// runs on (every coordinate, or a face's free ones). The norm is given `r` and `|r|^2`
+/// over every coordinate.
+struct Cg<'a, 'c> {
+    stencil: &'a Stencil,
+    coef: &'a Coefficients<'c>,
+    /// The stopping tolerance (physical units) of the error estimate.
+    tol: f64,
+    max_iterations: usize,
+    interrupt: &'a Interrupt,
+    /// The estimate's rate from the residuals before each step (as in
+    /// [`minimize_in_boxes`]) rather than after it.
+    lagged_rate: bool,
+}
+
+/// What [`Cg::run`] did.
+struct CgRun {
+    iterations: usize,
+    applications: usize,
+    estimate: f64,
+    /// The energy's change, `-a rz` summed over the steps.
+    energy_change: f64,
+}
+
+impl Cg<'_, '_> {
+    /// Iterates from `u` (`r = rhs - H u` on entry, kept so) until the error estimate is
+    /// at most `tol`, `max_iterations` steps, or the interrupt.
+    fn run(
+        &self,
+        u: &mut [DVec3],
+        r: &mut [DVec3],
+        work: &mut Work,
+        mut precondition: impl FnMut(&[DVec3], &mut [DVec3]),
+        norm: impl Fn(&[DVec3], f64) -> f64,
+    ) -> CgRun {
+        let Work { z, p, q, t } = work;
+        let mut run = CgRun { iterations: 0, applications: 0, estimate: f64::INFINITY, energy_change: 0.0 };
+        let mut residuals = vec![norm(r, dot(r, r))];
+        precondition(r, p);
+        let mut rz = dot(r, p);
+        while rz > 0.0 && run.iterations < self.max_iterations && !self.interrupt.is_raised() {
+            self.stencil.apply(self.coef, p, q, t, true);
+            run.applications += 1;
+            let pq = dot(p, q);
+            if pq.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
+                break;
+            }
+            let a = rz / pq;
+            // E changes by -2 a (r . p) + a^2 (p . q), with r . p = r . z = rz.
+            run.energy_change += -2.0 * a * rz + a * a * pq;
+            let (r2, p2) = cg_update(u, r, a, p, q);
+            run.iterations += 1;
+            if self.lagged_rate {
+                run.estimate = 2.0 * tail_estimate(a * p2.sqrt(), &residuals);
+                residuals.push(norm(r, r2));
+            } else {
+                residuals.push(norm(r, r2));
+                run.estimate = 2.0 * tail_estimate(a * p2.sqrt(), &residuals);
+            }
+            if run.estimate <= self.tol {
+                break;
+            }
+            precondition(r, z);
+            let rz_new = dot(r, z);
+            scale_add(p, rz_new / rz, z);
+            rz = rz_new;
+        }
+        run
+    }
 }
 
 /// The factor of the tolerance at which the active-set rounds stop their CG while the
@@ -452,9 +514,7 @@ pub(crate) fn active_set(
 ) -> ActiveSetStats {
     let BoxProblem { stencil, rhs, tol, max_iterations, interrupt, .. } = *problem;
     let n = u.len();
-    let coef = &prepared.coef;
-    let zero = || vec![DVec3::ZERO; n];
-    let (mut z, mut p, mut q, mut t) = (zero(), zero(), zero(), zero());
+    let mut work = Work::new(n);
     let mut hold = vec![[Hold::Free; 3]; n];
     let mut stats = ActiveSetStats { iterations: 0, applications: 0, rounds: 0, settled: false };
     // The first holds: the coordinates the start puts outside (the unconstrained
@@ -473,38 +533,29 @@ pub(crate) fn active_set(
         hold_on_bounds(&hold, w, u);
         face_of(&hold, &mut face);
         // Later rounds change few holds: their face's levels are updated, not rebuilt.
-        prepared.pre.set_face(stencil, coef, &face, stats.rounds > 1);
-        let tol = tol * loose;
-        stencil.residual(coef, u, rhs, r, &mut t);
+        prepared.pre.set_face(stencil, &prepared.coef, &face, stats.rounds > 1);
+        stencil.residual(&prepared.coef, u, rhs, r, &mut work.t);
         stats.applications += 1;
-        // Preconditioned CG on the free coordinates.
-        // The face's preconditioner masks its input: `r` goes in as it is.
-        let mut residuals = vec![free_norm(&hold, r)];
-        prepared.pre.apply_on_face(stencil, r, &mut p, &face);
-        let mut rz = dot(r, &p);
-        while rz > 0.0 && stats.iterations < max_iterations && !interrupt.is_raised() {
-            stencil.apply(coef, &p, &mut q, &mut t, true);
-            stats.applications += 1;
-            let pq = dot(&p, &q);
-            if pq.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
-                break;
-            }
-            let a = rz / pq;
-            let (_, p2) = cg_update(u, r, a, &p, &q);
-            stats.iterations += 1;
-            residuals.push(free_norm(&hold, r));
-            let estimate = 2.0 * tail_estimate(a * p2.sqrt(), &residuals);
-            if estimate <= tol {
-                break;
-            }
-            prepared.pre.apply_on_face(stencil, r, &mut z, &face);
-            let rz_new = dot(r, &z);
-            let s = rz_new / rz;
-            p.par_chunks_mut(CHUNK).zip(z.par_chunks(CHUNK)).for_each(|(p, z)| {
-                p.iter_mut().zip(z).for_each(|(p, z)| *p = *p * s + *z);
-            });
-            rz = rz_new;
-        }
+        // Preconditioned CG on the free coordinates; the face's preconditioner masks its
+        // input, so `r` goes in as it is.
+        let Prepared { coef, pre, .. } = &mut *prepared;
+        let cg = Cg {
+            stencil,
+            coef,
+            tol: tol * loose,
+            max_iterations: max_iterations - stats.iterations,
+            interrupt,
+            lagged_rate: false,
+        };
+        let run = cg.run(
+            u,
+            r,
+            &mut work,
+            |r, z| pre.apply_on_face(stencil, r, z, &face),
+            |r, _| free_norm(&hold, r),
+        );
+        stats.iterations += run.iterations;
+        stats.applications += run.applications;
         // The multipliers' signs are read from the recursive residual (CG updates it on
         // the held coordinates too); the next round starts from a true one.
         if update_holds(u, r, w, &mut hold) == 0 {
