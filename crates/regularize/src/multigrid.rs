@@ -1230,22 +1230,24 @@ impl Vcycle {
         if self.majorant.len() != stencil.len() {
             self.majorant = fine_majorant(stencil, coef);
         }
-        // The fine smoother: its blocks change only where the face does.
-        let former = built.as_ref().map(|b| &b.face[..]);
-        match former {
-            Some(former)
-                if update && self.face_smoother.len() == face.len() && former.len() == face.len() =>
-            {
+        // Where the face changed since the last one, when updating: the fine smoother's
+        // blocks and the coarse levels' rows follow those coordinates only.
+        let changed: Option<Vec<bool>> = built
+            .as_ref()
+            .filter(|b| update && b.face.len() == face.len() && self.face_smoother.len() == face.len())
+            .map(|b| b.face.par_iter().zip(face).map(|(a, b)| a != b).collect());
+        match &changed {
+            Some(changed) => {
                 self.face_smoother
                     .par_iter_mut()
-                    .zip(self.majorant.par_iter().zip(face.par_iter().zip(former)))
-                    .for_each(|(s, (m, (f, g)))| {
-                        if f != g {
+                    .zip(self.majorant.par_iter().zip(face.par_iter().zip(changed)))
+                    .for_each(|(s, (m, (f, &c)))| {
+                        if c {
                             *s = face_smoother_block(m, *f, damping);
                         }
                     });
             }
-            _ => {
+            None => {
                 self.face_smoother = self
                     .majorant
                     .par_iter()
@@ -1254,8 +1256,8 @@ impl Vcycle {
                     .collect();
             }
         }
-        self.face_levels = match built {
-            Some(b) if update => self.updated_face_hierarchy(stencil, coef, face, b),
+        self.face_levels = match (built, changed) {
+            (Some(b), Some(changed)) => self.updated_face_hierarchy(stencil, coef, face, &changed, b),
             _ => None,
         }
         .or_else(|| self.face_hierarchy(stencil, coef, face));
@@ -1316,17 +1318,17 @@ impl Vcycle {
         stencil: &Stencil,
         coef: &Coefficients<'_>,
         face: &[Vec3A],
+        changed: &[bool],
         built: FaceLevels,
     ) -> Option<FaceLevels> {
         let agg = self.aggregations.first()?;
-        let changed: Vec<bool> = built.face.par_iter().zip(face).map(|(a, b)| a != b).collect();
         let count = changed.iter().filter(|&&c| c).count();
         if 4 * count >= face.len() {
             return None;
         }
         let mut dirty: Vec<usize> = (0..agg.len())
             .into_par_iter()
-            .filter(|&a| agg.members(a).iter().any(|&i| face_row_reads(stencil, &changed, i as usize)))
+            .filter(|&a| agg.members(a).iter().any(|&i| face_row_reads(stencil, changed, i as usize)))
             .collect();
         let FaceLevels { mut levels, mut rows, .. } = built;
         if rows.len() != levels.len()
