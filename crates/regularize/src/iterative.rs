@@ -285,8 +285,8 @@ impl Pre {
 
     /// `z = M_F^-1 r` on the face where `face` is 1 (0 on the held coordinates): the
     /// multigrid cycle of the face's operator ([`Vcycle::apply_on_face`]); the others
-    /// are diagonal, so restricting them is masking.
-    /// `r` need not be masked: each preconditioner masks its input and its output.
+    /// (point or block diagonal) applied to the masked `r`, their result masked. `r`
+    /// need not be masked.
     pub(crate) fn apply_on_face(&mut self, stencil: &Stencil, r: &[DVec3], z: &mut [DVec3], face: &[Vec3A]) {
         let each = |z: &mut [DVec3], f: &(dyn Fn(usize, DVec3) -> DVec3 + Sync)| {
             z.par_chunks_mut(CHUNK)
