@@ -1,7 +1,7 @@
 //! What the pipeline does between solves: weak alignment at creases, and re-centring of
 //! the attachment targets (size preservation).
 
-use glam::DVec3;
+use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
 use voxreg_normals::{FeatureRamp, Interrupt, NormalField};
@@ -76,6 +76,57 @@ fn straddling_degree(surface: &DigitalSurface, field: &NormalField, feature_angl
             tilted.min(across)
         })
         .collect()
+}
+
+/// The scale below which a quad's normal changes are not treated as an oscillation by
+/// [`relaxed_normals`], squared: 1e-4 (a hundredth of a radian, about 0.6 degree).
+const OSCILLATION_SCALE2: f64 = 1e-4;
+
+/// The refined normals of a round, relaxed where they swing back: each quad moves from
+/// its normal `n` of the last round by `t d` instead of the whole change
+/// `d = estimate - n`, with `t = 1 / (1 + c)` and
+/// `c = max(0, -d . p) / (|p|^2 + s^2)`, where `p` is the change the quad took in the
+/// round before (`previous`, updated here to the change taken now) and `s` a hundredth of
+/// a radian. A quad whose normal keeps turning the same way, or barely moved, takes the
+/// estimate (`c = 0`); one that undoes its last change (`d = -p`, an oscillation between
+/// two normals) takes about half of it, the midpoint that the iteration would otherwise
+/// circle around. `t` is a continuous function of the normals, so a small change of the
+/// positions changes the result little (chunks must agree with the whole volume).
+///
+/// Why: on thin sheets of real segmentations the rounds do not settle on their own: some
+/// quads' normals alternate between two directions, and the alternation amplifies a
+/// difference of the positions (a solver tolerance, a chunk's cut) round after round.
+pub(crate) fn relaxed_normals(
+    field: &NormalField,
+    estimate: NormalField,
+    previous: &mut Option<Vec<Vec3>>,
+) -> NormalField {
+    let (n, e) = (field.as_slice(), estimate.as_slice());
+    let change =
+        |relaxed: &[DVec3]| Some(relaxed.par_iter().zip(n).map(|(r, n)| (*r - *n).as_vec3()).collect());
+    let relaxed: Vec<DVec3> = match previous.as_deref() {
+        None => {
+            *previous = change(e);
+            return estimate;
+        }
+        Some(p) => n
+            .par_iter()
+            .zip(e)
+            .zip(p)
+            .map(|((n, e), p)| {
+                let (d, p) = (*e - *n, p.as_dvec3());
+                let c = (-d.dot(p)).max(0.0) / (p.length_squared() + OSCILLATION_SCALE2);
+                let m = (*n + d / (1.0 + c)).normalize_or_zero();
+                if m == DVec3::ZERO {
+                    *e
+                } else {
+                    m
+                }
+            })
+            .collect(),
+    };
+    *previous = change(&relaxed);
+    NormalField::new(relaxed)
 }
 
 /// Low-pass filter of per-vertex displacements: lazy diffusion over the vertex graph,
@@ -460,6 +511,51 @@ mod tests {
         for (v, p) in surface.positions().iter().enumerate() {
             let on_edge = p.abs().to_array().iter().filter(|c| (**c - 4.5).abs() < 1e-9).count() >= 2;
             assert_eq!(informative[v], on_edge, "vertex at {p}");
+        }
+    }
+
+    #[test]
+    fn relaxed_normals_halve_an_oscillation_and_keep_a_steady_turn() {
+        let unit = |x: f64, y: f64| DVec3::new(x, y, 1.0).normalize();
+        let n0 = NormalField::new(vec![unit(0.0, 0.0), unit(0.0, 0.0), unit(0.0, 0.0)]);
+        let n1 = NormalField::new(vec![unit(0.2, 0.0), unit(0.2, 0.0), unit(1e-4, 0.0)]);
+        // The first round has no previous change: the estimate as it is.
+        let mut previous = None;
+        let r1 = relaxed_normals(&n0, n1.clone(), &mut previous);
+        assert_eq!(r1.as_slice(), n1.as_slice());
+        // Then: quad 0 swings back to where it was, quad 1 keeps turning the same way,
+        // quad 2 swings back by a change far below the oscillation scale.
+        let e2 = NormalField::new(vec![unit(0.0, 0.0), unit(0.4, 0.0), unit(0.0, 0.0)]);
+        let r2 = relaxed_normals(&r1, e2.clone(), &mut previous);
+        let (r, e) = (r2.as_slice(), e2.as_slice());
+        let mid = (n1.as_slice()[0] + e[0]).normalize();
+        assert!(r[0].angle_between(mid) < 0.01, "{} from the midpoint", r[0].angle_between(mid));
+        assert_eq!(r[1], e[1]);
+        assert!(r[2].angle_between(e[2]) < 1e-6);
+        for m in r {
+            assert!((m.length() - 1.0).abs() < 1e-12);
+        }
+        // The change taken is what the next round compares with.
+        let p = previous.unwrap();
+        assert!((p[1].as_dvec3() - (e[1] - n1.as_slice()[1])).length() < 1e-7);
+    }
+
+    #[test]
+    fn relaxed_normals_are_continuous_in_the_estimate() {
+        // The estimate's change crosses from turning on (d . p > 0) to swinging back
+        // (d . p < 0) at k = 0: a tiny change of the estimate moves the result by about as
+        // much, not by a jump (a rule switching at d . p = 0 would jump by degrees here).
+        let n = DVec3::new(0.0, 0.0, 1.0);
+        let mut last = None;
+        for k in -5..=5 {
+            let e = DVec3::new(1e-6 * k as f64, 0.3, 1.0).normalize();
+            let mut previous = Some(vec![Vec3::new(0.1, 0.0, 0.0)]);
+            let r = relaxed_normals(&NormalField::new(vec![n]), NormalField::new(vec![e]), &mut previous);
+            let m = r.as_slice()[0];
+            if let Some(l) = last {
+                assert!(m.angle_between(l) < 1e-5, "step {k}: {}", m.angle_between(l));
+            }
+            last = Some(m);
         }
     }
 }

@@ -10,8 +10,8 @@ use voxreg_normals::{
 };
 
 use crate::pipeline::{
-    crease_weights, informative_vertices, plateau_weights, sagitta_lift, sample_weights, surfel_drift,
-    trusted_drift,
+    crease_weights, informative_vertices, plateau_weights, relaxed_normals, sagitta_lift, sample_weights,
+    surfel_drift, trusted_drift,
 };
 use crate::report::{EnergyReport, NormalsReport, Report, StageTimes};
 use crate::{Energy, FairnessMask, Params, Progress, RegularizeError, Solver, SolverParams, Weights};
@@ -321,6 +321,8 @@ impl Regularizer {
         let mut positions = VertexData::default();
         let mut solves = Vec::with_capacity(params.refine + 1);
         let mut done = 1.0;
+        // Each quad's last change of normal, for the relaxation of the next round's.
+        let mut change = None;
         for round in 0..=params.refine {
             if round > 0 {
                 if warm.get(round).is_none() {
@@ -335,13 +337,14 @@ impl Regularizer {
                     iteration: None,
                     input: None,
                 });
-                field = Refined {
+                let estimate = Refined {
                     positions: &positions,
                     previous: &field,
                     radius: params.refine_radius,
                     feature_angle_deg: params.feature_angle_deg,
                 }
                 .estimate_interruptible(&surface, &interrupt)?;
+                field = relaxed_normals(&field, estimate, &mut change);
                 if let Some(r) = recentring {
                     let lift = (lift_weight > 0.0).then(|| {
                         let mut lift = sagitta_lift(&surface, &positions, &field);
