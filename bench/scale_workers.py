@@ -2,7 +2,7 @@
 
     target/pyvenv/bin/python bench/synth_zarr.py target/ooc/t512.zarr --dims 512,512,512
     target/pyvenv/bin/python bench/scale_workers.py target/ooc/t512.zarr [--pairs 2]
-        [--chunk 128] [--workers 2] [param=value ...]
+        [--chunk 128] [--halo H (default: voxreg.dask's)] [--workers 2] [param=value ...]
 
 Runs 1-worker and N-worker clusters in turn (1, N, 1, N, ...; each a fresh LocalCluster,
 one thread per worker, output to a scratch directory), and prints per run one JSON line
@@ -22,13 +22,15 @@ import tempfile
 sys.path.insert(0, os.path.dirname(__file__))
 from scale_ooc import _param, run  # noqa: E402
 
+import voxreg.dask as vd  # noqa: E402
+
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("store")
     ap.add_argument("--pairs", type=int, default=2)
     ap.add_argument("--chunk", type=int, default=128)
-    ap.add_argument("--halo", type=int, default=24)
+    ap.add_argument("--halo", type=int, default=vd.DEFAULT_HALO)
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--memory", default="2GB")
     ap.add_argument("params", nargs="*")
