@@ -233,6 +233,20 @@ fn descent_energy_decreases_monotonically() {
     }
 }
 
+/// Runs `test` on each thin structure with random normals (from an `Lcg` of `seed`, drawn
+/// in the structures' order) and weak attachment: `alpha = 1e-3`, `beta = 1`, `gamma`.
+fn with_thin_energies(seed: u64, gamma: f64, mut test: impl FnMut(&str, &DigitalSurface, &Energy<'_>)) {
+    let mut rng = Lcg::new(seed);
+    for (name, volume) in thin_structures() {
+        let s = DigitalSurface::from_volume(&volume).unwrap();
+        let input = s.positions();
+        let normals = random_normals(&s, &mut rng);
+        let energy =
+            Energy::new(&s, &normals, &input, EnergyParams { alpha: 1e-3, beta: 1.0, gamma }).unwrap();
+        test(name, &s, &energy);
+    }
+}
+
 /// Thin voxel structures: a one-voxel-thick wall, rods, a ring, diagonal pinches.
 fn thin_structures() -> Vec<(&'static str, LabelVolume)> {
     vec![
@@ -344,13 +358,7 @@ fn the_checker_finds_the_intersections_of_unclamped_thin_structures() {
 fn every_preconditioner_reaches_the_same_clamped_minimizer() {
     // The active-set rounds precondition on each face with the solver's preconditioner,
     // masked to the face's free coordinates; the clamped problem has one minimizer.
-    let mut rng = Lcg::new(21);
-    for (name, volume) in thin_structures() {
-        let s = DigitalSurface::from_volume(&volume).unwrap();
-        let input = s.positions();
-        let normals = random_normals(&s, &mut rng);
-        let energy =
-            Energy::new(&s, &normals, &input, EnergyParams { alpha: 1e-3, beta: 1.0, gamma: 0.3 }).unwrap();
+    with_thin_energies(21, 0.3, |name, s, energy| {
         let solve = |preconditioner| {
             let params = BoundedParams {
                 clamp: Some(0.01),
@@ -359,7 +367,7 @@ fn every_preconditioner_reaches_the_same_clamped_minimizer() {
                 max_iterations: 20_000,
                 ..Default::default()
             };
-            BoundedSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap()
+            BoundedSolver::for_surface(s, params).unwrap().solve(energy).unwrap()
         };
         let (reference, info) = solve(Preconditioner::Multigrid);
         assert!(info.converged && info.clamped_vertices > 0, "{name}: {info:?}");
@@ -371,7 +379,7 @@ fn every_preconditioner_reaches_the_same_clamped_minimizer() {
             // The rounds found the clamped set: MPRGP only polishes (2 steps here).
             assert!(info.iterations <= 5, "{name} {pre:?}: {} MPRGP steps after the rounds", info.iterations);
         }
-    }
+    });
 }
 
 #[test]
@@ -518,23 +526,18 @@ fn regression_small_surface_plateau() {
 /// descent reach the same energy.
 #[test]
 fn clamped_minimizer_satisfies_the_optimality_conditions() {
-    let mut rng = Lcg::new(15);
-    for (name, volume) in thin_structures() {
-        let s = DigitalSurface::from_volume(&volume).unwrap();
-        let input = s.positions();
-        let normals = random_normals(&s, &mut rng);
-        let energy =
-            Energy::new(&s, &normals, &input, EnergyParams { alpha: 1e-3, beta: 1.0, gamma: 0.1 }).unwrap();
+    with_thin_energies(15, 0.1, |name, s, energy| {
+        let input = energy.input();
         let eps = 0.01;
         let half = (1.0 - eps) * 0.5;
         let tight =
             BoundedParams { clamp: Some(eps), tolerance: 1e-7, max_iterations: 20_000, ..Default::default() };
-        let (x, info) = BoundedSolver::for_surface(&s, tight).unwrap().solve(&energy).unwrap();
+        let (x, info) = BoundedSolver::for_surface(s, tight).unwrap().solve(energy).unwrap();
         assert!(info.converged, "{name}: {info:?}");
         let g = energy.gradient(&x);
-        let scale = energy.gradient(&input).iter().map(|v| v.abs().max_element()).fold(0.0, f64::max);
+        let scale = energy.gradient(input).iter().map(|v| v.abs().max_element()).fold(0.0, f64::max);
         let mut held = 0;
-        for (v, ((p, q), g)) in x.iter().zip(&input).zip(&g).enumerate() {
+        for (v, ((p, q), g)) in x.iter().zip(input).zip(&g).enumerate() {
             for a in 0..3 {
                 let d = p[a] - q[a];
                 let ga = g[a] / scale;
@@ -551,10 +554,10 @@ fn clamped_minimizer_satisfies_the_optimality_conditions() {
         }
         assert!(held > 0, "{name}: the boxes should bind somewhere");
         let plain = BoundedParams { conjugate: false, ..tight };
-        let (y, _) = BoundedSolver::for_surface(&s, plain).unwrap().solve(&energy).unwrap();
+        let (y, _) = BoundedSolver::for_surface(s, plain).unwrap().solve(energy).unwrap();
         let (ex, ey) = (energy.terms(&x).total, energy.terms(&y).total);
         assert!(ex <= ey * (1.0 + 1e-6), "{name}: conjugate {ex} vs projected descent {ey}");
-    }
+    });
 }
 
 /// The iterates the front door streams (`Event::iterate`) are the solvers' own: their
