@@ -451,3 +451,26 @@ fn sensitivity() {
         ca.iter().zip(&cb).filter(|(x, y)| (*x - *y).abs() > 1e-3).count()
     );
 }
+
+/// The thin-sheet rule on a volume: how many quads it holds and what it costs
+/// (`pipeline::thin_sheets`, three timed runs).
+#[test]
+#[ignore]
+fn thin_sheet_count() {
+    use voxreg_normals::NormalEstimator;
+    let path = std::env::var("VOXREG_DIAG").expect("VOXREG_DIAG=volume.npy");
+    let surface = DigitalSurface::from_volume(&read_npy(&path)).unwrap();
+    let field = Params::default().normals.estimator().estimate(&surface).unwrap();
+    let thickness = Params::default().sheet_thickness;
+    for _ in 0..3 {
+        let t = std::time::Instant::now();
+        let held = crate::pipeline::thin_sheets(&surface, &field, thickness);
+        let full = held.iter().filter(|(_, s)| *s >= 1.0).count();
+        eprintln!(
+            "{} quads: {} held ({full} fully), {:.3} s",
+            surface.num_surfels(),
+            held.len(),
+            t.elapsed().as_secs_f64()
+        );
+    }
+}

@@ -203,6 +203,14 @@ pub struct Params {
     /// Rings of quads around the straddling ones that also get the weak alignment.
     /// Default: `1`.
     pub crease_dilation: usize,
+    /// Thin sheets: the quads of a region thinner than this along its normal (in voxels
+    /// of the finest spacing; a membrane one or two voxels thick between two other
+    /// labels) keep the normals of the first refinement round through the later rounds,
+    /// fully below `sheet_thickness - 0.5` and not at all from `sheet_thickness + 0.5`.
+    /// A sheet's tilt is held only by the weak attachment, and refining its normals again
+    /// and again from that tilt does not settle (docs/design/thin-sheets.md). `0` refines
+    /// every quad in every round. Default: `2.5`.
+    pub sheet_thickness: f64,
     /// Texture-aware fairness (paper, sec. 4.5): barycentres leave out the neighbours
     /// across a region boundary, so quad edges follow colour boundaries. Default: `false`.
     pub texture_aware: bool,
@@ -301,6 +309,12 @@ impl Params {
                 self.crease_alignment
             )));
         }
+        if !(self.sheet_thickness.is_finite() && self.sheet_thickness >= 0.0) {
+            return Err(RegularizeError::InvalidParams(format!(
+                "the sheet thickness must be finite and non-negative, got {}",
+                self.sheet_thickness
+            )));
+        }
         for (what, a) in [("feature", self.feature_angle_deg), ("crease", self.crease_angle_deg)] {
             if !(a > 0.0 && a <= 180.0) {
                 return Err(RegularizeError::InvalidParams(format!(
@@ -332,6 +346,7 @@ impl Default for Params {
             crease_alignment: 0.015,
             crease_angle_deg: 20.0,
             crease_dilation: 1,
+            sheet_thickness: 2.5,
             texture_aware: false,
             junction_fairness: true,
             solver: SolverParams::default(),

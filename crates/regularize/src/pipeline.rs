@@ -3,7 +3,8 @@
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
+use rustc_hash::FxHashMap as HashMap;
+use voxreg_digisurf::{DigitalSurface, Surfel, SurfelId, VertexId};
 use voxreg_normals::{FeatureRamp, Interrupt, NormalField};
 
 use crate::RegularizeError;
@@ -411,8 +412,141 @@ pub(crate) fn plateau_weights(
     Some((alpha, beta))
 }
 
+/// Full width, in voxels of the finest spacing, of the thin-sheet rule's ramp (see
+/// [`thin_sheets`]): a quad's share falls from 1 at `thickness - 0.5` to 0 at
+/// `thickness + 0.5`.
+const SHEET_RAMP: f64 = 1.0;
+
+/// The angles, in degrees, between a sheet's two sides (their outward normals, one
+/// reversed) within which they count as parallel in full and past which not at all
+/// (see [`thin_sheets`]).
+const SHEET_PARALLEL_DEG: [f64; 2] = [30.0, 50.0];
+
+/// The quads of thin sheets, as `(surfel, share)` with `share` in `(0, 1]`: for each quad
+/// and each of its two regions, the distance from the quad's centre through that region
+/// along `field`'s normal to the region's other side (marched voxel by voxel, in voxels of
+/// the finest spacing), where that side faces the opposite way (its outward normal in
+/// `field` within [`SHEET_PARALLEL_DEG`] of the march). The share is 1 for a sheet
+/// thinner than `thickness - 0.5`, 0 from `thickness + 0.5` on, linear between, and
+/// weighed by how parallel the sides are; the thinner region counts. A quad whose
+/// normal in `field` does not enter a region through the quad skips that region.
+///
+/// Why: a region one or two voxels thick between two others (a membrane between two
+/// compartments of a segmentation) is a long sheet whose tilt only the weak attachment
+/// holds; refined normals read that tilt back and the next solve amplifies it, so the
+/// rounds do not settle there and a difference of thousandths of a voxel (a solver's
+/// tolerance, a chunk's cut) grows to tenths. Measured on the initial field (from the
+/// voxels alone), the rule does not depend on the positions; the wedges at the rim of a
+/// thick region (sides not parallel) are not sheets.
+pub(crate) fn thin_sheets(surface: &DigitalSurface, field: &NormalField, thickness: f64) -> Vec<(u32, f64)> {
+    if thickness <= 0.0 {
+        return Vec::new();
+    }
+    let reach = thickness + 0.5 * SHEET_RAMP;
+    let dims = surface.dims().map(|d| d as i64);
+    // A face `(axis, cell)` as one key, for cells from -1 to dims + 1 along each axis.
+    let key = |axis: usize, c: [i64; 3]| -> u64 {
+        let [x, y, z] = [0, 1, 2].map(|k| (c[k] + 1) as u64);
+        let [a, b, c] = dims.map(|d| d as u64 + 3);
+        ((axis as u64 * a + x) * b + y) * c + z
+    };
+    let faces: HashMap<u64, u32> = surface
+        .surfels()
+        .iter()
+        .enumerate()
+        .map(|(i, s)| (key(s.axis as usize, s.cell.map(i64::from)), i as u32))
+        .collect();
+    let h = surface.spacing();
+    let unit = h.min_element();
+    let [par_one, par_zero] = SHEET_PARALLEL_DEG.map(|a| a.to_radians().cos());
+    let normals = field.as_slice();
+    // From quad `s` into its region `side` along `dir`: the distance to the region's far
+    // side and how parallel that side is; `None` past `reach` or out of the domain.
+    let march = |s: &Surfel, side: usize, dir: DVec3| -> Option<(f64, f64)> {
+        let a = s.axis as usize;
+        let mut p = DVec3::from_array(s.cell.map(|c| c as f64 + 0.5));
+        p[a] = s.cell[a] as f64;
+        // Lattice steps per voxel of the finest spacing.
+        let u = dir * unit / h;
+        let mut v = s.voxels()[side];
+        let mut next = [f64::INFINITY; 3];
+        let mut delta = [f64::INFINITY; 3];
+        for k in 0..3 {
+            if u[k] != 0.0 {
+                let bound = if u[k] > 0.0 { (v[k] + 1) as f64 } else { v[k] as f64 };
+                next[k] = ((bound - p[k]) / u[k]).max(0.0);
+                delta[k] = 1.0 / u[k].abs();
+            }
+        }
+        // The quad's own face is behind the start.
+        next[a] = delta[a];
+        loop {
+            let k = (0..3).min_by(|&i, &j| next[i].total_cmp(&next[j])).expect("three axes");
+            let t = next[k];
+            if t >= reach {
+                return None;
+            }
+            let mut cell = v;
+            if u[k] > 0.0 {
+                cell[k] += 1;
+            }
+            if let Some(&g) = faces.get(&key(k, cell)) {
+                let far = &surface.surfels()[g as usize];
+                let n = normals[g as usize];
+                let outward = if far.regions[0] == s.regions[side] { n } else { -n };
+                let parallel = ((dir.dot(outward) - par_zero) / (par_one - par_zero)).clamp(0.0, 1.0);
+                return Some((t, parallel));
+            }
+            v[k] += if u[k] > 0.0 { 1 } else { -1 };
+            if v[k] < -1 || v[k] > dims[k] {
+                return None;
+            }
+            next[k] += delta[k];
+        }
+    };
+    surface
+        .surfels()
+        .par_iter()
+        .zip(normals.par_iter())
+        .enumerate()
+        .filter_map(|(i, (s, n))| {
+            let oriented = s.normal();
+            let share = (0..2)
+                .filter_map(|side| {
+                    // Into the inner voxel against the normal, into the outer one along it.
+                    let dir = if side == 0 { -*n } else { *n };
+                    let entering = if side == 0 { -dir.dot(oriented) } else { dir.dot(oriented) };
+                    if entering <= 1e-6 {
+                        return None;
+                    }
+                    let (t, parallel) = march(s, side, dir)?;
+                    let thin = ((thickness + 0.5 * SHEET_RAMP - t) / SHEET_RAMP).clamp(0.0, 1.0);
+                    Some(thin * parallel)
+                })
+                .fold(0.0, f64::max);
+            (share > 0.0).then_some((i as u32, share))
+        })
+        .collect()
+}
+
+/// `estimate` moved towards the normals `held` (one per quad of a thin sheet, with its
+/// share from [`thin_sheets`]): by each quad's share, all the way at share 1.
+pub(crate) fn hold_thin_sheets(estimate: NormalField, held: &[(u32, DVec3, f64)]) -> NormalField {
+    if held.is_empty() {
+        return estimate;
+    }
+    let mut normals = estimate.as_slice().to_vec();
+    for &(s, n, share) in held {
+        let e = &mut normals[s as usize];
+        let m = (share * n + (1.0 - share) * *e).normalize_or_zero();
+        *e = if m == DVec3::ZERO { n } else { m };
+    }
+    NormalField::new(normals)
+}
+
 #[cfg(test)]
 mod tests {
+    use voxreg_normals::NormalEstimator;
     use voxreg_testkit::{digitize, Cuboid, Lcg, Sphere};
 
     use super::*;
@@ -557,5 +691,86 @@ mod tests {
             }
             last = Some(m);
         }
+    }
+
+    /// A sheet of label 2, `thickness` voxels thick along z, sloping one in three along x,
+    /// between label 1 below and label 3 above, in a 40 x 24 x 28 box; and its integral
+    /// invariant normals.
+    fn sloping_sheet(thickness: f64) -> (DigitalSurface, NormalField) {
+        let volume = voxreg_digisurf::LabelVolume::from_fn([40, 24, 28], |[x, y, z]| {
+            let _ = y;
+            let h = z as f64 + 0.5 - 8.0 - (x as f64 + 0.5) / 3.0;
+            if h < 0.0 {
+                1
+            } else if h < thickness {
+                2
+            } else {
+                3
+            }
+        });
+        let surface = DigitalSurface::from_volume(&volume).unwrap();
+        let field = voxreg_normals::IntegralInvariant { radius: None }.estimate(&surface).unwrap();
+        (surface, field)
+    }
+
+    /// The sheet's own quads (between labels 1 and 2 or 2 and 3), away from the box.
+    fn sheet_quads(surface: &DigitalSurface) -> Vec<usize> {
+        (0..surface.num_surfels())
+            .filter(|&i| {
+                let s = &surface.surfels()[i];
+                let inside = (6..34).contains(&s.cell[0]) && (6..18).contains(&s.cell[1]);
+                inside && s.labels.contains(&2) && s.labels.iter().all(|&l| l != 0)
+            })
+            .collect()
+    }
+
+    #[test]
+    fn thin_sheets_are_the_quads_of_sheets_one_or_two_voxels_thick() {
+        // Thickness along z, the shares' range on the sheet's quads.
+        for (thickness, least, most) in [(1.0, 1.0, 1.0), (1.8, 0.5, 1.0), (4.0, 0.0, 0.0)] {
+            let (surface, field) = sloping_sheet(thickness);
+            let shares: HashMap<u32, f64> = thin_sheets(&surface, &field, 2.5).into_iter().collect();
+            let quads = sheet_quads(&surface);
+            assert!(quads.len() > 200);
+            for f in quads {
+                let share = shares.get(&(f as u32)).copied().unwrap_or(0.0);
+                assert!(share >= least && share <= most, "thickness {thickness}, quad {f}: {share}");
+            }
+        }
+        // A ball is thick everywhere along its normals, the rim of a shallow cap included
+        // (its two sides are not parallel); 0 turns the rule off.
+        let ball = DigitalSurface::from_volume(&digitize(&Sphere { radius: 9.3 }, 1.0)).unwrap();
+        let field = voxreg_normals::IntegralInvariant { radius: None }.estimate(&ball).unwrap();
+        assert!(thin_sheets(&ball, &field, 2.5).is_empty());
+        let (surface, field) = sloping_sheet(1.0);
+        assert!(thin_sheets(&surface, &field, 0.0).is_empty());
+    }
+
+    #[test]
+    fn held_normals_move_the_estimate_by_their_share() {
+        let (a, b) = (DVec3::X, DVec3::Y);
+        let estimate = NormalField::new(vec![a, a, a]);
+        let held = hold_thin_sheets(estimate, &[(0, b, 1.0), (2, b, 0.5)]);
+        let [full, none, half] = [0, 1, 2].map(|i| held.as_slice()[i]);
+        assert!(full.distance(b) < 1e-15 && none.distance(a) < 1e-15);
+        assert!((half.angle_between(a) - half.angle_between(b)).abs() < 1e-12 && half.angle_between(a) > 0.7);
+    }
+
+    #[test]
+    fn thin_sheets_keep_the_first_rounds_normals() {
+        let (surface, _) = sloping_sheet(1.0);
+        let run = |refine: usize, sheet_thickness: f64| {
+            let params = crate::Params { refine, sheet_thickness, ..crate::Params::default() };
+            crate::Regularizer::new(surface.clone()).run(&params).unwrap().normals
+        };
+        let quads = sheet_quads(&surface);
+        let turn = |a: &NormalField, b: &NormalField| {
+            quads.iter().map(|&f| a.as_slice()[f].angle_between(b.as_slice()[f])).fold(0.0, f64::max)
+        };
+        let first = run(1, 2.5);
+        assert!(turn(&first, &run(3, 2.5)) < 1e-9);
+        // Refined in every round, the same quads turn on.
+        let free = turn(&run(1, 0.0), &run(3, 0.0));
+        assert!(free > 1e-4, "{free}");
     }
 }

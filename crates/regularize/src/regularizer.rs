@@ -10,8 +10,8 @@ use voxreg_normals::{
 };
 
 use crate::pipeline::{
-    crease_weights, informative_vertices, plateau_weights, relaxed_normals, sagitta_lift, sample_weights,
-    surfel_drift, trusted_drift,
+    crease_weights, hold_thin_sheets, informative_vertices, plateau_weights, relaxed_normals, sagitta_lift,
+    sample_weights, surfel_drift, thin_sheets, trusted_drift,
 };
 use crate::report::{EnergyReport, NormalsReport, Report, StageTimes};
 use crate::{Energy, FairnessMask, Params, Progress, RegularizeError, Solver, SolverParams, Weights};
@@ -317,6 +317,18 @@ impl Regularizer {
 
         let input = surface.positions();
         let mut targets = input.clone();
+        // The thin sheets' quads, with their shares and the normals they keep from the
+        // first refinement round on (timed with the refinement).
+        let t = Instant::now();
+        let mut held: Vec<(u32, DVec3, f64)> = if params.refine > 0 {
+            thin_sheets(&surface, &start, params.sheet_thickness)
+                .into_iter()
+                .map(|(s, share)| (s, DVec3::ZERO, share))
+                .collect()
+        } else {
+            Vec::new()
+        };
+        times.refine += t.elapsed().as_secs_f64();
         let mut field = start;
         let mut positions = VertexData::default();
         let mut solves = Vec::with_capacity(params.refine + 1);
@@ -344,6 +356,13 @@ impl Regularizer {
                     feature_angle_deg: params.feature_angle_deg,
                 }
                 .estimate_interruptible(&surface, &interrupt)?;
+                // Thin sheets keep the first round's normals.
+                let estimate = if round == 1 {
+                    held.iter_mut().for_each(|h| h.1 = estimate.as_slice()[h.0 as usize]);
+                    estimate
+                } else {
+                    hold_thin_sheets(estimate, &held)
+                };
                 field = relaxed_normals(&field, estimate, &mut change);
                 if let Some(r) = recentring {
                     let lift = (lift_weight > 0.0).then(|| {

@@ -196,3 +196,55 @@ fn refinement_keeps_the_edges_of_a_cube_sharp_on_thick_slices() {
     eprintln!("cube at (1, 1, 2.5): worst face {worst:.2} degrees");
     assert!(worst <= 5.0, "{worst}");
 }
+
+/// A spherical shell: label 1 inside radius `inner`, 2 out to `outer`, background past it.
+struct Shell {
+    inner: f64,
+    outer: f64,
+}
+
+impl LabelShape for Shell {
+    fn label(&self, p: DVec3) -> u32 {
+        let r = p.length();
+        if r <= self.inner {
+            1
+        } else if r <= self.outer {
+            2
+        } else {
+            0
+        }
+    }
+    fn bounds(&self) -> (DVec3, DVec3) {
+        (DVec3::splat(-self.outer - 1.0), DVec3::splat(self.outer + 1.0))
+    }
+    fn name(&self) -> &'static str {
+        "shell"
+    }
+    fn interface(&self, a: u32, b: u32, p: DVec3) -> Option<(DVec3, DVec3)> {
+        let r = match (a, b) {
+            (1, 2) => self.inner,
+            (0, 2) => self.outer,
+            _ => return None,
+        };
+        let n = p.normalize_or(DVec3::Z);
+        Some((r * n, n))
+    }
+    fn junction(&self, _: &[u32], _: DVec3) -> Option<(DVec3, voxreg_testkit::JunctionKind)> {
+        None
+    }
+}
+
+#[test]
+fn thin_shells_keep_their_place() {
+    // Sheets 1.8 and 2.2 voxels thick: the thin-sheet rule keeps the first refinement
+    // round's normals on them, which costs a little of the later rounds' accuracy (mean
+    // 0.0325 against 0.0261 and 0.0338 against 0.0310) for rounds that settle.
+    for (inner, outer, mean) in [(15.2, 17.0, 0.035), (20.3, 22.5, 0.036)] {
+        let shell = Shell { inner, outer };
+        let held = fidelity(&shell, DVec3::ONE, &Params::default());
+        let free = fidelity(&shell, DVec3::ONE, &Params { sheet_thickness: 0.0, ..Default::default() });
+        eprintln!("shell {inner}..{outer}: {:?}, every round refined {:?}", held.surface, free.surface);
+        assert!(held.surface.mean <= mean && held.surface.max <= 0.2, "{held:?}");
+        assert!(held.surface.mean <= 1.3 * free.surface.mean, "{held:?}\n{free:?}");
+    }
+}
