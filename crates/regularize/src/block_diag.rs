@@ -457,7 +457,6 @@ fn sensitivity() {
 #[test]
 #[ignore]
 fn thin_sheet_count() {
-    use voxreg_normals::NormalEstimator;
     let path = std::env::var("VOXREG_DIAG").expect("VOXREG_DIAG=volume.npy");
     let surface = DigitalSurface::from_volume(&read_npy(&path)).unwrap();
     let field = Params::default().normals.estimator().estimate(&surface).unwrap();
