@@ -185,8 +185,8 @@ def regularize(array: Any, chunks: Optional[Sequence[int]] = None, halo: int = D
         Voxels read around each chunk. The stitched mesh has the whole-volume mesh's
         quads and vertex ids at any halo; its positions approach the whole-volume solve
         as the halo grows (within 1e-2 voxel at the default on a synthetic tissue; on a
-        real volume with many thin layers, a few vertices in a million up to 1.6e-2). A
-        chunk reads
+        real volume of thin sloping layers, a few hundred vertices in a million up to
+        6e-2). A chunk reads
         ``(c + 2 halo)^3`` voxels for the ``c^3`` it owns: chunks of 128 to 256 keep that
         within 8 to 3.4 times; a narrower halo is faster and less exact (docs/scale.md).
     out : str or path-like, default None
