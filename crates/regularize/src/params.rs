@@ -377,6 +377,10 @@ mod tests {
         assert!(bad.validate().is_err());
         let bad = Params { intermediate_tolerance: 0.5, ..Default::default() };
         assert!(bad.validate().is_err());
+        for t in [-1.0, f64::NAN, f64::INFINITY] {
+            assert!(Params { sheet_thickness: t, ..Default::default() }.validate().is_err());
+        }
+        assert!(Params { sheet_thickness: 0.0, ..Default::default() }.validate().is_ok());
         let bad = Params {
             normals: NormalsParams { radius: Some(-1.0), ..Default::default() },
             ..Default::default()
