@@ -6,6 +6,7 @@ use rustc_hash::FxHashSet as HashSet;
 use voxreg_digisurf::{DigitalSurface, VertexId};
 
 use crate::boxqp::Boxes;
+use crate::faces::FaceIndex;
 
 /// The voxels (lattice coordinates, possibly one outside the domain) whose two neighbours
 /// along some axis are both separated from them by a surfel: the thin voxels of every
@@ -15,18 +16,16 @@ pub(crate) fn thin_voxels(surface: &DigitalSurface) -> HashSet<[i64; 3]> {
     thin_and_faces(surface).0
 }
 
-/// Surfels as `(axis, cell)`.
-type Faces = HashSet<(u8, [i64; 3])>;
-
-/// The thin voxels and the surfels.
-fn thin_and_faces(surface: &DigitalSurface) -> (HashSet<[i64; 3]>, Faces) {
-    let faces: Faces = surface.surfels().iter().map(|s| (s.axis, s.cell.map(i64::from))).collect();
+/// The thin voxels and the surfels by face.
+fn thin_and_faces(surface: &DigitalSurface) -> (HashSet<[i64; 3]>, FaceIndex) {
+    let faces = FaceIndex::new(surface);
     let mut thin = HashSet::default();
-    for &(axis, cell) in &faces {
+    for s in surface.surfels() {
         // Surfel (axis, cell) is the lower face of voxel `cell`: is its upper face one too?
+        let (axis, cell) = (s.axis as usize, s.cell.map(i64::from));
         let mut up = cell;
-        up[axis as usize] += 1;
-        if faces.contains(&(axis, up)) {
+        up[axis] += 1;
+        if faces.contains(axis, up) {
             thin.insert(cell);
         }
     }
@@ -68,7 +67,7 @@ pub(crate) fn clamp_boxes(surface: &DigitalSurface, half: f64, thin: Option<f64>
                 // voxel is on the + side.
                 let mut cell = voxel;
                 cell[a] += off[a] as i64;
-                if !faces.contains(&(a as u8, cell)) {
+                if !faces.contains(a, cell) {
                     continue;
                 }
                 if off[a] == 0 {

@@ -70,6 +70,7 @@ mod cg;
 mod clamping;
 mod direct;
 mod energy;
+mod faces;
 mod info;
 mod iterative;
 mod multigrid;

@@ -3,10 +3,10 @@
 
 use glam::{DVec3, Vec3};
 use rayon::prelude::*;
-use rustc_hash::FxHashMap as HashMap;
 use voxreg_digisurf::{DigitalSurface, Surfel, SurfelId, VertexId};
 use voxreg_normals::{FeatureRamp, Interrupt, NormalField};
 
+use crate::faces::FaceIndex;
 use crate::RegularizeError;
 
 /// Per-surfel alignment multipliers: `weight` for the quads whose normal in `field` is
@@ -444,18 +444,7 @@ pub(crate) fn thin_sheets(surface: &DigitalSurface, field: &NormalField, thickne
     }
     let reach = thickness + 0.5 * SHEET_RAMP;
     let dims = surface.dims().map(|d| d as i64);
-    // A face `(axis, cell)` as one key, for cells from -1 to dims + 1 along each axis.
-    let key = |axis: usize, c: [i64; 3]| -> u64 {
-        let [x, y, z] = [0, 1, 2].map(|k| (c[k] + 1) as u64);
-        let [a, b, c] = dims.map(|d| d as u64 + 3);
-        ((axis as u64 * a + x) * b + y) * c + z
-    };
-    let faces: HashMap<u64, u32> = surface
-        .surfels()
-        .iter()
-        .enumerate()
-        .map(|(i, s)| (key(s.axis as usize, s.cell.map(i64::from)), i as u32))
-        .collect();
+    let faces = FaceIndex::new(surface);
     let h = surface.spacing();
     let unit = h.min_element();
     let [par_one, par_zero] = SHEET_PARALLEL_DEG.map(|a| a.to_radians().cos());
@@ -490,7 +479,7 @@ pub(crate) fn thin_sheets(surface: &DigitalSurface, field: &NormalField, thickne
             if u[k] > 0.0 {
                 cell[k] += 1;
             }
-            if let Some(&g) = faces.get(&key(k, cell)) {
+            if let Some(g) = faces.get(k, cell) {
                 let far = &surface.surfels()[g as usize];
                 let n = normals[g as usize];
                 let outward = if far.regions[0] == s.regions[side] { n } else { -n };
@@ -697,8 +686,7 @@ mod tests {
     /// between label 1 below and label 3 above, in a 40 x 24 x 28 box; and its integral
     /// invariant normals.
     fn sloping_sheet(thickness: f64) -> (DigitalSurface, NormalField) {
-        let volume = voxreg_digisurf::LabelVolume::from_fn([40, 24, 28], |[x, y, z]| {
-            let _ = y;
+        let volume = voxreg_digisurf::LabelVolume::from_fn([40, 24, 28], |[x, _, z]| {
             let h = z as f64 + 0.5 - 8.0 - (x as f64 + 0.5) / 3.0;
             if h < 0.0 {
                 1
@@ -729,7 +717,8 @@ mod tests {
         // Thickness along z, the shares' range on the sheet's quads.
         for (thickness, least, most) in [(1.0, 1.0, 1.0), (1.8, 0.5, 1.0), (4.0, 0.0, 0.0)] {
             let (surface, field) = sloping_sheet(thickness);
-            let shares: HashMap<u32, f64> = thin_sheets(&surface, &field, 2.5).into_iter().collect();
+            let shares: std::collections::HashMap<u32, f64> =
+                thin_sheets(&surface, &field, 2.5).into_iter().collect();
             let quads = sheet_quads(&surface);
             assert!(quads.len() > 200);
             for f in quads {
