@@ -12,7 +12,7 @@
 //!   `bench/surfacenets_labels.py` (needs Python with numpy and pip's `vtk`).
 //! - `table1 [--runs N] [FILE...]`: the paper's Table 1 (normals, precomputation, direct
 //!   and CG solves) on ball+tet 40^3 and bunny-128 (see `table1.rs`).
-//! - `synth-labels [--dims X,Y,Z] [--out FILE.npy]`: a deterministic 25-label volume of
+//! - `synth-labels [--dims X,Y,Z] [--seed N] [--out FILE.npy]`: a deterministic 25-label volume of
 //!   500 x 470 x 136 voxels, like a tissue segmentation (see `synth.rs`).
 //! - `figures [--quick] [--out DIR]`: the papers' Figs. 4, 7, 8, 9, 10, 11 and 15 as PNG
 //!   renders and charts with an `index.html`, in `target/xtask/figures/` (see
@@ -51,7 +51,7 @@ fn main() -> Result<()> {
             eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
             eprintln!("       cargo xtask compare [--quick] [--labels] [--surfacenets] [--out DIR]");
             eprintln!("       cargo xtask table1 [--runs N] [FILE...]");
-            eprintln!("       cargo xtask synth-labels [--dims X,Y,Z] [--out FILE.npy]");
+            eprintln!("       cargo xtask synth-labels [--dims X,Y,Z] [--seed N] [--out FILE.npy]");
             eprintln!("       cargo xtask figures [--quick] [--out DIR]");
             eprintln!("       cargo xtask voxart [--smoothness S] [--no-clamp] [FILE.vox...]");
             eprintln!("       cargo xtask gallery [--out DIR]");

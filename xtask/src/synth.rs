@@ -57,9 +57,11 @@ fn label(p: [f64; 3], dims: [usize; 3], seeds: &[([f64; 3], f64)]) -> u8 {
     2 + best.1 as u8
 }
 
-/// Runs `synth-labels [--dims X,Y,Z] [--out FILE.npy]`.
+/// Runs `synth-labels [--dims X,Y,Z] [--seed N] [--out FILE.npy]`. `--seed` (default 0)
+/// draws another set of organs: volumes kept aside from tuning.
 pub(crate) fn synth_labels(args: &[String]) -> Result<()> {
     let mut dims = [500usize, 470, 136];
+    let mut seed = 0u64;
     let mut out = crate::root().join("target/xtask/synth/tissue.npy");
     let mut it = args.iter();
     while let Some(a) = it.next() {
@@ -69,6 +71,9 @@ pub(crate) fn synth_labels(args: &[String]) -> Result<()> {
                 let parts: Vec<usize> = v.split(',').map(str::parse).collect::<Result<_, _>>()?;
                 dims = parts.try_into().map_err(|_| anyhow::anyhow!("--dims needs X,Y,Z"))?;
             }
+            "--seed" => {
+                seed = it.next().context("--seed needs a number")?.parse().context("--seed needs a number")?
+            }
             "--out" => out = PathBuf::from(it.next().context("--out needs a file")?),
             other => bail!("synth-labels: unknown argument {other}"),
         }
@@ -76,7 +81,7 @@ pub(crate) fn synth_labels(args: &[String]) -> Result<()> {
     if dims.iter().any(|&d| d < 8) {
         bail!("synth-labels: dimensions must be at least 8");
     }
-    let mut rng = SplitMix(0x766f_7872_6567); // "voxreg"
+    let mut rng = SplitMix(0x766f_7872_6567_u64.wrapping_add(seed.wrapping_mul(0x9e37_79b9_7f4a_7c15))); // "voxreg"
     let c = dims.map(|d| 0.5 * (d as f64 - 1.0));
     let r = dims.map(|d| 0.5 * d as f64 - 2.0);
     let mut seeds = Vec::new();
