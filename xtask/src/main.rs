@@ -17,9 +17,11 @@
 //! - `figures [--quick] [--out DIR]`: the papers' Figs. 4, 7, 8, 9, 10, 11 and 15 as PNG
 //!   renders and charts with an `index.html`, in `target/xtask/figures/` (see
 //!   `figures.rs`).
-//! - `voxart [--smoothness S] [--no-clamp] [FILE.vox...]`: voxel art's targets per model
-//!   (voxel centres inside and outside, thin voxels' depth, folds, intersections, mean
-//!   angle between adjacent quads, time), default: the bundled models (see `voxart.rs`).
+//! - `voxart [--former] [--smoothness S] [--no-clamp] [FILE.vox...]`: voxel art's targets
+//!   per model (voxel centres inside and outside, thin voxels' depth, folds, intersections,
+//!   mean angle between adjacent quads, on and off thin voxels, the angle kept at hard
+//!   edges, time), default: the bundled models; `--former`: the former preset (see
+//!   `voxart.rs`).
 //! - `gallery [--out DIR]`: every bundled model rendered as voxels and output, two views,
 //!   into `docs/gallery/` (see `voxart.rs`).
 

@@ -10,7 +10,9 @@ use glam::DVec3;
 use voxreg_baselines::Mesh;
 use voxreg_digisurf::LabelVolume;
 use voxreg_io::{read_volume, QuadMesh};
-use voxreg_quality::{check, mean_adjacent_angle_deg, solid_report, Occupancy, SolidReport};
+use voxreg_quality::{
+    adjacent_angles_deg, check, hard_edges, mean_adjacent_angle_deg, solid_report, Occupancy, SolidReport,
+};
 use voxreg_regularize::{Output, Params, Regularizer};
 use voxreg_render::{Camera, Image, Shading};
 
@@ -44,6 +46,12 @@ pub(crate) struct Row {
     pub(crate) intersections: usize,
     pub(crate) angle_input: f64,
     pub(crate) angle_output: f64,
+    /// The output's mean adjacent angle over the pairs with a quad of a thin voxel, and
+    /// over the others, with their counts: `[(mean, pairs); 2]`.
+    pub(crate) angle_by_thinness: [(f64, usize); 2],
+    /// The mean angle in the output between the quads of the input's hard edges
+    /// ([`hard_edges`]: 90 degrees in the voxels), and their count.
+    pub(crate) hard_edge_angle: (f64, usize),
 }
 
 /// Runs `params` on the model at `path` and measures it.
@@ -57,18 +65,46 @@ pub(crate) fn measure(path: &Path, params: &Params) -> Result<(Row, Output, voxr
     let quads = QuadMesh::from_surface(&surface, &surface.positions()).quads;
     let input = surface.positions();
     let report = check(&out.positions, &quads);
+    let occ = occupancy(&loaded.volume);
+    let thin: Vec<bool> =
+        surface.surfels().iter().map(|s| s.voxels().iter().any(|&v| occ.is_thin(v))).collect();
+    let mut by = [(0.0, 0usize); 2];
+    for ((a, b), angle) in adjacent_angles_deg(&out.positions, &quads) {
+        let k = usize::from(!(thin[a] || thin[b]));
+        by[k].0 += angle;
+        by[k].1 += 1;
+    }
+    let angles = adjacent_angles_deg(&out.positions, &quads);
+    let hard = hard_edges(&input, &quads);
+    let hard_sum: f64 =
+        hard.iter().filter_map(|p| angles.binary_search_by_key(p, |x| x.0).ok()).map(|k| angles[k].1).sum();
+    let hard_edge_angle = (if hard.is_empty() { 0.0 } else { hard_sum / hard.len() as f64 }, hard.len());
+    let angle_by_thinness = by.map(|(sum, n)| (if n > 0 { sum / n as f64 } else { 0.0 }, n));
     let row = Row {
         name: path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
         quads: quads.len(),
         seconds,
-        solid: solid_report(&occupancy(&loaded.volume), &out.positions, &quads),
+        solid: solid_report(&occ, &out.positions, &quads),
         folded_quads: report.folded_quads,
         folded_pairs: report.folded_pairs,
         intersections: report.intersecting_pairs,
         angle_input: mean_adjacent_angle_deg(&input, &quads),
         angle_output: mean_adjacent_angle_deg(&out.positions, &quads),
+        angle_by_thinness,
+        hard_edge_angle,
     };
     Ok((row, out, loaded))
+}
+
+/// The voxel-art preset before thin parts kept their depth: uniform clamping boxes, no
+/// fold removal, ii normals of the multigrid rule's radius (3 voxels), `gamma = 0.1`.
+pub(crate) fn former_default() -> Params {
+    let mut p = Params::voxel_art();
+    p.solver.bounded.thin_depth = None;
+    p.fold_free = false;
+    p.normals.radius_voxels = None;
+    p.energy.gamma = Params::ENERGY.gamma;
+    p
 }
 
 fn model_paths(files: &[String]) -> Vec<PathBuf> {
@@ -79,7 +115,8 @@ fn model_paths(files: &[String]) -> Vec<PathBuf> {
     }
 }
 
-/// `cargo xtask voxart [--smoothness S] [FILE...]`: the table of voxel art's targets.
+/// `cargo xtask voxart [--former] [--smoothness S] [FILE...]`: the table of voxel art's
+/// targets (options apply in order: `--former` first, then the others on top).
 pub(crate) fn voxart(args: &[String]) -> Result<()> {
     let mut params = Params::voxel_art();
     let mut files = Vec::new();
@@ -97,6 +134,7 @@ pub(crate) fn voxart(args: &[String]) -> Result<()> {
                 params.solver.bounded.thin_depth = if d == "none" { None } else { Some(d.parse()?) };
             }
             "--no-unfold" => params.fold_free = false,
+            "--former" => params = former_default(),
             "--alpha" => params.energy.alpha = it.next().context("--alpha needs a number")?.parse()?,
             "--gamma" => params.energy.gamma = it.next().context("--gamma needs a number")?.parse()?,
             "--normals" => {
@@ -116,14 +154,15 @@ pub(crate) fn voxart(args: &[String]) -> Result<()> {
     }
     println!(
         "| model | quads | solid centres outside | empty centres inside | thin voxels | thin < 0.25 deep | \
-         thinnest depth | folded quads | folded pairs | intersecting pairs | mean angle: voxels, output | time |"
+         thinnest depth | folded quads | folded pairs | intersecting pairs | mean angle: voxels, output | \
+         output's mean angle: pairs with a thin voxel's quad, others | hard edges: mean angle (edges) | time |"
     );
-    println!("|---|---|---|---|---|---|---|---|---|---|---|---|");
+    println!("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|");
     for path in model_paths(&files) {
         let (r, _, _) = measure(&path, &params)?;
         let s = &r.solid;
         println!(
-            "| {} | {} | {} / {} | {} / {} | {} | {} | {:.3} | {} | {} | {} | {:.1}, {:.1} deg | {:.2} s |",
+            "| {} | {} | {} / {} | {} / {} | {} | {} | {:.3} | {} | {} | {} | {:.1}, {:.2} deg | {:.1} deg ({}), {:.1} deg ({}) | {:.1} deg ({}) | {:.2} s |",
             r.name,
             r.quads,
             s.solid_outside,
@@ -138,6 +177,12 @@ pub(crate) fn voxart(args: &[String]) -> Result<()> {
             r.intersections,
             r.angle_input,
             r.angle_output,
+            r.angle_by_thinness[0].0,
+            r.angle_by_thinness[0].1,
+            r.angle_by_thinness[1].0,
+            r.angle_by_thinness[1].1,
+            r.hard_edge_angle.0,
+            r.hard_edge_angle.1,
             r.seconds
         );
     }
@@ -163,7 +208,7 @@ fn colours(loaded: &voxreg_io::LoadedVolume, out: &Output) -> Vec<[u8; 3]> {
 }
 
 /// `cargo xtask gallery [--out DIR]`: every bundled model as voxels, with the former
-/// default (uniform boxes, no fold removal), the default and `--smoothness 0.3`, from two
+/// default ([`former_default`]), the default and `--smoothness 0.3`, from two
 /// views, in `docs/gallery/` (one PNG per model) with the measurements in
 /// `docs/gallery/README.md`.
 pub(crate) fn gallery(args: &[String]) -> Result<()> {
@@ -176,9 +221,7 @@ pub(crate) fn gallery(args: &[String]) -> Result<()> {
         }
     }
     std::fs::create_dir_all(&out_dir).with_context(|| format!("creating {}", out_dir.display()))?;
-    let mut former = Params::voxel_art();
-    former.solver.bounded.thin_depth = None;
-    former.fold_free = false;
+    let former = former_default();
     let variants: [(&str, Params); 4] = [
         ("voxels", Params::voxel_art()),
         ("before: uniform boxes", former),
@@ -187,7 +230,8 @@ pub(crate) fn gallery(args: &[String]) -> Result<()> {
     ];
     let mut md = String::from(
         "# Gallery\n\nEvery bundled MagicaVoxel model (`data/`), made by `cargo xtask gallery`: the voxels; the \
-         former default (uniform clamping boxes, no fold removal: thin parts collapse, some quads fold); \
+         former default (uniform clamping boxes, no fold removal, ii radius 3, gamma 0.1: thin parts collapse, \
+         some quads fold); \
          voxreg's output with the default options; and with `--smoothness 0.3`; from two views, in the \
          palette's colours.\n\n",
     );

@@ -279,7 +279,7 @@ pub(crate) struct RegularizeArgs {
     /// Alignment weight [default: 1].
     #[arg(long, value_parser = non_negative)]
     pub(crate) beta: Option<f64>,
-    /// Fairness weight [default: 0.1].
+    /// Fairness weight [default: the preset's, 0.1; 1 for voxel-art].
     #[arg(long, value_parser = non_negative)]
     pub(crate) gamma: Option<f64>,
     /// Normal estimator driving the alignment term [default: ii].
@@ -287,7 +287,7 @@ pub(crate) struct RegularizeArgs {
     pub(crate) normals: Option<NormalsKind>,
     /// Radius of the ii, convolved and at estimators, in physical units [default: the
     /// multigrid rule 3 h^(1/3), h the largest voxel spacing, kept within 3 to 12 voxels:
-    /// 3 at unit spacing].
+    /// 3 at unit spacing; 2 voxels for the voxel-art preset].
     #[arg(long, value_name = "R", value_parser = positive_named("--radius"))]
     pub(crate) radius: Option<f64>,
     /// With --normals at: also write the Ambrosio-Tortorelli feature field v (low on sharp

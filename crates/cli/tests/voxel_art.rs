@@ -7,7 +7,10 @@ use std::process::Command;
 
 use voxreg_digisurf::{DigitalSurface, RegionMap};
 use voxreg_io::{read_mesh, read_voxels, Voxels};
-use voxreg_quality::{check, self_intersections, solid_report, Occupancy};
+use voxreg_quality::{
+    adjacent_angles_deg, check, hard_edges, mean_adjacent_angle_deg, self_intersections, solid_report,
+    Occupancy,
+};
 
 mod common;
 use common::{data, stderr, voxreg};
@@ -117,6 +120,75 @@ fn every_bundled_vox_model_gives_a_clean_coloured_mesh_by_default() {
     if let Some(report) = validate_gltf(&glbs) {
         assert_eq!(report.lines().filter(|l| l.contains(": 0 errors")).count(), glbs.len(), "{report}");
     }
+}
+
+/// The preset's smoothness and sharpness against the former one (uniform boxes, no fold
+/// removal, ii radius 3, `gamma = 0.1`) on the bundled models: the mean angle between
+/// adjacent quads no higher on the models whose thin parts the former one did not
+/// flatten much (`docs/accuracy.md`); away from thin voxels, within a degree of it on
+/// every model with more than a hundred such pairs; and the box edges at least as sharp
+/// on the whole.
+#[test]
+fn the_preset_is_smooth_away_from_thin_parts_and_keeps_hard_edges() {
+    use voxreg_io::QuadMesh;
+    use voxreg_regularize::{Params, Regularizer};
+    let mut former = Params::voxel_art();
+    former.solver.bounded.thin_depth = None;
+    former.fold_free = false;
+    former.normals.radius_voxels = None;
+    former.energy.gamma = Params::ENERGY.gamma;
+    let (mut hard_now, mut hard_before, mut hard_count) = (0.0, 0.0, 0usize);
+    for name in MODELS {
+        let loaded = read_voxels(&data(name)).unwrap();
+        let Voxels::Labels(volume) = loaded.voxels else { panic!("{name}: .vox models are labels") };
+        let occ = occupancy_of(name);
+        let params = Params::voxel_art();
+        let mut r = Regularizer::from_volume(&volume, &params.regions).unwrap();
+        let surface = r.surface().clone();
+        let input = surface.positions();
+        let quads = QuadMesh::from_surface(&surface, &input).quads;
+        let thin: Vec<bool> =
+            surface.surfels().iter().map(|s| s.voxels().iter().any(|&v| occ.is_thin(v))).collect();
+        let hard = hard_edges(&input, &quads);
+        // Mean angle over all pairs, over the pairs away from thin voxels (and their
+        // count), and the sum of the angles at the hard edges.
+        let measure = |positions: &[glam::DVec3]| {
+            let angles = adjacent_angles_deg(positions, &quads);
+            let off: Vec<f64> =
+                angles.iter().filter(|((a, b), _)| !thin[*a] && !thin[*b]).map(|x| x.1).collect();
+            let at_hard: f64 =
+                hard.iter().map(|p| angles[angles.binary_search_by_key(p, |x| x.0).unwrap()].1).sum();
+            (
+                mean_adjacent_angle_deg(positions, &quads),
+                off.iter().sum::<f64>() / off.len().max(1) as f64,
+                off.len(),
+                at_hard,
+            )
+        };
+        let now = measure(&r.run(&params).unwrap().positions);
+        let before = measure(&r.run(&former).unwrap().positions);
+        if ["veh_fire.vox", "axes.vox", "extended.vox", "placeholder-with-materials.vox"].contains(&name) {
+            assert!(now.0 <= before.0, "{name}: mean angle {} against {} before", now.0, before.0);
+        }
+        if now.2 > 100 {
+            assert!(
+                now.1 <= before.1 + 1.0,
+                "{name}: away from thin voxels {} against {} before",
+                now.1,
+                before.1
+            );
+        }
+        hard_now += now.3;
+        hard_before += before.3;
+        hard_count += hard.len();
+    }
+    assert!(hard_count > 1000, "{hard_count} hard edges");
+    assert!(
+        hard_now >= hard_before,
+        "mean angle at hard edges {} against {} before",
+        hard_now / hard_count as f64,
+        hard_before / hard_count as f64
+    );
 }
 
 #[test]
@@ -266,7 +338,7 @@ fn every_model_of_a_file_without_a_scene_graph_opens() {
 
 /// The clamped solve's active-set rounds reach the minimizer that MPRGP alone reaches
 /// from the projected unconstrained minimizer, on bundled models: positions within the
-/// solvers' tolerance of each other (both stop at an estimated 1e-3 voxel), the same
+/// solvers' tolerance of each other (both run to an estimated 1e-5 voxel), the same
 /// energy, and every vertex in its box.
 #[test]
 fn the_active_set_rounds_reach_mprgps_minimizer() {
@@ -275,8 +347,11 @@ fn the_active_set_rounds_reach_mprgps_minimizer() {
         let loaded = read_voxels(&data(name)).unwrap();
         let Voxels::Labels(volume) = loaded.voxels else { panic!("{name}: .vox models are labels") };
         let mut params = Params::voxel_art();
-        // The minimizers themselves, before the fold-free pass.
+        // The minimizers themselves, before the fold-free pass, to a tolerance tight
+        // enough that the two solvers' stopping points cannot differ by more than the
+        // assertion's margin.
         params.fold_free = false;
+        params.solver.bounded.tolerance = 1e-5;
         let mut r = Regularizer::from_volume(&volume, &params.regions).unwrap();
         let fast = r.run(&params).unwrap();
         let mut old = params.clone();
@@ -284,7 +359,7 @@ fn the_active_set_rounds_reach_mprgps_minimizer() {
         let slow = r.run(&old).unwrap();
         let far =
             fast.positions.iter().zip(&slow.positions).map(|(a, b)| (*a - *b).length()).fold(0.0, f64::max);
-        assert!(far <= 4e-3, "{name}: the two minimizers are {far} voxel apart");
+        assert!(far <= 1e-3, "{name}: the two minimizers are {far} voxel apart");
         let energy = Energy::new(r.surface(), &fast.normals, &fast.targets, params.energy).unwrap();
         let (ef, es) = (energy.terms(&fast.positions).total, energy.terms(&slow.positions).total);
         assert!((ef - es).abs() <= 1e-5 * es, "{name}: energies {ef} and {es}");

@@ -181,12 +181,65 @@ pub fn folded_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usiz
 /// edge that no other quad shares: `90 * 2/3`-ish on a staircase, lower when smoother,
 /// `0` on a plane (and without such pairs).
 pub fn mean_adjacent_angle_deg(positions: &[DVec3], quads: &[[u32; 4]]) -> f64 {
-    let pairs = adjacent_pairs(positions, quads);
+    let pairs = adjacent_angles_deg(positions, quads);
     if pairs.is_empty() {
         return 0.0;
     }
-    let sum: f64 = pairs.iter().map(|(_, a, b)| a.angle_between(*b).to_degrees()).sum();
+    let sum: f64 = pairs.iter().map(|p| p.1).sum();
     sum / pairs.len() as f64
+}
+
+/// The pairs `(a, b)`, `a < b`, of quads sharing an edge that no other quad shares, with
+/// the angle in degrees between their normals (vector areas): the terms of
+/// [`mean_adjacent_angle_deg`], sorted by pair.
+pub fn adjacent_angles_deg(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize), f64)> {
+    adjacent_pairs(positions, quads)
+        .into_iter()
+        .map(|(p, a, b)| (p, a.angle_between(b).to_degrees()))
+        .collect()
+}
+
+/// The deliberate hard edges of a voxel model: the pairs `(a, b)`, `a < b`, of quads
+/// sharing an edge that meet at a right angle in `input` (the staircase), where the crease
+/// runs straight for at least three edges and both faces are flat at least two quads
+/// across it: each quad's neighbours across its other three edges lie in its own plane.
+/// A box's edges are hard edges; a staircase's steps, one quad wide, are not. Sorted.
+pub fn hard_edges(input: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
+    let unit = |q: &[u32; 4]| corners(input, q).map(|c| vector_area(c).normalize_or_zero());
+    let normals: Vec<Option<DVec3>> = quads.iter().map(unit).collect();
+    let mut edges: std::collections::HashMap<(u32, u32), Vec<(usize, usize)>> = Default::default();
+    for (f, q) in quads.iter().enumerate() {
+        for i in 0..4 {
+            let (a, b) = (q[i], q[(i + 1) % 4]);
+            edges.entry((a.min(b), a.max(b))).or_default().push((f, i));
+        }
+    }
+    let across = |f: usize, slot: usize| -> Option<usize> {
+        let q = &quads[f];
+        let (a, b) = (q[slot], q[(slot + 1) % 4]);
+        match edges.get(&(a.min(b), a.max(b)))?.as_slice() {
+            [(g, _), (h, _)] => Some(if *g == f { *h } else { *g }),
+            _ => None,
+        }
+    };
+    let flat = |f: usize, slot: usize| {
+        let Some(n) = normals[f] else { return false };
+        (1..4).all(|k| {
+            across(f, (slot + k) % 4).and_then(|g| normals[g]).is_some_and(|m| n.dot(m) > 1.0 - 1e-9)
+        })
+    };
+    let mut out: Vec<(usize, usize)> = edges
+        .values()
+        .filter_map(|e| match e.as_slice() {
+            [(f, i), (g, j)] if f != g => {
+                let (nf, ng) = (normals[*f]?, normals[*g]?);
+                (nf.dot(ng).abs() < 1e-9 && flat(*f, *i) && flat(*g, *j)).then(|| (*f.min(g), *f.max(g)))
+            }
+            _ => None,
+        })
+        .collect();
+    out.sort_unstable();
+    out
 }
 
 #[cfg(test)]
@@ -281,5 +334,72 @@ mod tests {
             v.z = 0.0;
         }
         assert_eq!(self_intersections(&p, &q).len(), 40 * 40);
+    }
+
+    /// The boundary quads of a set of solid voxels, outward, with shared corners.
+    fn voxel_surface(solid: impl Fn([i32; 3]) -> bool, n: i32) -> (Vec<DVec3>, Vec<[u32; 4]>) {
+        let mut ids = std::collections::HashMap::new();
+        let mut p = Vec::new();
+        let mut id = |c: [i32; 3]| {
+            *ids.entry(c).or_insert_with(|| {
+                p.push(DVec3::new(f64::from(c[0]), f64::from(c[1]), f64::from(c[2])));
+                (p.len() - 1) as u32
+            })
+        };
+        let mut q = Vec::new();
+        for x in -1..=n {
+            for y in -1..=n {
+                for z in -1..=n {
+                    let v = [x, y, z];
+                    if !solid(v) {
+                        continue;
+                    }
+                    for a in 0..3 {
+                        for side in [0, 1] {
+                            let mut w = v;
+                            w[a] += 2 * side - 1;
+                            if solid(w) {
+                                continue;
+                            }
+                            let (b, c) = ((a + 1) % 3, (a + 2) % 3);
+                            let corner = |db: i32, dc: i32| {
+                                let mut k = v;
+                                k[a] += side;
+                                k[b] += db;
+                                k[c] += dc;
+                                k
+                            };
+                            let mut quad = [corner(0, 0), corner(1, 0), corner(1, 1), corner(0, 1)];
+                            if side == 0 {
+                                quad.reverse();
+                            }
+                            q.push(quad.map(&mut id));
+                        }
+                    }
+                }
+            }
+        }
+        (p, q)
+    }
+
+    #[test]
+    fn a_box_has_hard_edges_and_a_staircase_has_none() {
+        // A 4 x 4 x 4 box: each of its 12 edges has 4 crease segments, of which the
+        // two at the corners have a side neighbour on the third face.
+        let inside = |v: [i32; 3], n: i32| v.iter().all(|&c| (0..n).contains(&c));
+        let (p, q) = voxel_surface(|v| inside(v, 4), 4);
+        assert_eq!(hard_edges(&p, &q).len(), 12 * 2);
+        // A slab cut by a 45-degree plane into one-voxel steps: the steps' creases are
+        // not hard edges; the five box edges away from the steps are, but for the
+        // segments at their ends (4 each).
+        let (p, q) = voxel_surface(|v| inside(v, 6) && v[0] <= v[1], 6);
+        let hard = hard_edges(&p, &q);
+        assert_eq!(hard.len(), 5 * 4);
+        let centre = |f: usize| q[f].iter().map(|&v| p[v as usize]).sum::<DVec3>() / 4.0;
+        let on_a_step = |f: usize| {
+            let c = centre(f);
+            (c.z > 0.0 && c.z < 6.0) && c.x > 0.0 && c.y < 6.0
+        };
+        assert!(hard.iter().all(|&(a, b)| !on_a_step(a) && !on_a_step(b)));
     }
 }

@@ -47,13 +47,18 @@ pub struct NormalsParams {
     /// rule `3 h^(1/3)` kept within 3 to 12 voxels ([`default_radius`]; 3 at unit spacing).
     /// Default: `None`.
     pub radius: Option<f64>,
+    /// Where `radius` is `None`: the radius in voxels along the coarsest axis (so
+    /// `radius_voxels` times the largest spacing), instead of the multigrid rule. A preset
+    /// sets it where the right scale is the voxel's, whatever the spacing
+    /// ([`Params::voxel_art`]). Default: `None`.
+    pub radius_voxels: Option<f64>,
     /// Settings of [`Estimator::At`]. Default: [`AtParams::default`].
     pub at: AtParams,
 }
 
 impl Default for NormalsParams {
     fn default() -> Self {
-        NormalsParams { estimator: Estimator::Ii, radius: None, at: AtParams::default() }
+        NormalsParams { estimator: Estimator::Ii, radius: None, radius_voxels: None, at: AtParams::default() }
     }
 }
 
@@ -71,7 +76,7 @@ pub struct EstimatedNormals {
 impl NormalsParams {
     /// Checks the radius and the Ambrosio-Tortorelli settings.
     pub fn validate(&self) -> Result<(), RegularizeError> {
-        if let Some(r) = self.radius {
+        for r in [self.radius, self.radius_voxels].into_iter().flatten() {
             if !(r.is_finite() && r > 0.0) {
                 return Err(RegularizeError::InvalidParams(format!(
                     "the normals' radius must be finite and positive, got {r}"
@@ -89,11 +94,18 @@ impl NormalsParams {
     pub fn radius_on(&self, surface: &DigitalSurface) -> Option<f64> {
         match self.estimator {
             Estimator::Trivial => None,
-            _ => Some(self.radius.unwrap_or_else(|| default_radius(surface))),
+            _ => Some(self.explicit_radius(surface).unwrap_or_else(|| default_radius(surface))),
         }
     }
 
-    /// The estimator as a trait object.
+    /// `radius`, else `radius_voxels` in physical units on `surface`; `None` leaves the
+    /// estimator its own rule.
+    fn explicit_radius(&self, surface: &DigitalSurface) -> Option<f64> {
+        self.radius.or_else(|| self.radius_voxels.map(|v| v * surface.spacing().max_element()))
+    }
+
+    /// The estimator as a trait object, with `radius` (`radius_voxels` needs the surface:
+    /// [`NormalsParams::estimate`] resolves it).
     pub fn estimator(&self) -> Box<dyn NormalEstimator + Send + Sync> {
         let radius = self.radius;
         match self.estimator {
@@ -121,14 +133,21 @@ impl NormalsParams {
         interrupt: &Interrupt,
     ) -> Result<EstimatedNormals, RegularizeError> {
         self.validate()?;
-        Ok(match self.estimator {
+        let resolved;
+        let this = if self.radius.is_none() && self.radius_voxels.is_some() {
+            resolved = NormalsParams { radius: self.explicit_radius(surface), ..self.clone() };
+            &resolved
+        } else {
+            self
+        };
+        Ok(match this.estimator {
             Estimator::At => {
                 let (field, features, info) =
-                    self.at_estimator().estimate_with_info_interruptible(surface, interrupt)?;
+                    this.at_estimator().estimate_with_info_interruptible(surface, interrupt)?;
                 EstimatedNormals { field, features: Some(features), at_info: Some(info) }
             }
             _ => EstimatedNormals {
-                field: self.estimator().estimate_interruptible(surface, interrupt)?,
+                field: this.estimator().estimate_interruptible(surface, interrupt)?,
                 features: None,
                 at_info: None,
             },
@@ -257,18 +276,28 @@ impl Params {
     /// boxes shrink around thin voxels so that one-voxel parts keep
     /// [`Params::THIN_DEPTH`] voxel of depth, and folds are removed afterwards
     /// ([`Params::fold_free`]). [`Params::with_smoothness`] trades roundness for
-    /// blockiness.
+    /// blockiness. Normals: ii of radius [`Params::VOXEL_ART_RADIUS`] voxels, fairness
+    /// `gamma = 1`: on the bundled models, smoother than
+    /// radius 3 and `gamma = 0.1` with box edges at least as sharp
+    /// (`docs/design/voxel-art-clamping.md`).
     pub fn voxel_art() -> Self {
         let mut solver = SolverParams::default().clamped(Some(0.01));
         solver.bounded.thin_depth = Some(Self::THIN_DEPTH);
+        let normals = NormalsParams { radius_voxels: Some(Self::VOXEL_ART_RADIUS), ..Default::default() };
         Params {
             regions: RegionMap::single_solid(),
             refine: 0,
             solver,
             fold_free: true,
+            normals,
+            energy: EnergyParams { gamma: 1.0, ..Self::ENERGY },
             ..Default::default()
         }
     }
+
+    /// The ii normals' ball radius of [`Params::voxel_art`], in voxels
+    /// ([`NormalsParams::radius_voxels`]).
+    pub const VOXEL_ART_RADIUS: f64 = 2.0;
 
     /// The same parameters with the boxes of smoothness `s` in `(0, 1]`: each vertex
     /// moves at most `s` times half a voxel (less `0.005`) from its voxel corner along
@@ -386,5 +415,25 @@ mod tests {
             ..Default::default()
         };
         assert!(bad.validate().is_err());
+        let bad = NormalsParams { radius_voxels: Some(f64::NAN), ..Default::default() };
+        assert!(bad.validate().is_err());
+    }
+
+    #[test]
+    fn a_radius_in_voxels_follows_the_coarsest_spacing_and_yields_to_an_explicit_one() {
+        let volume = voxreg_digisurf::LabelVolume::from_fn([9, 9, 9], |[x, y, z]| {
+            u32::from((x as i64 - 4).pow(2) + (y as i64 - 4).pow(2) + (z as i64 - 4).pow(2) <= 9)
+        })
+        .with_spacing(glam::DVec3::new(0.5, 0.5, 0.25))
+        .unwrap();
+        let surface = DigitalSurface::from_volume(&volume).unwrap();
+        let voxels = Params::voxel_art().normals;
+        assert_eq!(voxels.radius_on(&surface), Some(Params::VOXEL_ART_RADIUS * 0.5));
+        let explicit = NormalsParams { radius: Some(0.7), ..voxels.clone() };
+        assert_eq!(explicit.radius_on(&surface), Some(0.7));
+        // The field is the one of the physical radius the voxels make.
+        let physical = NormalsParams { radius: Some(1.0), radius_voxels: None, ..voxels.clone() };
+        let (a, b) = (voxels.estimate(&surface).unwrap().field, physical.estimate(&surface).unwrap().field);
+        assert_eq!(a, b);
     }
 }

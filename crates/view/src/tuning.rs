@@ -245,7 +245,7 @@ mod tests {
         assert_eq!(
             t.command_line("my model.vox", "out.glb"),
             "voxreg regularize 'my model.vox' -o out.glb --preset voxel-art --normals ii --alpha 0.01 \
-             --beta 1 --gamma 0.1 --refine 0 --clamp 0.01 --texture-aware"
+             --beta 1 --gamma 1 --refine 0 --clamp 0.01 --texture-aware"
         );
         t.clamp = None;
         assert!(t.command_line("a.vox", "a.glb").ends_with("--no-clamp --texture-aware"));

@@ -149,13 +149,13 @@ def regularize(
         Normal estimator driving the alignment term: each face's axis, axes averaged
         within the radius, integral invariants, or Ambrosio-Tortorelli (keeps sharp
         features).
-    radius : float, default None (preset: 3 h^(1/3), h the largest spacing; 3 at unit spacing)
+    radius : float, default None (preset: 3 h^(1/3), h the largest spacing, 3 at unit spacing; voxel_art 2 voxels)
         Radius of the ii, convolved and at estimators, in physical units.
     alpha : float > 0, default None (preset: 1e-2; papers 1e-3)
         Attachment weight.
     beta : float >= 0, default None (preset: 1)
         Alignment weight.
-    gamma : float >= 0, default None (preset: 0.1)
+    gamma : float >= 0, default None (preset: 0.1; voxel_art 1)
         Fairness weight.
     refine : int >= 0, default None (preset: 3; papers and voxel_art 0)
         Normal refinement rounds: re-estimate the normals from the result and solve again.
