@@ -130,9 +130,8 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     output::check_volume(args, product, &volume)?;
     let (mut regularizer, _) = stages.run("digital surface", || {
         // Refused before the surface is built: the count is one pass over the voxels.
-        let bytes = Regularizer::estimated_bytes_of(&volume, &params.regions)
+        let (surfels, bytes) = Regularizer::estimated_bytes_of(&volume, &params)
             .with_context(|| format!("{}: no surface to regularize", path.display()))?;
-        let surfels = bytes / voxreg_regularize::BYTES_PER_SURFEL;
         let (what, bytes) = match product {
             // Exact geodesics' windows outgrow the surface: refused here too, not hours later.
             Product::Geodesic(opts) if opts.method == args::GeodesicMethod::Exact => (

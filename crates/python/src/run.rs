@@ -202,9 +202,8 @@ pub(crate) fn regularize<'py>(
             on_pool(threads, move || {
                 catch_unwind(AssertUnwindSafe(|| -> Result<Output> {
                     // Refused before the surface is built, as the CLI refuses it.
-                    let bytes = Regularizer::estimated_bytes_of(volume, &params.regions)
+                    let (surfels, bytes) = Regularizer::estimated_bytes_of(volume, params)
                         .map_err(|e| Error::regularize("labels: no surface to regularize: ", &e))?;
-                    let surfels = bytes / voxreg_regularize::BYTES_PER_SURFEL;
                     volume::check_budget(
                         &format!("the regularization of its {surfels} surfels"),
                         u128::from(bytes),

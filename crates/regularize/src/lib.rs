@@ -94,7 +94,10 @@ pub use info::{BoundedInfo, CgInfo, DirectInfo, SolveInfo, SolveTimings};
 pub use iterative::Preconditioner;
 pub use multigrid::MultigridParams;
 pub use params::{EstimatedNormals, Estimator, NormalsParams, Params};
-pub use regularizer::{regularize, Event, Output, Regularizer, Stage, BYTES_PER_SURFEL};
+pub use regularizer::{
+    estimated_bytes, regularize, Event, Output, Regularizer, Stage, BYTES_FIXED, BYTES_PER_SURFEL,
+    BYTES_PER_SURFEL_CLAMPED,
+};
 pub use report::{EnergyReport, NormalsReport, Report, StageTimes};
 pub use solver::{estimate_factor_nnz, ClampOverride, OverrideError, Solver, SolverChoice, SolverParams};
 pub use stencil::MatrixFreeOperator;

@@ -95,13 +95,29 @@ pub fn regularize<S: LabelStorage>(
     Regularizer::from_volume(volume, &params.regions)?.run(params)
 }
 
-/// Peak memory per surfel of a run, with a margin: the resident memory a run adds
-/// measured at 1,150 to 1,550 bytes per surfel with every preset and estimator, on one-
-/// and multi-label surfaces of 60k to 1.5 million surfels, and up to about 2,400 with
-/// the voxel-art preset, whose clamped solve builds a second set of coarse levels for
-/// the active-set rounds and updates them between rounds (`tests/memory.rs` keeps the
-/// estimate above the measured peak).
-pub const BYTES_PER_SURFEL: u64 = 2_700;
+/// Peak memory per surfel of a run that does not clamp, with a margin: the resident
+/// memory a run adds measured at 940 to 1,210 bytes per surfel with every preset and
+/// estimator on one- and multi-label surfaces of 100k to 5.3 million surfels
+/// (`tests/memory.rs` keeps the estimate above the measured peak).
+pub const BYTES_PER_SURFEL: u64 = 1_800;
+
+/// [`BYTES_PER_SURFEL`] for a run that clamps (the voxel-art preset), whose clamped solve
+/// builds a second set of coarse levels for the active-set rounds and updates them between
+/// rounds: measured up to about 2,400 bytes per surfel.
+pub const BYTES_PER_SURFEL_CLAMPED: u64 = 2_700;
+
+/// The part of a run's memory that does not grow with the surface, with a margin (the
+/// direct solver's factor budget on small surfaces, the threads' buffers).
+pub const BYTES_FIXED: u64 = 32 << 20;
+
+/// An upper estimate of the memory a run of `params` takes on a surface of `surfels`
+/// surfels, in bytes: [`BYTES_FIXED`] and [`BYTES_PER_SURFEL`] (or
+/// [`BYTES_PER_SURFEL_CLAMPED`]) per surfel for the solver's operator, hierarchy and
+/// vectors, the normals and the refinement's work arrays.
+pub fn estimated_bytes(surfels: u64, params: &Params) -> u64 {
+    let per = if params.clamps() { BYTES_PER_SURFEL_CLAMPED } else { BYTES_PER_SURFEL };
+    surfels.saturating_mul(per).saturating_add(BYTES_FIXED)
+}
 
 /// The front door's reusable form: keeps the digital surface, its solver (symbolic
 /// analysis, multigrid hierarchy) and the initial normal field across runs, for
@@ -156,22 +172,23 @@ impl Regularizer {
         Ok(r)
     }
 
-    /// An upper estimate of the memory a run of the default pipeline takes on this
-    /// surface, in bytes: [`BYTES_PER_SURFEL`] per surfel (the solver's operator,
-    /// hierarchy and vectors, the normals and the refinement's work arrays), so that a
-    /// caller can refuse a run that cannot fit before it starts.
-    pub fn estimated_bytes(&self) -> u64 {
-        self.surface.num_surfels() as u64 * BYTES_PER_SURFEL
+    /// An upper estimate of the memory a run of `params` takes on this surface, in bytes
+    /// ([`estimated_bytes`]), so that a caller can refuse a run that cannot fit before it
+    /// starts.
+    pub fn estimated_bytes(&self, params: &Params) -> u64 {
+        estimated_bytes(self.surface.num_surfels() as u64, params)
     }
 
-    /// [`Regularizer::estimated_bytes`] of the regularizer [`Regularizer::from_volume`]
-    /// would build, found by counting the surfels in one pass over the voxels, before
-    /// any of the surface is built.
+    /// The surfels of the regularizer [`Regularizer::from_volume`] would build with
+    /// `params.regions`, and [`Regularizer::estimated_bytes`] of a run of `params` on it,
+    /// found by counting the surfels in one pass over the voxels, before any of the
+    /// surface is built: `(surfels, bytes)`.
     pub fn estimated_bytes_of<S: LabelStorage>(
         volume: &LabelVolume<S>,
-        regions: &RegionMap,
-    ) -> Result<u64, RegularizeError> {
-        Ok(DigitalSurface::count_surfels(volume, regions)?.saturating_mul(BYTES_PER_SURFEL))
+        params: &Params,
+    ) -> Result<(u64, u64), RegularizeError> {
+        let surfels = DigitalSurface::count_surfels(volume, &params.regions)?;
+        Ok((surfels, estimated_bytes(surfels, params)))
     }
 
     /// The digital surface.

@@ -55,7 +55,7 @@ fn memory_case() {
     let (shape, preset) = case.split_once('/').unwrap();
     let volume = volume(shape);
     let params = params(preset);
-    let estimate = Regularizer::estimated_bytes_of(&volume, &params.regions).unwrap();
+    let (_, estimate) = Regularizer::estimated_bytes_of(&volume, &params).unwrap();
     let before = status_bytes("VmRSS:");
     // Some sandboxes refuse the reset of the peak: nothing to measure there.
     if std::fs::write("/proc/self/clear_refs", "5").is_err() {

@@ -368,10 +368,12 @@ fn apply_edit(shared: &Shared, c: &mut Current, edit: &Edit) -> Result<(), Strin
 }
 
 /// The regularizer of `volume`, refused up front (as the CLI does) when its run would not
-/// fit the memory limit; the error is the page's one-line message.
+/// fit the memory limit; the error is the page's one-line message. The page may turn
+/// clamping on at any time, so the estimate is a clamped run's.
 fn build(volume: &LabelVolume, regions: &RegionMap, name: &str) -> Result<Regularizer, String> {
-    let bytes = Regularizer::estimated_bytes_of(volume, regions).map_err(|e| format!("{name}: {e}"))?;
-    let surfels = bytes / voxreg_regularize::BYTES_PER_SURFEL;
+    let surfels = voxreg_digisurf::DigitalSurface::count_surfels(volume, regions)
+        .map_err(|e| format!("{name}: {e}"))?;
+    let bytes = voxreg_regularize::estimated_bytes(surfels, &Params::voxel_art());
     voxreg_io::check_memory(
         std::path::Path::new(name),
         &format!("the regularization of its {surfels} surfels"),
