@@ -11,7 +11,7 @@ use voxreg_baselines::Mesh;
 use voxreg_digisurf::LabelVolume;
 use voxreg_io::{read_volume, QuadMesh};
 use voxreg_quality::{
-    adjacent_angles_deg, check, hard_edges, mean_adjacent_angle_deg, solid_report, Occupancy, SolidReport,
+    angle_report, check, mean_adjacent_angle_deg, solid_report, AngleReport, Occupancy, SolidReport,
 };
 use voxreg_regularize::{Output, Params, Regularizer};
 use voxreg_render::{Camera, Image, Shading};
@@ -45,13 +45,8 @@ pub(crate) struct Row {
     pub(crate) folded_pairs: usize,
     pub(crate) intersections: usize,
     pub(crate) angle_input: f64,
-    pub(crate) angle_output: f64,
-    /// The output's mean adjacent angle over the pairs with a quad of a thin voxel, and
-    /// over the others, with their counts: `[(mean, pairs); 2]`.
-    pub(crate) angle_by_thinness: [(f64, usize); 2],
-    /// The mean angle in the output between the quads of the input's hard edges
-    /// ([`hard_edges`]: 90 degrees in the voxels), and their count.
-    pub(crate) hard_edge_angle: (f64, usize),
+    /// The output's smoothness on and off thin voxels and its angle at the hard edges.
+    pub(crate) angles: AngleReport,
 }
 
 /// Runs `params` on the model at `path` and measures it.
@@ -66,20 +61,7 @@ pub(crate) fn measure(path: &Path, params: &Params) -> Result<(Row, Output, voxr
     let input = surface.positions();
     let report = check(&out.positions, &quads);
     let occ = occupancy(&loaded.volume);
-    let thin: Vec<bool> =
-        surface.surfels().iter().map(|s| s.voxels().iter().any(|&v| occ.is_thin(v))).collect();
-    let mut by = [(0.0, 0usize); 2];
-    for ((a, b), angle) in adjacent_angles_deg(&out.positions, &quads) {
-        let k = usize::from(!(thin[a] || thin[b]));
-        by[k].0 += angle;
-        by[k].1 += 1;
-    }
-    let angles = adjacent_angles_deg(&out.positions, &quads);
-    let hard = hard_edges(&input, &quads);
-    let hard_sum: f64 =
-        hard.iter().filter_map(|p| angles.binary_search_by_key(p, |x| x.0).ok()).map(|k| angles[k].1).sum();
-    let hard_edge_angle = (if hard.is_empty() { 0.0 } else { hard_sum / hard.len() as f64 }, hard.len());
-    let angle_by_thinness = by.map(|(sum, n)| (if n > 0 { sum / n as f64 } else { 0.0 }, n));
+    let angles = angle_report(&input, &out.positions, &quads, &occ.thin_quads(&input, &quads));
     let row = Row {
         name: path.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default(),
         quads: quads.len(),
@@ -89,9 +71,7 @@ pub(crate) fn measure(path: &Path, params: &Params) -> Result<(Row, Output, voxr
         folded_pairs: report.folded_pairs,
         intersections: report.intersecting_pairs,
         angle_input: mean_adjacent_angle_deg(&input, &quads),
-        angle_output: mean_adjacent_angle_deg(&out.positions, &quads),
-        angle_by_thinness,
-        hard_edge_angle,
+        angles,
     };
     Ok((row, out, loaded))
 }
@@ -176,13 +156,13 @@ pub(crate) fn voxart(args: &[String]) -> Result<()> {
             r.folded_pairs,
             r.intersections,
             r.angle_input,
-            r.angle_output,
-            r.angle_by_thinness[0].0,
-            r.angle_by_thinness[0].1,
-            r.angle_by_thinness[1].0,
-            r.angle_by_thinness[1].1,
-            r.hard_edge_angle.0,
-            r.hard_edge_angle.1,
+            r.angles.mean,
+            r.angles.thin.0,
+            r.angles.thin.1,
+            r.angles.elsewhere.0,
+            r.angles.elsewhere.1,
+            r.angles.hard_edges.0,
+            r.angles.hard_edges.1,
             r.seconds
         );
     }
@@ -277,7 +257,7 @@ pub(crate) fn gallery(args: &[String]) -> Result<()> {
         md.push_str(&format!(
             "## {name}\n\n![{name}]({file})\n\n{} quads; default: {} folded quads, {} folded pairs, {} intersecting \
              pairs, thinnest voxel {:.2} deep, mean angle between adjacent quads {:.1} deg (voxels {:.1}).\n\n",
-            r.quads, r.folded_quads, r.folded_pairs, r.intersections, r.solid.thin_min_depth, r.angle_output, r.angle_input
+            r.quads, r.folded_quads, r.folded_pairs, r.intersections, r.solid.thin_min_depth, r.angles.mean, r.angle_input
         ));
         eprintln!("{name}: done");
     }

@@ -148,7 +148,9 @@ pub(crate) struct CheckArgs {
     /// Also measure the mesh against the labeled volume it came from (any non-background
     /// voxel solid): solid voxel centres next to the surface left outside, empty ones put
     /// inside, and thin voxels (both neighbours along an axis empty) less than 0.25 voxel
-    /// deep; reported, not errors.
+    /// deep; for a clamped mesh (every vertex within half a voxel of its corner, as the
+    /// voxel-art preset makes), also the mean angle between adjacent quads on and off thin
+    /// voxels and the angle kept at the voxels' box edges; reported, not errors.
     #[arg(long, value_name = "VOLUME")]
     pub(crate) voxels: Option<PathBuf>,
 }

@@ -238,6 +238,29 @@ fn check(args: &CheckArgs) -> Result<()> {
             s.thin_voxels,
             s.thin_min_depth
         ))?;
+        // Smoothness and sharpness need the staircase: found where every vertex stayed
+        // within half a voxel of its corner (clamped outputs, the voxel-art preset's).
+        if let Some(stair) = occ.staircase_of(&mesh.positions, &mesh.quads) {
+            let a = voxreg_quality::angle_report(
+                &stair,
+                &mesh.positions,
+                &mesh.quads,
+                &occ.thin_quads(&stair, &mesh.quads),
+            );
+            print_stdout(&format!(
+                "{}: mean angle between adjacent quads {:.1} deg (voxels {:.1}; {:.1} on the {} pairs at thin \
+                 voxels, {:.1} on the {} others), {} hard edges at {:.1} deg (90 in the voxels)\n",
+                args.mesh.display(),
+                a.mean,
+                voxreg_quality::mean_adjacent_angle_deg(&stair, &mesh.quads),
+                a.thin.0,
+                a.thin.1,
+                a.elsewhere.0,
+                a.elsewhere.1,
+                a.hard_edges.1,
+                a.hard_edges.0
+            ))?;
+        }
     }
     if let Some((a, b)) = r.first_intersection {
         bail!(

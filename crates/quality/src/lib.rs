@@ -12,10 +12,11 @@
 //!   than 120 degrees apart (across edges that exactly two quads share; at junction and
 //!   pinched edges the pairing is ambiguous and left out).
 //!
-//! Two measurements describe how a mesh made from voxels treats them:
-//! [`mean_adjacent_angle_deg`] (smoothness: the mean angle between edge-adjacent quads)
-//! and [`solid_report`] (which voxel centres of an [`Occupancy`] end up inside, and how
-//! deep the thin ones are).
+//! Measurements describe how a mesh made from voxels treats them:
+//! [`mean_adjacent_angle_deg`] (smoothness: the mean angle between edge-adjacent quads),
+//! [`angle_report`] (the same on and off thin voxels, and the angle kept at the voxels'
+//! [`hard_edges`]) and [`solid_report`] (which voxel centres of an [`Occupancy`] end up
+//! inside, and how deep the thin ones are).
 //!
 //! # Example
 //!
@@ -104,7 +105,7 @@ pub fn folded_quads(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<usize> {
 }
 
 /// The vector area of a quad (half the cross product of its diagonals).
-fn vector_area(p: [DVec3; 4]) -> DVec3 {
+pub(crate) fn vector_area(p: [DVec3; 4]) -> DVec3 {
     0.5 * (p[2] - p[0]).cross(p[3] - p[1])
 }
 
@@ -197,6 +198,52 @@ pub fn adjacent_angles_deg(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usi
         .into_iter()
         .map(|(p, a, b)| (p, a.angle_between(b).to_degrees()))
         .collect()
+}
+
+/// How smooth a mesh made from voxels is, and how sharp it keeps its box edges; angles
+/// in degrees ([`angle_report`]).
+#[derive(Clone, Debug, Default, PartialEq, serde::Serialize)]
+pub struct AngleReport {
+    /// [`mean_adjacent_angle_deg`].
+    pub mean: f64,
+    /// The mean over the pairs with a quad on a thin voxel, and their count.
+    pub thin: (f64, usize),
+    /// The mean over the other pairs, and their count.
+    pub elsewhere: (f64, usize),
+    /// The mean at the staircase's [`hard_edges`] (90 degrees in the voxels), and their
+    /// count.
+    pub hard_edges: (f64, usize),
+}
+
+/// [`AngleReport`] of the mesh (`positions`, `quads`) made from the staircase
+/// (`staircase`, the same quads), `thin[f]` saying whether quad `f` lies on a thin voxel
+/// ([`Occupancy::thin_quads`]).
+pub fn angle_report(
+    staircase: &[DVec3],
+    positions: &[DVec3],
+    quads: &[[u32; 4]],
+    thin: &[bool],
+) -> AngleReport {
+    let angles = adjacent_angles_deg(positions, quads);
+    let mean = |it: &mut dyn Iterator<Item = f64>| {
+        let (sum, n) = it.fold((0.0, 0usize), |(s, n), a| (s + a, n + 1));
+        (if n > 0 { sum / n as f64 } else { 0.0 }, n)
+    };
+    let on_thin = |(a, b): (usize, usize)| {
+        thin.get(a).copied().unwrap_or(false) || thin.get(b).copied().unwrap_or(false)
+    };
+    let hard = hard_edges(staircase, quads);
+    AngleReport {
+        mean: mean(&mut angles.iter().map(|x| x.1)).0,
+        thin: mean(&mut angles.iter().filter(|x| on_thin(x.0)).map(|x| x.1)),
+        elsewhere: mean(&mut angles.iter().filter(|x| !on_thin(x.0)).map(|x| x.1)),
+        hard_edges: mean(
+            &mut hard
+                .iter()
+                .filter_map(|p| angles.binary_search_by_key(p, |x| x.0).ok())
+                .map(|k| angles[k].1),
+        ),
+    }
 }
 
 /// The deliberate hard edges of a voxel model: the pairs `(a, b)`, `a < b`, of quads
@@ -401,5 +448,32 @@ mod tests {
             (c.z > 0.0 && c.z < 6.0) && c.x > 0.0 && c.y < 6.0
         };
         assert!(hard.iter().all(|&(a, b)| !on_a_step(a) && !on_a_step(b)));
+    }
+
+    #[test]
+    fn a_clamped_mesh_gives_back_its_staircase_and_its_thin_quads() {
+        // A 4 x 4 x 1 plate: every voxel thin (empty above and below).
+        let (p, q) = voxel_surface(|v| (0..4).contains(&v[0]) && (0..4).contains(&v[1]) && v[2] == 0, 4);
+        let occ = Occupancy::from_fn([4, 4, 1], DVec3::splat(0.5), DVec3::ONE, |_| true);
+        // Voxel corners sit at integers here (centres at origin + index).
+        let moved: Vec<DVec3> = p
+            .iter()
+            .enumerate()
+            .map(|(i, &v)| v + 0.45 * DVec3::new((i as f64 * 0.7).sin(), (i as f64 * 1.3).cos(), 0.3))
+            .collect();
+        assert_eq!(occ.staircase_of(&moved, &q), Some(p.clone()));
+        assert!(occ.thin_quads(&p, &q).iter().all(|&t| t));
+        let report = angle_report(&p, &moved, &q, &occ.thin_quads(&p, &q));
+        assert_eq!(report.elsewhere.1, 0);
+        assert_eq!(report.thin.1 + report.elsewhere.1, adjacent_angles_deg(&moved, &q).len());
+        // A vertex past half a voxel from its corner: no staircase.
+        let mut far = moved;
+        far[0] += DVec3::new(0.2, 0.0, 0.0);
+        far[0].x = p[0].x + 0.6;
+        assert_eq!(occ.staircase_of(&far, &q), None);
+        // A thick box: no thin quad.
+        let (p, q) = voxel_surface(|v| v.iter().all(|&c| (0..3).contains(&c)), 3);
+        let occ = Occupancy::from_fn([3, 3, 3], DVec3::splat(0.5), DVec3::ONE, |_| true);
+        assert!(occ.thin_quads(&p, &q).iter().all(|&t| !t));
     }
 }

@@ -61,6 +61,42 @@ impl Occupancy {
             })
     }
 
+    /// For each quad of a staircase (`staircase`: voxel faces, corners on the lattice of
+    /// voxel corners), whether a voxel on either side of it is thin.
+    pub fn thin_quads(&self, staircase: &[DVec3], quads: &[[u32; 4]]) -> Vec<bool> {
+        quads
+            .iter()
+            .map(|q| {
+                let c = q.iter().map(|&v| staircase[v as usize]).sum::<DVec3>() / 4.0;
+                let n = super::vector_area(q.map(|v| staircase[v as usize])).normalize_or_zero();
+                [-0.5, 0.5].iter().any(|&side| {
+                    let v = ((c + side * n * self.spacing - self.origin) / self.spacing).round();
+                    self.is_thin([v.x as i64, v.y as i64, v.z as i64])
+                })
+            })
+            .collect()
+    }
+
+    /// The staircase a clamped mesh came from: each vertex moved back to the nearest
+    /// voxel corner. `None` unless every quad is then a voxel face (an axis-aligned square
+    /// of the voxel's size), as for meshes whose vertices stayed within half a voxel of
+    /// their corners (the voxel-art preset's).
+    pub fn staircase_of(&self, positions: &[DVec3], quads: &[[u32; 4]]) -> Option<Vec<DVec3>> {
+        let corner = |p: DVec3| {
+            let k = ((p - self.origin) / self.spacing + 0.5).round();
+            self.origin + (k - 0.5) * self.spacing
+        };
+        let stair: Vec<DVec3> = positions.iter().map(|&p| corner(p)).collect();
+        let faces = quads.iter().all(|q| {
+            let c = q.map(|v| stair.get(v as usize).copied().unwrap_or(DVec3::NAN));
+            let edges = [c[1] - c[0], c[2] - c[1], c[3] - c[2], c[0] - c[3]];
+            let axis = |e: DVec3| (0..3).filter(|&a| e[a] != 0.0).count() == 1;
+            let n = super::vector_area(c);
+            edges.iter().all(|&e| axis(e)) && (0..3).filter(|&a| n[a] != 0.0).count() == 1
+        });
+        faces.then_some(stair)
+    }
+
     /// Whether voxel `v` has a 6-neighbour of the other state (so a face of the surface).
     fn on_surface(&self, v: [i64; 3]) -> bool {
         let s = self.get(v);
