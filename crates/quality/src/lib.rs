@@ -254,35 +254,47 @@ pub fn angle_report(
 pub fn hard_edges(input: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
     let unit = |q: &[u32; 4]| corners(input, q).map(|c| vector_area(c).normalize_or_zero());
     let normals: Vec<Option<DVec3>> = quads.iter().map(unit).collect();
-    let mut edges: std::collections::HashMap<(u32, u32), Vec<(usize, usize)>> = Default::default();
-    for (f, q) in quads.iter().enumerate() {
-        for i in 0..4 {
-            let (a, b) = (q[i], q[(i + 1) % 4]);
-            edges.entry((a.min(b), a.max(b))).or_default().push((f, i));
+    // Every quad's edges as (undirected edge, quad, slot), sorted as in
+    // `adjacent_pairs_unsorted`: a run of two entries is an edge two quads share.
+    let mut edges: Vec<(u64, u32, u8)> = quads
+        .iter()
+        .enumerate()
+        .flat_map(|(f, q)| {
+            (0..4).map(move |i| {
+                let (a, b) = (q[i], q[(i + 1) % 4]);
+                ((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), f as u32, i as u8)
+            })
+        })
+        .collect();
+    edges.par_sort_unstable();
+    // `across[f][slot]`: the other quad of that edge, where exactly two quads share it.
+    let mut across = vec![[u32::MAX; 4]; quads.len()];
+    let mut shared = Vec::new();
+    let mut k = 0;
+    while k < edges.len() {
+        let end = k + edges[k..].iter().take_while(|e| e.0 == edges[k].0).count();
+        if end - k == 2 {
+            let [(_, f, i), (_, g, j)] = [edges[k], edges[k + 1]];
+            across[f as usize][i as usize] = g;
+            across[g as usize][j as usize] = f;
+            if f != g {
+                shared.push((f as usize, i as usize, g as usize, j as usize));
+            }
         }
+        k = end;
     }
-    let across = |f: usize, slot: usize| -> Option<usize> {
-        let q = &quads[f];
-        let (a, b) = (q[slot], q[(slot + 1) % 4]);
-        match edges.get(&(a.min(b), a.max(b)))?.as_slice() {
-            [(g, _), (h, _)] => Some(if *g == f { *h } else { *g }),
-            _ => None,
-        }
-    };
     let flat = |f: usize, slot: usize| {
         let Some(n) = normals[f] else { return false };
         (1..4).all(|k| {
-            across(f, (slot + k) % 4).and_then(|g| normals[g]).is_some_and(|m| n.dot(m) > 1.0 - 1e-9)
+            let g = across[f][(slot + k) % 4];
+            g != u32::MAX && normals[g as usize].is_some_and(|m| n.dot(m) > 1.0 - 1e-9)
         })
     };
-    let mut out: Vec<(usize, usize)> = edges
-        .values()
-        .filter_map(|e| match e.as_slice() {
-            [(f, i), (g, j)] if f != g => {
-                let (nf, ng) = (normals[*f]?, normals[*g]?);
-                (nf.dot(ng).abs() < 1e-9 && flat(*f, *i) && flat(*g, *j)).then(|| (*f.min(g), *f.max(g)))
-            }
-            _ => None,
+    let mut out: Vec<(usize, usize)> = shared
+        .into_iter()
+        .filter_map(|(f, i, g, j)| {
+            let (nf, ng) = (normals[f]?, normals[g]?);
+            (nf.dot(ng).abs() < 1e-9 && flat(f, i) && flat(g, j)).then(|| (f.min(g), f.max(g)))
         })
         .collect();
     out.sort_unstable();

@@ -133,13 +133,8 @@ impl NormalsParams {
         interrupt: &Interrupt,
     ) -> Result<EstimatedNormals, RegularizeError> {
         self.validate()?;
-        let resolved;
-        let this = if self.radius.is_none() && self.radius_voxels.is_some() {
-            resolved = NormalsParams { radius: self.explicit_radius(surface), ..self.clone() };
-            &resolved
-        } else {
-            self
-        };
+        // The estimators take a physical radius: `radius_voxels` resolved on this surface.
+        let this = NormalsParams { radius: self.explicit_radius(surface), ..self.clone() };
         Ok(match this.estimator {
             Estimator::At => {
                 let (field, features, info) =

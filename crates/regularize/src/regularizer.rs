@@ -97,7 +97,7 @@ pub fn regularize<S: LabelStorage>(
 
 /// Peak memory per surfel of a run that does not clamp, with a margin: the resident
 /// memory a run adds measured at 940 to 1,210 bytes per surfel with every preset and
-/// estimator on one- and multi-label surfaces of 100k to 5.3 million surfels
+/// estimator on one- and multi-label surfaces of 80k to 5.3 million surfels
 /// (`tests/memory.rs` keeps the estimate above the measured peak).
 pub const BYTES_PER_SURFEL: u64 = 1_800;
 
