@@ -234,7 +234,7 @@ const RIM_FRACTION: f64 = 0.25;
 /// visiting order `(quad, parent, distance, reach)`, and the quads of partial reach
 /// waiting, highest reach first (`(reach, quad, parent, squared distance)`, the floats as
 /// their bits: non-negative, they order as their values).
-type Scratch = (Vec<bool>, Vec<(u32, u32, f64, f64)>, BinaryHeap<(u64, u32, u32, u64)>);
+type Scratch = (Vec<bool>, Vec<(u32, u32, f64, f64)>, BinaryHeap<(u64, u32, u32, u64)>, Vec<f64>);
 
 /// `t` of the direction of `a` and `1 - t` of the direction of `b` (`a` itself from
 /// `t = 1`, `b` itself at `t = 0`).
@@ -370,8 +370,8 @@ fn refined_interruptible(
         .into_par_iter()
         .with_min_len(4096)
         .map_init(
-            || (vec![false; n], Vec::new(), BinaryHeap::new()),
-            |(seen, queue, waiting): &mut Scratch, f| {
+            || (vec![false; n], Vec::new(), BinaryHeap::new(), vec![0.0; n]),
+            |(seen, queue, waiting, best): &mut Scratch, f| {
                 if interrupt.is_raised() {
                     return normals[f];
                 }
@@ -496,7 +496,14 @@ fn refined_interruptible(
                                         seen[ku] = true;
                                         queue.push((k, g as u32, dk, 1.0));
                                     } else {
-                                        waiting.push((pass.to_bits(), k, g as u32, dk.to_bits()));
+                                        // A quad already waiting with a higher reach
+                                        // leaves the heap first: this entry would be
+                                        // dropped there (ties are kept: their order
+                                        // depends on the rest of the entry).
+                                        if pass >= best[ku] {
+                                            best[ku] = pass;
+                                            waiting.push((pass.to_bits(), k, g as u32, dk.to_bits()));
+                                        }
                                     }
                                 }
                             }
@@ -507,7 +514,10 @@ fn refined_interruptible(
                         _ => sum,
                     };
                     if junction <= 0.0 {
-                        queue.drain(..).for_each(|(k, _, _, _)| seen[k as usize] = false);
+                        queue.drain(..).for_each(|(k, _, _, _)| {
+                            seen[k as usize] = false;
+                            best[k as usize] = 0.0;
+                        });
                         return Some((plain, 0.0));
                     }
                     // Only a disc that reached a junction's quads needs the interior's fit
@@ -533,7 +543,10 @@ fn refined_interruptible(
                         }
                         interior.add(w, a / len * dot.signum(), nodes[g].centre - cf, nf);
                     }
-                    queue.drain(..).for_each(|(k, _, _, _)| seen[k as usize] = false);
+                    queue.drain(..).for_each(|(k, _, _, _)| {
+                        seen[k as usize] = false;
+                        best[k as usize] = 0.0;
+                    });
                     // Each junction rule comes in with the share of the disc's weight that
                     // calls for it, not at its first sample (see `Refined`).
                     let fitted = interior.at_origin().unwrap_or(sum);
