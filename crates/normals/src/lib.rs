@@ -59,7 +59,9 @@ pub use convolved::ConvolvedTrivial;
 pub use field::NormalField;
 pub use ii::{default_radius, multigrid_radius, IntegralInvariant, MAX_DEFAULT_RADIUS_VOXELS};
 pub use interrupt::Interrupt;
-pub use refined::{anisotropic_fit_weight, FeatureRamp, Refined, FEATURE_RAMP_DEG, JUNCTION_DISC_FACTOR};
+pub use refined::{
+    anisotropic_fit_weight, FeatureRamp, ProbeHints, Refined, FEATURE_RAMP_DEG, JUNCTION_DISC_FACTOR,
+};
 pub use trivial::Trivial;
 
 use voxreg_digisurf::DigitalSurface;

@@ -98,6 +98,24 @@ impl NormalEstimator for Refined<'_> {
         surface: &DigitalSurface,
         interrupt: &Interrupt,
     ) -> Result<NormalField, NormalError> {
+        self.estimate_with_hints(surface, interrupt, &mut ProbeHints::default())
+    }
+}
+
+impl Refined<'_> {
+    /// [`NormalEstimator::estimate_interruptible`], reading and updating `hints`: the
+    /// quads whose wide junction disc (see [`Refined`]) held another interface's interior
+    /// in the last estimate on the same surface search it at once, without the probe that
+    /// otherwise decides whether to. The estimate is the same with any hints, bit for bit
+    /// (the probe only saves searches whose share would be 0); the refinement rounds of
+    /// one solve, whose positions move little, keep one `ProbeHints` to skip most probes
+    /// that would find something.
+    pub fn estimate_with_hints(
+        &self,
+        surface: &DigitalSurface,
+        interrupt: &Interrupt,
+        hints: &mut ProbeHints,
+    ) -> Result<NormalField, NormalError> {
         if self.positions.len() != surface.num_vertices() || self.previous.len() != surface.num_surfels() {
             return Err(NormalError::InvalidParameter(format!(
                 "refinement needs {} positions and {} normals, got {} and {}",
@@ -113,6 +131,9 @@ impl NormalEstimator for Refined<'_> {
                 self.radius
             )));
         }
+        if hints.wide.len() != surface.num_surfels() {
+            hints.wide = vec![false; surface.num_surfels()];
+        }
         let blend = anisotropic_fit_weight(surface.spacing());
         let near = near_junction_surfels(surface);
         interrupt.check()?;
@@ -125,12 +146,21 @@ impl NormalEstimator for Refined<'_> {
             blend,
             &near,
             true,
+            Some(&mut hints.wide),
             interrupt,
         );
         // A raised interrupt left the surfels after it unestimated.
         interrupt.check()?;
         Ok(field)
     }
+}
+
+/// What one [`Refined`] estimate learned for the next on the same surface: per surfel,
+/// whether its wide junction disc held another interface's interior
+/// ([`Refined::estimate_with_hints`]). Empty by default (every disc probed).
+#[derive(Clone, Debug, Default)]
+pub struct ProbeHints {
+    wide: Vec<bool>,
 }
 
 /// The vector area of surfel `s` at `positions` (half the cross product of its
@@ -307,6 +337,7 @@ fn refined(
         blend,
         near_junction,
         true,
+        None,
         &never,
     )
 }
@@ -317,7 +348,10 @@ fn refined(
 /// and that search only where such an interior quad near enough is within the feature
 /// angle by a per-cell bound on the normals ([`InteriorNormals`]). Where none is, its
 /// share is 0 and the disc is not used: the same estimate, bit for bit, for a fraction of
-/// the search where junction curves are creases.
+/// the search where junction curves are creases. With `hints` (one per surfel), the
+/// surfels marked search their wide disc without the probe (the same estimate: the probe
+/// only skips searches whose share would be 0), and each surfel's mark becomes whether
+/// its wide disc's share was positive.
 #[allow(clippy::too_many_arguments)]
 fn refined_interruptible(
     surface: &DigitalSurface,
@@ -328,6 +362,7 @@ fn refined_interruptible(
     blend: f64,
     near_junction: &[bool],
     probe: bool,
+    mut hints: Option<&mut Vec<bool>>,
     interrupt: &Interrupt,
 ) -> NormalField {
     let n = surface.num_surfels();
@@ -366,14 +401,16 @@ fn refined_interruptible(
     let single = surface.interfaces().len() < 2;
     let interiors = (probe && !single)
         .then(|| InteriorNormals::new(&nodes, &samples, &near_junction, JUNCTION_DISC_FACTOR * r));
-    let out: Vec<DVec3> = (0..n)
+    let hinted: Option<Vec<bool>> =
+        hints.as_ref().map(|h| order.par_iter().map(|&s| h[s as usize]).collect());
+    let out: Vec<(DVec3, bool)> = (0..n)
         .into_par_iter()
         .with_min_len(4096)
         .map_init(
             || (vec![false; n], Vec::new(), BinaryHeap::new(), vec![0.0; n]),
             |(seen, queue, waiting, best): &mut Scratch, f| {
                 if interrupt.is_raised() {
-                    return normals[f];
+                    return (normals[f], false);
                 }
                 let nf = normals[f];
                 let cf = nodes[f].centre;
@@ -559,7 +596,7 @@ fn refined_interruptible(
                 // between the two by the ramp.
                 let own = ramp.weight(cosine(f).abs());
                 if own <= 0.0 {
-                    return nf;
+                    return (nf, false);
                 }
                 // Next to a junction, the wider disc where the surface continues across
                 // the curve (its samples on both sides); the plain radius where it stops
@@ -576,10 +613,13 @@ fn refined_interruptible(
                         if none {
                             None
                         } else {
-                            disc(JUNCTION_DISC_FACTOR * r, probe)
+                            // Searched at once where the last estimate found a share.
+                            let known = hinted.as_ref().is_some_and(|h| h[f]);
+                            disc(JUNCTION_DISC_FACTOR * r, probe && !known)
                         }
                     })
                     .flatten();
+                let shared = wide.is_some_and(|(_, c)| c > 0.0);
                 let mut plain = || disc(r, false).map_or(DVec3::ZERO, |(m, _)| m);
                 let m = match wide {
                     Some((wide, c)) if c >= 1.0 => wide,
@@ -588,17 +628,16 @@ fn refined_interruptible(
                 }
                 .normalize_or_zero();
                 let m = if m == DVec3::ZERO { nf } else { mix(own, m, nf).normalize_or_zero() };
-                if m == DVec3::ZERO {
-                    nf
-                } else {
-                    m
-                }
+                (if m == DVec3::ZERO { nf } else { m }, shared)
             },
         )
         .collect();
     let mut field = vec![DVec3::ZERO; n];
-    for (s, m) in order.iter().zip(out) {
+    for (s, (m, shared)) in order.iter().zip(out) {
         field[*s as usize] = m;
+        if let Some(h) = hints.as_deref_mut() {
+            h[*s as usize] = shared;
+        }
     }
     NormalField::new(field)
 }
@@ -1013,10 +1052,20 @@ mod tests {
             let near = near_junction_surfels(&surface);
             assert!(near.iter().any(|&n| n));
             let never = Interrupt::never();
-            let run = |probe: bool| {
-                refined_interruptible(&surface, &positions, &field, 3.0, 30.0, 0.0, &near, probe, &never)
+            let run = |probe: bool, hints: Option<&mut Vec<bool>>| {
+                refined_interruptible(
+                    &surface, &positions, &field, 3.0, 30.0, 0.0, &near, probe, hints, &never,
+                )
             };
-            assert_eq!(run(true), run(false));
+            let plain = run(false, None);
+            assert_eq!(run(true, None), plain);
+            // Hints from a first estimate, then any hints at all: the same estimate.
+            let mut hints = vec![false; surface.num_surfels()];
+            assert_eq!(run(true, Some(&mut hints)), plain);
+            assert!(hints.iter().any(|&h| h), "no wide disc with a share");
+            assert_eq!(run(true, Some(&mut hints)), plain);
+            let mut all = vec![true; surface.num_surfels()];
+            assert_eq!(run(true, Some(&mut all)), plain);
         }
     }
 

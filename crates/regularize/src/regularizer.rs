@@ -5,9 +5,7 @@ use std::time::Instant;
 
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
-use voxreg_normals::{
-    anisotropic_fit_weight, FeatureField, Interrupt, NormalEstimator, NormalField, Refined,
-};
+use voxreg_normals::{anisotropic_fit_weight, FeatureField, Interrupt, NormalField, ProbeHints, Refined};
 
 use crate::pipeline::{
     crease_weights, hold_thin_sheets, informative_vertices, plateau_weights, relaxed_normals, sagitta_lift,
@@ -352,6 +350,8 @@ impl Regularizer {
         let mut done = 1.0;
         // Each quad's last change of normal, for the relaxation of the next round's.
         let mut change = None;
+        // Which quads' wide junction discs the last round found in use (see `Refined`).
+        let mut hints = ProbeHints::default();
         for round in 0..=params.refine {
             if round > 0 {
                 if warm.get(round).is_none() {
@@ -372,7 +372,7 @@ impl Regularizer {
                     radius: params.refine_radius,
                     feature_angle_deg: params.feature_angle_deg,
                 }
-                .estimate_interruptible(&surface, &interrupt)?;
+                .estimate_with_hints(&surface, &interrupt, &mut hints)?;
                 // Thin sheets keep the first round's normals.
                 let estimate = if round == 1 {
                     held.iter_mut().for_each(|h| h.1 = estimate.as_slice()[h.0 as usize]);
