@@ -263,7 +263,8 @@ const RIM_FRACTION: f64 = 0.25;
 /// A disc search's scratch, kept per worker: the seen marks, the reached quads in
 /// visiting order `(quad, parent, distance, reach)`, and the quads of partial reach
 /// waiting, highest reach first (`(reach, quad, parent, squared distance)`, the floats as
-/// their bits: non-negative, they order as their values).
+/// their bits: non-negative, they order as their values), and per quad the highest reach
+/// it waits with (0 where it does not).
 type Scratch = (Vec<bool>, Vec<(u32, u32, f64, f64)>, BinaryHeap<(u64, u32, u32, u64)>, Vec<f64>);
 
 /// `t` of the direction of `a` and `1 - t` of the direction of `b` (`a` itself from
