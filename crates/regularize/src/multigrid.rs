@@ -380,6 +380,23 @@ impl FineNumbers {
         t: &mut [Vec3A],
         face: Option<&[Vec3A]>,
     ) {
+        self.residual_map(stencil, x, b, y, t, face, |_, r| r);
+    }
+
+    /// [`FineNumbers::residual`] with `y_i = f(i, (b - H x)_i)`: what is done with each
+    /// residual (a smoothing step, the cycle's output) done in the pass that computes it,
+    /// without writing the residual and reading it back.
+    #[allow(clippy::too_many_arguments)]
+    fn residual_map<T: Send>(
+        &self,
+        stencil: &Stencil,
+        x: &[Vec3A],
+        b: &[Vec3A],
+        y: &mut [T],
+        t: &mut [Vec3A],
+        face: Option<&[Vec3A]>,
+        f: impl Fn(usize, Vec3A) -> T + Sync,
+    ) {
         t.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
             let base = k * CHUNK;
             for (o, ti) in out.iter_mut().enumerate() {
@@ -409,7 +426,7 @@ impl FineNumbers {
                 }
                 let nb = stencil.fair_neighbours(i);
                 let sum: Vec3A = nb.iter().map(|&j| t[j as usize]).sum();
-                *yi = masked(face, i, b[i] - (acc + nb.len() as f32 * t[i] - sum));
+                *yi = f(i, masked(face, i, b[i] - (acc + nb.len() as f32 * t[i] - sum)));
             }
         });
     }
@@ -1375,20 +1392,32 @@ impl Vcycle {
         let mut works = std::mem::take(&mut self.works);
         let (fine, rest) = works.split_at_mut(1);
         let w = &mut fine[0];
-        w.b.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).enumerate().for_each(|(k, (b, r))| {
-            for (i, (b, r)) in b.iter_mut().zip(r).enumerate() {
-                *b = masked(face, k * CHUNK + i, r.as_vec3a());
-            }
-        });
-        // Fine level: pre-smooth from zero, restrict the residual.
         let face_smoother = std::mem::take(&mut self.face_smoother);
         let smoother = if face.is_some() && face_smoother.len() == w.b.len() {
             &face_smoother
         } else {
             &self.fine_smoother
         };
-        smooth(smoother, &w.b, &mut w.x, false, face);
-        if !self.levels.is_empty() {
+        // Fine level: the right-hand side in `f32` and the pre-smoothing from zero in one
+        // pass, then the residual restricted.
+        w.b.par_chunks_mut(CHUNK)
+            .zip(w.x.par_chunks_mut(CHUNK))
+            .zip(r.par_chunks(CHUNK).zip(smoother.par_chunks(CHUNK)))
+            .enumerate()
+            .for_each(|(k, ((b, x), (r, m)))| {
+                for i in 0..b.len() {
+                    let bi = masked(face, k * CHUNK + i, r[i].as_vec3a());
+                    b[i] = bi;
+                    x[i] = masked(face, k * CHUNK + i, block_mul(&m[i], bi));
+                }
+            });
+        if self.levels.is_empty() {
+            z.par_chunks_mut(CHUNK).zip(w.x.par_chunks(CHUNK)).for_each(|(z, x)| {
+                for (z, x) in z.iter_mut().zip(x) {
+                    *z = x.as_dvec3();
+                }
+            });
+        } else {
             for s in 0..steps {
                 self.fine.residual(stencil, &w.x, &w.b, &mut w.r, &mut w.t, face);
                 if s + 1 < steps {
@@ -1401,17 +1430,18 @@ impl Vcycle {
                 _ => self.coarse_cycle(&self.levels, self.coarsest.as_ref(), 0, rest),
             }
             prolong_add(&self.aggregations[0].parent, &rest[0].x, &mut w.x, face);
-            for _ in 0..steps {
+            for _ in 1..steps {
                 self.fine.residual(stencil, &w.x, &w.b, &mut w.r, &mut w.t, face);
                 smooth(smoother, &w.r, &mut w.x, true, face);
             }
+            // The last post-smoothing step and the output in `f64`, in the residual's pass.
+            let Work { x, b, t, .. } = w;
+            let x = &*x;
+            self.fine.residual_map(stencil, x, b, z, t, face, |i, r| {
+                masked(face, i, x[i] + block_mul(&smoother[i], r)).as_dvec3()
+            });
         }
         self.face_smoother = face_smoother;
-        z.par_chunks_mut(CHUNK).zip(w.x.par_chunks(CHUNK)).for_each(|(z, x)| {
-            for (z, x) in z.iter_mut().zip(x) {
-                *z = x.as_dvec3();
-            }
-        });
         self.works = works;
     }
 
