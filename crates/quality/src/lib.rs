@@ -120,19 +120,40 @@ fn adjacent_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize
 
 /// [`adjacent_pairs`] in the order of their shared edges.
 fn adjacent_pairs_unsorted(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize), DVec3, DVec3)> {
-    // Every quad's edges as (undirected edge, quad, runs low to high), sorted by edge then
-    // quad: a run of two entries of two quads is a pair; longer runs are edges shared by
-    // more than two. A sort, not a map of edges: linear memory, no allocation per edge.
-    // Four slots a quad, written in place; the edges a quad does not have (a repeated
-    // corner, a corner out of range) get the key `u64::MAX`, sorted last and cut off.
-    const NONE: (u64, u32, bool) = (u64::MAX, u32::MAX, false);
+    let out: Vec<((usize, usize), DVec3, DVec3)> = shared_edges(positions, quads)
+        .into_par_iter()
+        .filter_map(|(f, i, g, j)| {
+            // The edge runs the same way in both quads: one of them is flipped.
+            let forward = |f: usize, i: usize| quads[f][i] < quads[f][(i + 1) % 4];
+            let same = forward(f, i) == forward(g, j);
+            let nf = vector_area(corners(positions, &quads[f])?);
+            let mut ng = vector_area(corners(positions, &quads[g])?);
+            if same {
+                ng = -ng;
+            }
+            (nf.length() > 0.0 && ng.length() > 0.0).then_some(((f.min(g), f.max(g)), nf, ng))
+        })
+        .collect();
+    out
+}
+
+/// The edges exactly two different quads share, as `(f, i, g, j)`: edge `i` of quad `f`
+/// (from corner `i` to `i + 1`) is edge `j` of quad `g`, `f < g`, in the order of the
+/// edges' corner pairs.
+fn shared_edges(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize, usize, usize)> {
+    // Every quad's edges as (undirected edge, quad, slot), sorted by edge then quad: a run
+    // of two entries of two quads is a shared edge; longer runs are edges shared by more
+    // than two. A sort, not a map of edges: linear memory, no allocation per edge. Four
+    // slots a quad, written in place; the edges a quad does not have (a repeated corner,
+    // a corner out of range) get the key `u64::MAX`, sorted last and cut off.
+    const NONE: (u64, u32, u8) = (u64::MAX, u32::MAX, u8::MAX);
     let mut edges = vec![NONE; 4 * quads.len()];
     edges.par_chunks_mut(4).zip(quads.par_iter()).enumerate().for_each(|(f, (e, q))| {
         let ok = corners(positions, q).is_some();
         for i in 0..4 {
             let (a, b) = (q[i], q[(i + 1) % 4]);
             if ok && a != b {
-                e[i] = ((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), f as u32, a < b);
+                e[i] = ((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), f as u32, i as u8);
             }
         }
     });
@@ -140,25 +161,18 @@ fn adjacent_pairs_unsorted(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usi
     edges.truncate(edges.partition_point(|e| e.0 != u64::MAX));
     let starts: Vec<usize> =
         (0..edges.len()).into_par_iter().filter(|&i| i == 0 || edges[i - 1].0 != edges[i].0).collect();
-    let out: Vec<((usize, usize), DVec3, DVec3)> = starts
+    starts
         .par_iter()
         .enumerate()
-        .filter_map(|(k, &i)| {
+        .filter_map(|(k, &start)| {
             let end = starts.get(k + 1).copied().unwrap_or(edges.len());
-            if end - i != 2 || edges[i].1 == edges[i + 1].1 {
+            if end - start != 2 {
                 return None;
             }
-            let [(_, f, df), (_, g, dg)] = [edges[i], edges[i + 1]];
-            let (f, g) = (f as usize, g as usize);
-            let nf = vector_area(corners(positions, &quads[f])?);
-            let mut ng = vector_area(corners(positions, &quads[g])?);
-            if df == dg {
-                ng = -ng;
-            }
-            (nf.length() > 0.0 && ng.length() > 0.0).then_some(((f.min(g), f.max(g)), nf, ng))
+            let [(_, f, i), (_, g, j)] = [edges[start], edges[start + 1]];
+            (f != g).then_some((f as usize, usize::from(i), g as usize, usize::from(j)))
         })
-        .collect();
-    out
+        .collect()
 }
 
 /// The pairs `(a, b)`, `a < b`, of quads sharing an edge that no other quad shares, whose
@@ -254,34 +268,12 @@ pub fn angle_report(
 pub fn hard_edges(input: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
     let unit = |q: &[u32; 4]| corners(input, q).map(|c| vector_area(c).normalize_or_zero());
     let normals: Vec<Option<DVec3>> = quads.iter().map(unit).collect();
-    // Every quad's edges as (undirected edge, quad, slot), sorted as in
-    // `adjacent_pairs_unsorted`: a run of two entries is an edge two quads share.
-    let mut edges: Vec<(u64, u32, u8)> = quads
-        .iter()
-        .enumerate()
-        .flat_map(|(f, q)| {
-            (0..4).map(move |i| {
-                let (a, b) = (q[i], q[(i + 1) % 4]);
-                ((u64::from(a.min(b)) << 32) | u64::from(a.max(b)), f as u32, i as u8)
-            })
-        })
-        .collect();
-    edges.par_sort_unstable();
+    let shared = shared_edges(input, quads);
     // `across[f][slot]`: the other quad of that edge, where exactly two quads share it.
     let mut across = vec![[u32::MAX; 4]; quads.len()];
-    let mut shared = Vec::new();
-    let mut k = 0;
-    while k < edges.len() {
-        let end = k + edges[k..].iter().take_while(|e| e.0 == edges[k].0).count();
-        if end - k == 2 {
-            let [(_, f, i), (_, g, j)] = [edges[k], edges[k + 1]];
-            across[f as usize][i as usize] = g;
-            across[g as usize][j as usize] = f;
-            if f != g {
-                shared.push((f as usize, i as usize, g as usize, j as usize));
-            }
-        }
-        k = end;
+    for &(f, i, g, j) in &shared {
+        across[f][i] = g as u32;
+        across[g][j] = f as u32;
     }
     let flat = |f: usize, slot: usize| {
         let Some(n) = normals[f] else { return false };
