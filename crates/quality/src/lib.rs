@@ -472,7 +472,6 @@ mod tests {
         assert_eq!(report.thin.1 + report.elsewhere.1, adjacent_angles_deg(&moved, &q).len());
         // A vertex past half a voxel from its corner: no staircase.
         let mut far = moved;
-        far[0] += DVec3::new(0.2, 0.0, 0.0);
         far[0].x = p[0].x + 0.6;
         assert_eq!(occ.staircase_of(&far, &q), None);
         // A thick box: no thin quad.
