@@ -439,6 +439,8 @@ impl DigitalSurface {
                 )
             })
             .collect::<Result<_, _>>()?;
+        // The surfels' array sized once (a grown one holds up to twice its surfels).
+        scan.surfels.reserve_exact(found.iter().flatten().map(Vec::len).sum());
         for (k, faces) in found.into_iter().flatten().enumerate() {
             for f in faces {
                 scan.face(f.cell, f.axis as usize, f.regions[0], f.regions[1], f.labels[0], f.labels[1], k)?;
@@ -446,7 +448,8 @@ impl DigitalSurface {
             std::mem::swap(&mut scan.corners_lo, &mut scan.corners_hi);
             scan.corners_hi.fill(NONE);
         }
-        let Scan { mut surfels, vertex_corners, interface_of_pair, .. } = scan;
+        let Scan { mut surfels, mut vertex_corners, interface_of_pair, .. } = scan;
+        vertex_corners.shrink_to_fit();
         if surfels.is_empty() {
             return Err(SurfaceError::Empty);
         }
@@ -458,9 +461,14 @@ impl DigitalSurface {
         for (new, &(_, old)) in pairs.iter().enumerate() {
             renumber[old as usize] = new as u32;
         }
+        let mut sizes = vec![0usize; pairs.len()];
+        surfels.iter().for_each(|s| sizes[s.interface.index()] += 1);
         let mut interfaces: Vec<Interface> = pairs
             .iter()
-            .map(|&((a, b), _)| Interface { regions: [RegionId(a), RegionId(b)], surfels: Vec::new() })
+            .map(|&((a, b), old)| Interface {
+                regions: [RegionId(a), RegionId(b)],
+                surfels: Vec::with_capacity(sizes[old as usize]),
+            })
             .collect();
         for (i, s) in surfels.iter_mut().enumerate() {
             s.interface = InterfaceId(renumber[s.interface.index()]);

@@ -9,7 +9,7 @@ use voxreg_digisurf::DigitalSurface;
 use crate::info::CgInfo;
 use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
-use crate::stencil::CHUNK;
+use crate::stencil::{Coefficients, Stencil, CHUNK};
 use crate::vecops::{cg_update, dot, norm, scale_add, tail_estimate};
 use crate::{Energy, Interrupt, MatrixFreeOperator, Progress, RegularizeError};
 
@@ -86,6 +86,29 @@ pub struct CgSolver {
 }
 
 /// Work vectors of one solve.
+/// The true residual `r = b - H u` without `b = -(H - diag(alpha)) p`: as
+/// `-(H - diag(alpha)) (p + u) - diag(alpha) u`, where `H - diag(alpha)` only sees
+/// differences of positions (`x` and `t` are scratch).
+fn true_residual(
+    stencil: &Stencil,
+    coef: &Coefficients<'_>,
+    p: &[DVec3],
+    u: &[DVec3],
+    r: &mut [DVec3],
+    x: &mut [DVec3],
+    t: &mut [DVec3],
+) {
+    x.par_chunks_mut(CHUNK)
+        .zip(p.par_chunks(CHUNK).zip(u.par_chunks(CHUNK)))
+        .for_each(|(x, (p, u))| x.iter_mut().zip(p.iter().zip(u)).for_each(|(x, (p, u))| *x = *p + *u));
+    stencil.apply(coef, x, r, t, false);
+    r.par_chunks_mut(CHUNK).zip(u.par_chunks(CHUNK)).enumerate().for_each(|(k, (r, u))| {
+        for (i, (r, u)) in r.iter_mut().zip(u).enumerate() {
+            *r = -*r - coef.alpha.get(k * CHUNK + i) * *u;
+        }
+    });
+}
+
 struct Buffers {
     u: Vec<DVec3>,
     r: Vec<DVec3>,
@@ -168,7 +191,7 @@ impl CgSolver {
 
     /// Minimizes `energy` from its input positions; returns the positions and a report.
     pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        self.run(energy, None, None)
+        self.run(energy, None, None, None)
     }
 
     /// [`CgSolver::solve`], calling `progress` after each iteration (its energy costs two
@@ -178,7 +201,7 @@ impl CgSolver {
         energy: &Energy<'_>,
         progress: &mut dyn FnMut(&Progress),
     ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        self.run(energy, None, Some(progress))
+        self.run(energy, None, None, Some(progress))
     }
 
     /// [`CgSolver::solve_with`], iterating from `start` (one position per vertex) instead
@@ -199,16 +222,36 @@ impl CgSolver {
                 energy.input().len()
             )));
         }
-        self.run(energy, Some(start), Some(progress))
+        self.run(energy, Some(start), None, Some(progress))
+    }
+
+    /// [`CgSolver::solve_from`] with a start the solver may take: its vector becomes the
+    /// iterate's (one vector fewer held during the solve), and the result comes back in it.
+    pub(crate) fn solve_from_owned(
+        &mut self,
+        energy: &Energy<'_>,
+        start: Vec<DVec3>,
+        progress: &mut dyn FnMut(&Progress),
+    ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
+        if start.len() != energy.input().len() {
+            return Err(RegularizeError::SizeMismatch(format!(
+                "{} start positions for {} vertices",
+                start.len(),
+                energy.input().len()
+            )));
+        }
+        self.run(energy, None, Some(start), Some(progress))
     }
 
     fn run(
         &mut self,
         energy: &Energy<'_>,
         start: Option<&[DVec3]>,
+        owned: Option<Vec<DVec3>>,
         mut progress: Option<&mut dyn FnMut(&Progress)>,
     ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        let quick = self.quick_start && start.is_some() && progress.is_some();
+        let warm = start.is_some() || owned.is_some();
+        let quick = self.quick_start && warm && progress.is_some();
         let mut prepared = self.setup.prepare(energy, quick, &self.interrupt)?;
         if self.interrupt.is_raised() {
             self.setup.keep(prepared);
@@ -220,28 +263,46 @@ impl CgSolver {
 
         let t = Instant::now();
         let zero = || vec![DVec3::ZERO; n];
-        let mut b = Buffers { u: zero(), r: zero(), z: zero(), p: zero(), q: zero() };
+        let mut b = Buffers { u: Vec::new(), r: zero(), z: zero(), p: zero(), q: zero() };
         // r = alpha p - H p = -(H - diag(alpha)) p: only differences of positions, exact.
         stencil.apply(&prepared.coef, input, &mut b.r, &mut b.z, false);
         b.r.par_chunks_mut(CHUNK).for_each(|c| c.iter_mut().for_each(|x| *x = -*x));
-        let rhs = b.r.clone();
         let r0 = norm(&b.r);
         let mut applications = 1;
         let mut rnorm = r0;
+        // Solve for the displacement from the input: u = start - p, r = b - H u.
+        b.u = match owned {
+            Some(mut u) => {
+                u.par_chunks_mut(CHUNK)
+                    .zip(input.par_chunks(CHUNK))
+                    .for_each(|(u, p)| u.iter_mut().zip(p).for_each(|(u, p)| *u -= *p));
+                u
+            }
+            None => zero(),
+        };
         if let Some(start) = start {
-            // Solve for the displacement from the input: u = start - p, r = b - H u.
             b.u.par_chunks_mut(CHUNK).zip(input.par_chunks(CHUNK).zip(start.par_chunks(CHUNK))).for_each(
                 |(u, (p, s))| u.iter_mut().zip(p.iter().zip(s)).for_each(|(u, (p, s))| *u = *s - *p),
             );
-            stencil.residual(&prepared.coef, &b.u, &rhs, &mut b.r, &mut b.z);
+        }
+        let e0 = if progress.is_some() { energy.terms(input).total } else { 0.0 };
+        // The energy at the iterate, `E(p + u) = E(p) - u.b - u.r`, then followed step by
+        // step (the right-hand side `b` is not kept through the iterations).
+        let mut energy_now = e0;
+        if warm {
+            // `q` holds the right-hand side while the residual is formed.
+            std::mem::swap(&mut b.r, &mut b.q);
+            stencil.residual(&prepared.coef, &b.u, &b.q, &mut b.r, &mut b.z);
             applications += 1;
             rnorm = norm(&b.r);
+            if progress.is_some() {
+                energy_now = e0 - dot(&b.u, &b.q) - dot(&b.u, &b.r);
+            }
         }
         let alpha_min = energy.min_alpha();
         let h = self.setup.spacing;
         let tol = self.params.tolerance * h;
         let guaranteed = alpha_min * tol;
-        let e0 = if progress.is_some() { energy.terms(input).total } else { 0.0 };
 
         let mut iterations = 0;
         let mut stale_iterations = 0;
@@ -264,6 +325,8 @@ impl CgSolver {
                     break 'outer; // converged to rounding
                 }
                 let a = rz / pq;
+                // E changes by -2 a (r . p) + a^2 (p . q), with r . p = r . z = rz.
+                energy_now += -2.0 * a * rz + a * a * pq;
                 let (r2, p2) = cg_update(&mut b.u, &mut b.r, a, &b.p, &b.q);
                 rnorm = r2.sqrt();
                 residuals.push(rnorm);
@@ -275,7 +338,7 @@ impl CgSolver {
                 };
                 if done || iterations >= self.params.max_iterations {
                     // The recursive residual drifts from the true one: report the latter.
-                    stencil.residual(&prepared.coef, &b.u, &rhs, &mut b.r, &mut b.z);
+                    true_residual(stencil, &prepared.coef, input, &b.u, &mut b.r, &mut b.z, &mut b.q);
                     applications += 1;
                     rnorm = norm(&b.r);
                     let drifted = self.params.stopping == StoppingRule::Guaranteed && rnorm > guaranteed;
@@ -286,8 +349,6 @@ impl CgSolver {
                     break 'outer;
                 }
                 if let Some(report) = progress.as_mut() {
-                    // E(p + u) = E(p) - u.b - u.r for the quadratic with H u = b - r.
-                    let energy_now = e0 - dot(&b.u, &rhs) - dot(&b.u, &b.r);
                     report(&Progress {
                         iteration: iterations,
                         energy: energy_now,
@@ -326,7 +387,7 @@ impl CgSolver {
         let solve_seconds = t.elapsed().as_secs_f64();
         let relative = if r0 > 0.0 { rnorm / r0 } else { 0.0 };
         let bound = rnorm / alpha_min / h;
-        let estimate = if r0 > 0.0 || start.is_some() { (estimate / h).min(bound) } else { 0.0 };
+        let estimate = if r0 > 0.0 || warm { (estimate / h).min(bound) } else { 0.0 };
         let converged = match self.params.stopping {
             StoppingRule::Estimate => estimate <= self.params.tolerance,
             StoppingRule::Guaranteed => bound <= self.params.tolerance,
@@ -530,7 +591,7 @@ mod quick_start {
         // No start (a cold solve) or no listener: nothing to show early.
         let (_, info) = solver.solve_with(&energy, &mut |_| {}).unwrap();
         assert_eq!(info.quick_start_iterations, 0);
-        let (_, info) = solver.run(&energy, Some(&x), None).unwrap();
+        let (_, info) = solver.run(&energy, Some(&x), None, None).unwrap();
         assert_eq!(info.quick_start_iterations, 0);
     }
 }

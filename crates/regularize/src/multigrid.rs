@@ -286,14 +286,9 @@ impl Hierarchy {
         };
         let factor_seconds = t.elapsed().as_secs_f64();
         lap("coarsest factor");
-        let work = |n: usize| Work {
-            r: vec![Vec3A::ZERO; n],
-            x: vec![Vec3A::ZERO; n],
-            t: vec![Vec3A::ZERO; n],
-            b: Vec::new(),
-        };
+        let work =
+            |n: usize| Work { r: vec![Vec3A::ZERO; n], x: vec![Vec3A::ZERO; n], t: vec![Vec3A::ZERO; n] };
         let mut works = vec![work(stencil.len())];
-        works[0].b = vec![Vec3A::ZERO; stencil.len()];
         works.extend(levels.iter().map(|l| work(l.n)));
         let fine = FineNumbers::new(stencil, coef);
         Ok(Vcycle {
@@ -370,12 +365,12 @@ impl FineNumbers {
     }
 
     /// `y = b - H x` in `f32`, in the two passes of the `f64` product (`t` is scratch),
-    /// masked by `face` when given.
+    /// masked by `face` when given; `b(i)` is the right-hand side's entry `i`.
     fn residual(
         &self,
         stencil: &Stencil,
         x: &[Vec3A],
-        b: &[Vec3A],
+        b: &(impl Fn(usize) -> Vec3A + Sync),
         y: &mut [Vec3A],
         t: &mut [Vec3A],
         face: Option<&[Vec3A]>,
@@ -391,7 +386,7 @@ impl FineNumbers {
         &self,
         stencil: &Stencil,
         x: &[Vec3A],
-        b: &[Vec3A],
+        b: &(impl Fn(usize) -> Vec3A + Sync),
         y: &mut [T],
         t: &mut [Vec3A],
         face: Option<&[Vec3A]>,
@@ -426,7 +421,7 @@ impl FineNumbers {
                 }
                 let nb = stencil.fair_neighbours(i);
                 let sum: Vec3A = nb.iter().map(|&j| t[j as usize]).sum();
-                *yi = f(i, masked(face, i, b[i] - (acc + nb.len() as f32 * t[i] - sum)));
+                *yi = f(i, masked(face, i, b(i) - (acc + nb.len() as f32 * t[i] - sum)));
             }
         });
     }
@@ -1075,8 +1070,6 @@ struct Work {
     r: Vec<Vec3A>,
     x: Vec<Vec3A>,
     t: Vec<Vec3A>,
-    /// The cycle's input on the surface itself (empty on coarse levels).
-    b: Vec<Vec3A>,
 }
 
 /// One energy's multigrid preconditioner: `z = V(r)`.
@@ -1166,8 +1159,7 @@ impl Vcycle {
         let agg: usize =
             self.aggregations.iter().map(|a| 4 * (a.parent.len() + a.members.len() + a.offsets.len())).sum();
         let levels: usize = self.levels.iter().map(|l| l.matrix.bytes() + 24 * l.n).sum();
-        let works: usize =
-            self.works.iter().map(|w| 16 * (w.r.len() + w.x.len() + w.t.len() + w.b.len())).sum();
+        let works: usize = self.works.iter().map(|w| 16 * (w.r.len() + w.x.len() + w.t.len())).sum();
         let coarsest = self.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len());
         let face = self.face_levels.as_ref().map_or(0, |f| {
             let levels: usize = f.levels.iter().map(|l| l.matrix.bytes() + 24 * l.n).sum();
@@ -1393,24 +1385,20 @@ impl Vcycle {
         let (fine, rest) = works.split_at_mut(1);
         let w = &mut fine[0];
         let face_smoother = std::mem::take(&mut self.face_smoother);
-        let smoother = if face.is_some() && face_smoother.len() == w.b.len() {
+        let smoother = if face.is_some() && face_smoother.len() == w.x.len() {
             &face_smoother
         } else {
             &self.fine_smoother
         };
-        // Fine level: the right-hand side in `f32` and the pre-smoothing from zero in one
-        // pass, then the residual restricted.
-        w.b.par_chunks_mut(CHUNK)
-            .zip(w.x.par_chunks_mut(CHUNK))
-            .zip(r.par_chunks(CHUNK).zip(smoother.par_chunks(CHUNK)))
-            .enumerate()
-            .for_each(|(k, ((b, x), (r, m)))| {
-                for i in 0..b.len() {
-                    let bi = masked(face, k * CHUNK + i, r[i].as_vec3a());
-                    b[i] = bi;
-                    x[i] = masked(face, k * CHUNK + i, block_mul(&m[i], bi));
-                }
-            });
+        // Fine level: the right-hand side in `f32`, read from `r` where used (not stored),
+        // and the pre-smoothing from zero, then the residual restricted.
+        let b = |i: usize| masked(face, i, r[i].as_vec3a());
+        w.x.par_chunks_mut(CHUNK).zip(smoother.par_chunks(CHUNK)).enumerate().for_each(|(k, (x, m))| {
+            for i in 0..x.len() {
+                let j = k * CHUNK + i;
+                x[i] = masked(face, j, block_mul(&m[i], b(j)));
+            }
+        });
         if self.levels.is_empty() {
             z.par_chunks_mut(CHUNK).zip(w.x.par_chunks(CHUNK)).for_each(|(z, x)| {
                 for (z, x) in z.iter_mut().zip(x) {
@@ -1419,7 +1407,7 @@ impl Vcycle {
             });
         } else {
             for s in 0..steps {
-                self.fine.residual(stencil, &w.x, &w.b, &mut w.r, &mut w.t, face);
+                self.fine.residual(stencil, &w.x, &b, &mut w.r, &mut w.t, face);
                 if s + 1 < steps {
                     smooth(smoother, &w.r, &mut w.x, true, face);
                 }
@@ -1431,13 +1419,13 @@ impl Vcycle {
             }
             prolong_add(&self.aggregations[0].parent, &rest[0].x, &mut w.x, face);
             for _ in 1..steps {
-                self.fine.residual(stencil, &w.x, &w.b, &mut w.r, &mut w.t, face);
+                self.fine.residual(stencil, &w.x, &b, &mut w.r, &mut w.t, face);
                 smooth(smoother, &w.r, &mut w.x, true, face);
             }
             // The last post-smoothing step and the output in `f64`, in the residual's pass.
-            let Work { x, b, t, .. } = w;
+            let Work { x, t, .. } = w;
             let x = &*x;
-            self.fine.residual_map(stencil, x, b, z, t, face, |i, r| {
+            self.fine.residual_map(stencil, x, &b, z, t, face, |i, r| {
                 masked(face, i, x[i] + block_mul(&smoother[i], r)).as_dvec3()
             });
         }

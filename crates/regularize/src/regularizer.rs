@@ -330,8 +330,9 @@ impl Regularizer {
         // (0 on cubic voxels).
         let lift_weight = anisotropic_fit_weight(surface.spacing());
 
-        let input = surface.positions();
-        let mut targets = input.clone();
+        // The input positions are the lattice's, recomputed where needed rather than held
+        // through the solves.
+        let mut targets = surface.positions();
         // The thin sheets' quads, with their shares and the normals they keep from the
         // first refinement round on (timed with the refinement).
         let t = Instant::now();
@@ -387,8 +388,13 @@ impl Regularizer {
                         lift.iter_mut().for_each(|l| *l *= lift_weight);
                         lift
                     });
-                    let (drift, sampled) =
-                        surfel_drift(&surface, &positions, &input, r.samples.as_deref(), lift.as_deref());
+                    let (drift, sampled) = surfel_drift(
+                        &surface,
+                        &positions,
+                        &surface.positions(),
+                        r.samples.as_deref(),
+                        lift.as_deref(),
+                    );
                     let weight: Vec<f64> =
                         sampled.iter().zip(&r.trusted).map(|(w, &t)| if t { *w } else { 0.0 }).collect();
                     let drift = trusted_drift(&surface, &drift, &weight, params.recentre_sigma, &interrupt)?;
@@ -446,7 +452,11 @@ impl Regularizer {
             let chained = round > 0 && !matches!(solver, Solver::Bounded(_));
             let (x, info) = match warm.get(round) {
                 Some(start) => solver.solve_from(&energy, start, &mut report)?,
-                None if chained => solver.solve_from(&energy, &positions, &mut report)?,
+                None if chained => solver.solve_from_owned(
+                    &energy,
+                    std::mem::take(&mut positions).into_vec(),
+                    &mut report,
+                )?,
                 None => solver.solve_with(&energy, &mut report)?,
             };
             if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {
@@ -474,7 +484,7 @@ impl Regularizer {
 
         interrupt.check()?;
         if params.fold_free {
-            crate::unfold::unfold(&surface, &input, &mut positions);
+            crate::unfold::unfold(&surface, &surface.positions(), &mut positions);
         }
 
         // The energy of the last round (its normals and targets, without crease weights),
@@ -484,7 +494,7 @@ impl Regularizer {
             Some(w) => energy.with_weights(w)?,
             None => energy,
         };
-        let (before, after) = (energy.terms(&input), energy.terms(&positions));
+        let (before, after) = (energy.terms(&surface.positions()), energy.terms(&positions));
         if !(before.total.is_finite() && after.total.is_finite()) {
             return Err(RegularizeError::NotFinite(format!(
                 "the energy is not finite ({} -> {}): the weights or the spacing are out of range",

@@ -293,6 +293,20 @@ impl Solver {
             Solver::Direct(_) => self.solve_with(energy, progress),
         }
     }
+
+    /// [`Solver::solve_from`] with a start the solver may take (the conjugate gradient
+    /// iterates in its vector: one vector fewer held during the solve).
+    pub(crate) fn solve_from_owned(
+        &mut self,
+        energy: &Energy<'_>,
+        start: Vec<DVec3>,
+        progress: &mut dyn FnMut(&Progress),
+    ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+        match self {
+            Solver::Cg(s) => s.solve_from_owned(energy, start, progress).map(|(x, i)| (x, SolveInfo::Cg(i))),
+            _ => self.solve_from(energy, &start, progress),
+        }
+    }
 }
 
 #[cfg(test)]

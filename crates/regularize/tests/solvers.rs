@@ -562,6 +562,35 @@ fn clamped_minimizer_satisfies_the_optimality_conditions() {
 
 /// The iterates the front door streams (`Event::iterate`) are the solvers' own: their
 /// energy is the one each `Progress` reports, and they approach the final positions.
+/// A refinement round's solve starts from the last round's positions: its reported
+/// energies (followed step by step from the start's) stay those of its iterates.
+#[test]
+fn warm_started_rounds_report_their_iterates_energy() {
+    use voxreg_regularize::{Params, Regularizer, SolverChoice, Stage};
+    let volume = digitize(&Sphere { radius: 7.0 }, 1.0);
+    let mut params = Params::default();
+    params.solver.choice = SolverChoice::Cg;
+    params.refine = 2;
+    let mut r = Regularizer::from_volume(&volume, &params.regions).unwrap();
+    let mut iterates = Vec::new();
+    let mut energies = Vec::new();
+    let out = r
+        .run_with(&params, None, &mut |e| {
+            if let (Stage::Solve { round: 2 }, Some(x)) = (e.stage, e.iterate()) {
+                iterates.push(x);
+                energies.push(e.iteration.unwrap().energy);
+            }
+        })
+        .unwrap();
+    assert!(iterates.len() >= 2, "{} iterates", iterates.len());
+    let energy = Energy::new(r.surface(), &out.normals, &out.targets, params.energy).unwrap();
+    for (x, e) in iterates.iter().zip(&energies) {
+        let exact = energy.terms(x).total;
+        assert!((exact - e).abs() <= 1e-6 * exact.abs().max(1.0), "{exact} vs {e}");
+    }
+    assert!(energies.windows(2).all(|w| w[1] <= w[0]), "{energies:?}");
+}
+
 #[test]
 fn streamed_iterates_match_the_reported_energy_and_converge() {
     use voxreg_regularize::{Params, Regularizer, SolverChoice, Stage};
