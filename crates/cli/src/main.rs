@@ -149,6 +149,8 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     let labels =
         args.report.as_ref().map(|_| report::named_labels(&volume, palette.as_ref())).unwrap_or_default();
     let volume = matches!(product, Product::Volume { .. }).then_some(volume);
+    // One run: the initial normals need not outlive it.
+    regularizer.set_keep_normals(false);
     let out = stages.pipeline(&params, |progress| {
         regularizer
             .run_with(&params, None, progress)

@@ -321,6 +321,10 @@ struct Scan {
     last_pair: ((u32, u32), u32),
 }
 
+/// The most surfels a surface holds: their four corners' slots (`4 F`) are numbered in
+/// `u32`.
+const MAX_SURFELS: usize = (1 << 30) - 1;
+
 impl Scan {
     fn vertex(&mut self, c: [u32; 3], k: usize) -> Result<VertexId, SurfaceError> {
         let idx = c[0] as usize + (self.nx + 1) * c[1] as usize;
@@ -351,8 +355,8 @@ impl Scan {
         if a == b || a == NONE || b == NONE {
             return Ok(());
         }
-        if self.surfels.len() >= NONE as usize {
-            return Err(SurfaceError::TooLarge("more than 2^32 - 1 surfels".into()));
+        if self.surfels.len() >= MAX_SURFELS {
+            return Err(SurfaceError::TooLarge(format!("more than {MAX_SURFELS} surfels")));
         }
         let flipped = a > b;
         let (inner, outer, li, lo) = if flipped { (b, a, lb, la) } else { (a, b, la, lb) };
@@ -555,8 +559,8 @@ impl DigitalSurface {
                 surfel_edges[(slot / 4) as usize][(slot % 4) as usize] = e;
                 items.push(SurfelId(slot / 4));
             }
-            offsets.push(items.len());
-            let kind = self.edge_kind(ca.min(cb), axis, &items[offsets[offsets.len() - 2]..]);
+            offsets.push(items.len() as u32);
+            let kind = self.edge_kind(ca.min(cb), axis, &items[offsets[offsets.len() - 2] as usize..]);
             edges.push(Edge { vertices: [a, b], axis: axis as u8, kind });
         }
         self.edges = edges;

@@ -140,6 +140,7 @@ pub struct Regularizer {
     /// Vertices the re-centring must not measure its drift at (a block's cut sides).
     pub(crate) untrusted: Option<Vec<bool>>,
     interrupt: Interrupt,
+    keep_normals: bool,
 }
 
 impl Regularizer {
@@ -153,6 +154,17 @@ impl Regularizer {
             recentring: None,
             untrusted: None,
             interrupt: Interrupt::never(),
+            keep_normals: true,
+        }
+    }
+
+    /// Whether a run keeps the initial normal field it estimated for the next runs
+    /// (default: `true`). A single run (the command line's) does not need it: not kept,
+    /// its 24 bytes per surfel are free for the solves.
+    pub fn set_keep_normals(&mut self, keep: bool) {
+        self.keep_normals = keep;
+        if !keep {
+            self.normals = None;
         }
     }
 
@@ -287,8 +299,14 @@ impl Regularizer {
                     let estimated = params.normals.estimate_interruptible(&surface, &interrupt)?;
                     self.normals = Some((params.normals.clone(), estimated));
                 }
-                let (_, n) = self.normals.as_ref().expect("estimated above");
-                (n.field.clone(), n.features.clone(), n.at_info.clone(), params.normals.estimator.name())
+                let name = params.normals.estimator.name();
+                if self.keep_normals {
+                    let (_, n) = self.normals.as_ref().expect("estimated above");
+                    (n.field.clone(), n.features.clone(), n.at_info.clone(), name)
+                } else {
+                    let (_, n) = self.normals.take().expect("estimated above");
+                    (n.field, n.features, n.at_info, name)
+                }
             }
         };
         times.normals = t.elapsed().as_secs_f64();

@@ -1,5 +1,7 @@
 //! Per-element weights of the energy, and texture-aware fairness (paper, sec. 4.5).
 
+use std::sync::Arc;
+
 use voxreg_digisurf::{DigitalSurface, EdgeId, SurfelData, VertexData, VertexId};
 
 use crate::RegularizeError;
@@ -78,10 +80,12 @@ impl Weights {
 /// their barycenters (so the mask is symmetric, and the energy stays convex). A vertex
 /// whose edges are all cut has no fairness term. Stored per vertex, aligned with
 /// [`DigitalSurface::vertex_neighbours`].
+///
+/// Cloning one is cheap: the per-round weights of a run share it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FairnessMask {
-    offsets: Vec<usize>,
-    keep: Vec<bool>,
+    offsets: Arc<[usize]>,
+    keep: Arc<[bool]>,
 }
 
 impl FairnessMask {
@@ -112,7 +116,7 @@ impl FairnessMask {
                 }
             }
         }
-        Ok(FairnessMask { offsets, keep })
+        Ok(FairnessMask { offsets: offsets.into(), keep: keep.into() })
     }
 
     /// Texture-aware fairness (paper, sec. 4.5 and Fig. 14): cuts the colour
@@ -143,7 +147,7 @@ impl FairnessMask {
 
     /// The union of two masks' cuts: a neighbour is kept when both keep it.
     pub fn and(mut self, other: &FairnessMask) -> Self {
-        self.keep.iter_mut().zip(&other.keep).for_each(|(k, o)| *k &= *o);
+        self.keep = self.keep.iter().zip(other.keep.iter()).map(|(k, o)| *k && *o).collect();
         self
     }
 

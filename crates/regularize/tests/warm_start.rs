@@ -202,3 +202,18 @@ fn a_warm_clamped_solve_reaches_the_cold_minimizer_with_fewer_operator_products(
         assert!(w < c, "change {k}: warm {w} operator products, cold {c}");
     }
 }
+
+/// A regularizer that does not keep its initial normals gives the same output, run after
+/// run (each run estimates them again).
+#[test]
+fn a_regularizer_without_kept_normals_gives_the_same_runs() {
+    let params = Params::default();
+    let kept = torus().run(&params).unwrap();
+    let mut r = torus();
+    r.set_keep_normals(false);
+    for _ in 0..2 {
+        let out = r.run(&params).unwrap();
+        assert_eq!(out.positions.as_slice(), kept.positions.as_slice());
+        assert_eq!(out.normals.as_slice(), kept.normals.as_slice());
+    }
+}
