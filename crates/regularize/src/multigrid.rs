@@ -20,6 +20,7 @@
 //! definite preconditioner. Its iteration counts on smooth fields are nearly independent
 //! of the surface's size (`docs/performance.md`).
 
+use std::sync::Arc;
 use std::time::Instant;
 
 use faer::dyn_stack::{MemBuffer, MemStack};
@@ -92,7 +93,8 @@ impl Aggregation {
 /// The voxel hierarchy of a surface: which vertices each coarse node groups.
 #[derive(Clone, Debug)]
 pub(crate) struct Hierarchy {
-    aggregations: Vec<Aggregation>,
+    /// Shared with the cycles built from it.
+    aggregations: Arc<[Aggregation]>,
     params: MultigridParams,
 }
 
@@ -227,7 +229,7 @@ impl Hierarchy {
                 members: (0..n).collect(),
             });
         }
-        Hierarchy { aggregations, params: *params }
+        Hierarchy { aggregations: aggregations.into(), params: *params }
     }
 
     /// Number of levels, the surface included.
@@ -302,7 +304,7 @@ impl Hierarchy {
             majorant: Vec::new(),
             damping: self.params.damping,
             levels,
-            aggregations: self.aggregations.clone(),
+            aggregations: Arc::clone(&self.aggregations),
             coarsest,
             works,
             steps: self.params.smoothing_steps.max(1),
@@ -1086,7 +1088,7 @@ pub(crate) struct Vcycle {
     majorant: Vec<[f64; 6]>,
     damping: f64,
     levels: Vec<Level>,
-    aggregations: Vec<Aggregation>,
+    aggregations: Arc<[Aggregation]>,
     coarsest: Option<Coarsest>,
     works: Vec<Work>,
     steps: usize,
