@@ -537,6 +537,10 @@ impl<const W: usize> Rows<W> {
                         part.0.push(acc.row.len());
                         acc.flush_into(&mut part.1, &mut part.2);
                     }
+                    // Grown by doubling: at their size before the concatenation below,
+                    // which holds them and the whole level at once.
+                    part.1.shrink_to_fit();
+                    part.2.shrink_to_fit();
                     part
                 },
             )
