@@ -211,6 +211,7 @@ pub(crate) fn regularize<'py>(
                     )?;
                     let mut regularizer = Regularizer::from_volume(volume, &params.regions)
                         .map_err(|e| Error::regularize("labels: no surface to regularize: ", &e))?;
+                    regularizer.set_keep_normals(false);
                     regularizer.run_with(params, None, &mut report).map_err(|e| Error::regularize("", &e))
                 }))
             })

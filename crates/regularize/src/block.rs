@@ -119,6 +119,7 @@ pub fn regularize_block<S: LabelStorage>(
             report: None,
         });
     };
+    regularizer.set_keep_normals(false);
     let out = regularizer.run(params)?;
     Ok(owned_part(&out.surface, out.positions.as_slice(), block, Some(out.report)))
 }

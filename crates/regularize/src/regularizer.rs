@@ -90,7 +90,9 @@ pub fn regularize<S: LabelStorage>(
     volume: &LabelVolume<S>,
     params: &Params,
 ) -> Result<Output, RegularizeError> {
-    Regularizer::from_volume(volume, &params.regions)?.run(params)
+    let mut regularizer = Regularizer::from_volume(volume, &params.regions)?;
+    regularizer.set_keep_normals(false);
+    regularizer.run(params)
 }
 
 /// Peak memory per surfel of a run that does not clamp, with a margin: the resident
