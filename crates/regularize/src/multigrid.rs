@@ -522,17 +522,20 @@ impl<const W: usize> Rows<W> {
     /// Builds `n` rows with `f(accumulator, row)`, columns in `0..cols`, in parallel
     /// chunks of rows (one marker array and one output buffer per chunk).
     fn build(n: usize, cols: usize, f: impl Fn(&mut Accumulator<W>, usize) + Sync) -> Rows<W> {
-        const ROWS: usize = 1024;
         type Part<const W: usize> = (Vec<usize>, Vec<u32>, Vec<[f32; W]>);
+        // A few parts per thread, each a large block: freed after the concatenation, a
+        // large block goes back to the system, where many small ones would stay in the
+        // allocator's heaps, resident through the solve that follows.
+        let rows = n.div_ceil(4 * rayon::current_num_threads().max(1)).max(1024);
         // One marker array per worker, not per chunk of rows: `cols` entries each, so a
         // fresh one per chunk would cost time quadratic in the level's size.
-        let parts: Vec<Part<W>> = (0..n.div_ceil(ROWS))
+        let parts: Vec<Part<W>> = (0..n.div_ceil(rows))
             .into_par_iter()
             .map_init(
                 || Accumulator { slot: vec![u32::MAX; cols], row: Vec::with_capacity(64) },
                 |acc, c| {
-                    let mut part: Part<W> = (Vec::with_capacity(ROWS), Vec::new(), Vec::new());
-                    for i in c * ROWS..((c + 1) * ROWS).min(n) {
+                    let mut part: Part<W> = (Vec::with_capacity(rows), Vec::new(), Vec::new());
+                    for i in c * rows..((c + 1) * rows).min(n) {
                         f(acc, i);
                         part.0.push(acc.row.len());
                         acc.flush_into(&mut part.1, &mut part.2);
