@@ -489,7 +489,7 @@ mod kernel_timings {
         eprintln!("cg update: {upd:.3} ms");
         let mut block = Pre::Block(st.diagonal(&c).iter().map(sym_inverse).collect());
         eprintln!("block jacobi: {:.3} ms", time(&mut || block.apply(&st, &y, &mut t)));
-        let h = Hierarchy::new(&st, &MultigridParams::default());
+        let h = Hierarchy::new(&st, crate::stencil::lattice_corners(&s), &MultigridParams::default());
         eprintln!(
             "multigrid numeric: {:.3} ms",
             time(&mut || {

@@ -77,9 +77,9 @@ impl Setup {
         multigrid: MultigridParams,
     ) -> Result<Self, RegularizeError> {
         let t = Instant::now();
-        let MatrixFreeOperator { stencil, spacing, build_seconds } = operator;
+        let MatrixFreeOperator { stencil, spacing, build_seconds, corners } = operator;
         let hierarchy = match preconditioner {
-            Preconditioner::Multigrid => Some(Hierarchy::new(&stencil, &multigrid)),
+            Preconditioner::Multigrid => Some(Hierarchy::new(&stencil, corners, &multigrid)),
             _ => None,
         };
         Ok(Setup {
@@ -169,7 +169,9 @@ impl Setup {
                 Pre::Block(self.stencil.diagonal(&coef).iter().map(sym_inverse).collect())
             }
             Preconditioner::Multigrid => {
-                let h = self.hierarchy.get_or_insert_with(|| Hierarchy::new(&self.stencil, &self.multigrid));
+                let h = self.hierarchy.get_or_insert_with(|| {
+                    Hierarchy::new(&self.stencil, crate::stencil::lattice_corners(surface), &self.multigrid)
+                });
                 Pre::Multigrid(Box::new(h.numeric(&self.stencil, &coef, interrupt)?))
             }
         };

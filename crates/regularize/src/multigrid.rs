@@ -204,10 +204,11 @@ impl Adjacency<'_> {
 }
 
 impl Hierarchy {
-    /// The hierarchy of `surface` (whose vertices are `stencil`'s).
-    pub(crate) fn new(stencil: &Stencil, params: &MultigridParams) -> Self {
+    /// The hierarchy of a surface whose vertices are `stencil`'s, at lattice corners
+    /// `corners` ([`crate::stencil::lattice_corners`]).
+    pub(crate) fn new(stencil: &Stencil, corners: Vec<[u32; 3]>, params: &MultigridParams) -> Self {
         let mut aggregations = Vec::new();
-        let mut cells = stencil.corners.clone();
+        let mut cells = corners;
         let mut adjacency = Adjacency::Surface(stencil);
         while cells.len() > params.coarsest_nodes.max(1) && aggregations.len() + 1 < params.max_levels.max(1)
         {
@@ -1522,7 +1523,11 @@ pub(crate) mod tests {
         let e = Energy::new(&s, &normals, &input, EnergyParams::default()).unwrap();
         let st = Stencil::new(&s, None).unwrap();
         let c = st.coefficients(&e);
-        let h = Hierarchy::new(&st, &MultigridParams { coarsest_nodes: 20, ..Default::default() });
+        let h = Hierarchy::new(
+            &st,
+            crate::stencil::lattice_corners(&s),
+            &MultigridParams { coarsest_nodes: 20, ..Default::default() },
+        );
         assert!(h.levels() > 2);
         test(&st, &c, &h, &mut rng);
     }

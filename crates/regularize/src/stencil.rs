@@ -31,8 +31,6 @@ pub(crate) struct Stencil {
     /// decides who is in whose barycenter).
     fair_offsets: Vec<u32>,
     fair_nbrs: Vec<u32>,
-    /// Lattice corner of each vertex (for the multigrid aggregation).
-    pub(crate) corners: Vec<[u32; 3]>,
 }
 
 /// The energy's operator `H` as the iterative solvers apply it, matrix-free: the
@@ -45,6 +43,9 @@ pub struct MatrixFreeOperator {
     pub(crate) stencil: Stencil,
     pub(crate) spacing: glam::DVec3,
     pub(crate) build_seconds: f64,
+    /// The vertices' lattice corners, for the multigrid hierarchy (dropped once it is
+    /// built).
+    pub(crate) corners: Vec<[u32; 3]>,
 }
 
 impl MatrixFreeOperator {
@@ -56,6 +57,7 @@ impl MatrixFreeOperator {
             stencil,
             spacing: surface.spacing(),
             build_seconds: t.elapsed().as_secs_f64(),
+            corners: lattice_corners(surface),
         })
     }
 
@@ -71,9 +73,9 @@ impl MatrixFreeOperator {
 pub(crate) struct Coefficients<'a> {
     pub(crate) normals: &'a [DVec3],
     /// Per vertex, `alpha_i` (or one value for all).
-    pub(crate) alpha: PerItem,
+    pub(crate) alpha: PerItem<'a>,
     /// Per face, `beta_f`.
-    pub(crate) beta: PerItem,
+    pub(crate) beta: PerItem<'a>,
     /// Per vertex, `gamma_i / |S_i|`, or 0 without fairness term.
     pub(crate) fair: Vec<f64>,
     /// Per face, `sqrt(beta_f) n_f`: the product reads one vector per face slot instead
@@ -82,21 +84,28 @@ pub(crate) struct Coefficients<'a> {
     pub(crate) face_normals: Vec<DVec3>,
 }
 
-/// One value per item, or one value for all.
-#[derive(Clone, Debug)]
-pub(crate) enum PerItem {
+/// One value for all items, or a global weight times each item's multiplier (the
+/// energy's [`Weights`](crate::Weights), read where they are rather than copied: the same
+/// product as [`Energy::alpha_at`] and [`Energy::beta_at`]).
+#[derive(Clone, Copy, Debug)]
+pub(crate) enum PerItem<'a> {
     Uniform(f64),
-    Each(Vec<f64>),
+    Scaled(f64, &'a [f64]),
 }
 
-impl PerItem {
+impl PerItem<'_> {
     #[inline(always)]
     pub(crate) fn get(&self, i: usize) -> f64 {
         match self {
             PerItem::Uniform(x) => *x,
-            PerItem::Each(v) => v[i],
+            PerItem::Scaled(s, w) => *s * w[i],
         }
     }
+}
+
+/// The lattice corner of each vertex of `surface` (what the multigrid aggregates by).
+pub(crate) fn lattice_corners(surface: &DigitalSurface) -> Vec<[u32; 3]> {
+    (0..surface.num_vertices()).into_par_iter().map(|v| surface.vertex_corner(VertexId(v as u32))).collect()
 }
 
 /// Prefix sums of `len(v)` for `v` in `0..n`, as `u32` offsets.
@@ -175,8 +184,7 @@ impl Stencil {
                 (offs, nbrs)
             }
         };
-        let corners = (0..n).map(|v| surface.vertex_corner(VertexId(v as u32))).collect();
-        Ok(Stencil { face_offsets, face_slots, fair_offsets, fair_nbrs, corners })
+        Ok(Stencil { face_offsets, face_slots, fair_offsets, fair_nbrs })
     }
 
     /// Number of vertices.
@@ -216,11 +224,11 @@ impl Stencil {
         let n = self.len();
         let weights = energy.weights();
         let alpha = match weights.and_then(|w| w.alpha.as_ref()) {
-            Some(_) => PerItem::Each((0..n).map(|i| energy.alpha_at(i)).collect()),
+            Some(w) => PerItem::Scaled(energy.params().alpha, w),
             None => PerItem::Uniform(energy.params().alpha),
         };
         let beta = match weights.and_then(|w| w.beta.as_ref()) {
-            Some(_) => PerItem::Each((0..energy.normals().len()).map(|f| energy.beta_at(f)).collect()),
+            Some(w) => PerItem::Scaled(energy.params().beta, w),
             None => PerItem::Uniform(energy.params().beta),
         };
         let surface = energy.surface();
