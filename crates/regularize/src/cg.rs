@@ -85,7 +85,6 @@ pub struct CgSolver {
     interrupt: Interrupt,
 }
 
-/// Work vectors of one solve.
 /// The true residual `r = b - H u` without `b = -(H - diag(alpha)) p`: as
 /// `-(H - diag(alpha)) (p + u) - diag(alpha) u`, where `H - diag(alpha)` only sees
 /// differences of positions (`x` and `t` are scratch).
@@ -109,6 +108,7 @@ fn true_residual(
     });
 }
 
+/// Work vectors of one solve.
 struct Buffers {
     u: Vec<DVec3>,
     r: Vec<DVec3>,
@@ -593,5 +593,48 @@ mod quick_start {
         assert_eq!(info.quick_start_iterations, 0);
         let (_, info) = solver.run(&energy, Some(&x), None, None).unwrap();
         assert_eq!(info.quick_start_iterations, 0);
+    }
+}
+
+#[cfg(test)]
+mod residuals {
+    //! The end-of-solve residual without the right-hand side against `b - H u`.
+    use super::*;
+    use crate::stencil::Stencil;
+    use crate::{EnergyParams, FairnessMask, Weights};
+    use voxreg_normals::NormalField;
+    use voxreg_testkit::{digitize, true_normals, Lcg, Torus};
+
+    #[test]
+    fn the_true_residual_without_the_right_hand_side_is_b_minus_h_u() {
+        let shape = Torus { major: 6.0, minor: 2.5 };
+        let s = DigitalSurface::from_volume(&digitize(&shape, 0.5)).unwrap();
+        let normals = NormalField::new(true_normals(&s, &shape));
+        let input = s.positions();
+        let mut rng = Lcg::new(7);
+        // Per-vertex attachment weights and a fairness mask, as the pipeline's runs have.
+        let weights = Weights {
+            alpha: Some((0..s.num_vertices()).map(|_| rng.range(0.5, 2.0)).collect::<Vec<_>>().into()),
+            fairness: Some(FairnessMask::junction_curves(&s)),
+            ..Default::default()
+        };
+        let energy = Energy::new(&s, &normals, &input, EnergyParams::default())
+            .unwrap()
+            .with_weights(&weights)
+            .unwrap();
+        let stencil = Stencil::new(&s, weights.fairness.as_ref()).unwrap();
+        let coef = stencil.coefficients(&energy);
+        let n = stencil.len();
+        let u: Vec<DVec3> = (0..n).map(|_| rng.vec3(-0.4, 0.4)).collect();
+        let (mut b, mut t) = (vec![DVec3::ZERO; n], vec![DVec3::ZERO; n]);
+        stencil.apply(&coef, &input, &mut b, &mut t, false);
+        b.iter_mut().for_each(|x| *x = -*x);
+        let mut expected = vec![DVec3::ZERO; n];
+        stencil.residual(&coef, &u, &b, &mut expected, &mut t);
+        let (mut r, mut x) = (vec![DVec3::ZERO; n], vec![DVec3::ZERO; n]);
+        true_residual(&stencil, &coef, &input, &u, &mut r, &mut x, &mut t);
+        let scale = norm(&expected);
+        let diff = r.iter().zip(&expected).map(|(a, e)| (*a - *e).length()).fold(0.0, f64::max);
+        assert!(scale > 1e-3 && diff <= 1e-12 * scale.max(1.0), "{diff} against {scale}");
     }
 }
