@@ -185,13 +185,7 @@ impl BoundedSolver {
         start: &[DVec3],
         progress: &mut dyn FnMut(&Progress),
     ) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
-        if start.len() != energy.input().len() {
-            return Err(RegularizeError::SizeMismatch(format!(
-                "{} start positions for {} vertices",
-                start.len(),
-                energy.input().len()
-            )));
-        }
+        energy.check_start(start)?;
         self.run(energy, Some(start), progress)
     }
 

@@ -108,6 +108,14 @@ fn true_residual(
     });
 }
 
+/// Where a solve starts: the input positions, or given ones (borrowed, or taken so that
+/// their vector becomes the iterate's).
+enum Start<'s> {
+    Input,
+    Given(&'s [DVec3]),
+    Taken(Vec<DVec3>),
+}
+
 /// Work vectors of one solve.
 struct Buffers {
     u: Vec<DVec3>,
@@ -191,7 +199,7 @@ impl CgSolver {
 
     /// Minimizes `energy` from its input positions; returns the positions and a report.
     pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        self.run(energy, None, None, None)
+        self.run(energy, Start::Input, None)
     }
 
     /// [`CgSolver::solve`], calling `progress` after each iteration (its energy costs two
@@ -201,7 +209,7 @@ impl CgSolver {
         energy: &Energy<'_>,
         progress: &mut dyn FnMut(&Progress),
     ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        self.run(energy, None, None, Some(progress))
+        self.run(energy, Start::Input, Some(progress))
     }
 
     /// [`CgSolver::solve_with`], iterating from `start` (one position per vertex) instead
@@ -215,14 +223,8 @@ impl CgSolver {
         start: &[DVec3],
         progress: &mut dyn FnMut(&Progress),
     ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        if start.len() != energy.input().len() {
-            return Err(RegularizeError::SizeMismatch(format!(
-                "{} start positions for {} vertices",
-                start.len(),
-                energy.input().len()
-            )));
-        }
-        self.run(energy, Some(start), None, Some(progress))
+        energy.check_start(start)?;
+        self.run(energy, Start::Given(start), Some(progress))
     }
 
     /// [`CgSolver::solve_from`] with a start the solver may take: its vector becomes the
@@ -233,24 +235,17 @@ impl CgSolver {
         start: Vec<DVec3>,
         progress: &mut dyn FnMut(&Progress),
     ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        if start.len() != energy.input().len() {
-            return Err(RegularizeError::SizeMismatch(format!(
-                "{} start positions for {} vertices",
-                start.len(),
-                energy.input().len()
-            )));
-        }
-        self.run(energy, None, Some(start), Some(progress))
+        energy.check_start(&start)?;
+        self.run(energy, Start::Taken(start), Some(progress))
     }
 
     fn run(
         &mut self,
         energy: &Energy<'_>,
-        start: Option<&[DVec3]>,
-        owned: Option<Vec<DVec3>>,
+        start: Start<'_>,
         mut progress: Option<&mut dyn FnMut(&Progress)>,
     ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        let warm = start.is_some() || owned.is_some();
+        let warm = !matches!(start, Start::Input);
         let quick = self.quick_start && warm && progress.is_some();
         let mut prepared = self.setup.prepare(energy, quick, &self.interrupt)?;
         if self.interrupt.is_raised() {
@@ -271,20 +266,14 @@ impl CgSolver {
         let mut applications = 1;
         let mut rnorm = r0;
         // Solve for the displacement from the input: u = start - p, r = b - H u.
-        b.u = match owned {
-            Some(mut u) => {
-                u.par_chunks_mut(CHUNK)
-                    .zip(input.par_chunks(CHUNK))
-                    .for_each(|(u, p)| u.iter_mut().zip(p).for_each(|(u, p)| *u -= *p));
+        b.u = match start {
+            Start::Input => zero(),
+            Start::Given(s) => s.par_iter().zip(input).map(|(s, p)| *s - *p).collect(),
+            Start::Taken(mut u) => {
+                u.par_iter_mut().zip(input).for_each(|(u, p)| *u -= *p);
                 u
             }
-            None => zero(),
         };
-        if let Some(start) = start {
-            b.u.par_chunks_mut(CHUNK).zip(input.par_chunks(CHUNK).zip(start.par_chunks(CHUNK))).for_each(
-                |(u, (p, s))| u.iter_mut().zip(p.iter().zip(s)).for_each(|(u, (p, s))| *u = *s - *p),
-            );
-        }
         let e0 = if progress.is_some() { energy.terms(input).total } else { 0.0 };
         // The energy at the iterate, `E(p + u) = E(p) - u.b - u.r`, then followed step by
         // step (the right-hand side `b` is not kept through the iterations).
@@ -591,7 +580,7 @@ mod quick_start {
         // No start (a cold solve) or no listener: nothing to show early.
         let (_, info) = solver.solve_with(&energy, &mut |_| {}).unwrap();
         assert_eq!(info.quick_start_iterations, 0);
-        let (_, info) = solver.run(&energy, Some(&x), None, None).unwrap();
+        let (_, info) = solver.run(&energy, Start::Given(&x), None).unwrap();
         assert_eq!(info.quick_start_iterations, 0);
     }
 }

@@ -224,6 +224,18 @@ impl<'a> Energy<'a> {
         self.input
     }
 
+    /// Fails unless `start` holds one position per vertex (a solver's start).
+    pub(crate) fn check_start(&self, start: &[DVec3]) -> Result<(), RegularizeError> {
+        if start.len() == self.input.len() {
+            return Ok(());
+        }
+        Err(RegularizeError::SizeMismatch(format!(
+            "{} start positions for {} vertices",
+            start.len(),
+            self.input.len()
+        )))
+    }
+
     /// The surface.
     pub fn surface(&self) -> &'a DigitalSurface {
         self.surface

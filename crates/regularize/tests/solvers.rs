@@ -560,28 +560,40 @@ fn clamped_minimizer_satisfies_the_optimality_conditions() {
     });
 }
 
-/// The iterates the front door streams (`Event::iterate`) are the solvers' own: their
-/// energy is the one each `Progress` reports, and they approach the final positions.
+/// A front-door run of `params` on `volume`, with the iterates it streams in solve
+/// round `round` and the energies reported with them.
+fn streamed_round(
+    volume: &LabelVolume,
+    params: &voxreg_regularize::Params,
+    round: usize,
+) -> (voxreg_regularize::Regularizer, voxreg_regularize::Output, Vec<Vec<DVec3>>, Vec<f64>) {
+    use voxreg_regularize::{Regularizer, Stage};
+    let mut r = Regularizer::from_volume(volume, &params.regions).unwrap();
+    let mut iterates = Vec::new();
+    let mut energies = Vec::new();
+    let out = r
+        .run_with(params, None, &mut |e| {
+            if let (Stage::Solve { round: k }, Some(x)) = (e.stage, e.iterate()) {
+                if k == round {
+                    iterates.push(x);
+                    energies.push(e.iteration.unwrap().energy);
+                }
+            }
+        })
+        .unwrap();
+    (r, out, iterates, energies)
+}
+
 /// A refinement round's solve starts from the last round's positions: its reported
 /// energies (followed step by step from the start's) stay those of its iterates.
 #[test]
 fn warm_started_rounds_report_their_iterates_energy() {
-    use voxreg_regularize::{Params, Regularizer, SolverChoice, Stage};
+    use voxreg_regularize::{Params, SolverChoice};
     let volume = digitize(&Sphere { radius: 7.0 }, 1.0);
     let mut params = Params::default();
     params.solver.choice = SolverChoice::Cg;
     params.refine = 2;
-    let mut r = Regularizer::from_volume(&volume, &params.regions).unwrap();
-    let mut iterates = Vec::new();
-    let mut energies = Vec::new();
-    let out = r
-        .run_with(&params, None, &mut |e| {
-            if let (Stage::Solve { round: 2 }, Some(x)) = (e.stage, e.iterate()) {
-                iterates.push(x);
-                energies.push(e.iteration.unwrap().energy);
-            }
-        })
-        .unwrap();
+    let (r, out, iterates, energies) = streamed_round(&volume, &params, 2);
     assert!(iterates.len() >= 2, "{} iterates", iterates.len());
     let energy = Energy::new(r.surface(), &out.normals, &out.targets, params.energy).unwrap();
     for (x, e) in iterates.iter().zip(&energies) {
@@ -591,9 +603,11 @@ fn warm_started_rounds_report_their_iterates_energy() {
     assert!(energies.windows(2).all(|w| w[1] <= w[0]), "{energies:?}");
 }
 
+/// The iterates the front door streams (`Event::iterate`) are the solvers' own: their
+/// energy is the one each `Progress` reports, and they approach the final positions.
 #[test]
 fn streamed_iterates_match_the_reported_energy_and_converge() {
-    use voxreg_regularize::{Params, Regularizer, SolverChoice, Stage};
+    use voxreg_regularize::{Params, SolverChoice};
     let volume = digitize(&Sphere { radius: 7.0 }, 1.0);
     for (choice, clamp) in [(SolverChoice::Cg, false), (SolverChoice::Bounded, true)] {
         let mut params = Params::papers();
@@ -601,17 +615,7 @@ fn streamed_iterates_match_the_reported_energy_and_converge() {
         if !clamp {
             params.solver.bounded.clamp = None;
         }
-        let mut r = Regularizer::from_volume(&volume, &params.regions).unwrap();
-        let mut iterates = Vec::new();
-        let mut energies = Vec::new();
-        let out = r
-            .run_with(&params, None, &mut |e| {
-                if let (Stage::Solve { round: 0 }, Some(x)) = (e.stage, e.iterate()) {
-                    iterates.push(x);
-                    energies.push(e.iteration.unwrap().energy);
-                }
-            })
-            .unwrap();
+        let (r, out, iterates, energies) = streamed_round(&volume, &params, 0);
         assert!(iterates.len() >= 2, "{choice:?}: {} iterates", iterates.len());
         let surface = r.surface();
         let energy = Energy::new(surface, &out.normals, &out.targets, params.energy).unwrap();
