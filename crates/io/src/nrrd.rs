@@ -116,8 +116,13 @@ fn exact<'a>(path: &Path, data: &'a [u8], expected: usize, whole: bool) -> Resul
     }
 }
 
+/// `data` after its first `lines` lines (empty when it has fewer): stops at the end of
+/// the data, whatever `line skip` the header declares.
 fn skip_lines(mut data: &[u8], lines: usize) -> &[u8] {
     for _ in 0..lines {
+        if data.is_empty() {
+            break;
+        }
         data = data.iter().position(|&b| b == b'\n').map_or(&[], |i| &data[i + 1..]);
     }
     data

@@ -312,3 +312,15 @@ fn failed_obj_write_keeps_the_old_material_library() {
     assert_eq!(std::fs::read_to_string(dir.path().join("m.mtl")).unwrap(), "old");
     assert_eq!(std::fs::read_dir(dir.path()).unwrap().count(), 2);
 }
+
+/// A `line skip` far beyond the data's lines stops at the data's end (the skip looped
+/// once per declared line: a fuzzer's input with a skip of 10^17 ran for minutes).
+#[test]
+fn nrrd_line_skip_beyond_the_data_is_refused_at_once() {
+    let bytes = b"NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\nline skip: 100000000000000000\n\n\x01\x02\n";
+    let t = std::time::Instant::now();
+    let err = voxreg_io::read_nrrd_bytes(bytes, Path::new("skip.nrrd")).map(drop).unwrap_err();
+    assert!(t.elapsed().as_secs_f64() < 1.0, "{:?}", t.elapsed());
+    let msg = err.to_string();
+    assert!(msg.contains("skip.nrrd") && msg.contains("truncated"), "{msg}");
+}
