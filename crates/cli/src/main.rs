@@ -33,12 +33,20 @@ fn main() -> std::process::ExitCode {
     if let Some(bytes) = cli.max_memory {
         voxreg_io::set_max_memory(bytes);
     }
+    // The commands that compute run on a thread of rayon's pool: a parallel pass started
+    // from outside the pool wakes a worker and sleeps until it is done, two context
+    // switches per pass (a tenth of a voxel-art run's time). The viewer serves for its
+    // whole life and runs its solves on the pool itself.
     let result = std::panic::catch_unwind(|| match cli.command {
         Command::Info(args) => input::info(&args),
-        Command::Regularize(args) => regularize(&args, Product::Mesh),
-        Command::Upscale(args) => regularize(&args.regularize, Product::Volume { factor: args.factor }),
-        Command::Geodesic(args) => regularize(&args.regularize, Product::Geodesic(&args.geodesic)),
-        Command::Check(args) => check(&args),
+        Command::Regularize(args) => rayon::scope(|_| regularize(&args, Product::Mesh)),
+        Command::Upscale(args) => {
+            rayon::scope(|_| regularize(&args.regularize, Product::Volume { factor: args.factor }))
+        }
+        Command::Geodesic(args) => {
+            rayon::scope(|_| regularize(&args.regularize, Product::Geodesic(&args.geodesic)))
+        }
+        Command::Check(args) => rayon::scope(|_| check(&args)),
         Command::View(args) => view::view(&args),
     })
     .unwrap_or_else(|_| {

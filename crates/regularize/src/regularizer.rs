@@ -86,13 +86,18 @@ pub struct Output {
 
 /// Regularizes the digital surface of `volume` with `params`: the one-shot form of
 /// [`Regularizer`].
+///
+/// The run goes on a thread of rayon's pool (where it is called from outside it):
+/// [`Regularizer`]'s runs are best called that way too (`rayon::scope`,
+/// `ThreadPool::install`), since each of their many parallel passes started from outside
+/// the pool wakes a worker and waits for it.
 pub fn regularize<S: LabelStorage>(
     volume: &LabelVolume<S>,
     params: &Params,
 ) -> Result<Output, RegularizeError> {
     let mut regularizer = Regularizer::from_volume(volume, &params.regions)?;
     regularizer.set_keep_normals(false);
-    regularizer.run(params)
+    rayon::scope(|_| regularizer.run(params))
 }
 
 /// Peak memory per surfel of a run that does not clamp, with a margin: the resident
@@ -129,6 +134,10 @@ pub fn estimated_bytes(surfels: u64, params: &Params) -> u64 {
 /// solver's setup and iterations) and returns [`RegularizeError::Interrupted`] soon after
 /// it is raised; what the regularizer keeps (the solver, its last multigrid cycle, the
 /// initial normals) stays usable by the next run.
+///
+/// Call its runs from a thread of rayon's pool (`rayon::scope(|_| ...)`,
+/// `ThreadPool::install`): each of a run's many parallel passes started from outside the
+/// pool wakes a worker and waits for it, about a tenth of a small run's time.
 #[derive(Debug)]
 pub struct Regularizer {
     surface: Arc<DigitalSurface>,

@@ -192,7 +192,11 @@ pub(crate) fn worker(shared: Arc<Shared>, jobs: Receiver<Job>) {
         };
         let t = shared.arrival(id).unwrap_or_else(Instant::now);
         let interrupt = shared.start(id);
-        let result = catch_unwind(AssertUnwindSafe(|| run(&shared, &mut current, job, t, &interrupt)));
+        // On a thread of rayon's pool, so that the solve's parallel passes do not each
+        // wake a worker from outside it.
+        let result = catch_unwind(AssertUnwindSafe(|| {
+            rayon::scope(|_| run(&shared, &mut current, job, t, &interrupt))
+        }));
         if let Err(panic) = result {
             let message = panic_message(&*panic);
             current = None;
