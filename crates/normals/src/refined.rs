@@ -404,9 +404,14 @@ fn refined_interruptible(
         .then(|| InteriorNormals::new(&nodes, &samples, &near_junction, JUNCTION_DISC_FACTOR * r));
     let hinted: Option<Vec<bool>> =
         hints.as_ref().map(|h| order.par_iter().map(|&s| h[s as usize]).collect());
+    // Discs near junctions cost many times the others: the quads go to the threads in
+    // pieces of at most 1/128 of them, so that no thread is left alone with a large piece at
+    // the end (rayon splits a range it does not steal from only a few times). Each piece
+    // allocates its own scratch, hence at least 4,096 quads.
     let out: Vec<(DVec3, bool)> = (0..n)
         .into_par_iter()
         .with_min_len(4096)
+        .with_max_len((n / 128).max(4096))
         .map_init(
             || (vec![false; n], Vec::new(), BinaryHeap::new(), vec![0.0; n]),
             |(seen, queue, waiting, best): &mut Scratch, f| {
