@@ -241,6 +241,11 @@ fn range_face_count(
 
 /// Calls `visit(previous layer, current layer, k)` for each slab `k` of `range`, with
 /// rolling region/label layers.
+///
+/// A volume stored `z` fastest (a C-order array indexed `[x, y, z]`, as numpy writes it)
+/// is read [`LAYER_BATCH`] layers at a time, one short contiguous run per `(x, y)`: one
+/// layer alone would read a single label from each cache line and page of the whole
+/// volume.
 fn scan_slabs(
     volume: &LabelView<'_>,
     regions: &Regions,
@@ -249,15 +254,85 @@ fn scan_slabs(
     mut visit: impl FnMut(&(Vec<u32>, Vec<u32>), &(Vec<u32>, Vec<u32>), usize),
 ) -> Result<(), SurfaceError> {
     let [nx, ny, _] = volume.dims();
-    let mut prev = (vec![0u32; nx * ny], vec![0u32; nx * ny]);
-    let mut cur = (vec![0u32; nx * ny], vec![0u32; nx * ny]);
-    fill_layer(volume, regions, outside, range.start as isize - 1, &mut prev.0, &mut prev.1)?;
-    for k in range {
-        fill_layer(volume, regions, outside, k as isize, &mut cur.0, &mut cur.1)?;
-        visit(&prev, &cur, k);
-        std::mem::swap(&mut prev, &mut cur);
+    let batch = if z_fastest(volume).is_some() { LAYER_BATCH } else { 1 };
+    // `layers[0]` is the layer before the next batch.
+    let mut layers: Vec<(Vec<u32>, Vec<u32>)> =
+        (0..=batch.min(range.len().max(1))).map(|_| (vec![0u32; nx * ny], vec![0u32; nx * ny])).collect();
+    fill_layers(volume, regions, outside, range.start as isize - 1, &mut layers[..1])?;
+    let mut k = range.start;
+    while k < range.end {
+        let m = (layers.len() - 1).min(range.end - k);
+        fill_layers(volume, regions, outside, k as isize, &mut layers[1..=m])?;
+        for j in 0..m {
+            visit(&layers[j], &layers[j + 1], k + j);
+        }
+        layers.swap(0, m);
+        k += m;
     }
     Ok(())
+}
+
+/// Layers read together from a volume stored `z` fastest: 32 bytes of each `(x, y)`'s
+/// run of labels per read.
+const LAYER_BATCH: usize = 8;
+
+/// The labels as one slice indexed `(x * ny + y) * nz + z`, when stored so.
+fn z_fastest<'a>(volume: &'a LabelView<'_>) -> Option<&'a [u32]> {
+    let labels = volume.labels();
+    let [_, _, nz] = volume.dims();
+    (labels.is_standard_layout() && nz > 1).then(|| labels.as_slice()).flatten()
+}
+
+/// Fills `layers[j]` with the regions and labels of voxel layer `z + j`, `x` fastest;
+/// the outside beyond the domain.
+fn fill_layers(
+    volume: &LabelView<'_>,
+    regions: &Regions,
+    outside: &Outside,
+    z: isize,
+    layers: &mut [(Vec<u32>, Vec<u32>)],
+) -> Result<(), SurfaceError> {
+    let [nx, ny, nz] = volume.dims();
+    let inside = |j: usize| (0..nz as isize).contains(&(z + j as isize));
+    match z_fastest(volume) {
+        Some(all) if layers.len() > 1 => {
+            // The layers inside the volume, `lo..hi`, from one contiguous run per column.
+            let lo = (0..layers.len()).find(|&j| inside(j)).unwrap_or(layers.len());
+            let hi = (lo..layers.len()).find(|&j| !inside(j)).unwrap_or(layers.len());
+            if lo < hi {
+                let z0 = (z + lo as isize) as usize;
+                let mut run = [0u32; LAYER_BATCH];
+                for x in 0..nx {
+                    for y in 0..ny {
+                        let start = (x * ny + y) * nz + z0;
+                        let run = &mut run[..hi - lo];
+                        run.copy_from_slice(&all[start..start + hi - lo]);
+                        let i = x + nx * y;
+                        for (layer, &label) in layers[lo..hi].iter_mut().zip(run.iter()) {
+                            layer.1[i] = label;
+                            layer.0[i] = regions.region_of(label).map_or(NONE, |id| id.0);
+                        }
+                    }
+                }
+            }
+            for (j, (rs, ls)) in layers.iter_mut().enumerate() {
+                if !inside(j) {
+                    let (r, l) = outside[2][usize::from(z + j as isize >= 0)];
+                    rs.fill(r);
+                    ls.fill(l);
+                } else if let Some(i) = rs.iter().position(|&r| r == NONE) {
+                    return Err(SurfaceError::InvalidRegions(format!("label {} has no region", ls[i])));
+                }
+            }
+            Ok(())
+        }
+        _ => {
+            for (j, (rs, ls)) in layers.iter_mut().enumerate() {
+                fill_layer(volume, regions, outside, z + j as isize, rs, ls)?;
+            }
+            Ok(())
+        }
+    }
 }
 
 /// The faces of slab `k`, in scan order: faces perpendicular to z between voxel layers
