@@ -267,6 +267,51 @@ const RIM_FRACTION: f64 = 0.25;
 /// it waits with (0 where it does not).
 type Scratch = (Vec<bool>, Vec<(u32, u32, f64, f64)>, BinaryHeap<(u64, u32, u32, u64)>, Vec<f64>);
 
+/// Scratch lent to the pieces of a parallel pass and taken back when a piece ends: as
+/// many as pieces run at once, not one per piece (a disc search's holds two arrays as
+/// long as the surface, which every piece would otherwise allocate and fault in). What
+/// comes back must be as it was lent: each search clears the marks it set.
+struct Pool<T>(std::sync::Mutex<Vec<T>>);
+
+/// A [`Pool`]'s item, returned to it when dropped.
+struct Lent<'a, T> {
+    item: Option<T>,
+    pool: &'a Pool<T>,
+}
+
+impl<T> Pool<T> {
+    fn new() -> Self {
+        Pool(std::sync::Mutex::new(Vec::new()))
+    }
+
+    /// An item of the pool, or `make()` when none is free.
+    fn lend(&self, make: impl FnOnce() -> T) -> Lent<'_, T> {
+        let item = self.0.lock().ok().and_then(|mut free| free.pop()).unwrap_or_else(make);
+        Lent { item: Some(item), pool: self }
+    }
+}
+
+impl<T> Drop for Lent<'_, T> {
+    fn drop(&mut self) {
+        if let (Some(item), Ok(mut free)) = (self.item.take(), self.pool.0.lock()) {
+            free.push(item);
+        }
+    }
+}
+
+impl<T> std::ops::Deref for Lent<'_, T> {
+    type Target = T;
+    fn deref(&self) -> &T {
+        self.item.as_ref().expect("lent until dropped")
+    }
+}
+
+impl<T> std::ops::DerefMut for Lent<'_, T> {
+    fn deref_mut(&mut self) -> &mut T {
+        self.item.as_mut().expect("lent until dropped")
+    }
+}
+
 /// `t` of the direction of `a` and `1 - t` of the direction of `b` (`a` itself from
 /// `t = 1`, `b` itself at `t = 0`).
 fn mix(t: f64, a: DVec3, b: DVec3) -> DVec3 {
@@ -406,15 +451,17 @@ fn refined_interruptible(
         hints.as_ref().map(|h| order.par_iter().map(|&s| h[s as usize]).collect());
     // Discs near junctions cost many times the others: the quads go to the threads in
     // pieces of at most 1/128 of them, so that no thread is left alone with a large piece at
-    // the end (rayon splits a range it does not steal from only a few times). Each piece
-    // allocates its own scratch, hence at least 4,096 quads.
+    // the end (rayon splits a range it does not steal from only a few times). The pieces
+    // borrow their scratch from a pool.
+    let pool: Pool<Scratch> = Pool::new();
     let out: Vec<(DVec3, bool)> = (0..n)
         .into_par_iter()
-        .with_min_len(4096)
-        .with_max_len((n / 128).max(4096))
+        .with_min_len(1024)
+        .with_max_len((n / 128).max(1024))
         .map_init(
-            || (vec![false; n], Vec::new(), BinaryHeap::new(), vec![0.0; n]),
-            |(seen, queue, waiting, best): &mut Scratch, f| {
+            || pool.lend(|| (vec![false; n], Vec::new(), BinaryHeap::new(), vec![0.0; n])),
+            |lent, f| {
+                let (seen, queue, waiting, best) = &mut **lent;
                 if interrupt.is_raised() {
                     return (normals[f], false);
                 }

@@ -482,10 +482,10 @@ mod kernel_timings {
         eprintln!(
             "multigrid numeric: {:.3} ms",
             time(&mut || {
-                std::hint::black_box(h.numeric(&st, &c, &Interrupt::never()).unwrap());
+                std::hint::black_box(h.numeric(&st, &c, &Interrupt::never(), None).unwrap());
             })
         );
-        let mut v = h.numeric(&st, &c, &Interrupt::never()).unwrap();
+        let mut v = h.numeric(&st, &c, &Interrupt::never(), None).unwrap();
         eprintln!("v-cycle: {:.3} ms ({} levels)", time(&mut || v.apply(&st, &y, &mut t)), h.levels());
     }
 }

@@ -121,9 +121,9 @@ impl Setup {
     /// factorization), marked `stale`: the solver iterates at once and builds the
     /// energy's own cycle later ([`Setup::renew`]). Any symmetric positive definite
     /// preconditioner leaves the conjugate gradient's minimizer unchanged; only its rate
-    /// depends on how far the energy moved. Otherwise a kept cycle is dropped before the
-    /// new one is built (one in memory at a time). The multigrid setup polls `interrupt`
-    /// between levels.
+    /// depends on how far the energy moved. Otherwise the new cycle is built in a kept
+    /// cycle's arrays ([`Hierarchy::numeric`]: one in memory at a time, no fresh
+    /// memory faulted in). The multigrid setup polls `interrupt` between levels.
     pub(crate) fn prepare<'a>(
         &mut self,
         energy: &Energy<'a>,
@@ -145,8 +145,9 @@ impl Setup {
         }
         let t = Instant::now();
         let coef = self.stencil.coefficients(energy);
-        let kept = self.kept.take().filter(|_| quick && self.preconditioner == Preconditioner::Multigrid);
-        if let Some(mut v) = kept {
+        let mut kept = self.kept.take();
+        if quick && self.preconditioner == Preconditioner::Multigrid && kept.is_some() {
+            let mut v = kept.take().expect("a kept cycle");
             v.refresh_fine(&self.stencil, &coef);
             return Ok(Prepared {
                 coef,
@@ -172,7 +173,8 @@ impl Setup {
                 let h = self.hierarchy.get_or_insert_with(|| {
                     Hierarchy::new(&self.stencil, crate::stencil::lattice_corners(surface), &self.multigrid)
                 });
-                Pre::Multigrid(Box::new(h.numeric(&self.stencil, &coef, interrupt)?))
+                // The kept cycle's arrays become the new one's.
+                Pre::Multigrid(Box::new(h.numeric(&self.stencil, &coef, interrupt, kept)?))
             }
         };
         let factor_seconds = match &pre {
@@ -189,8 +191,8 @@ impl Setup {
     }
 
     /// Replaces a quick start's stale cycle by `prepared`'s energy's own (the setup
-    /// [`Setup::prepare`] deferred), its seconds added to `prepared`'s; the stale cycle
-    /// is dropped first.
+    /// [`Setup::prepare`] deferred), its seconds added to `prepared`'s; built in the
+    /// stale cycle's arrays.
     pub(crate) fn renew(
         &self,
         prepared: &mut Prepared<'_>,
@@ -200,8 +202,11 @@ impl Setup {
             return Ok(());
         };
         let t = Instant::now();
-        prepared.pre = Pre::Identity;
-        let v = h.numeric(&self.stencil, &prepared.coef, interrupt)?;
+        let stale = match std::mem::replace(&mut prepared.pre, Pre::Identity) {
+            Pre::Multigrid(v) => Some(v),
+            _ => None,
+        };
+        let v = h.numeric(&self.stencil, &prepared.coef, interrupt, stale)?;
         prepared.factor_seconds += v.factor_seconds;
         prepared.assemble_seconds += t.elapsed().as_secs_f64() - v.factor_seconds;
         prepared.pre = Pre::Multigrid(Box::new(v));

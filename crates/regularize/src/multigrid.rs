@@ -239,15 +239,30 @@ impl Hierarchy {
     }
 
     /// The coarse operators, smoothers and coarsest factorization of one energy;
-    /// [`RegularizeError::Interrupted`] if `interrupt` is raised before a level.
+    /// [`RegularizeError::Interrupted`] if `interrupt` is raised before a level. The
+    /// arrays of `old` (a cycle built on this hierarchy, the last solve's) are refilled
+    /// where their sizes and patterns match instead of allocated: the same cycle, without
+    /// faulting in fresh memory for the levels' blocks, smoothers and work vectors at
+    /// every solve of a refinement loop.
     pub(crate) fn numeric(
         &self,
         stencil: &Stencil,
         coef: &Coefficients<'_>,
         interrupt: &Interrupt,
+        old: Option<Box<Vcycle>>,
     ) -> Result<Vcycle, RegularizeError> {
         #[cfg(test)]
         tests::SETUPS.with(|c| c.set(c.get() + 1));
+        // The old cycle's arrays (its face's levels and coarsest factor dropped here).
+        let (mut spare_levels, spare_works, spare_smoother, spare_fine) =
+            match old.filter(|v| Arc::ptr_eq(&v.aggregations, &self.aggregations)) {
+                Some(v) => {
+                    let Vcycle { levels, works, fine_smoother, fine, .. } = *v;
+                    (levels, works, fine_smoother, Some(fine))
+                }
+                None => (Vec::new(), Vec::new(), Vec::new(), None),
+            };
+        spare_levels.reverse();
         let clock = Instant::now();
         let lap = |what: &str| {
             tracing::trace!(stage = what, ms = clock.elapsed().as_secs_f64() * 1e3, "multigrid setup");
@@ -265,8 +280,8 @@ impl Hierarchy {
             let _ = l;
             if let Some(finer) = rows.take() {
                 let last: &mut Level = levels.last_mut().expect("a previous level");
-                last.matrix = Bsr::from_rows(&finer);
-                last.smoother = l1_smoother(&finer, self.params.damping);
+                last.matrix = Bsr::from_rows_reusing(&finer, std::mem::take(&mut last.matrix));
+                last.smoother = l1_smoother(&finer, self.params.damping, std::mem::take(&mut last.smoother));
             }
             rows = Some(coarse_rows);
             lap(&format!(
@@ -275,7 +290,10 @@ impl Hierarchy {
                 agg.len(),
                 rows.as_ref().map_or(0, |r| r.nnz()) as f64 / agg.len() as f64
             ));
-            levels.push(Level { matrix: Bsr::default(), smoother: Vec::new(), n: agg.len() });
+            // The last solve's level `l`, its arrays refilled once the rows are built.
+            let mut level = spare_levels.pop().unwrap_or_default();
+            level.n = agg.len();
+            levels.push(level);
         }
         interrupt.check()?;
         let t = Instant::now();
@@ -289,17 +307,25 @@ impl Hierarchy {
         };
         let factor_seconds = t.elapsed().as_secs_f64();
         lap("coarsest factor");
-        let work =
-            |n: usize| Work { r: vec![Vec3A::ZERO; n], x: vec![Vec3A::ZERO; n], t: vec![Vec3A::ZERO; n] };
-        let mut works = vec![work(stencil.len())];
-        works.extend(levels.iter().map(|l| work(l.n)));
-        let fine = FineNumbers::new(stencil, coef);
+        // Work vectors of the same sizes are reused as they are: every cycle writes each
+        // entry before reading it.
+        let sizes: Vec<usize> = std::iter::once(stencil.len()).chain(levels.iter().map(|l| l.n)).collect();
+        let works = if spare_works.iter().map(|w| w.x.len()).eq(sizes.iter().copied()) {
+            spare_works
+        } else {
+            drop(spare_works);
+            let work =
+                |n: usize| Work { r: vec![Vec3A::ZERO; n], x: vec![Vec3A::ZERO; n], t: vec![Vec3A::ZERO; n] };
+            sizes.iter().map(|&n| work(n)).collect()
+        };
+        let fine = FineNumbers::new(stencil, coef, spare_fine);
+        let damping = self.params.damping;
         Ok(Vcycle {
             fine,
-            fine_smoother: fine_smoother
-                .par_iter()
-                .map(|d| block(&scale6(&sym_inverse(d), self.params.damping)))
-                .collect(),
+            fine_smoother: refill(
+                spare_smoother,
+                fine_smoother.par_iter().map(|d| block(&scale6(&sym_inverse(d), damping))),
+            ),
             face_smoother: Vec::new(),
             face_levels: None,
             majorant: Vec::new(),
@@ -317,6 +343,18 @@ impl Hierarchy {
 
 fn scale6(m: &[f64; 6], s: f64) -> [f64; 6] {
     m.map(|x| x * s)
+}
+
+/// The items of `items` in `buf` when it has their number (written in place, no new
+/// memory to fault in), else collected anew.
+fn refill<T: Send>(mut buf: Vec<T>, items: impl IndexedParallelIterator<Item = T>) -> Vec<T> {
+    if buf.len() == items.len() {
+        buf.par_iter_mut().zip(items).for_each(|(b, x)| *b = x);
+        buf
+    } else {
+        drop(buf);
+        items.collect()
+    }
 }
 
 /// A symmetric 3x3 block `[xx, yy, zz, xy, xz, yz]` in `f32`: 24 bytes, half of three
@@ -346,7 +384,7 @@ fn full_mul(m: &Full, v: Vec3A) -> Vec3A {
 
 /// The fine operator's numbers in `f32`, for the cycle's fine residuals: the whole cycle
 /// runs in `f32` SIMD (it only preconditions: CG's products and residuals stay `f64`).
-#[derive(Debug)]
+#[derive(Debug, Default)]
 struct FineNumbers {
     alpha: Vec<f32>,
     fair: Vec<f32>,
@@ -355,11 +393,13 @@ struct FineNumbers {
 }
 
 impl FineNumbers {
-    fn new(stencil: &Stencil, coef: &Coefficients<'_>) -> Self {
+    /// The numbers of `coef`, in the arrays of `old` where their sizes match.
+    fn new(stencil: &Stencil, coef: &Coefficients<'_>, old: Option<FineNumbers>) -> Self {
+        let FineNumbers { alpha, fair, face_normals } = old.unwrap_or_default();
         FineNumbers {
-            alpha: (0..stencil.len()).into_par_iter().map(|i| coef.alpha.get(i) as f32).collect(),
-            fair: coef.fair.par_iter().map(|&c| c as f32).collect(),
-            face_normals: coef.face_normals.par_iter().map(|m| m.as_vec3a()).collect(),
+            alpha: refill(alpha, (0..stencil.len()).into_par_iter().map(|i| coef.alpha.get(i) as f32)),
+            fair: refill(fair, coef.fair.par_iter().map(|&c| c as f32)),
+            face_normals: refill(face_normals, coef.face_normals.par_iter().map(|m| m.as_vec3a())),
         }
     }
 
@@ -838,10 +878,10 @@ struct FaceLevels {
 /// damped: `M_I = A_II + sum_{J != I} (-N_IJ + |s_IJ| I)` for off-diagonal blocks
 /// `N_IJ + s_IJ I` with `N_IJ <= 0` (alignment) — since `[[0, B], [B, 0]] <= diag(C, C)`
 /// whenever `C >= +-B`.
-fn l1_smoother(rows: &Rows, damping: f64) -> Vec<Block> {
-    (0..rows.len())
-        .into_par_iter()
-        .map(|i| {
+fn l1_smoother(rows: &Rows, damping: f64, old: Vec<Block>) -> Vec<Block> {
+    refill(
+        old,
+        (0..rows.len()).into_par_iter().map(|i| {
             let mut d = [0.0; 6];
             for (j, b) in rows.row(i) {
                 let sym = [b[0], b[4], b[8], 0.5 * (b[3] + b[1]), 0.5 * (b[6] + b[2]), 0.5 * (b[7] + b[5])];
@@ -854,8 +894,8 @@ fn l1_smoother(rows: &Rows, damping: f64) -> Vec<Block> {
                 }
             }
             block(&scale6(&sym_inverse(&d), damping))
-        })
-        .collect()
+        }),
+    )
 }
 
 /// A 3x3-block sparse row matrix in `f32`, its products in SIMD `f32` (it only
@@ -890,23 +930,27 @@ impl Bsr {
         let offsets = rows.offsets.iter().map(|&o| o as u32).collect();
         let cols = rows.cols.clone();
         let blocks = if W == 10 {
-            // The same numbers as the full block's (its entries are exactly symmetric:
-            // each is accumulated from the same products in the same order), so the
-            // products are the same to the bit.
-            Blocks::Sym(
-                rows.vals
-                    .par_iter()
-                    .map(|b| {
-                        let m = full_block(b);
-                        debug_assert!(m[1] == m[3] && m[2] == m[6] && m[5] == m[7], "an asymmetric block");
-                        [m[0], m[4], m[8], m[3], m[6], m[7]]
-                    })
-                    .collect(),
-            )
+            Blocks::Sym(rows.vals.par_iter().map(|b| sym_block(full_block(b))).collect())
         } else {
             Blocks::Full(rows.vals.par_iter().map(full_block).collect())
         };
         Bsr { offsets, cols, blocks }
+    }
+
+    /// [`Bsr::from_rows`] of the whole operator's rows (`W = 10`), in the arrays of `old`
+    /// when it has their pattern (the last solve's level: the pattern depends on the
+    /// surface and hierarchy, seldom on the numbers).
+    fn from_rows_reusing(rows: &Rows<10>, old: Bsr) -> Self {
+        let same = old.offsets.len() == rows.offsets.len()
+            && old.cols == rows.cols
+            && old.offsets.iter().zip(&rows.offsets).all(|(&a, &b)| a as usize == b);
+        match old.blocks {
+            Blocks::Sym(blocks) if same && blocks.len() == rows.vals.len() => {
+                let blocks = refill(blocks, rows.vals.par_iter().map(|b| sym_block(full_block(b))));
+                Bsr { offsets: old.offsets, cols: old.cols, blocks: Blocks::Sym(blocks) }
+            }
+            _ => Self::from_rows(rows),
+        }
     }
 
     /// Rows `dirty` of a face's level (general blocks) from `rows` (the same pattern).
@@ -971,6 +1015,14 @@ fn full_block<const W: usize>(b: &[f32; W]) -> Full {
         m[t] += b[if W == 10 { 9 } else { 9 + k }];
     }
     m
+}
+
+/// A whole-operator block in symmetric storage: the same numbers as the full block's (its
+/// entries are exactly symmetric: each is accumulated from the same products in the same
+/// order), so the products are the same to the bit.
+fn sym_block(m: Full) -> Block {
+    debug_assert!(m[1] == m[3] && m[2] == m[6] && m[5] == m[7], "an asymmetric block");
+    [m[0], m[4], m[8], m[3], m[6], m[7]]
 }
 
 /// Sparse Cholesky of the coarsest level.
@@ -1067,7 +1119,7 @@ impl Coarsest {
     }
 }
 
-#[derive(Debug)]
+#[derive(Debug, Default)]
 struct Level {
     /// The operator (empty on the coarsest level, which is factored instead).
     matrix: Bsr,
@@ -1201,7 +1253,7 @@ impl Vcycle {
             .map(|d| block(&scale6(&sym_inverse(d), self.damping)))
             .collect();
         self.majorant = Vec::new();
-        self.fine = FineNumbers::new(stencil, coef);
+        self.fine = FineNumbers::new(stencil, coef, Some(std::mem::take(&mut self.fine)));
         self.face_smoother = Vec::new();
         self.face_levels = None;
     }
@@ -1558,6 +1610,42 @@ pub(crate) mod tests {
         });
     }
 
+    /// A cycle built in the arrays of another energy's cycle (the last solve's, in a
+    /// refinement loop) is the cycle built anew, to the bit; a cycle of another hierarchy
+    /// lends nothing.
+    #[test]
+    fn a_cycle_built_in_another_ones_arrays_is_the_same() {
+        on_torus(0.2, 7, |st, c, h, rng| {
+            let other = Coefficients {
+                normals: c.normals,
+                alpha: c.alpha,
+                beta: c.beta,
+                fair: c.fair.iter().map(|f| 3.0 * f).collect(),
+                face_normals: c.face_normals.iter().map(|m| 0.5 * *m).collect(),
+            };
+            // The same levels, but another hierarchy's.
+            let elsewhere =
+                Hierarchy { aggregations: h.aggregations.iter().cloned().collect(), params: h.params };
+            let r: Vec<DVec3> = (0..st.len()).map(|_| rng.vec3(-1.0, 1.0)).collect();
+            let mut fresh = h.numeric(st, c, &Interrupt::never(), None).unwrap();
+            let mut zf = vec![DVec3::ZERO; st.len()];
+            fresh.apply(st, &r, &mut zf);
+            for old in [
+                h.numeric(st, &other, &Interrupt::never(), None),
+                elsewhere.numeric(st, &other, &Interrupt::never(), None),
+            ] {
+                let mut reused = h.numeric(st, c, &Interrupt::never(), Some(Box::new(old.unwrap()))).unwrap();
+                assert_eq!(reused.levels.len(), fresh.levels.len());
+                for (a, b) in reused.levels.iter().zip(&fresh.levels) {
+                    assert_eq!((a.n, &a.smoother, a.matrix.bytes()), (b.n, &b.smoother, b.matrix.bytes()));
+                }
+                let mut z = vec![DVec3::ZERO; st.len()];
+                reused.apply(st, &r, &mut z);
+                assert_eq!(z, zf);
+            }
+        });
+    }
+
     #[test]
     fn updated_face_levels_are_those_built_anew() {
         on_torus(0.0, 3, |st, c, h, rng| {
@@ -1571,10 +1659,10 @@ pub(crate) mod tests {
             let many = random_face(st.len(), rng);
             let r: Vec<DVec3> = (0..st.len()).map(|_| rng.vec3(-1.0, 1.0)).collect();
             for next in [few, many] {
-                let mut updated = h.numeric(st, c, &Interrupt::never()).unwrap();
+                let mut updated = h.numeric(st, c, &Interrupt::never(), None).unwrap();
                 updated.set_face(st, c, &first, false);
                 updated.set_face(st, c, &next, true);
-                let mut fresh = h.numeric(st, c, &Interrupt::never()).unwrap();
+                let mut fresh = h.numeric(st, c, &Interrupt::never(), None).unwrap();
                 fresh.set_face(st, c, &next, false);
                 let (a, b) = (updated.face_levels.as_ref().unwrap(), fresh.face_levels.as_ref().unwrap());
                 assert_eq!(a.rows.len(), b.rows.len());
