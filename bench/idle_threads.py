@@ -22,13 +22,13 @@ def read_samples(path):
     samples, current = [], None
     with open(path) as f:
         for line in f:
+            header = re.match(r"\s*(\d+)\s+([\d.]+):", line)
             if not line.strip():
                 if current:
                     samples.append(current)
                 current = None
-            elif not line[0].isspace():
-                m = re.match(r"\s*(\d+)\s+([\d.]+):", line)
-                current = (int(m.group(1)), float(m.group(2)), []) if m else None
+            elif header and not line.startswith("\t"):
+                current = (int(header.group(1)), float(header.group(2)), [])
             elif current is not None:
                 parts = line.strip().split(None, 1)
                 if len(parts) == 2:
