@@ -254,10 +254,12 @@ fn scan_slabs(
     mut visit: impl FnMut(&(Vec<u32>, Vec<u32>), &(Vec<u32>, Vec<u32>), usize),
 ) -> Result<(), SurfaceError> {
     let [nx, ny, _] = volume.dims();
-    let batch = if z_fastest(volume).is_some() { LAYER_BATCH } else { 1 };
+    // At most a quarter of the range's layers at once: the batches of all ranges hold at
+    // most about half as many bytes as the volume's labels.
+    let batch = if z_fastest(volume).is_some() { (range.len() / 4).clamp(1, LAYER_BATCH) } else { 1 };
     // `layers[0]` is the layer before the next batch.
     let mut layers: Vec<(Vec<u32>, Vec<u32>)> =
-        (0..=batch.min(range.len().max(1))).map(|_| (vec![0u32; nx * ny], vec![0u32; nx * ny])).collect();
+        (0..=batch).map(|_| (vec![0u32; nx * ny], vec![0u32; nx * ny])).collect();
     fill_layers(volume, regions, outside, range.start as isize - 1, &mut layers[..1])?;
     let mut k = range.start;
     while k < range.end {
