@@ -199,10 +199,15 @@ fn fill_layer(
         *l = label;
         *r = regions.region_of(label).map_or(NONE, |id| id.0);
     }
-    if let Some(i) = rs.iter().position(|&r| r == NONE) {
-        return Err(SurfaceError::InvalidRegions(format!("label {} has no region", ls[i])));
+    check_regions(rs, ls)
+}
+
+/// Fails on the first label of a layer that has no region.
+fn check_regions(rs: &[u32], ls: &[u32]) -> Result<(), SurfaceError> {
+    match rs.iter().position(|&r| r == NONE) {
+        Some(i) => Err(SurfaceError::InvalidRegions(format!("label {} has no region", ls[i]))),
+        None => Ok(()),
     }
-    Ok(())
 }
 
 /// The faces of slabs `range`, one list per slab (see [`slab_faces`]), with rolling layers.
@@ -322,8 +327,8 @@ fn fill_layers(
                     let (r, l) = outside[2][usize::from(z + j as isize >= 0)];
                     rs.fill(r);
                     ls.fill(l);
-                } else if let Some(i) = rs.iter().position(|&r| r == NONE) {
-                    return Err(SurfaceError::InvalidRegions(format!("label {} has no region", ls[i])));
+                } else {
+                    check_regions(rs, ls)?;
                 }
             }
             Ok(())

@@ -1,9 +1,11 @@
 //! Normals re-estimated from a regularized geometry (the refinement rounds).
 
+use std::cell::RefCell;
 use std::collections::BinaryHeap;
 
 use glam::{DMat3, DVec3};
 use rayon::prelude::*;
+use thread_local::ThreadLocal;
 use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
 
 use crate::eigen::symmetric_eigen;
@@ -267,51 +269,6 @@ const RIM_FRACTION: f64 = 0.25;
 /// it waits with (0 where it does not).
 type Scratch = (Vec<bool>, Vec<(u32, u32, f64, f64)>, BinaryHeap<(u64, u32, u32, u64)>, Vec<f64>);
 
-/// Scratch lent to the pieces of a parallel pass and taken back when a piece ends: as
-/// many as pieces run at once, not one per piece (a disc search's holds two arrays as
-/// long as the surface, which every piece would otherwise allocate and fault in). What
-/// comes back must be as it was lent: each search clears the marks it set.
-struct Pool<T>(std::sync::Mutex<Vec<T>>);
-
-/// A [`Pool`]'s item, returned to it when dropped.
-struct Lent<'a, T> {
-    item: Option<T>,
-    pool: &'a Pool<T>,
-}
-
-impl<T> Pool<T> {
-    fn new() -> Self {
-        Pool(std::sync::Mutex::new(Vec::new()))
-    }
-
-    /// An item of the pool, or `make()` when none is free.
-    fn lend(&self, make: impl FnOnce() -> T) -> Lent<'_, T> {
-        let item = self.0.lock().ok().and_then(|mut free| free.pop()).unwrap_or_else(make);
-        Lent { item: Some(item), pool: self }
-    }
-}
-
-impl<T> Drop for Lent<'_, T> {
-    fn drop(&mut self) {
-        if let (Some(item), Ok(mut free)) = (self.item.take(), self.pool.0.lock()) {
-            free.push(item);
-        }
-    }
-}
-
-impl<T> std::ops::Deref for Lent<'_, T> {
-    type Target = T;
-    fn deref(&self) -> &T {
-        self.item.as_ref().expect("lent until dropped")
-    }
-}
-
-impl<T> std::ops::DerefMut for Lent<'_, T> {
-    fn deref_mut(&mut self) -> &mut T {
-        self.item.as_mut().expect("lent until dropped")
-    }
-}
-
 /// `t` of the direction of `a` and `1 - t` of the direction of `b` (`a` itself from
 /// `t = 1`, `b` itself at `t = 0`).
 fn mix(t: f64, a: DVec3, b: DVec3) -> DVec3 {
@@ -452,16 +409,18 @@ fn refined_interruptible(
     // Discs near junctions cost many times the others: the quads go to the threads in
     // pieces of at most 1/128 of them, so that no thread is left alone with a large piece at
     // the end (rayon splits a range it does not steal from only a few times). The pieces
-    // borrow their scratch from a pool.
-    let pool: Pool<Scratch> = Pool::new();
+    // share their thread's scratch (two arrays as long as the surface: one per piece would
+    // be allocated and faulted in again and again); each search clears the marks it set.
+    let scratch: ThreadLocal<RefCell<Scratch>> = ThreadLocal::new();
     let out: Vec<(DVec3, bool)> = (0..n)
         .into_par_iter()
         .with_min_len(1024)
         .with_max_len((n / 128).max(1024))
         .map_init(
-            || pool.lend(|| (vec![false; n], Vec::new(), BinaryHeap::new(), vec![0.0; n])),
-            |lent, f| {
-                let (seen, queue, waiting, best) = &mut **lent;
+            || scratch.get_or(|| RefCell::new((vec![false; n], Vec::new(), BinaryHeap::new(), vec![0.0; n]))),
+            |cell, f| {
+                let mut lent = cell.borrow_mut();
+                let (seen, queue, waiting, best) = &mut *lent;
                 if interrupt.is_raised() {
                     return (normals[f], false);
                 }

@@ -145,18 +145,19 @@ impl Setup {
         }
         let t = Instant::now();
         let coef = self.stencil.coefficients(energy);
-        let mut kept = self.kept.take();
-        if quick && self.preconditioner == Preconditioner::Multigrid && kept.is_some() {
-            let mut v = kept.take().expect("a kept cycle");
-            v.refresh_fine(&self.stencil, &coef);
-            return Ok(Prepared {
-                coef,
-                pre: Pre::Multigrid(v),
-                assemble_seconds: t.elapsed().as_secs_f64(),
-                factor_seconds: 0.0,
-                stale: true,
-            });
-        }
+        let kept = match self.kept.take() {
+            Some(mut v) if quick && self.preconditioner == Preconditioner::Multigrid => {
+                v.refresh_fine(&self.stencil, &coef);
+                return Ok(Prepared {
+                    coef,
+                    pre: Pre::Multigrid(v),
+                    assemble_seconds: t.elapsed().as_secs_f64(),
+                    factor_seconds: 0.0,
+                    stale: true,
+                });
+            }
+            kept => kept,
+        };
         let pre = match self.preconditioner {
             Preconditioner::Identity => Pre::Identity,
             Preconditioner::Jacobi => Pre::Jacobi(

@@ -258,9 +258,9 @@ impl Hierarchy {
             match old.filter(|v| Arc::ptr_eq(&v.aggregations, &self.aggregations)) {
                 Some(v) => {
                     let Vcycle { levels, works, fine_smoother, fine, .. } = *v;
-                    (levels, works, fine_smoother, Some(fine))
+                    (levels, works, fine_smoother, fine)
                 }
-                None => (Vec::new(), Vec::new(), Vec::new(), None),
+                None => Default::default(),
             };
         spare_levels.reverse();
         let clock = Instant::now();
@@ -394,8 +394,8 @@ struct FineNumbers {
 
 impl FineNumbers {
     /// The numbers of `coef`, in the arrays of `old` where their sizes match.
-    fn new(stencil: &Stencil, coef: &Coefficients<'_>, old: Option<FineNumbers>) -> Self {
-        let FineNumbers { alpha, fair, face_normals } = old.unwrap_or_default();
+    fn new(stencil: &Stencil, coef: &Coefficients<'_>, old: FineNumbers) -> Self {
+        let FineNumbers { alpha, fair, face_normals } = old;
         FineNumbers {
             alpha: refill(alpha, (0..stencil.len()).into_par_iter().map(|i| coef.alpha.get(i) as f32)),
             fair: refill(fair, coef.fair.par_iter().map(|&c| c as f32)),
@@ -1253,7 +1253,7 @@ impl Vcycle {
             .map(|d| block(&scale6(&sym_inverse(d), self.damping)))
             .collect();
         self.majorant = Vec::new();
-        self.fine = FineNumbers::new(stencil, coef, Some(std::mem::take(&mut self.fine)));
+        self.fine = FineNumbers::new(stencil, coef, std::mem::take(&mut self.fine));
         self.face_smoother = Vec::new();
         self.face_levels = None;
     }
