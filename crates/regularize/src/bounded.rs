@@ -277,6 +277,7 @@ impl BoundedSolver {
                 start_applications: s.start_applications,
                 active_set_rounds: s.active_set_rounds,
                 active_set_applications: s.active_set_applications,
+                active_set_iterations: s.active_set_iterations,
                 relative_gradient: if r0 > 0.0 { rp_norm_true / r0 } else { 0.0 },
                 error_bound: bound,
                 error_estimate: estimate,
@@ -321,6 +322,7 @@ impl BoundedSolver {
         // What MPRGP starts from if the rounds' projected result is worse: the warm start,
         // or the input.
         let fallback = warm.then(|| (s.u.clone(), s.energy));
+        let mut settled = None;
         if rounds > 0 {
             let st = active_set(problem, prepared, w, rounds, &mut s.u, &mut s.r);
             tracing::debug!(
@@ -332,11 +334,32 @@ impl BoundedSolver {
             s.applications += st.applications;
             s.active_set_rounds = st.rounds;
             s.active_set_applications = st.applications;
+            s.active_set_iterations = st.iterations;
+            settled = st.settled.then_some((st.estimate, st.gradient));
         }
         w.project(&mut s.u);
         let start = energy.terms(&input.iter().zip(&s.u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
         if start <= s.energy {
             s.energy = start;
+            if let Some((estimate, rp)) = settled {
+                // The rounds settled: no hold changed, so the projection moved nothing and
+                // the last round's iterate meets the optimality conditions in the boxes to
+                // the tolerance, by MPRGP's own stopping rule. MPRGP would only spend the
+                // few steps its estimate needs to see a rate. The iterate is reported as
+                // MPRGP's would be: the first inside the boxes.
+                s.estimate = estimate;
+                let r0 = problem.r0;
+                progress(&Progress {
+                    iteration: s.active_set_iterations,
+                    energy: s.energy,
+                    gradient_norm: 2.0 * rp,
+                    relative_gradient: if r0 > 0.0 { rp / r0 } else { 0.0 },
+                    error_bound: rp / problem.alpha_min / problem.h,
+                    error_estimate: estimate / problem.h,
+                    displacement: &s.u,
+                });
+                return;
+            }
         } else if let Some((u, e)) = fallback {
             s.u = u;
             s.energy = e;
@@ -484,6 +507,7 @@ struct Iterate {
     start_applications: usize,
     active_set_rounds: usize,
     active_set_applications: usize,
+    active_set_iterations: usize,
 }
 
 /// Zeroes the residual's coordinates held on their bound.

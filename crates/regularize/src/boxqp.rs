@@ -484,6 +484,10 @@ pub(crate) struct ActiveSetStats {
     /// Whether the last round changed no coordinate's hold: the face solve is then a
     /// minimizer in the boxes to its tolerance (up to the final projection).
     pub(crate) settled: bool,
+    /// The last round's error estimate (physical units) and, when settled, the norm of
+    /// its residual on the free coordinates (the projected gradient's, halved).
+    pub(crate) estimate: f64,
+    pub(crate) gradient: f64,
 }
 
 /// The primal-dual active-set iteration (semismooth Newton for bounds, Hintermüller, Ito
@@ -502,8 +506,9 @@ pub(crate) struct ActiveSetStats {
 /// Unlike MPRGP, whose CG restarts each time a step meets a bound (once every two
 /// iterations on voxel art, where thousands of coordinates bind), a round changes many
 /// holds at once, and a few rounds settle. Iterates may leave the boxes: the caller
-/// projects the result and finishes with [`minimize_in_boxes`], which keeps the
-/// guarantees whatever this phase did.
+/// projects the result and, unless the rounds settled (the projection then moves
+/// nothing), finishes with [`minimize_in_boxes`], which keeps the guarantees whatever
+/// this phase did.
 pub(crate) fn active_set(
     problem: &BoxProblem<'_>,
     prepared: &mut Prepared<'_>,
@@ -516,7 +521,14 @@ pub(crate) fn active_set(
     let n = u.len();
     let mut work = Work::new(n);
     let mut hold = vec![[Hold::Free; 3]; n];
-    let mut stats = ActiveSetStats { iterations: 0, applications: 0, rounds: 0, settled: false };
+    let mut stats = ActiveSetStats {
+        iterations: 0,
+        applications: 0,
+        rounds: 0,
+        settled: false,
+        estimate: f64::INFINITY,
+        gradient: f64::INFINITY,
+    };
     // The first holds: the coordinates the start puts outside (the unconstrained
     // minimizer), or on a bound with the gradient pushing them out (a warm start inside
     // the boxes).
@@ -556,6 +568,7 @@ pub(crate) fn active_set(
         );
         stats.iterations += run.iterations;
         stats.applications += run.applications;
+        stats.estimate = run.estimate;
         // The multipliers' signs are read from the recursive residual (CG updates it on
         // the held coordinates too); the next round starts from a true one.
         if update_holds(u, r, w, &mut hold) == 0 {
@@ -563,6 +576,7 @@ pub(crate) fn active_set(
                 loose = 1.0;
                 continue;
             }
+            stats.gradient = free_norm(&hold, r);
             stats.settled = true;
             break;
         }

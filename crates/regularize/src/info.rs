@@ -79,7 +79,8 @@ pub struct CgInfo {
 /// What [`crate::BoundedSolver`] reports.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct BoundedInfo {
-    /// Iterations with the bounds active (the unconstrained start excluded).
+    /// MPRGP's iterations, after the active-set rounds (`0` when the rounds settled:
+    /// their iterate is then the minimizer in the boxes).
     pub iterations: usize,
     /// Products by the operator `H`, every phase included.
     pub operator_applications: usize,
@@ -90,6 +91,8 @@ pub struct BoundedInfo {
     pub active_set_rounds: usize,
     /// Of [`BoundedInfo::operator_applications`], those of the active-set rounds.
     pub active_set_applications: usize,
+    /// The active-set rounds' conjugate gradient iterations, all rounds together.
+    pub active_set_iterations: usize,
     /// Certificate: the norm of the projected gradient at the result relative to the
     /// gradient at the input.
     pub relative_gradient: f64,
@@ -154,13 +157,14 @@ impl SolveInfo {
         }
     }
 
-    /// Iterations of the iterative solvers; for the direct solver, `1` plus its
+    /// Iterations of the iterative solvers (for the clamped one, its active-set rounds'
+    /// and MPRGP's, without the unconstrained start); for the direct solver, `1` plus its
     /// refinement steps.
     pub fn iterations(&self) -> usize {
         match self {
             SolveInfo::Direct(i) => 1 + i.refinement_steps,
             SolveInfo::Cg(i) => i.iterations,
-            SolveInfo::Bounded(i) => i.iterations,
+            SolveInfo::Bounded(i) => i.active_set_iterations + i.iterations,
         }
     }
 

@@ -222,7 +222,15 @@ fn descent_energy_decreases_monotonically() {
             for w in energies.windows(2) {
                 assert!(w[1] <= w[0] + 1e-12 * w[0].abs(), "{name} {pre:?} {clamp:?}: {} -> {}", w[0], w[1]);
             }
-            assert_eq!(energies.len(), info.iterations + 1, "{name}: one report per iteration");
+            // One report per iteration without boxes; with them, one per MPRGP step, or
+            // one for the active-set rounds' iterate when they settle (their iterations
+            // report nothing: they may leave the boxes).
+            if clamp.is_none() {
+                assert_eq!(energies.len(), info.iterations + 1, "{name}: one report per iteration");
+            } else {
+                let most = info.iterations + 1 + usize::from(info.iterations == 0);
+                assert!((2..=most).contains(&energies.len()), "{name}: {} reports", energies.len());
+            }
             let last = *energies.last().unwrap();
             let actual = energy.terms(&x).total;
             assert!(
