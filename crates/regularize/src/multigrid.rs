@@ -533,30 +533,32 @@ impl<const W: usize> Rows<W> {
         self.offsets.len() - 1
     }
 
-    /// Rows `dirty` computed anew by `f` (as [`Rows::build`] does, so to the bit), in
-    /// place; `false` if a row's columns differ (its pattern is not this one's).
+    /// Rows `dirty` (ascending) computed anew by `f` (as [`Rows::build`] does, so to the
+    /// bit), in place and in parallel; `false` if a row's columns differ (its pattern is
+    /// not this one's: the rows are then partly rewritten, and the caller builds anew).
     fn recompute(&mut self, dirty: &[usize], f: impl Fn(&mut Accumulator<W>, usize) + Sync) -> bool {
         let n = self.len();
-        let fresh: Vec<(usize, Vec<u32>, Vec<[f32; W]>)> = dirty
-            .par_iter()
+        let Rows { offsets, cols, vals } = self;
+        // Each dirty row's values, a slice of its own.
+        let mut rows: Vec<(usize, &mut [[f32; W]])> = Vec::with_capacity(dirty.len());
+        let (mut rest, mut at): (&mut [[f32; W]], usize) = (vals, 0);
+        for &a in dirty {
+            debug_assert!(offsets[a] >= at, "dirty rows ascending");
+            let (_, tail) = std::mem::take(&mut rest).split_at_mut(offsets[a] - at);
+            let (row, tail) = tail.split_at_mut(offsets[a + 1] - offsets[a]);
+            rows.push((a, row));
+            (rest, at) = (tail, offsets[a + 1]);
+        }
+        let (offsets, cols) = (&*offsets, &*cols);
+        rows.into_par_iter()
             .map_init(
                 || Accumulator { slot: vec![u32::MAX; n], row: Vec::with_capacity(64) },
-                |acc, &a| {
+                |acc, (a, out)| {
                     f(acc, a);
-                    let (mut cols, mut vals) = (Vec::new(), Vec::new());
-                    acc.flush_into(&mut cols, &mut vals);
-                    (a, cols, vals)
+                    acc.flush_checked(&cols[offsets[a]..offsets[a + 1]], out)
                 },
             )
-            .collect();
-        for (a, cols, vals) in fresh {
-            let r = self.offsets[a]..self.offsets[a + 1];
-            if self.cols[r.clone()] != cols[..] {
-                return false;
-            }
-            self.vals[r].copy_from_slice(&vals);
-        }
-        true
+            .all(|same| same)
     }
 
     fn nnz(&self) -> usize {
@@ -631,6 +633,22 @@ impl<const W: usize> Accumulator<W> {
             self.row.push((col, [0.0; W]));
         }
         &mut self.row[*s as usize].1
+    }
+
+    /// Writes the row, sorted by column, to `out` if its columns are `cols`; clears it.
+    fn flush_checked(&mut self, cols: &[u32], out: &mut [[f32; W]]) -> bool {
+        for (c, _) in &self.row {
+            self.slot[*c as usize] = u32::MAX;
+        }
+        self.row.sort_unstable_by_key(|e| e.0);
+        let same = self.row.len() == cols.len() && self.row.iter().zip(cols).all(|(e, c)| e.0 == *c);
+        if same {
+            for (o, e) in out.iter_mut().zip(&self.row) {
+                *o = narrow(&e.1);
+            }
+        }
+        self.row.clear();
+        same
     }
 
     /// Appends the row, sorted by column, to `cols` and `vals`, and clears it.
@@ -970,6 +988,11 @@ impl Bsr {
         let Blocks::Full(blocks) = &mut self.blocks else {
             unreachable!("a face's level has general blocks")
         };
+        if 4 * dirty.len() >= rows.len() {
+            // Most rows: all of them in parallel (the others' blocks come out the same).
+            blocks.par_iter_mut().zip(&rows.vals).for_each(|(b, v)| *b = full_block(v));
+            return;
+        }
         for &i in dirty {
             for k in rows.offsets[i]..rows.offsets[i + 1] {
                 blocks[k] = full_block(&rows.vals[k]);
@@ -1393,7 +1416,7 @@ impl Vcycle {
     /// level the rows of the aggregates holding a recomputed row, with their blocks and
     /// smoother blocks. The same levels as [`Vcycle::face_hierarchy`], at a cost
     /// that follows the number of changed vertices instead of the surface's size. `None`
-    /// where the change is too large to gain (a quarter of the vertices or more) or a
+    /// where the change is too large to gain (half the vertices or more) or a
     /// row's pattern differs (it cannot: which entries a row has does not depend on the
     /// face); the caller builds them anew.
     fn updated_face_hierarchy(
@@ -1406,7 +1429,7 @@ impl Vcycle {
     ) -> Option<FaceLevels> {
         let agg = self.aggregations.first()?;
         let count = changed.iter().filter(|&&c| c).count();
-        if 4 * count >= face.len() {
+        if 2 * count >= face.len() {
             return None;
         }
         let mut dirty: Vec<usize> = (0..agg.len())
@@ -1422,8 +1445,17 @@ impl Vcycle {
         for k in 0..rows.len() - 1 {
             let level = &mut levels[k];
             level.matrix.set_rows(&rows[k], &dirty);
-            for &i in &dirty {
-                level.smoother[i] = l1_face_block(&rows[k], i, self.damping);
+            if 4 * dirty.len() >= rows[k].len() {
+                let (r, damping) = (&rows[k], self.damping);
+                level
+                    .smoother
+                    .par_iter_mut()
+                    .enumerate()
+                    .for_each(|(i, b)| *b = l1_face_block(r, i, damping));
+            } else {
+                for &i in &dirty {
+                    level.smoother[i] = l1_face_block(&rows[k], i, self.damping);
+                }
             }
             let coarser = &self.aggregations[k + 1];
             let mut next: Vec<usize> = dirty.iter().map(|&i| coarser.parent[i] as usize).collect();
@@ -1662,15 +1694,20 @@ pub(crate) mod tests {
     fn updated_face_levels_are_those_built_anew() {
         on_torus(0.0, 3, |st, c, h, rng| {
             let first = random_face(st.len(), rng);
-            // The next face: the first one with a few vertices changed (an update), then one
-            // with most of them changed (built anew).
-            let mut few = first.clone();
-            for i in (0..st.len()).step_by(37) {
-                few[i] = Vec3A::new(1.0, 0.0, 1.0) - few[i] * Vec3A::new(1.0, 0.0, 1.0);
-            }
+            // The next face: the first one with one vertex, a few, or a third of them changed
+            // (updates: a few rows rewritten one by one, or most rows, all rewritten in
+            // parallel), then one with most of them changed (built anew).
+            let flipped = |step: usize| {
+                let mut next = first.clone();
+                for i in (0..st.len()).step_by(step) {
+                    next[i] = Vec3A::new(1.0, 0.0, 1.0) - next[i] * Vec3A::new(1.0, 0.0, 1.0);
+                }
+                next
+            };
+            let (one, few, third) = (flipped(st.len()), flipped(37), flipped(3));
             let many = random_face(st.len(), rng);
             let r: Vec<DVec3> = (0..st.len()).map(|_| rng.vec3(-1.0, 1.0)).collect();
-            for next in [few, many] {
+            for next in [one, few, third, many] {
                 let mut updated = h.numeric(st, c, &Interrupt::never(), None).unwrap();
                 updated.set_face(st, c, &first, false);
                 updated.set_face(st, c, &next, true);
