@@ -4,6 +4,7 @@ use glam::DVec3;
 use ndarray::{
     Array3, ArrayBase, ArrayView3, Data, Ix3, OwnedRepr, RawData, RawDataClone, ShapeBuilder, ViewRepr,
 };
+use rayon::prelude::*;
 
 use crate::SurfaceError;
 
@@ -295,26 +296,16 @@ impl<S: Data<Elem = u32>> LabelVolume<S> {
 
     /// The distinct labels of the volume with their voxel counts, sorted by label.
     pub fn label_counts(&self) -> Vec<(u32, u64)> {
-        // Dense counting while labels stay small; a sorted tally beyond.
-        let mut dense: Vec<u64> = Vec::new();
-        let mut large: Vec<u32> = Vec::new();
-        self.for_each_label(|l| {
-            if (l as usize) < (1 << 20) {
-                if l as usize >= dense.len() {
-                    dense.resize(l as usize + 1, 0);
-                }
-                dense[l as usize] += 1;
-            } else {
-                large.push(l);
+        let tallies = match self.labels.as_slice_memory_order() {
+            // One tally per thread (at most eight: a dense one can reach 8 MiB).
+            Some(slice) => {
+                let parts = rayon::current_num_threads().clamp(1, 8);
+                let chunk = slice.len().div_ceil(parts).max(1 << 16);
+                slice.par_chunks(chunk).map(|c| Tally::of(c.iter().copied())).collect()
             }
-        });
-        let mut counts: Vec<(u32, u64)> =
-            dense.iter().enumerate().filter(|(_, &c)| c > 0).map(|(l, &c)| (l as u32, c)).collect();
-        large.sort_unstable();
-        for chunk in large.chunk_by(|a, b| a == b) {
-            counts.push((chunk[0], chunk.len() as u64));
-        }
-        counts
+            None => vec![Tally::of(self.labels.iter().copied())],
+        };
+        Tally::merge(tallies)
     }
 
     /// A binary volume: label `1` where `inside(label)` holds, `0` (background) elsewhere.
@@ -327,6 +318,46 @@ impl<S: Data<Elem = u32>> LabelVolume<S> {
             background: Some(0),
             open_sides: self.open_sides,
         }
+    }
+}
+
+/// Voxel counts of labels: dense while labels stay small, a list to sort beyond.
+struct Tally {
+    dense: Vec<u64>,
+    large: Vec<u32>,
+}
+
+impl Tally {
+    fn of(labels: impl Iterator<Item = u32>) -> Tally {
+        let mut t = Tally { dense: Vec::new(), large: Vec::new() };
+        for l in labels {
+            if (l as usize) < (1 << 20) {
+                if l as usize >= t.dense.len() {
+                    t.dense.resize(l as usize + 1, 0);
+                }
+                t.dense[l as usize] += 1;
+            } else {
+                t.large.push(l);
+            }
+        }
+        t
+    }
+
+    /// The labels of all `parts` with their counts, sorted by label.
+    fn merge(parts: Vec<Tally>) -> Vec<(u32, u64)> {
+        let mut dense: Vec<u64> = vec![0; parts.iter().map(|t| t.dense.len()).max().unwrap_or(0)];
+        let mut large: Vec<u32> = Vec::new();
+        for t in parts {
+            dense.iter_mut().zip(&t.dense).for_each(|(d, c)| *d += c);
+            large.extend(t.large);
+        }
+        let mut counts: Vec<(u32, u64)> =
+            dense.iter().enumerate().filter(|(_, &c)| c > 0).map(|(l, &c)| (l as u32, c)).collect();
+        large.sort_unstable();
+        for chunk in large.chunk_by(|a, b| a == b) {
+            counts.push((chunk[0], chunk.len() as u64));
+        }
+        counts
     }
 }
 
@@ -364,6 +395,23 @@ mod tests {
         assert_eq!(v.label_counts(), vec![(0, 1), (5, 2)]);
         let big = LabelVolume::from_fn([2, 1, 1], |p| [u32::MAX, 7][p[0]]);
         assert_eq!(big.label_counts(), vec![(7, 1), (u32::MAX, 1)]);
+        // Counted in parallel parts (2^16 voxels or more each), small and large labels
+        // spread over them: the same as one tally.
+        let label = |[x, y, z]: [usize; 3]| match (x * 7 + y * 3 + z) % 11 {
+            0 => u32::MAX - (x % 3) as u32,
+            1 => (1 << 20) + (y % 5) as u32,
+            k => (k * (z % 4)) as u32,
+        };
+        let v = LabelVolume::from_fn([90, 50, 40], label);
+        let mut expected = std::collections::BTreeMap::new();
+        for x in 0..90 {
+            for y in 0..50 {
+                for z in 0..40 {
+                    *expected.entry(label([x, y, z])).or_insert(0u64) += 1;
+                }
+            }
+        }
+        assert_eq!(v.label_counts(), expected.into_iter().collect::<Vec<_>>());
     }
 
     #[test]
