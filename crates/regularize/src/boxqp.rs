@@ -484,9 +484,10 @@ pub(crate) struct ActiveSetStats {
     /// Whether the last round changed no coordinate's hold: the face solve is then a
     /// minimizer in the boxes to its tolerance (up to the final projection).
     pub(crate) settled: bool,
-    /// The last round's error estimate (physical units) and, when settled, the norm of
-    /// its residual on the free coordinates (the projected gradient's, halved).
+    /// The last round's error estimate (physical units).
     pub(crate) estimate: f64,
+    /// When settled, the norm of the last round's residual on its free coordinates (the
+    /// projected gradient's, halved).
     pub(crate) gradient: f64,
 }
 
