@@ -122,19 +122,28 @@ fn adjacent_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize
 fn adjacent_pairs_unsorted(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<((usize, usize), DVec3, DVec3)> {
     let out: Vec<((usize, usize), DVec3, DVec3)> = shared_edges(positions, quads)
         .into_par_iter()
-        .filter_map(|(f, i, g, j)| {
-            // The edge runs the same way in both quads: one of them is flipped.
-            let forward = |f: usize, i: usize| quads[f][i] < quads[f][(i + 1) % 4];
-            let same = forward(f, i) == forward(g, j);
-            let nf = vector_area(corners(positions, &quads[f])?);
-            let mut ng = vector_area(corners(positions, &quads[g])?);
-            if same {
-                ng = -ng;
-            }
-            (nf.length() > 0.0 && ng.length() > 0.0).then_some(((f.min(g), f.max(g)), nf, ng))
-        })
+        .filter_map(|e| oriented_pair(positions, quads, e))
         .collect();
     out
+}
+
+/// The two quads of shared edge `(f, i, g, j)` with their vector areas, the second one
+/// flipped when the pair runs the edge in the same direction; `None` when either is
+/// degenerate.
+fn oriented_pair(
+    positions: &[DVec3],
+    quads: &[[u32; 4]],
+    (f, i, g, j): (usize, usize, usize, usize),
+) -> Option<((usize, usize), DVec3, DVec3)> {
+    // The edge runs the same way in both quads: one of them is flipped.
+    let forward = |f: usize, i: usize| quads[f][i] < quads[f][(i + 1) % 4];
+    let same = forward(f, i) == forward(g, j);
+    let nf = vector_area(corners(positions, &quads[f])?);
+    let mut ng = vector_area(corners(positions, &quads[g])?);
+    if same {
+        ng = -ng;
+    }
+    (nf.length() > 0.0 && ng.length() > 0.0).then_some(((f.min(g), f.max(g)), nf, ng))
 }
 
 /// The edges exactly two different quads share, as `(f, i, g, j)`: edge `i` of quad `f`
@@ -180,10 +189,23 @@ fn shared_edges(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize, u
 /// runs the shared edge in the same direction is oriented oppositely: one normal is
 /// flipped first). Sorted.
 pub fn folded_pairs(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
+    folded_pairs_of(positions, quads, &shared_edges(positions, quads))
+}
+
+/// [`folded_pairs`] among the given shared edges `(f, i, g, j)`: edge `i` of quad `f`
+/// (from corner `i` to `i + 1`) is edge `j` of quad `g`, and no other quad has it. For a
+/// caller that knows its mesh's edges (a digital surface does): the same test without
+/// the sort that finds them.
+pub fn folded_pairs_of(
+    positions: &[DVec3],
+    quads: &[[u32; 4]],
+    shared: &[(usize, usize, usize, usize)],
+) -> Vec<(usize, usize)> {
     let cos_max = (120f64).to_radians().cos();
     // Filtered before sorting: the folded pairs are few.
-    let mut out: Vec<(usize, usize)> = adjacent_pairs_unsorted(positions, quads)
-        .into_iter()
+    let mut out: Vec<(usize, usize)> = shared
+        .par_iter()
+        .filter_map(|&e| oriented_pair(positions, quads, e))
         .filter(|(_, nf, ng)| nf.dot(*ng) < cos_max * nf.length() * ng.length())
         .map(|x| x.0)
         .collect();

@@ -1,8 +1,9 @@
 //! The fold-free post-condition: vertices of folded quads pulled back towards the input.
 
 use glam::DVec3;
-use voxreg_digisurf::{DigitalSurface, VertexId};
-use voxreg_quality::{folded_pairs, folded_quads};
+use rayon::prelude::*;
+use voxreg_digisurf::{DigitalSurface, EdgeId, VertexId};
+use voxreg_quality::{folded_pairs, folded_pairs_of, folded_quads};
 
 /// Removes every folded quad and folded adjacent pair (as [`voxreg_quality`] defines
 /// them) by moving the vertices of the folded quads back along their displacement from
@@ -26,12 +27,19 @@ pub(crate) fn unfold(surface: &DigitalSurface, input: &[DVec3], positions: &mut 
     let mut candidates: Vec<usize> = (0..quads.len()).collect();
     let mut mark = vec![false; quads.len()];
     for round in 0.. {
-        let sub: Vec<[u32; 4]> = candidates.iter().map(|&f| quads[f]).collect();
-        let mut folded: Vec<usize> =
-            folded_quads(positions, &sub).into_iter().map(|i| candidates[i]).collect();
-        folded.extend(
-            folded_pairs(positions, &sub).into_iter().flat_map(|(a, b)| [candidates[a], candidates[b]]),
-        );
+        let mut folded: Vec<usize>;
+        if round == 0 {
+            // Every quad: the surface's own edges give the shared ones without a sort.
+            folded = folded_quads(positions, &quads);
+            let shared = shared_edges(surface);
+            folded.extend(folded_pairs_of(positions, &quads, &shared).into_iter().flat_map(|(a, b)| [a, b]));
+        } else {
+            let sub: Vec<[u32; 4]> = candidates.iter().map(|&f| quads[f]).collect();
+            folded = folded_quads(positions, &sub).into_iter().map(|i| candidates[i]).collect();
+            folded.extend(
+                folded_pairs(positions, &sub).into_iter().flat_map(|(a, b)| [candidates[a], candidates[b]]),
+            );
+        }
         if folded.is_empty() {
             break;
         }
@@ -72,10 +80,58 @@ pub(crate) fn unfold(surface: &DigitalSurface, input: &[DVec3], positions: &mut 
     moved.iter().filter(|m| **m).count()
 }
 
+/// The edges exactly two surfels share, as `(f, i, g, j)`: edge `i` of surfel `f` is edge
+/// `j` of surfel `g` ([`folded_pairs_of`]'s input).
+fn shared_edges(surface: &DigitalSurface) -> Vec<(usize, usize, usize, usize)> {
+    (0..surface.edges().len())
+        .into_par_iter()
+        .filter_map(|e| {
+            let e = EdgeId(e as u32);
+            let &[f, g] = surface.edge_surfels(e) else { return None };
+            let slot = |s| surface.surfel_edges(s).iter().position(|&x| x == e);
+            (f != g).then_some((f.index(), slot(f)?, g.index(), slot(g)?))
+        })
+        .collect()
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
     use voxreg_digisurf::{LabelVolume, RegionMap};
+
+    #[test]
+    fn the_surface_edges_give_the_folded_pairs_a_sort_finds() {
+        // Two labels, a pinched edge (two voxels meeting along an edge: four surfels
+        // there) and a one-voxel rod; every vertex moved at random, so that many pairs fold.
+        let volume = LabelVolume::from_fn([6, 5, 5], |[x, y, z]| match (x, y, z) {
+            (1, 1, 1) | (2, 2, 1) => 1,
+            (4, 1..=3, 2) => 2,
+            (1..=2, 3, 3) => 1,
+            _ => 0,
+        })
+        .with_background(Some(0));
+        let surface = DigitalSurface::new(&volume, &RegionMap::per_label()).unwrap();
+        let quads: Vec<[u32; 4]> = surface.surfels().iter().map(|s| s.vertices.map(|v| v.0)).collect();
+        let mut rng = voxreg_testkit::Lcg::new(5);
+        let shared = shared_edges(&surface);
+        // The same pairs of quads as the sort finds (`voxreg_quality`'s adjacent pairs).
+        let mut pairs: Vec<(usize, usize)> =
+            shared.iter().map(|&(f, _, g, _)| (f.min(g), f.max(g))).collect();
+        pairs.sort_unstable();
+        let by_sort: Vec<(usize, usize)> = voxreg_quality::adjacent_angles_deg(&surface.positions(), &quads)
+            .into_iter()
+            .map(|p| p.0)
+            .collect();
+        assert_eq!(pairs, by_sort);
+        let mut folds = 0;
+        for _ in 0..20 {
+            let x: Vec<DVec3> = surface.positions().iter().map(|p| *p + rng.vec3(-0.8, 0.8)).collect();
+            let by_sort = folded_pairs(&x, &quads);
+            assert_eq!(folded_pairs_of(&x, &quads, &shared), by_sort);
+            folds += by_sort.len();
+        }
+        assert!(folds > 20, "{folds} folded pairs");
+    }
 
     #[test]
     fn folds_are_pulled_back_and_the_rest_is_kept() {
