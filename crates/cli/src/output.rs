@@ -4,7 +4,6 @@
 use std::path::Path;
 
 use anyhow::{bail, Result};
-use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId};
 use voxreg_io::{named_interface_name, named_region_name, write_mesh, MeshBatch, Palette, QuadMesh};
 
@@ -152,12 +151,7 @@ pub(crate) fn check_volume(args: &RegularizeArgs, product: Product<'_>, volume: 
         Product::Volume { .. } => false,
     };
     if ply {
-        let labels = volume.labels();
-        let max = match labels.as_slice_memory_order() {
-            Some(s) => s.par_iter().copied().max(),
-            None => labels.iter().copied().max(),
-        };
-        if let Some(max) = max.filter(|&m| m > i32::MAX as u32) {
+        if let Some(max) = volume.max_label().filter(|&m| m > i32::MAX as u32) {
             bail!(
                 "{}: label {max} does not fit PLY's int labels (at most {}): write .obj or .glb",
                 input.display(),

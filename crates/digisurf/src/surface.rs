@@ -308,14 +308,12 @@ fn fill_layers(
             let hi = (lo..layers.len()).find(|&j| !inside(j)).unwrap_or(layers.len());
             if lo < hi {
                 let z0 = (z + lo as isize) as usize;
-                let mut run = [0u32; LAYER_BATCH];
                 for x in 0..nx {
                     for y in 0..ny {
                         let start = (x * ny + y) * nz + z0;
-                        let run = &mut run[..hi - lo];
-                        run.copy_from_slice(&all[start..start + hi - lo]);
+                        let run = &all[start..start + hi - lo];
                         let i = x + nx * y;
-                        for (layer, &label) in layers[lo..hi].iter_mut().zip(run.iter()) {
+                        for (layer, &label) in layers[lo..hi].iter_mut().zip(run) {
                             layer.1[i] = label;
                             layer.0[i] = regions.region_of(label).map_or(NONE, |id| id.0);
                         }

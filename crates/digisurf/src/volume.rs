@@ -294,6 +294,14 @@ impl<S: Data<Elem = u32>> LabelVolume<S> {
         }
     }
 
+    /// The largest label (`None` for an empty volume), found in parallel.
+    pub fn max_label(&self) -> Option<u32> {
+        match self.labels.as_slice_memory_order() {
+            Some(slice) => slice.par_iter().copied().max(),
+            None => self.labels.iter().copied().max(),
+        }
+    }
+
     /// The distinct labels of the volume with their voxel counts, sorted by label.
     pub fn label_counts(&self) -> Vec<(u32, u64)> {
         let tallies = match self.labels.as_slice_memory_order() {
@@ -411,6 +419,7 @@ mod tests {
                 }
             }
         }
+        assert_eq!(v.max_label(), expected.keys().next_back().copied());
         assert_eq!(v.label_counts(), expected.into_iter().collect::<Vec<_>>());
     }
 

@@ -348,16 +348,7 @@ impl BoundedSolver {
                 // few steps its estimate needs to see a rate. The iterate is reported as
                 // MPRGP's would be: the first inside the boxes.
                 s.estimate = estimate;
-                let r0 = problem.r0;
-                progress(&Progress {
-                    iteration: s.active_set_iterations,
-                    energy: s.energy,
-                    gradient_norm: 2.0 * rp,
-                    relative_gradient: if r0 > 0.0 { rp / r0 } else { 0.0 },
-                    error_bound: rp / problem.alpha_min / problem.h,
-                    error_estimate: estimate / problem.h,
-                    displacement: &s.u,
-                });
+                progress(&problem.progress(s.active_set_iterations, s.energy, rp, estimate, &s.u));
                 return;
             }
         } else if let Some((u, e)) = fallback {

@@ -207,6 +207,30 @@ pub(crate) struct BoxProblem<'a> {
     pub(crate) interrupt: &'a Interrupt,
 }
 
+impl BoxProblem<'_> {
+    /// The progress report of an iterate `input + u` of energy `energy`, whose projected
+    /// residual has norm `rp` (half the projected gradient's) and whose error estimate is
+    /// `estimate` (physical units).
+    pub(crate) fn progress<'u>(
+        &self,
+        iteration: usize,
+        energy: f64,
+        rp: f64,
+        estimate: f64,
+        u: &'u [DVec3],
+    ) -> Progress<'u> {
+        Progress {
+            iteration,
+            energy,
+            gradient_norm: 2.0 * rp,
+            relative_gradient: if self.r0 > 0.0 { rp / self.r0 } else { 0.0 },
+            error_bound: rp / self.alpha_min / self.h,
+            error_estimate: estimate / self.h,
+            displacement: u,
+        }
+    }
+}
+
 /// Minimizes `E(input + u)` over the boxes `b` (MPRGP), from `u` (feasible), where
 /// `r = rhs - H u` on entry.
 pub(crate) fn minimize_in_boxes(
@@ -217,7 +241,7 @@ pub(crate) fn minimize_in_boxes(
     r: &mut [DVec3],
     progress: &mut dyn FnMut(&Progress),
 ) -> BoxStats {
-    let BoxProblem { stencil, rhs, tol, max_iterations, energy0, r0, alpha_min, h, interrupt } = *problem;
+    let BoxProblem { stencil, rhs, tol, max_iterations, energy0, interrupt, .. } = *problem;
     let n = u.len();
     let coef = &prepared.coef;
     let zero = || vec![DVec3::ZERO; n];
@@ -237,15 +261,7 @@ pub(crate) fn minimize_in_boxes(
         let rp = (f2 + b2).sqrt();
         residuals.push(rp);
         if iterations > 0 {
-            progress(&Progress {
-                iteration: iterations,
-                energy: energy0 + de_total,
-                gradient_norm: 2.0 * rp,
-                relative_gradient: if r0 > 0.0 { rp / r0 } else { 0.0 },
-                error_bound: rp / alpha_min / h,
-                error_estimate: estimate / h,
-                displacement: u,
-            });
+            progress(&problem.progress(iterations, energy0 + de_total, rp, estimate, u));
         }
         if rp == 0.0 || estimate <= tol || iterations >= max_iterations || interrupt.is_raised() {
             break;

@@ -319,13 +319,9 @@ impl Hierarchy {
             sizes.iter().map(|&n| work(n)).collect()
         };
         let fine = FineNumbers::new(stencil, coef, spare_fine);
-        let damping = self.params.damping;
         Ok(Vcycle {
             fine,
-            fine_smoother: refill(
-                spare_smoother,
-                fine_smoother.par_iter().map(|d| block(&scale6(&sym_inverse(d), damping))),
-            ),
+            fine_smoother: inverse_blocks(&fine_smoother, self.params.damping, spare_smoother),
             face_smoother: Vec::new(),
             face_levels: None,
             majorant: Vec::new(),
@@ -343,6 +339,12 @@ impl Hierarchy {
 
 fn scale6(m: &[f64; 6], s: f64) -> [f64; 6] {
     m.map(|x| x * s)
+}
+
+/// The damped inverses of the majorant blocks `m` (the fine level's smoother), in the
+/// arrays of `old` when it has their number.
+fn inverse_blocks(m: &[[f64; 6]], damping: f64, old: Vec<Block>) -> Vec<Block> {
+    refill(old, m.par_iter().map(|d| block(&scale6(&sym_inverse(d), damping))))
 }
 
 /// The items of `items` in `buf` when it has their number (written in place, no new
@@ -983,23 +985,6 @@ impl Bsr {
         }
     }
 
-    /// Rows `dirty` of a face's level (general blocks) from `rows` (the same pattern).
-    fn set_rows<const W: usize>(&mut self, rows: &Rows<W>, dirty: &[usize]) {
-        let Blocks::Full(blocks) = &mut self.blocks else {
-            unreachable!("a face's level has general blocks")
-        };
-        if 4 * dirty.len() >= rows.len() {
-            // Most rows: all of them in parallel (the others' blocks come out the same).
-            blocks.par_iter_mut().zip(&rows.vals).for_each(|(b, v)| *b = full_block(v));
-            return;
-        }
-        for &i in dirty {
-            for k in rows.offsets[i]..rows.offsets[i + 1] {
-                blocks[k] = full_block(&rows.vals[k]);
-            }
-        }
-    }
-
     /// Bytes read by one product.
     pub(crate) fn bytes(&self) -> usize {
         let blocks = match &self.blocks {
@@ -1162,6 +1147,28 @@ struct Level {
     n: usize,
 }
 
+impl Level {
+    /// Rows `dirty` of a face's level (general blocks) and their smoother blocks, from
+    /// `rows` (the same pattern). When they are a quarter of the rows or more, every row is
+    /// converted, in parallel: the others come out as they were.
+    fn set_face_rows(&mut self, rows: &Rows<FACE>, dirty: &[usize], damping: f64) {
+        let Blocks::Full(blocks) = &mut self.matrix.blocks else {
+            unreachable!("a face's level has general blocks")
+        };
+        if 4 * dirty.len() >= rows.len() {
+            blocks.par_iter_mut().zip(&rows.vals).for_each(|(b, v)| *b = full_block(v));
+            self.smoother.par_iter_mut().enumerate().for_each(|(i, b)| *b = l1_face_block(rows, i, damping));
+            return;
+        }
+        for &i in dirty {
+            for k in rows.offsets[i]..rows.offsets[i + 1] {
+                blocks[k] = full_block(&rows.vals[k]);
+            }
+            self.smoother[i] = l1_face_block(rows, i, damping);
+        }
+    }
+}
+
 #[derive(Debug)]
 struct Work {
     r: Vec<Vec3A>,
@@ -1283,10 +1290,11 @@ impl Vcycle {
     /// definite and `C` (the old levels' own symmetric cycle) positive semi-definite; how
     /// close the old levels are to the new operator's only sets the rate.
     pub(crate) fn refresh_fine(&mut self, stencil: &Stencil, coef: &Coefficients<'_>) {
-        self.fine_smoother = fine_majorant(stencil, coef)
-            .par_iter()
-            .map(|d| block(&scale6(&sym_inverse(d), self.damping)))
-            .collect();
+        self.fine_smoother = inverse_blocks(
+            &fine_majorant(stencil, coef),
+            self.damping,
+            std::mem::take(&mut self.fine_smoother),
+        );
         self.majorant = Vec::new();
         self.fine = FineNumbers::new(stencil, coef, std::mem::take(&mut self.fine));
         self.face_smoother = Vec::new();
@@ -1444,19 +1452,7 @@ impl Vcycle {
         }
         for k in 0..rows.len() - 1 {
             let level = &mut levels[k];
-            level.matrix.set_rows(&rows[k], &dirty);
-            if 4 * dirty.len() >= rows[k].len() {
-                let (r, damping) = (&rows[k], self.damping);
-                level
-                    .smoother
-                    .par_iter_mut()
-                    .enumerate()
-                    .for_each(|(i, b)| *b = l1_face_block(r, i, damping));
-            } else {
-                for &i in &dirty {
-                    level.smoother[i] = l1_face_block(&rows[k], i, self.damping);
-                }
-            }
+            level.set_face_rows(&rows[k], &dirty, self.damping);
             let coarser = &self.aggregations[k + 1];
             let mut next: Vec<usize> = dirty.iter().map(|&i| coarser.parent[i] as usize).collect();
             next.sort_unstable();
