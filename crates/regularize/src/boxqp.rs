@@ -20,7 +20,7 @@
 use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 
-use crate::iterative::Prepared;
+use crate::iterative::{Pre, Prepared};
 use crate::stencil::{Coefficients, Stencil, CHUNK};
 use crate::vecops::{cg_update, dot, scale_add, tail_estimate};
 use crate::{Interrupt, Progress};
@@ -480,6 +480,11 @@ impl Cg<'_, '_> {
 /// holds change, and at which the unconstrained start before them stops.
 pub(crate) const ACTIVE_SET_LOOSE: f64 = 100.0;
 
+/// The most CG iterations of an active-set round while the holds change, with the
+/// multigrid preconditioner: such a round only has to show which coordinates cross their
+/// bounds, and the next round, on another face, starts from its iterate.
+pub(crate) const ACTIVE_SET_LOOSE_ITERATIONS: usize = 3;
+
 /// How the active-set phase treats a coordinate: free, or held on its lower or upper
 /// bound.
 #[derive(Copy, Clone, PartialEq, Eq, Debug, Default)]
@@ -516,10 +521,13 @@ pub(crate) struct ActiveSetStats {
 /// face's operator, its own Galerkin coarse levels included,
 /// [`Pre::apply_on_face`](crate::iterative::Pre::apply_on_face)),
 /// warm-started from the previous round and stopped by the same estimate rule (at
-/// `100 tol` while the holds change, then at `tol`). Then every free coordinate outside
-/// its interval is held on the bound it crossed, and every held coordinate whose gradient
-/// pulls it back inside is freed. When
+/// `100 tol`, or after [`ACTIVE_SET_LOOSE_ITERATIONS`] iterations of multigrid CG, while the holds change,
+/// then at `tol`). Then every free coordinate outside its interval is held on the bound it
+/// crossed, and every held coordinate whose gradient pulls it back inside is freed. When
 /// no hold changes, the iterate satisfies the optimality conditions of the box problem.
+/// Inexact rounds can cycle (a coordinate freed and held in turn): a loose round that
+/// changes at least as many holds as the one before ends the loose rounds, and such a
+/// round at the tolerance ends the phase.
 /// Unlike MPRGP, whose CG restarts each time a step meets a bound (once every two
 /// iterations on voxel art, where thousands of coordinates bind), a round changes many
 /// holds at once, and a few rounds settle. Iterates may leave the boxes: the caller
@@ -552,10 +560,15 @@ pub(crate) fn active_set(
     update_holds(u, r, w, &mut hold);
     hold_pushed_out(u, r, w, &mut hold);
     // Rounds whose holds still change need no accurate face solve: they stop at
-    // `LOOSE` times the tolerance, until one changes nothing; then one round at the
-    // tolerance, warm, makes it exact.
+    // `LOOSE` times the tolerance or after a few iterations, until one changes nothing
+    // (or no fewer than the round before); then rounds at the tolerance, warm, make it
+    // exact.
     const LOOSE: f64 = ACTIVE_SET_LOOSE;
     let mut loose = LOOSE;
+    let mut last_changes = usize::MAX;
+    // A few iterations say where the iterate goes only with the multigrid cycle (which
+    // solves most of each face's problem in them).
+    let capped = matches!(prepared.pre, Pre::Multigrid(_));
     let mut face = vec![Vec3A::ONE; n];
     while stats.rounds < max_rounds && stats.iterations < max_iterations && !interrupt.is_raised() {
         stats.rounds += 1;
@@ -572,7 +585,11 @@ pub(crate) fn active_set(
             stencil,
             coef,
             tol: tol * loose,
-            max_iterations: max_iterations - stats.iterations,
+            max_iterations: if loose > 1.0 && capped {
+                ACTIVE_SET_LOOSE_ITERATIONS.min(max_iterations - stats.iterations)
+            } else {
+                max_iterations - stats.iterations
+            },
             interrupt,
             lagged_rate: false,
         };
@@ -588,17 +605,51 @@ pub(crate) fn active_set(
         stats.estimate = run.estimate;
         // The multipliers' signs are read from the recursive residual (CG updates it on
         // the held coordinates too); the next round starts from a true one.
-        if update_holds(u, r, w, &mut hold) == 0 {
-            if loose > 1.0 {
-                loose = 1.0;
-                continue;
+        let changes = update_holds(u, r, w, &mut hold);
+        match next_round(changes, last_changes, loose > 1.0) {
+            Round::Loose => {}
+            Round::Tight => loose = 1.0,
+            Round::Settled => {
+                stats.gradient = free_norm(&hold, r);
+                stats.settled = true;
+                break;
             }
-            stats.gradient = free_norm(&hold, r);
-            stats.settled = true;
-            break;
+            Round::Stop => break,
+        }
+        if changes > 0 {
+            last_changes = changes;
         }
     }
     stats
+}
+
+/// What follows an active-set round.
+#[derive(Copy, Clone, Debug, PartialEq, Eq)]
+enum Round {
+    /// Another loose round.
+    Loose,
+    /// Rounds at the tolerance from now on.
+    Tight,
+    /// The holds are those of the minimizer in the boxes.
+    Settled,
+    /// The rounds do not converge: the caller's MPRGP finishes.
+    Stop,
+}
+
+/// The rule after a round that changed `changes` holds, `last` in the last round that
+/// changed any (`usize::MAX` before the first): no change ends the loose rounds, or
+/// settles at the tolerance; no fewer changes than the last round (a coordinate freed and
+/// held in turn, which inexact rounds can do) ends the loose rounds, or the phase at the
+/// tolerance.
+fn next_round(changes: usize, last: usize, loose: bool) -> Round {
+    match (changes, loose) {
+        (0, true) => Round::Tight,
+        (0, false) => Round::Settled,
+        (c, true) if c >= last => Round::Tight,
+        (c, false) if c >= last => Round::Stop,
+        (_, true) => Round::Loose,
+        (_, false) => Round::Tight,
+    }
 }
 
 /// Updates the holds from `u` and `r`: a free coordinate outside its interval is held on
@@ -692,6 +743,22 @@ fn free_norm(hold: &[[Hold; 3]], r: &[DVec3]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    #[test]
+    fn rounds_end_when_the_holds_stop_settling() {
+        use Round::*;
+        // Fewer changes each round: loose rounds go on, tight ones too.
+        assert_eq!(next_round(40, usize::MAX, true), Loose);
+        assert_eq!(next_round(12, 40, true), Loose);
+        assert_eq!(next_round(3, 12, false), Tight);
+        // No change: tighten, then settle.
+        assert_eq!(next_round(0, 12, true), Tight);
+        assert_eq!(next_round(0, 3, false), Settled);
+        // As many changes as the last round (one coordinate freed and held in turn).
+        assert_eq!(next_round(1, 1, true), Tight);
+        assert_eq!(next_round(1, 1, false), Stop);
+        assert_eq!(next_round(5, 2, false), Stop);
+    }
 
     #[test]
     fn places_and_feasible_steps() {
