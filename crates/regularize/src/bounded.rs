@@ -325,6 +325,8 @@ impl BoundedSolver {
         let mut settled = None;
         if rounds > 0 {
             let st = active_set(problem, prepared, w, rounds, &mut s.u, &mut s.r);
+            // The face's levels (about one multigrid hierarchy) are not used again.
+            prepared.pre.forget_face();
             tracing::debug!(
                 rounds = st.rounds,
                 iterations = st.iterations,

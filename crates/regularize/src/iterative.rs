@@ -291,6 +291,13 @@ impl Pre {
         }
     }
 
+    /// Drops what [`Pre::set_face`] built (the multigrid's face levels).
+    pub(crate) fn forget_face(&mut self) {
+        if let Pre::Multigrid(v) = self {
+            v.forget_face();
+        }
+    }
+
     /// `z = M_F^-1 r` on the face where `face` is 1 (0 on the held coordinates): the
     /// multigrid cycle of the face's operator ([`Vcycle::apply_on_face`]); the others
     /// (point or block diagonal) applied to the masked `r`, their result masked. `r`

@@ -1352,6 +1352,14 @@ impl Vcycle {
         self.face_levels = None;
     }
 
+    /// Drops the face's levels, smoother and majorant ([`Vcycle::set_face`]): once the
+    /// active-set rounds are over, what follows uses the whole operator's cycle.
+    pub(crate) fn forget_face(&mut self) {
+        self.face_levels = None;
+        self.face_smoother = Vec::new();
+        self.majorant = Vec::new();
+    }
+
     /// Bytes moved by one cycle (`connectivity`: bytes of the stencil's connectivity).
     pub(crate) fn traffic(&self, connectivity: usize, n: usize) -> usize {
         let (s, cs) = (self.steps, self.coarse_steps);
