@@ -309,20 +309,14 @@ impl Hierarchy {
         lap("coarsest factor");
         // Work vectors of the same sizes are reused as they are: every cycle writes each
         // entry before reading it.
-        // The fine level's residual is only stored between extra smoothing steps: with one
-        // step it goes straight to the coarse level ([`FineNumbers::residual_restricted`]).
         let sizes: Vec<usize> = std::iter::once(stencil.len()).chain(levels.iter().map(|l| l.n)).collect();
         let works = if spare_works.iter().map(|w| w.x.len()).eq(sizes.iter().copied()) {
             spare_works
         } else {
             drop(spare_works);
-            let fine_r = if self.params.smoothing_steps > 1 { stencil.len() } else { 0 };
-            let work = |n: usize, r: usize| Work {
-                r: vec![Vec3A::ZERO; r],
-                x: vec![Vec3A::ZERO; n],
-                t: vec![Vec3A::ZERO; n],
-            };
-            sizes.iter().enumerate().map(|(l, &n)| work(n, if l == 0 { fine_r } else { n })).collect()
+            let work =
+                |n: usize| Work { r: vec![Vec3A::ZERO; n], x: vec![Vec3A::ZERO; n], t: vec![Vec3A::ZERO; n] };
+            sizes.iter().map(|&n| work(n)).collect()
         };
         let fine = FineNumbers::new(stencil, coef, spare_fine);
         Ok(Vcycle {
@@ -455,47 +449,6 @@ impl FineNumbers {
         face: Option<&[Vec3A]>,
         f: impl Fn(usize, Vec3A) -> T + Sync,
     ) {
-        self.fairness_residuals(stencil, x, t);
-        let t = &*t;
-        y.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
-            let base = k * CHUNK;
-            for (o, yi) in out.iter_mut().enumerate() {
-                let i = base + o;
-                *yi = f(i, self.residual_at(stencil, x, b, t, face, i));
-            }
-        });
-    }
-
-    /// The residual `b - H x` restricted to the first coarse level (`coarse = P^T (b - H
-    /// x)`, masked by `face`), each aggregate summing its members' residuals as they are
-    /// computed: the fine residual is never stored.
-    #[allow(clippy::too_many_arguments)]
-    fn residual_restricted(
-        &self,
-        stencil: &Stencil,
-        x: &[Vec3A],
-        b: &(impl Fn(usize) -> Vec3A + Sync),
-        t: &mut [Vec3A],
-        face: Option<&[Vec3A]>,
-        agg: &Aggregation,
-        coarse: &mut [Vec3A],
-    ) {
-        self.fairness_residuals(stencil, x, t);
-        let t = &*t;
-        coarse.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
-            for (o, c) in out.iter_mut().enumerate() {
-                *c = agg
-                    .members(k * CHUNK + o)
-                    .iter()
-                    .map(|&i| self.residual_at(stencil, x, b, t, face, i as usize))
-                    .sum();
-            }
-        });
-    }
-
-    /// The products' first pass: `t_i = c_i (x_i - mean of x over i's barycentre
-    /// neighbours)`.
-    fn fairness_residuals(&self, stencil: &Stencil, x: &[Vec3A], t: &mut [Vec3A]) {
         t.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
             let base = k * CHUNK;
             for (o, ti) in out.iter_mut().enumerate() {
@@ -510,28 +463,24 @@ impl FineNumbers {
                 };
             }
         });
-    }
-
-    /// The second pass at vertex `i`: `(b - H x)_i` from the first pass's `t`, masked.
-    #[inline(always)]
-    fn residual_at(
-        &self,
-        stencil: &Stencil,
-        x: &[Vec3A],
-        b: &(impl Fn(usize) -> Vec3A + Sync),
-        t: &[Vec3A],
-        face: Option<&[Vec3A]>,
-        i: usize,
-    ) -> Vec3A {
-        let xi = x[i];
-        let mut acc = self.alpha[i] * xi;
-        for s in &stencil.face_slots()[stencil.face_range(i)] {
-            let m = self.face_normals[s.face as usize];
-            acc += (2.0 * xi - x[s.prev as usize] - x[s.next as usize]).dot(m) * m;
-        }
-        let nb = stencil.fair_neighbours(i);
-        let sum: Vec3A = nb.iter().map(|&j| t[j as usize]).sum();
-        masked(face, i, b(i) - (acc + nb.len() as f32 * t[i] - sum))
+        let t = &*t;
+        let slots = stencil.face_slots();
+        y.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
+            let base = k * CHUNK;
+            for (o, yi) in out.iter_mut().enumerate() {
+                let i = base + o;
+                let xi = x[i];
+                let mut acc = self.alpha[i] * xi;
+                let range = stencil.face_range(i);
+                for s in &slots[range] {
+                    let m = self.face_normals[s.face as usize];
+                    acc += (2.0 * xi - x[s.prev as usize] - x[s.next as usize]).dot(m) * m;
+                }
+                let nb = stencil.fair_neighbours(i);
+                let sum: Vec3A = nb.iter().map(|&j| t[j as usize]).sum();
+                *yi = f(i, masked(face, i, b(i) - (acc + nb.len() as f32 * t[i] - sum)));
+            }
+        });
     }
 }
 
@@ -1366,7 +1315,7 @@ impl Vcycle {
         // Fine, in f32: products (connectivity, numbers, 5 vectors), smoothing (r, M, z),
         // residual updates, conversions in and out, restriction, prolongation.
         let product = connectivity + self.fine.bytes() + 5 * 16 * n;
-        let fine = 2 * s * product + 2 * s * 56 * n + 2 * s * 48 * n + 2 * 40 * n + 8 * n;
+        let fine = 2 * s * product + 2 * s * 56 * n + 2 * s * 48 * n + 2 * 40 * n + 40 * n;
         let coarse: usize =
             self.levels.iter().map(|l| 2 * cs * (l.matrix.bytes() + 3 * 16 * l.n) + 10 * 16 * l.n).sum();
         let coarsest = self.coarsest.as_ref().map_or(0, |c| 2 * 8 * c.factor.len());
@@ -1567,19 +1516,13 @@ impl Vcycle {
                 }
             });
         } else {
-            for _ in 1..steps {
+            for s in 0..steps {
                 self.fine.residual(stencil, &w.x, &b, &mut w.r, &mut w.t, face);
-                smooth(smoother, &w.r, &mut w.x, true, face);
+                if s + 1 < steps {
+                    smooth(smoother, &w.r, &mut w.x, true, face);
+                }
             }
-            self.fine.residual_restricted(
-                stencil,
-                &w.x,
-                &b,
-                &mut w.t,
-                face,
-                &self.aggregations[0],
-                &mut rest[0].r,
-            );
+            restrict(&self.aggregations[0], &w.r, &mut rest[0].r);
             match (face, &self.face_levels) {
                 (Some(_), Some(f)) => self.coarse_cycle(&f.levels, f.coarsest.as_ref(), 0, rest),
                 _ => self.coarse_cycle(&self.levels, self.coarsest.as_ref(), 0, rest),
