@@ -65,8 +65,13 @@ pub struct BoundedParams {
     /// Each round holds the coordinates that cross their bounds (or are pushed onto them)
     /// and solves for the others by the unconstrained solver's own preconditioned CG; a
     /// few rounds find the binding coordinates at the cost of a few unconstrained solves,
-    /// where MPRGP alone discovers them a step at a time. MPRGP then finishes from the
-    /// result projected into the boxes, so the guarantees are MPRGP's. The rounds count in
+    /// where MPRGP alone discovers them a step at a time. While the holds change, a
+    /// round's CG stops at 100 times the tolerance (or after three iterations with the
+    /// multigrid preconditioner); a round at the tolerance that changes no hold ends the
+    /// solve (its iterate is then the minimizer in the boxes to the tolerance). Rounds
+    /// that stop changing fewer holds (a coordinate freed and held in turn) or reach this
+    /// count hand over to MPRGP, from the result projected into the boxes, so the
+    /// guarantees are MPRGP's. The rounds count in
     /// [`BoundedInfo::operator_applications`](crate::BoundedInfo::operator_applications),
     /// not in its iterations, and report no progress (their iterates may leave the
     /// boxes). `0`: MPRGP from the projected unconstrained minimizer. Default: `30`.
