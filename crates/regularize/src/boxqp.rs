@@ -485,6 +485,11 @@ pub(crate) const ACTIVE_SET_LOOSE: f64 = 100.0;
 /// bounds, and the next round, on another face, starts from its iterate.
 pub(crate) const ACTIVE_SET_LOOSE_ITERATIONS: usize = 3;
 
+/// The most CG iterations of the unconstrained start before the active-set rounds, with
+/// the multigrid preconditioner: like a loose round, it only shows which coordinates
+/// cross their bounds.
+pub(crate) const ACTIVE_SET_START_ITERATIONS: usize = 4;
+
 /// How the active-set phase treats a coordinate: free, or held on its lower or upper
 /// bound.
 #[derive(Copy, Clone, PartialEq, Eq, Debug, Default)]
@@ -526,8 +531,8 @@ pub(crate) struct ActiveSetStats {
 /// crossed, and every held coordinate whose gradient pulls it back inside is freed. When
 /// no hold changes, the iterate satisfies the optimality conditions of the box problem.
 /// Inexact rounds can cycle (a coordinate freed and held in turn): a loose round that
-/// changes at least as many holds as the one before ends the loose rounds, and such a
-/// round at the tolerance ends the phase.
+/// changes at least as many holds as the one before ends the loose rounds, and a second
+/// such round at the tolerance ends the phase ([`RoundRule`]).
 /// Unlike MPRGP, whose CG restarts each time a step meets a bound (once every two
 /// iterations on voxel art, where thousands of coordinates bind), a round changes many
 /// holds at once, and a few rounds settle. Iterates may leave the boxes: the caller
@@ -565,7 +570,7 @@ pub(crate) fn active_set(
     // exact.
     const LOOSE: f64 = ACTIVE_SET_LOOSE;
     let mut loose = LOOSE;
-    let mut last_changes = usize::MAX;
+    let mut rule = RoundRule::default();
     // A few iterations say where the iterate goes only with the multigrid cycle (which
     // solves most of each face's problem in them).
     let capped = matches!(prepared.pre, Pre::Multigrid(_));
@@ -606,7 +611,7 @@ pub(crate) fn active_set(
         // The multipliers' signs are read from the recursive residual (CG updates it on
         // the held coordinates too); the next round starts from a true one.
         let changes = update_holds(u, r, w, &mut hold);
-        match next_round(changes, last_changes, loose > 1.0) {
+        match rule.next(changes, loose > 1.0) {
             Round::Loose => {}
             Round::Tight => loose = 1.0,
             Round::Settled => {
@@ -615,9 +620,6 @@ pub(crate) fn active_set(
                 break;
             }
             Round::Stop => break,
-        }
-        if changes > 0 {
-            last_changes = changes;
         }
     }
     stats
@@ -636,19 +638,44 @@ enum Round {
     Stop,
 }
 
-/// The rule after a round that changed `changes` holds, `last` in the last round that
-/// changed any (`usize::MAX` before the first): no change ends the loose rounds, or
-/// settles at the tolerance; no fewer changes than the last round (a coordinate freed and
-/// held in turn, which inexact rounds can do) ends the loose rounds, or the phase at the
-/// tolerance.
-fn next_round(changes: usize, last: usize, loose: bool) -> Round {
-    match (changes, loose) {
-        (0, true) => Round::Tight,
-        (0, false) => Round::Settled,
-        (c, true) if c >= last => Round::Tight,
-        (c, false) if c >= last => Round::Stop,
-        (_, true) => Round::Loose,
-        (_, false) => Round::Tight,
+/// What follows each active-set round, from the number of holds it changed: no change
+/// ends the loose rounds, or settles at the tolerance; no fewer changes than the last
+/// round that changed any (a coordinate freed and held in turn, which inexact rounds can
+/// do) ends the loose rounds, and the second time at the tolerance ends the phase (the
+/// first may be a round at the tolerance finishing what the loose ones left).
+#[derive(Clone, Debug)]
+struct RoundRule {
+    /// Changes of the last round that changed any (`usize::MAX` before).
+    last: usize,
+    /// Rounds at the tolerance that changed no fewer holds than the one before.
+    tight_stalls: usize,
+}
+
+impl Default for RoundRule {
+    fn default() -> Self {
+        RoundRule { last: usize::MAX, tight_stalls: 0 }
+    }
+}
+
+impl RoundRule {
+    fn next(&mut self, changes: usize, loose: bool) -> Round {
+        if changes == 0 {
+            return if loose { Round::Tight } else { Round::Settled };
+        }
+        let stalled = changes >= self.last;
+        self.last = changes;
+        match (stalled, loose) {
+            (false, true) => Round::Loose,
+            (false, false) | (true, true) => Round::Tight,
+            (true, false) => {
+                self.tight_stalls += 1;
+                if self.tight_stalls > 1 {
+                    Round::Stop
+                } else {
+                    Round::Tight
+                }
+            }
+        }
     }
 }
 
@@ -747,17 +774,25 @@ mod tests {
     #[test]
     fn rounds_end_when_the_holds_stop_settling() {
         use Round::*;
-        // Fewer changes each round: loose rounds go on, tight ones too.
-        assert_eq!(next_round(40, usize::MAX, true), Loose);
-        assert_eq!(next_round(12, 40, true), Loose);
-        assert_eq!(next_round(3, 12, false), Tight);
-        // No change: tighten, then settle.
-        assert_eq!(next_round(0, 12, true), Tight);
-        assert_eq!(next_round(0, 3, false), Settled);
-        // As many changes as the last round (one coordinate freed and held in turn).
-        assert_eq!(next_round(1, 1, true), Tight);
-        assert_eq!(next_round(1, 1, false), Stop);
-        assert_eq!(next_round(5, 2, false), Stop);
+        let run = |rounds: &[(usize, bool)]| {
+            let mut rule = RoundRule::default();
+            rounds.iter().map(|&(changes, loose)| rule.next(changes, loose)).collect::<Vec<_>>()
+        };
+        // Fewer changes each round, then none: loose, then tight, then settled.
+        assert_eq!(
+            run(&[(40, true), (12, true), (0, true), (3, false), (0, false)]),
+            [Loose, Loose, Tight, Tight, Settled]
+        );
+        // A loose round changing as many holds as the last one that changed any ends the
+        // loose rounds (one coordinate freed and held in turn).
+        assert_eq!(run(&[(40, true), (5, true), (0, true)]), [Loose, Loose, Tight]);
+        assert_eq!(run(&[(40, true), (5, true), (5, true)]), [Loose, Loose, Tight]);
+        // At the tolerance, the second stall ends the phase, the first does not.
+        assert_eq!(run(&[(9, true), (22, true), (22, false), (22, false)]), [Loose, Tight, Tight, Stop]);
+        assert_eq!(
+            run(&[(9, true), (9, true), (4, false), (5, false), (2, false), (2, false)]),
+            [Loose, Tight, Tight, Tight, Tight, Stop]
+        );
     }
 
     #[test]
