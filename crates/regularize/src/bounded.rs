@@ -55,8 +55,8 @@ pub struct BoundedParams {
     /// projected gradient steps to add bounds, proportioning steps to release them). Tens
     /// of times fewer iterations than the projected descent, with the same guarantees
     /// (feasible iterates, monotone energy). It starts from the unconstrained minimizer
-    /// (found by the same iteration without bounds, i.e. preconditioned CG, to 100 times
-    /// the tolerance when active-set rounds follow) projected into the boxes when that
+    /// (found by the same iteration without bounds, i.e. preconditioned CG; only roughly
+    /// when active-set rounds follow) projected into the boxes when that
     /// lowers the energy, else from the input; [`BoundedInfo::iterations`](crate::BoundedInfo::iterations)
     /// counts the bounded iterations only, [`BoundedInfo::operator_applications`](crate::BoundedInfo::operator_applications) all.
     /// `false`: plain projected descent. Default: `true`.
@@ -68,11 +68,11 @@ pub struct BoundedParams {
     /// few rounds find the binding coordinates at the cost of a few unconstrained solves,
     /// where MPRGP alone discovers them a step at a time. While the holds change, a
     /// round's CG stops at 100 times the tolerance (or after three iterations with the
-    /// multigrid preconditioner); a round at the tolerance that changes no hold ends the
-    /// solve (its iterate is then the minimizer in the boxes to the tolerance). Rounds
-    /// that stop changing fewer holds (a coordinate freed and held in turn) or reach this
-    /// count hand over to MPRGP, from the result projected into the boxes, so the
-    /// guarantees are MPRGP's. The rounds count in
+    /// multigrid preconditioner, four for the unconstrained start); a round at the
+    /// tolerance that changes no hold ends the solve (its iterate is then the minimizer in
+    /// the boxes to the tolerance). Rounds that stop changing fewer holds (a coordinate
+    /// freed and held in turn) or reach this count hand over to MPRGP, from the result
+    /// projected into the boxes, so the guarantees are MPRGP's. The rounds count in
     /// [`BoundedInfo::operator_applications`](crate::BoundedInfo::operator_applications),
     /// not in its iterations, and report no progress (their iterates may leave the
     /// boxes). `0`: MPRGP from the projected unconstrained minimizer. Default: `30`.
