@@ -8,13 +8,13 @@ use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
 use crate::boxqp::{
-    active_set, minimize_free, minimize_in_boxes, place, BoxProblem, Boxes, Place, ACTIVE_SET_LOOSE,
-    ACTIVE_SET_START_ITERATIONS,
+    active_set, loose_iterations, minimize_free, minimize_in_boxes, place, BoxProblem, Boxes, Place,
+    ACTIVE_SET_LOOSE, ACTIVE_SET_START_ITERATIONS,
 };
 use crate::cg::check_tolerance;
 use crate::clamping::clamp_boxes;
 use crate::info::BoundedInfo;
-use crate::iterative::{Pre, Preconditioner, Prepared, Setup};
+use crate::iterative::{Preconditioner, Prepared, Setup};
 use crate::multigrid::MultigridParams;
 use crate::stencil::CHUNK;
 use crate::vecops::{dot, norm, tail_estimate};
@@ -320,18 +320,13 @@ impl BoundedSolver {
         if !warm {
             // The rounds only need the unconstrained minimizer's binding coordinates, not
             // its last digits: a start as loose as their own first solves.
-            // With the multigrid cycle a few iterations show which coordinates cross, as
-            // in a loose round.
-            let loose = if rounds > 0 { ACTIVE_SET_LOOSE } else { 1.0 };
-            let capped = rounds > 0 && matches!(prepared.pre, Pre::Multigrid(_));
-            let start = BoxProblem {
-                max_iterations: if capped {
-                    ACTIVE_SET_START_ITERATIONS.min(problem.max_iterations)
-                } else {
-                    problem.max_iterations
-                },
-                ..*problem
+            let (loose, max_iterations) = if rounds > 0 {
+                let most = loose_iterations(prepared, ACTIVE_SET_START_ITERATIONS, problem.max_iterations);
+                (ACTIVE_SET_LOOSE, most)
+            } else {
+                (1.0, problem.max_iterations)
             };
+            let start = BoxProblem { max_iterations, ..*problem };
             let free = minimize_free(&start, prepared, problem.tol * loose, &mut s.u, &mut s.r);
             s.applications += free.applications;
             s.start_applications = free.applications;

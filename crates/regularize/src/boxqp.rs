@@ -490,6 +490,15 @@ pub(crate) const ACTIVE_SET_LOOSE_ITERATIONS: usize = 3;
 /// cross their bounds.
 pub(crate) const ACTIVE_SET_START_ITERATIONS: usize = 4;
 
+/// At most `cap` of the `remaining` iterations with the multigrid preconditioner, which
+/// solves most of a problem in a few; all of them with the others.
+pub(crate) fn loose_iterations(prepared: &Prepared<'_>, cap: usize, remaining: usize) -> usize {
+    match prepared.pre {
+        Pre::Multigrid(_) => cap.min(remaining),
+        _ => remaining,
+    }
+}
+
 /// How the active-set phase treats a coordinate: free, or held on its lower or upper
 /// bound.
 #[derive(Copy, Clone, PartialEq, Eq, Debug, Default)]
@@ -526,9 +535,10 @@ pub(crate) struct ActiveSetStats {
 /// face's operator, its own Galerkin coarse levels included,
 /// [`Pre::apply_on_face`](crate::iterative::Pre::apply_on_face)),
 /// warm-started from the previous round and stopped by the same estimate rule (at
-/// `100 tol`, or after [`ACTIVE_SET_LOOSE_ITERATIONS`] iterations of multigrid CG, while the holds change,
-/// then at `tol`). Then every free coordinate outside its interval is held on the bound it
-/// crossed, and every held coordinate whose gradient pulls it back inside is freed. When
+/// `100 tol`, or after [`ACTIVE_SET_LOOSE_ITERATIONS`] iterations of multigrid CG, while
+/// the holds change, then at `tol`). Then every free coordinate outside its interval is
+/// held on the bound it crossed, and every held coordinate whose gradient pulls it back
+/// inside is freed. When
 /// no hold changes, the iterate satisfies the optimality conditions of the box problem.
 /// Inexact rounds can cycle (a coordinate freed and held in turn): a loose round that
 /// changes at least as many holds as the one before ends the loose rounds, and a second
@@ -571,9 +581,6 @@ pub(crate) fn active_set(
     const LOOSE: f64 = ACTIVE_SET_LOOSE;
     let mut loose = LOOSE;
     let mut rule = RoundRule::default();
-    // A few iterations say where the iterate goes only with the multigrid cycle (which
-    // solves most of each face's problem in them).
-    let capped = matches!(prepared.pre, Pre::Multigrid(_));
     let mut face = vec![Vec3A::ONE; n];
     while stats.rounds < max_rounds && stats.iterations < max_iterations && !interrupt.is_raised() {
         stats.rounds += 1;
@@ -585,19 +592,14 @@ pub(crate) fn active_set(
         stats.applications += 1;
         // Preconditioned CG on the free coordinates; the face's preconditioner masks its
         // input, so `r` goes in as it is.
-        let Prepared { coef, pre, .. } = &mut *prepared;
-        let cg = Cg {
-            stencil,
-            coef,
-            tol: tol * loose,
-            max_iterations: if loose > 1.0 && capped {
-                ACTIVE_SET_LOOSE_ITERATIONS.min(max_iterations - stats.iterations)
-            } else {
-                max_iterations - stats.iterations
-            },
-            interrupt,
-            lagged_rate: false,
+        let remaining = max_iterations - stats.iterations;
+        let max_iterations = if loose > 1.0 {
+            loose_iterations(prepared, ACTIVE_SET_LOOSE_ITERATIONS, remaining)
+        } else {
+            remaining
         };
+        let Prepared { coef, pre, .. } = &mut *prepared;
+        let cg = Cg { stencil, coef, tol: tol * loose, max_iterations, interrupt, lagged_rate: false };
         let run = cg.run(
             u,
             r,

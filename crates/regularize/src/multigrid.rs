@@ -1295,14 +1295,12 @@ impl Vcycle {
             self.damping,
             std::mem::take(&mut self.fine_smoother),
         );
-        self.majorant = Vec::new();
         self.fine = FineNumbers::new(stencil, coef, std::mem::take(&mut self.fine));
-        self.face_smoother = Vec::new();
-        self.face_levels = None;
+        self.forget_face();
     }
 
     /// Drops the face's levels, smoother and majorant ([`Vcycle::set_face`]): once the
-    /// active-set rounds are over, what follows uses the whole operator's cycle.
+    /// active-set rounds are over, or the operator's numbers changed.
     pub(crate) fn forget_face(&mut self) {
         self.face_levels = None;
         self.face_smoother = Vec::new();
