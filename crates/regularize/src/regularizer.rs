@@ -108,8 +108,9 @@ pub const BYTES_PER_SURFEL: u64 = 1_800;
 
 /// [`BYTES_PER_SURFEL`] for a run that clamps (the voxel-art preset), whose clamped solve
 /// builds a second set of coarse levels for the active-set rounds and updates them between
-/// rounds: measured up to about 2,400 bytes per surfel.
-pub const BYTES_PER_SURFEL_CLAMPED: u64 = 2_700;
+/// rounds: measured up to about 1,630 bytes per surfel with ii and at normals
+/// (`tests/memory.rs`), 1,310 on a 3-million-quad voxel scene.
+pub const BYTES_PER_SURFEL_CLAMPED: u64 = 2_100;
 
 /// The part of a run's memory that does not grow with the surface, with a margin (the
 /// direct solver's factor budget on small surfaces, the threads' buffers).

@@ -37,6 +37,11 @@ fn params(name: &str) -> Params {
             p.normals.estimator = Estimator::At;
             p
         }
+        "voxel art, at" => {
+            let mut p = Params::voxel_art();
+            p.normals.estimator = Estimator::At;
+            p
+        }
         _ => panic!("no preset {name}"),
     }
 }
@@ -94,9 +99,11 @@ fn runs_stay_within_the_memory_estimate() {
         ("sphere", "papers"),
         ("sphere", "voxel art"),
         ("sphere", "at"),
+        ("sphere", "voxel art, at"),
         ("torus", "default"),
         ("split ball", "default"),
         ("split ball", "voxel art"),
+        ("split ball", "voxel art, at"),
         ("quartered ball", "default"),
         ("quartered ball", "at"),
     ];

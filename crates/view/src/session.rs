@@ -371,13 +371,20 @@ fn apply_edit(shared: &Shared, c: &mut Current, edit: &Edit) -> Result<(), Strin
     Ok(())
 }
 
-/// The regularizer of `volume`, refused up front (as the CLI does) when its run would not
-/// fit the memory limit; the error is the page's one-line message. The page may turn
-/// clamping on at any time, so the estimate is a clamped run's.
+/// Peak memory per surfel of a viewer session: a clamped run's (the page may turn clamping
+/// on at any time) and what the session keeps across runs (the solver's last cycle for a
+/// quick start, the initial normals, the shown and streamed positions). Not measured
+/// apart: the figure the command line's clamped runs had before theirs was measured
+/// lower, above [`voxreg_regularize::BYTES_PER_SURFEL_CLAMPED`].
+const SESSION_BYTES_PER_SURFEL: u64 = 2_700;
+
+/// The regularizer of `volume`, refused up front (as the CLI does) when a session on it
+/// would not fit the memory limit; the error is the page's one-line message.
 fn build(volume: &LabelVolume, regions: &RegionMap, name: &str) -> Result<Regularizer, String> {
     let surfels = voxreg_digisurf::DigitalSurface::count_surfels(volume, regions)
         .map_err(|e| format!("{name}: {e}"))?;
-    let bytes = voxreg_regularize::estimated_bytes(surfels, &Params::voxel_art());
+    let bytes =
+        surfels.saturating_mul(SESSION_BYTES_PER_SURFEL).saturating_add(voxreg_regularize::BYTES_FIXED);
     voxreg_io::check_memory(
         std::path::Path::new(name),
         &format!("the regularization of its {surfels} surfels"),
