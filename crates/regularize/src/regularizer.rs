@@ -101,10 +101,11 @@ pub fn regularize<S: LabelStorage>(
 }
 
 /// Peak memory per surfel of a run that does not clamp, with a margin: the resident
-/// memory a run adds measured at 940 to 1,210 bytes per surfel with every preset and
-/// estimator on one- and multi-label surfaces of 80k to 5.3 million surfels
-/// (`tests/memory.rs` keeps the estimate above the measured peak).
-pub const BYTES_PER_SURFEL: u64 = 1_800;
+/// memory a run adds measured at 900 to 1,150 bytes per surfel with every preset and
+/// estimator on one- and multi-label surfaces of 68k to 160k surfels, 740 to 790 on
+/// tissues of 1.5 and 5.3 million (`tests/memory.rs` keeps the estimate above the
+/// measured peak).
+pub const BYTES_PER_SURFEL: u64 = 1_400;
 
 /// [`BYTES_PER_SURFEL`] for a run that clamps (the voxel-art preset), whose clamped solve
 /// builds a second set of coarse levels for the active-set rounds and updates them between
