@@ -8,7 +8,7 @@ use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
 use crate::boxqp::{
-    active_set, loose_iterations, minimize_free, minimize_in_boxes, place, BoxProblem, Boxes, Place,
+    active_set, loose_iterations, minimize_free, minimize_in_boxes, place, BoxProblem, Boxes, Place, Work,
     ACTIVE_SET_LOOSE, ACTIVE_SET_START_ITERATIONS,
 };
 use crate::cg::check_tolerance;
@@ -211,8 +211,9 @@ impl BoundedSolver {
         let t0 = Instant::now();
         // u: displacement from the input; r = -grad E / 2 = b - H u.
         let mut s = Iterate { u: vec![DVec3::ZERO; n], r: vec![DVec3::ZERO; n], ..Iterate::default() };
-        let mut tmp = vec![DVec3::ZERO; n];
-        stencil.apply(&prepared.coef, input, &mut s.r, &mut tmp, false);
+        // The phases' vectors, and `t` the products' scratch here.
+        let mut work = Work::new(n);
+        stencil.apply(&prepared.coef, input, &mut s.r, &mut work.t, false);
         s.r.par_iter_mut().for_each(|x| *x = -*x);
         let rhs = s.r.clone();
         let problem = BoxProblem {
@@ -240,7 +241,7 @@ impl BoundedSolver {
             let e = energy.terms(&x).total;
             if e <= s.energy && e.is_finite() {
                 s.energy = e;
-                stencil.residual(&prepared.coef, &s.u, &rhs, &mut s.r, &mut tmp);
+                stencil.residual(&prepared.coef, &s.u, &rhs, &mut s.r, &mut work.t);
                 s.applications += 1;
             } else {
                 s.u.iter_mut().for_each(|d| *d = DVec3::ZERO);
@@ -248,7 +249,9 @@ impl BoundedSolver {
         }
         let warm = start.is_some() && s.u.iter().any(|d| *d != DVec3::ZERO);
         match (half, self.params.conjugate) {
-            (Some(w), true) => self.mprgp(energy, &problem, &mut prepared, w, warm, &mut s, progress),
+            (Some(w), true) => {
+                self.mprgp(energy, &problem, &mut prepared, w, warm, &mut s, &mut work, progress)
+            }
             _ => self.projected_descent(&problem, &mut prepared, half, &mut s, progress),
         }
         // Each phase stopped at its next iteration.
@@ -257,17 +260,19 @@ impl BoundedSolver {
         let (u, mut r) = (s.u, s.r);
         let (mut applications, iterations, estimate) = (s.applications, s.iterations, s.estimate);
         let coef = &prepared.coef;
-        let mut rp = vec![DVec3::ZERO; n];
-        // The certificate, on the true residual.
-        stencil.residual(coef, &u, &rhs, &mut r, &mut tmp);
+        // The certificate, on the true residual (projected in the scratch's place).
+        stencil.residual(coef, &u, &rhs, &mut r, &mut work.t);
         applications += 1;
+        let mut rp = work.t;
         rp.copy_from_slice(&r);
         let clamped = half.map(|w| {
             project_residual(&u, w, &mut rp);
             w.count_on_bound(&u)
         });
         let rp_norm_true = norm(&rp);
-        let x: Vec<DVec3> = input.par_iter().zip(&u).map(|(p, u)| *p + *u).collect();
+        // The positions in the displacement's own vector.
+        let mut x = u;
+        x.par_iter_mut().zip(input.par_iter()).for_each(|(u, p)| *u += *p);
         let solve_seconds = t0.elapsed().as_secs_f64();
         let estimate = if r0 > 0.0 { estimate / h } else { 0.0 };
         let bound = (half.is_none()).then(|| rp_norm_true / alpha_min / h);
@@ -313,6 +318,7 @@ impl BoundedSolver {
         w: &Boxes,
         warm: bool,
         s: &mut Iterate,
+        work: &mut Work,
         progress: &mut dyn FnMut(&Progress),
     ) {
         let input = energy.input();
@@ -327,7 +333,7 @@ impl BoundedSolver {
                 (1.0, problem.max_iterations)
             };
             let start = BoxProblem { max_iterations, ..*problem };
-            let free = minimize_free(&start, prepared, problem.tol * loose, &mut s.u, &mut s.r);
+            let free = minimize_free(&start, prepared, problem.tol * loose, &mut s.u, &mut s.r, work);
             s.applications += free.applications;
             s.start_applications = free.applications;
         }
@@ -336,7 +342,7 @@ impl BoundedSolver {
         let fallback = warm.then(|| (s.u.clone(), s.energy));
         let mut settled = None;
         if rounds > 0 {
-            let st = active_set(problem, prepared, w, rounds, &mut s.u, &mut s.r);
+            let st = active_set(problem, prepared, w, rounds, &mut s.u, &mut s.r, work);
             // The face's levels (about one multigrid hierarchy) are not used again.
             prepared.pre.forget_face();
             tracing::debug!(
@@ -352,7 +358,9 @@ impl BoundedSolver {
             settled = st.settled.then_some((st.estimate, st.gradient));
         }
         w.project(&mut s.u);
-        let start = energy.terms(&input.iter().zip(&s.u).map(|(p, d)| *p + *d).collect::<Vec<_>>()).total;
+        // The projected iterate's positions, in the scratch.
+        work.t.par_iter_mut().zip(input.par_iter().zip(&s.u)).for_each(|(x, (p, d))| *x = *p + *d);
+        let start = energy.terms(&work.t).total;
         if start <= s.energy {
             s.energy = start;
             if let Some((estimate, rp)) = settled {
@@ -372,11 +380,10 @@ impl BoundedSolver {
             // The projection can cost more than it gained: start from the input.
             s.u.iter_mut().for_each(|d| *d = DVec3::ZERO);
         }
-        let mut tmp = vec![DVec3::ZERO; s.u.len()];
-        problem.stencil.residual(&prepared.coef, &s.u, problem.rhs, &mut s.r, &mut tmp);
+        problem.stencil.residual(&prepared.coef, &s.u, problem.rhs, &mut s.r, &mut work.t);
         s.applications += 1;
         let bounded = BoxProblem { energy0: s.energy, ..*problem };
-        let stats = minimize_in_boxes(&bounded, prepared, w, &mut s.u, &mut s.r, progress);
+        let stats = minimize_in_boxes(&bounded, prepared, w, &mut s.u, &mut s.r, work, progress);
         s.iterations = stats.iterations;
         s.applications += stats.applications;
         s.estimate = stats.estimate;

@@ -239,14 +239,16 @@ pub(crate) fn minimize_in_boxes(
     w: &Boxes,
     u: &mut [DVec3],
     r: &mut [DVec3],
+    work: &mut Work,
     progress: &mut dyn FnMut(&Progress),
 ) -> BoxStats {
     let BoxProblem { stencil, rhs, tol, max_iterations, energy0, interrupt, .. } = *problem;
     let n = u.len();
     let coef = &prepared.coef;
     let zero = || vec![DVec3::ZERO; n];
-    let (mut phi, mut beta, mut z, mut p, mut q, mut t) = (zero(), zero(), zero(), zero(), zero(), zero());
-    let (mut trial, mut tq) = (zero(), zero());
+    let (mut phi, mut beta, mut trial, mut tq) = (zero(), zero(), zero(), zero());
+    let Work { z, p, q, t } = work;
+    let (z, p, q, t) = (&mut z[..], &mut p[..], &mut q[..], &mut t[..]);
     let mut applications = 0;
     let mut iterations = 0;
     let mut residuals = Vec::new();
@@ -270,27 +272,27 @@ pub(crate) fn minimize_in_boxes(
         let correction;
         if b2 > GAMMA * GAMMA * f2 {
             // Proportioning: release coordinates from their bounds along beta.
-            stencil.apply(coef, &beta, &mut q, &mut t, true);
+            stencil.apply(coef, &beta, q, t, true);
             applications += 1;
-            let bq = dot(&beta, &q);
+            let bq = dot(&beta, q);
             let a = if bq > 0.0 { b2 / bq } else { f64::INFINITY };
             let a = a.min(feasible_step(u, &beta, w));
             if !(a > 0.0 && a.is_finite()) {
                 break;
             }
             de_total += -2.0 * a * b2 + a * a * bq;
-            correction = step(u, r, a, &beta, &q, w);
+            correction = step(u, r, a, &beta, q, w);
             restart = true;
         } else {
             // Conjugate gradient on the face.
-            prepared.pre.apply(stencil, &phi, &mut z);
-            restrict_to_face(u, w, &mut z);
-            let rz_new = dot(&phi, &z);
+            prepared.pre.apply(stencil, &phi, z);
+            restrict_to_face(u, w, z);
+            let rz_new = dot(&phi, z);
             if rz_new.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
                 break;
             }
             if restart {
-                p.copy_from_slice(&z);
+                p.copy_from_slice(z);
             } else {
                 let s = rz_new / rz;
                 p.par_chunks_mut(CHUNK).zip(z.par_chunks(CHUNK)).for_each(|(p, z)| {
@@ -299,24 +301,24 @@ pub(crate) fn minimize_in_boxes(
             }
             rz = rz_new;
             restart = false;
-            stencil.apply(coef, &p, &mut q, &mut t, true);
+            stencil.apply(coef, p, q, t, true);
             applications += 1;
-            let pq = dot(&p, &q);
+            let pq = dot(p, q);
             if pq.partial_cmp(&0.0) != Some(std::cmp::Ordering::Greater) {
                 break;
             }
-            let rpd = dot(r, &p);
+            let rpd = dot(r, p);
             let a_cg = rpd / pq;
-            let a_f = feasible_step(u, &p, w);
+            let a_f = feasible_step(u, p, w);
             if a_cg <= a_f {
                 de_total += -2.0 * a_cg * rpd + a_cg * a_cg * pq;
-                correction = step(u, r, a_cg, &p, &q, w);
+                correction = step(u, r, a_cg, p, q, w);
             } else if let Some((de, moved)) = {
                 // Expansion, projected: the full CG step projected into the boxes, which
                 // puts every coordinate it crosses on its bound at once; taken when it
                 // does better than stopping at the first bound.
-                project_step(u, &p, a_cg, w, &mut trial);
-                stencil.apply(coef, &trial, &mut tq, &mut t, true);
+                project_step(u, p, a_cg, w, &mut trial);
+                stencil.apply(coef, &trial, &mut tq, t, true);
                 applications += 1;
                 let de = -2.0 * dot(r, &trial) + dot(&trial, &tq);
                 (de <= -2.0 * a_f * rpd + a_f * a_f * pq).then(|| (de, step(u, r, 1.0, &trial, &tq, w)))
@@ -328,19 +330,19 @@ pub(crate) fn minimize_in_boxes(
                 // Expansion: to the bound, then one projected preconditioned gradient
                 // step with backtracking.
                 de_total += -2.0 * a_f * rpd + a_f * a_f * pq;
-                let c0 = step(u, r, a_f, &p, &q, w);
+                let c0 = step(u, r, a_f, p, q, w);
                 split(u, r, w, &mut phi, &mut beta);
-                prepared.pre.apply(stencil, &phi, &mut z);
-                restrict_to_face(u, w, &mut z);
-                stencil.apply(coef, &z, &mut q, &mut t, true);
+                prepared.pre.apply(stencil, &phi, z);
+                restrict_to_face(u, w, z);
+                stencil.apply(coef, z, q, t, true);
                 applications += 1;
-                let (rz1, zq) = (dot(r, &z), dot(&z, &q));
+                let (rz1, zq) = (dot(r, z), dot(z, q));
                 let mut moved = 0.0;
                 if rz1 > 0.0 && zq > 0.0 {
                     let mut s = rz1 / zq;
                     for _ in 0..30 {
-                        project_step(u, &z, s, w, &mut trial);
-                        stencil.apply(coef, &trial, &mut tq, &mut t, true);
+                        project_step(u, z, s, w, &mut trial);
+                        stencil.apply(coef, &trial, &mut tq, t, true);
                         applications += 1;
                         let de = -2.0 * dot(r, &trial) + dot(&trial, &tq);
                         if de <= 0.0 {
@@ -358,7 +360,7 @@ pub(crate) fn minimize_in_boxes(
         estimate = 2.0 * tail_estimate(correction, &residuals[residuals.len().saturating_sub(6)..]);
         if iterations % 50 == 0 {
             // Refresh the residual: the updates drift from rhs - H u.
-            stencil.residual(coef, u, rhs, r, &mut t);
+            stencil.residual(coef, u, rhs, r, t);
             applications += 1;
         }
     }
@@ -375,12 +377,12 @@ pub(crate) fn minimize_free(
     tol: f64,
     u: &mut [DVec3],
     r: &mut [DVec3],
+    work: &mut Work,
 ) -> BoxStats {
     let BoxProblem { stencil, max_iterations, interrupt, .. } = *problem;
-    let mut work = Work::new(u.len());
     let Prepared { coef, pre, .. } = prepared;
     let cg = Cg { stencil, coef, tol, max_iterations, interrupt, lagged_rate: true };
-    let run = cg.run(u, r, &mut work, |r, z| pre.apply(stencil, r, z), |_, r2| r2.sqrt());
+    let run = cg.run(u, r, work, |r, z| pre.apply(stencil, r, z), |_, r2| r2.sqrt());
     BoxStats {
         iterations: run.iterations,
         applications: run.applications,
@@ -389,16 +391,19 @@ pub(crate) fn minimize_free(
     }
 }
 
-/// The vectors of [`Cg::run`].
-struct Work {
+/// The vectors of [`Cg::run`] and [`minimize_in_boxes`], one set for the phases of a
+/// bounded solve (each phase writes every entry before reading it): at three million
+/// vertices each set is 288 MB that the system would otherwise zero again.
+pub(crate) struct Work {
     z: Vec<DVec3>,
     p: Vec<DVec3>,
     q: Vec<DVec3>,
-    t: Vec<DVec3>,
+    /// Also the operator's scratch for the callers' own products.
+    pub(crate) t: Vec<DVec3>,
 }
 
 impl Work {
-    fn new(n: usize) -> Work {
+    pub(crate) fn new(n: usize) -> Work {
         let zero = || vec![DVec3::ZERO; n];
         Work { z: zero(), p: zero(), q: zero(), t: zero() }
     }
@@ -556,10 +561,10 @@ pub(crate) fn active_set(
     max_rounds: usize,
     u: &mut [DVec3],
     r: &mut [DVec3],
+    work: &mut Work,
 ) -> ActiveSetStats {
     let BoxProblem { stencil, rhs, tol, max_iterations, interrupt, .. } = *problem;
     let n = u.len();
-    let mut work = Work::new(n);
     let mut hold = vec![[Hold::Free; 3]; n];
     let mut stats = ActiveSetStats {
         iterations: 0,
@@ -600,13 +605,8 @@ pub(crate) fn active_set(
         };
         let Prepared { coef, pre, .. } = &mut *prepared;
         let cg = Cg { stencil, coef, tol: tol * loose, max_iterations, interrupt, lagged_rate: false };
-        let run = cg.run(
-            u,
-            r,
-            &mut work,
-            |r, z| pre.apply_on_face(stencil, r, z, &face),
-            |r, _| free_norm(&hold, r),
-        );
+        let run =
+            cg.run(u, r, work, |r, z| pre.apply_on_face(stencil, r, z, &face), |r, _| free_norm(&hold, r));
         stats.iterations += run.iterations;
         stats.applications += run.applications;
         stats.estimate = run.estimate;

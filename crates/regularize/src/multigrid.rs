@@ -1450,7 +1450,7 @@ impl Vcycle {
             .into_par_iter()
             .filter(|&a| agg.members(a).iter().any(|&i| face_row_reads(stencil, changed, i as usize)))
             .collect();
-        let FaceLevels { mut levels, mut rows, .. } = built;
+        let FaceLevels { mut levels, mut rows, face: mut kept, .. } = built;
         if rows.len() != levels.len()
             || !rows[0].recompute(&dirty, |acc, a| face_row(acc, stencil, coef, agg, face, a))
         {
@@ -1471,7 +1471,8 @@ impl Vcycle {
             dirty = next;
         }
         let coarsest = Coarsest::face(rows.last().expect("a coarse level")).ok()?;
-        Some(FaceLevels { levels, coarsest: Some(coarsest), rows, face: face.to_vec() })
+        kept.copy_from_slice(face);
+        Some(FaceLevels { levels, coarsest: Some(coarsest), rows, face: kept })
     }
 
     /// [`Vcycle::apply`] for the operator restricted to a face (the coordinates where

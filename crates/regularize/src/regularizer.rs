@@ -514,8 +514,14 @@ impl Regularizer {
         }
 
         interrupt.check()?;
+        // The lattice positions: the targets themselves where no round re-centred them.
+        let staircase = if params.refine == 0 {
+            std::borrow::Cow::Borrowed(targets.as_slice())
+        } else {
+            std::borrow::Cow::Owned(surface.positions().into_vec())
+        };
         if params.fold_free {
-            crate::unfold::unfold(&surface, &surface.positions(), &mut positions);
+            crate::unfold::unfold(&surface, &staircase, &mut positions);
         }
 
         // The energy of the last round (its normals and targets, without crease weights),
@@ -525,7 +531,8 @@ impl Regularizer {
             Some(w) => energy.with_weights(w)?,
             None => energy,
         };
-        let (before, after) = (energy.terms(&surface.positions()), energy.terms(&positions));
+        let (before, after) = (energy.terms(&staircase), energy.terms(&positions));
+        drop(staircase);
         if !(before.total.is_finite() && after.total.is_finite()) {
             return Err(RegularizeError::NotFinite(format!(
                 "the energy is not finite ({} -> {}): the weights or the spacing are out of range",
