@@ -391,9 +391,9 @@ pub(crate) fn minimize_free(
     }
 }
 
-/// The vectors of [`Cg::run`] and [`minimize_in_boxes`], one set for the phases of a
-/// bounded solve (each phase writes every entry before reading it): at three million
-/// vertices each set is 288 MB that the system would otherwise zero again.
+/// The vectors of [`Cg::run`] and [`minimize_in_boxes`]: one set (96 bytes per vertex)
+/// for every phase of a bounded solve, each writing every entry before reading it, rather
+/// than fresh memory for the system to zero again in each phase.
 pub(crate) struct Work {
     z: Vec<DVec3>,
     p: Vec<DVec3>,
