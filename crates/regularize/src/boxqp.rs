@@ -404,8 +404,12 @@ pub(crate) struct Work {
 
 impl Work {
     pub(crate) fn new(n: usize) -> Work {
-        let zero = || vec![DVec3::ZERO; n];
-        Work { z: zero(), p: zero(), q: zero(), t: zero() }
+        #[cfg(test)]
+        let fill = if tests::POISONED_WORK.with(|p| p.get()) { DVec3::NAN } else { DVec3::ZERO };
+        #[cfg(not(test))]
+        let fill = DVec3::ZERO;
+        let vector = || vec![fill; n];
+        Work { z: vector(), p: vector(), q: vector(), t: vector() }
     }
 }
 
@@ -772,6 +776,45 @@ fn free_norm(hold: &[[Hold; 3]], r: &[DVec3]) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+
+    thread_local! {
+        /// Whether [`Work::new`] fills its vectors with NaN on this thread.
+        pub(super) static POISONED_WORK: std::cell::Cell<bool> = const { std::cell::Cell::new(false) };
+    }
+
+    /// The phases of a bounded solve share one [`Work`]: each must write every entry
+    /// before reading it. With the vectors full of NaN at the start, any entry read first
+    /// would spread through the dot products into the result.
+    #[test]
+    fn every_phase_writes_the_shared_vectors_before_reading_them() {
+        use crate::{BoundedParams, BoundedSolver, Energy, EnergyParams};
+        use voxreg_digisurf::DigitalSurface;
+        use voxreg_normals::NormalField;
+        use voxreg_testkit::{digitize, true_normals, Sphere};
+        let shape = Sphere { radius: 5.0 };
+        let s = DigitalSurface::from_volume(&digitize(&shape, 1.0)).unwrap();
+        let normals = NormalField::new(true_normals(&s, &shape));
+        let input = s.positions();
+        let energy =
+            Energy::new(&s, &normals, &input, EnergyParams { alpha: 1e-3, ..Default::default() }).unwrap();
+        // MPRGP alone, one round then MPRGP, and rounds until they settle.
+        for rounds in [0, 1, 30] {
+            let params = BoundedParams { clamp: Some(0.01), active_set_rounds: rounds, ..Default::default() };
+            let solve = |poisoned: bool| {
+                POISONED_WORK.with(|p| p.set(poisoned));
+                let out = BoundedSolver::for_surface(&s, params).unwrap().solve(&energy);
+                POISONED_WORK.with(|p| p.set(false));
+                out.unwrap()
+            };
+            let (clean, info) = solve(false);
+            let (poisoned, _) = solve(true);
+            assert!(info.converged && info.clamped_vertices > 0, "{rounds} rounds: {info:?}");
+            if rounds < 30 {
+                assert!(info.iterations > 0, "{rounds} rounds: MPRGP did not run: {info:?}");
+            }
+            assert_eq!(clean, poisoned, "{rounds} rounds");
+        }
+    }
 
     #[test]
     fn rounds_end_when_the_holds_stop_settling() {
