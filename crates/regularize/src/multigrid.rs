@@ -526,8 +526,88 @@ fn fine_majorant(stencil: &Stencil, coef: &Coefficients<'_>) -> Vec<[f64; 6]> {
 struct Rows<const W: usize = 10> {
     offsets: Vec<usize>,
     cols: Vec<u32>,
-    /// Accumulated in `f64`, stored in `f32`: they only precondition.
-    vals: Vec<[f32; W]>,
+    /// Accumulated in `f64`, stored in `f32`: they only precondition. Kept in the parts
+    /// they were built in (each a range of whole rows), never joined.
+    vals: Parts<[f32; W]>,
+}
+
+/// A sequence stored as the consecutive parts it was built in, each a range of whole
+/// rows: joining them would copy the level's numbers into fresh memory, which the system
+/// must fault in page by page.
+#[derive(Debug, Default)]
+struct Parts<T> {
+    parts: Vec<Vec<T>>,
+    /// Where each part starts in the sequence, and its length last.
+    starts: Vec<usize>,
+}
+
+impl<T> Parts<T> {
+    fn new(parts: Vec<Vec<T>>) -> Self {
+        let mut starts = Vec::with_capacity(parts.len() + 1);
+        starts.push(0);
+        for p in &parts {
+            starts.push(starts.last().unwrap() + p.len());
+        }
+        Parts { parts, starts }
+    }
+
+    fn len(&self) -> usize {
+        *self.starts.last().unwrap_or(&0)
+    }
+
+    /// The part holding entry `k`.
+    fn part_of(&self, k: usize) -> usize {
+        self.starts.partition_point(|&s| s <= k) - 1
+    }
+
+    /// Entries `r`, which lie in one part (a row's).
+    fn slice(&self, r: std::ops::Range<usize>) -> &[T] {
+        if r.is_empty() {
+            return &[];
+        }
+        let p = self.part_of(r.start);
+        let s = self.starts[p];
+        &self.parts[p][r.start - s..r.end - s]
+    }
+
+    fn iter(&self) -> impl Iterator<Item = &T> {
+        self.parts.iter().flatten()
+    }
+
+    /// `out[k] = f(&self[k])` for every entry, in parallel part by part.
+    fn map_into<U: Send>(&self, out: &mut [U], f: impl Fn(&T) -> U + Sync)
+    where
+        T: Sync,
+    {
+        let mut pieces = Vec::with_capacity(self.parts.len());
+        let mut rest = out;
+        for p in &self.parts {
+            let (here, tail) = rest.split_at_mut(p.len());
+            pieces.push((p, here));
+            rest = tail;
+        }
+        pieces.into_par_iter().for_each(|(p, out)| {
+            out.par_chunks_mut(CHUNK).zip(p.par_chunks(CHUNK)).for_each(|(o, v)| {
+                o.iter_mut().zip(v).for_each(|(o, v)| *o = f(v));
+            })
+        });
+    }
+
+    /// `f(&self[k])` for every entry, in a new vector.
+    fn map<U: Send + Default + Clone>(&self, f: impl Fn(&T) -> U + Sync) -> Vec<U>
+    where
+        T: Sync,
+    {
+        let mut out = vec![U::default(); self.len()];
+        self.map_into(&mut out, f);
+        out
+    }
+}
+
+impl<T: PartialEq> PartialEq for Parts<T> {
+    fn eq(&self, other: &Self) -> bool {
+        self.len() == other.len() && self.iter().eq(other.iter())
+    }
 }
 
 impl<const W: usize> Rows<W> {
@@ -541,15 +621,23 @@ impl<const W: usize> Rows<W> {
     fn recompute(&mut self, dirty: &[usize], f: impl Fn(&mut Accumulator<W>, usize) + Sync) -> bool {
         let n = self.len();
         let Rows { offsets, cols, vals } = self;
-        // Each dirty row's values, a slice of its own.
+        // Each dirty row's values, a slice of its own (in its part).
         let mut rows: Vec<(usize, &mut [[f32; W]])> = Vec::with_capacity(dirty.len());
-        let (mut rest, mut at): (&mut [[f32; W]], usize) = (vals, 0);
-        for &a in dirty {
-            debug_assert!(offsets[a] >= at, "dirty rows ascending");
-            let (_, tail) = std::mem::take(&mut rest).split_at_mut(offsets[a] - at);
-            let (row, tail) = tail.split_at_mut(offsets[a + 1] - offsets[a]);
-            rows.push((a, row));
-            (rest, at) = (tail, offsets[a + 1]);
+        let mut dirty = dirty.iter().copied().peekable();
+        for (p, part) in vals.parts.iter_mut().enumerate() {
+            let (start, end) = (vals.starts[p], vals.starts[p + 1]);
+            let (mut rest, mut at): (&mut [[f32; W]], usize) = (part, start);
+            while let Some(&a) = dirty.peek() {
+                if offsets[a] >= end && offsets[a + 1] > offsets[a] {
+                    break;
+                }
+                dirty.next();
+                debug_assert!(offsets[a] >= at, "dirty rows ascending");
+                let (_, tail) = std::mem::take(&mut rest).split_at_mut(offsets[a] - at);
+                let (row, tail) = tail.split_at_mut(offsets[a + 1] - offsets[a]);
+                rows.push((a, row));
+                (rest, at) = (tail, offsets[a + 1]);
+            }
         }
         let (offsets, cols) = (&*offsets, &*cols);
         rows.into_par_iter()
@@ -573,7 +661,7 @@ impl<const W: usize> Rows<W> {
 
     fn row(&self, i: usize) -> impl Iterator<Item = (u32, [f64; W])> + '_ {
         let r = self.offsets[i]..self.offsets[i + 1];
-        self.cols[r.clone()].iter().zip(&self.vals[r]).map(|(c, v)| (*c, v.map(f64::from)))
+        self.cols[r.clone()].iter().zip(self.vals.slice(r)).map(|(c, v)| (*c, v.map(f64::from)))
     }
 
     /// Builds `n` rows with `f(accumulator, row)`, columns in `0..cols`, in parallel
@@ -608,15 +696,17 @@ impl<const W: usize> Rows<W> {
         let total = parts.iter().map(|p| p.1.len()).sum();
         let mut offsets = Vec::with_capacity(n + 1);
         offsets.push(0);
-        let (mut all_cols, mut vals) = (Vec::with_capacity(total), Vec::with_capacity(total));
+        // The columns (4 bytes an entry) joined; the numbers stay in their parts.
+        let mut all_cols = Vec::with_capacity(total);
+        let mut vals = Vec::with_capacity(parts.len());
         for (lens, c, v) in parts {
             for l in lens {
                 offsets.push(offsets.last().unwrap() + l);
             }
             all_cols.extend(c);
-            vals.extend(v);
+            vals.push(v);
         }
-        Rows { offsets, cols: all_cols, vals }
+        Rows { offsets, cols: all_cols, vals: Parts::new(vals) }
     }
 }
 
@@ -962,9 +1052,9 @@ impl Bsr {
         let offsets = rows.offsets.iter().map(|&o| o as u32).collect();
         let cols = rows.cols.clone();
         let blocks = if W == 10 {
-            Blocks::Sym(rows.vals.par_iter().map(|b| sym_block(full_block(b))).collect())
+            Blocks::Sym(rows.vals.map(|b| sym_block(full_block(b))))
         } else {
-            Blocks::Full(rows.vals.par_iter().map(full_block).collect())
+            Blocks::Full(rows.vals.map(full_block))
         };
         Bsr { offsets, cols, blocks }
     }
@@ -977,8 +1067,8 @@ impl Bsr {
             && old.cols == rows.cols
             && old.offsets.iter().zip(&rows.offsets).all(|(&a, &b)| a as usize == b);
         match old.blocks {
-            Blocks::Sym(blocks) if same && blocks.len() == rows.vals.len() => {
-                let blocks = refill(blocks, rows.vals.par_iter().map(|b| sym_block(full_block(b))));
+            Blocks::Sym(mut blocks) if same && blocks.len() == rows.vals.len() => {
+                rows.vals.map_into(&mut blocks, |b| sym_block(full_block(b)));
                 Bsr { offsets: old.offsets, cols: old.cols, blocks: Blocks::Sym(blocks) }
             }
             _ => Self::from_rows(rows),
@@ -1156,13 +1246,14 @@ impl Level {
             unreachable!("a face's level has general blocks")
         };
         if 4 * dirty.len() >= rows.len() {
-            blocks.par_iter_mut().zip(&rows.vals).for_each(|(b, v)| *b = full_block(v));
+            rows.vals.map_into(blocks, full_block);
             self.smoother.par_iter_mut().enumerate().for_each(|(i, b)| *b = l1_face_block(rows, i, damping));
             return;
         }
         for &i in dirty {
-            for k in rows.offsets[i]..rows.offsets[i + 1] {
-                blocks[k] = full_block(&rows.vals[k]);
+            let r = rows.offsets[i]..rows.offsets[i + 1];
+            for (b, v) in blocks[r.clone()].iter_mut().zip(rows.vals.slice(r)) {
+                *b = full_block(v);
             }
             self.smoother[i] = l1_face_block(rows, i, damping);
         }
