@@ -1686,6 +1686,53 @@ pub(crate) mod tests {
     use crate::stencil::Stencil;
     use crate::{Energy, EnergyParams};
 
+    /// Rows built in several parts (some rows empty) read back and recomputed in place
+    /// across the parts' boundaries as if they were one array.
+    #[test]
+    fn rows_in_parts_read_and_recompute_as_one_array() {
+        let n = 9000;
+        // Row i: columns i, i + 7 and i * 3 (mod n), except every 13th row, empty;
+        // numbers from the row, the column and `s`.
+        let f = |s: f64| {
+            move |acc: &mut Accumulator<2>, i: usize| {
+                if i % 13 != 0 {
+                    for c in [i, (i + 7) % n, (i * 3) % n] {
+                        let e = acc.entry(c as u32);
+                        e[0] += s * i as f64 + c as f64;
+                        e[1] += 1.0;
+                    }
+                }
+            }
+        };
+        let mut rows = Rows::<2>::build(n, n, f(1.0));
+        assert!(rows.vals.parts.len() > 2, "{} parts", rows.vals.parts.len());
+        let fresh = Rows::<2>::build(n, n, f(2.0));
+        // Every third row, and the rows at the parts' edges, recomputed with `s = 2`.
+        let mut dirty: Vec<usize> = (0..n).step_by(3).collect();
+        for &k in &rows.vals.starts {
+            let row = rows.offsets.partition_point(|&o| o <= k).saturating_sub(1).min(n - 1);
+            dirty.extend([row.saturating_sub(1), row, (row + 1).min(n - 1)]);
+        }
+        dirty.sort_unstable();
+        dirty.dedup();
+        assert!(rows.recompute(&dirty, f(2.0)));
+        let old = Rows::<2>::build(n, n, f(1.0));
+        for i in 0..n {
+            let want: Vec<_> =
+                if dirty.binary_search(&i).is_ok() { fresh.row(i) } else { old.row(i) }.collect();
+            assert_eq!(rows.row(i).collect::<Vec<_>>(), want, "row {i}");
+        }
+        // Another pattern is refused.
+        let shifted = |acc: &mut Accumulator<2>, i: usize| {
+            acc.entry(((i + 1) % n) as u32)[0] += 1.0;
+        };
+        assert!(!rows.recompute(&[1, 5000], shifted));
+        // The blocks of a level read the parts in order.
+        let flat: Vec<[f32; 2]> = fresh.vals.iter().copied().collect();
+        assert_eq!(fresh.vals.map(|v| *v), flat);
+        assert_eq!(flat.len(), fresh.nnz());
+    }
+
     /// A face holding a random fifth of the coordinates.
     fn random_face(n: usize, rng: &mut Lcg) -> Vec<Vec3A> {
         (0..n)
