@@ -668,9 +668,9 @@ impl<const W: usize> Rows<W> {
     /// chunks of rows (one marker array and one output buffer per chunk).
     fn build(n: usize, cols: usize, f: impl Fn(&mut Accumulator<W>, usize) + Sync) -> Rows<W> {
         type Part<const W: usize> = (Vec<usize>, Vec<u32>, Vec<[f32; W]>);
-        // A few parts per thread, each a large block: freed after the concatenation, a
-        // large block goes back to the system, where many small ones would stay in the
-        // allocator's heaps, resident through the solve that follows.
+        // A few parts per thread, each a large block that the level keeps (its numbers
+        // are never joined): freed with the level, a large block goes back to the system,
+        // where many small ones would stay in the allocator's heaps.
         let rows = n.div_ceil(4 * rayon::current_num_threads().max(1)).max(1024);
         // One marker array per worker, not per chunk of rows: `cols` entries each, so a
         // fresh one per chunk would cost time quadratic in the level's size.
@@ -685,8 +685,8 @@ impl<const W: usize> Rows<W> {
                         part.0.push(acc.row.len());
                         acc.flush_into(&mut part.1, &mut part.2);
                     }
-                    // Grown by doubling: at their size before the concatenation below,
-                    // which holds them and the whole level at once.
+                    // Grown by doubling: at their size, since the numbers stay in the
+                    // level and the columns are joined below.
                     part.1.shrink_to_fit();
                     part.2.shrink_to_fit();
                     part
