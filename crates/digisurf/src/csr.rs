@@ -1,5 +1,7 @@
 //! Compressed lists: a list of small lists in two flat arrays.
 
+use rayon::prelude::*;
+
 /// A list of lists stored flat (compressed sparse rows): list `i` is
 /// `items[offsets[i]..offsets[i + 1]]`, with `u32` offsets (a surface's lists hold at most
 /// four items per surfel, and a surface at most `2^30 - 1` surfels).
@@ -28,6 +30,47 @@ impl<T: Copy + Default> Lists<T> {
     }
 }
 
+impl<T: Copy + Default + Send + Sync> Lists<T> {
+    /// Builds `n` lists, list `i` being what `list(i, out)` pushes onto `out` (given
+    /// empty), in parallel over pieces of consecutive lists: `list` runs twice per list,
+    /// to size the lists and then to fill them.
+    pub(crate) fn par_from_fn(n: usize, list: impl Fn(usize, &mut Vec<T>) + Sync) -> Self {
+        let mut offsets = vec![0u32; n + 1];
+        offsets[1..].par_chunks_mut(PIECE).enumerate().for_each_init(Vec::new, |out, (p, lens)| {
+            for (k, len) in lens.iter_mut().enumerate() {
+                out.clear();
+                list(p * PIECE + k, out);
+                *len = out.len() as u32;
+            }
+        });
+        for i in 0..n {
+            offsets[i + 1] += offsets[i];
+        }
+        let mut items = vec![T::default(); offsets[n] as usize];
+        let mut pieces = Vec::with_capacity(n.div_ceil(PIECE));
+        let mut rest: &mut [T] = &mut items;
+        for start in (0..n).step_by(PIECE) {
+            let end = (start + PIECE).min(n);
+            let (head, tail) = rest.split_at_mut((offsets[end] - offsets[start]) as usize);
+            pieces.push((start, end, head));
+            rest = tail;
+        }
+        pieces.into_par_iter().for_each_init(Vec::new, |out, (start, end, piece)| {
+            let mut at = 0;
+            for i in start..end {
+                out.clear();
+                list(i, out);
+                piece[at..at + out.len()].copy_from_slice(out);
+                at += out.len();
+            }
+        });
+        Lists { offsets, items }
+    }
+}
+
+/// Lists per piece of [`Lists::par_from_fn`].
+pub(crate) const PIECE: usize = 4096;
+
 impl<T> Lists<T> {
     /// Builds from explicit offsets and items.
     pub(crate) fn from_parts(offsets: Vec<u32>, items: Vec<T>) -> Self {
@@ -49,12 +92,6 @@ impl<T> Lists<T> {
     #[inline]
     pub fn get(&self, i: usize) -> &[T] {
         &self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
-    }
-
-    /// List `i`, mutably.
-    #[inline]
-    pub(crate) fn get_mut(&mut self, i: usize) -> &mut [T] {
-        &mut self.items[self.offsets[i] as usize..self.offsets[i + 1] as usize]
     }
 
     /// Total number of items in all lists.

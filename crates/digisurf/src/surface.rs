@@ -579,6 +579,7 @@ impl DigitalSurface {
             vertex_corners,
             surfels,
         };
+        surface.build_vertex_surfels();
         surface.build_edges();
         surface.build_vertex_lists();
         surface.build_components();
@@ -611,41 +612,108 @@ impl DigitalSurface {
             .try_reduce(|| 0, |a, b| Ok(a + b))
     }
 
-    /// Edges by sorting the surfels' `4F` vertex pairs (radix-like cost in practice,
-    /// `O(F log F)` at worst), then their incident surfels and kinds.
+    /// Each vertex's surfels, in increasing order.
+    fn build_vertex_surfels(&mut self) {
+        let surfels = &self.surfels;
+        self.vertex_surfels = Lists::from_pairs(self.vertex_corners.len(), |f| {
+            for (s, surfel) in surfels.iter().enumerate() {
+                for v in surfel.vertices {
+                    f(v.index(), SurfelId(s as u32));
+                }
+            }
+        });
+    }
+
+    /// Vertex `a`'s sides `(b, slot)` with `b > a`, sorted: the sides of its surfels that
+    /// it owns (a side belongs to its lower end). Slot `4s + j` is side `j` of surfel `s`,
+    /// from its corner `j` to corner `j + 1`.
+    fn owned_sides(&self, a: usize, out: &mut Vec<(u32, u32)>) {
+        out.clear();
+        for &s in self.vertex_surfels.get(a) {
+            let vs = self.surfels[s.index()].vertices;
+            let i = vs.iter().position(|v| v.index() == a).unwrap_or(0);
+            let (next, prev) = (vs[(i + 1) % 4].0, vs[(i + 3) % 4].0);
+            if next as usize > a {
+                out.push((next, 4 * s.0 + i as u32));
+            }
+            if prev as usize > a {
+                out.push((prev, 4 * s.0 + ((i + 3) % 4) as u32));
+            }
+        }
+        out.sort_unstable();
+    }
+
+    /// The edges, numbered by their end points `(a, b)`, `a < b`, each listing its surfels
+    /// in increasing order, and each surfel's four: built per vertex from its own sides
+    /// ([`DigitalSurface::owned_sides`]) in parallel over pieces of vertices, in time
+    /// linear in the surfels (no sort of all `4F` sides).
     fn build_edges(&mut self) {
-        let mut keys: Vec<(u64, u32)> = Vec::with_capacity(4 * self.surfels.len());
-        for (s, surfel) in self.surfels.iter().enumerate() {
-            for i in 0..4 {
-                let a = surfel.vertices[i].0;
-                let b = surfel.vertices[(i + 1) % 4].0;
-                let key = ((a.min(b) as u64) << 32) | a.max(b) as u64;
-                keys.push((key, (s as u32) * 4 + i as u32));
-            }
+        use std::sync::atomic::{AtomicU32, Ordering};
+        const PIECE: usize = crate::csr::PIECE;
+        let nv = self.vertex_corners.len();
+        let this = &*self;
+        // Edges and sides of each piece of vertices.
+        let counts: Vec<(usize, usize)> = (0..nv.div_ceil(PIECE))
+            .into_par_iter()
+            .map_init(Vec::new, |out, p| {
+                let (mut edges, mut sides) = (0, 0);
+                for a in p * PIECE..((p + 1) * PIECE).min(nv) {
+                    this.owned_sides(a, out);
+                    sides += out.len();
+                    edges += out.chunk_by(|x, y| x.0 == y.0).count();
+                }
+                (edges, sides)
+            })
+            .collect();
+        let num_edges: usize = counts.iter().map(|c| c.0).sum();
+        let num_sides: usize = counts.iter().map(|c| c.1).sum();
+        debug_assert_eq!(num_sides, 4 * self.surfels.len());
+        let blank = Edge { vertices: [VertexId(0); 2], axis: 0, kind: EdgeKind::Regular };
+        let mut edges = vec![blank; num_edges];
+        let mut offsets = vec![0u32; num_edges + 1];
+        let mut items = vec![SurfelId(0); num_sides];
+        let surfel_edges: Vec<AtomicU32> = (0..num_sides).map(|_| AtomicU32::new(0)).collect();
+        // Each piece's slices of the outputs.
+        let mut pieces = Vec::with_capacity(counts.len());
+        let (mut e_rest, mut o_rest, mut i_rest) = (&mut edges[..], &mut offsets[1..], &mut items[..]);
+        let (mut e_base, mut i_base) = (0usize, 0usize);
+        for (p, &(ne, ns)) in counts.iter().enumerate() {
+            let (e, et) = e_rest.split_at_mut(ne);
+            let (o, ot) = o_rest.split_at_mut(ne);
+            let (i, it) = i_rest.split_at_mut(ns);
+            pieces.push((p, e_base, i_base, e, o, i));
+            (e_rest, o_rest, i_rest) = (et, ot, it);
+            e_base += ne;
+            i_base += ns;
         }
-        keys.par_sort_unstable();
-        let mut edges = Vec::with_capacity(keys.len() / 2 + 1);
-        let mut offsets = Vec::with_capacity(keys.len() / 2 + 2);
-        let mut items = Vec::with_capacity(keys.len());
-        let mut surfel_edges = vec![[EdgeId(0); 4]; self.surfels.len()];
-        offsets.push(0);
-        for group in keys.chunk_by(|x, y| x.0 == y.0) {
-            let e = EdgeId(edges.len() as u32);
-            let a = VertexId((group[0].0 >> 32) as u32);
-            let b = VertexId(group[0].0 as u32);
-            let (ca, cb) = (self.vertex_corners[a.index()], self.vertex_corners[b.index()]);
-            let axis = (0..3).find(|&k| ca[k] != cb[k]).unwrap_or(0);
-            for &(_, slot) in group {
-                surfel_edges[(slot / 4) as usize][(slot % 4) as usize] = e;
-                items.push(SurfelId(slot / 4));
+        pieces.into_par_iter().for_each_init(Vec::new, |out, (p, e_base, i_base, edges, ends, items)| {
+            let (mut le, mut li) = (0, 0);
+            for a in p * PIECE..((p + 1) * PIECE).min(nv) {
+                this.owned_sides(a, out);
+                for group in out.chunk_by(|x, y| x.0 == y.0) {
+                    let e = (e_base + le) as u32;
+                    let first = li;
+                    for &(_, slot) in group {
+                        items[li] = SurfelId(slot / 4);
+                        surfel_edges[slot as usize].store(e, Ordering::Relaxed);
+                        li += 1;
+                    }
+                    ends[le] = (i_base + li) as u32;
+                    let b = group[0].0;
+                    let (ca, cb) = (this.vertex_corners[a], this.vertex_corners[b as usize]);
+                    let axis = (0..3).find(|&k| ca[k] != cb[k]).unwrap_or(0);
+                    let kind = this.edge_kind(ca.min(cb), axis, &items[first..li]);
+                    edges[le] = Edge { vertices: [VertexId(a as u32), VertexId(b)], axis: axis as u8, kind };
+                    le += 1;
+                }
             }
-            offsets.push(items.len() as u32);
-            let kind = self.edge_kind(ca.min(cb), axis, &items[offsets[offsets.len() - 2] as usize..]);
-            edges.push(Edge { vertices: [a, b], axis: axis as u8, kind });
-        }
+        });
+        self.surfel_edges = surfel_edges
+            .par_chunks(4)
+            .map(|c| [0, 1, 2, 3].map(|j| EdgeId(c[j].load(Ordering::Relaxed))))
+            .collect();
         self.edges = edges;
         self.edge_surfels = Lists::from_parts(offsets, items);
-        self.surfel_edges = surfel_edges;
     }
 
     fn edge_kind(&self, corner: [u32; 3], axis: usize, incident: &[SurfelId]) -> EdgeKind {
@@ -676,25 +744,18 @@ impl DigitalSurface {
 
     fn build_vertex_lists(&mut self) {
         let nv = self.vertex_corners.len();
-        let surfels = &self.surfels;
-        self.vertex_surfels = Lists::from_pairs(nv, |f| {
-            for (s, surfel) in surfels.iter().enumerate() {
-                for v in surfel.vertices {
-                    f(v.index(), SurfelId(s as u32));
-                }
+        // A vertex's neighbours: the other ends of its surfels' sides at it, sorted.
+        let (surfels, vertex_surfels) = (&self.surfels, &self.vertex_surfels);
+        self.vertex_neighbours = Lists::par_from_fn(nv, |a, out| {
+            for &s in vertex_surfels.get(a) {
+                let vs = surfels[s.index()].vertices;
+                let i = vs.iter().position(|v| v.index() == a).unwrap_or(0);
+                out.push(vs[(i + 1) % 4]);
+                out.push(vs[(i + 3) % 4]);
             }
+            out.sort_unstable();
+            out.dedup();
         });
-        let edges = &self.edges;
-        let mut neighbours = Lists::from_pairs(nv, |f| {
-            for e in edges {
-                f(e.vertices[0].index(), e.vertices[1]);
-                f(e.vertices[1].index(), e.vertices[0]);
-            }
-        });
-        for v in 0..nv {
-            neighbours.get_mut(v).sort_unstable();
-        }
-        self.vertex_neighbours = neighbours;
         let mut boundary = vec![false; nv];
         for e in &self.edges {
             if e.kind == EdgeKind::Boundary {
@@ -909,6 +970,93 @@ impl DigitalSurface {
             junction_edges: count_kind(EdgeKind::Junction),
             pinched_edges: count_kind(EdgeKind::Pinch),
             pinched_vertices: self.pinched_vertex.iter().filter(|&&b| b).count(),
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use proptest::prelude::*;
+
+    use super::*;
+
+    /// The edges, their surfels, each surfel's edges and each vertex's neighbours as a
+    /// sort of all the surfels' sides by end points and slot gives them.
+    fn by_sorting(s: &DigitalSurface) -> (Vec<Edge>, Lists<SurfelId>, Vec<[EdgeId; 4]>, Lists<VertexId>) {
+        let mut keys: Vec<(u64, u32)> = Vec::new();
+        for (f, surfel) in s.surfels.iter().enumerate() {
+            for i in 0..4 {
+                let (a, b) = (surfel.vertices[i].0, surfel.vertices[(i + 1) % 4].0);
+                keys.push((((a.min(b) as u64) << 32) | a.max(b) as u64, (f as u32) * 4 + i as u32));
+            }
+        }
+        keys.sort_unstable();
+        let (mut edges, mut offsets, mut items) = (Vec::new(), vec![0u32], Vec::new());
+        let mut surfel_edges = vec![[EdgeId(0); 4]; s.surfels.len()];
+        for group in keys.chunk_by(|x, y| x.0 == y.0) {
+            let e = EdgeId(edges.len() as u32);
+            let (a, b) = (VertexId((group[0].0 >> 32) as u32), VertexId(group[0].0 as u32));
+            let (ca, cb) = (s.vertex_corners[a.index()], s.vertex_corners[b.index()]);
+            let axis = (0..3).find(|&k| ca[k] != cb[k]).unwrap_or(0);
+            for &(_, slot) in group {
+                surfel_edges[(slot / 4) as usize][(slot % 4) as usize] = e;
+                items.push(SurfelId(slot / 4));
+            }
+            offsets.push(items.len() as u32);
+            let kind = s.edge_kind(ca.min(cb), axis, &items[offsets[offsets.len() - 2] as usize..]);
+            edges.push(Edge { vertices: [a, b], axis: axis as u8, kind });
+        }
+        let mut lists = vec![Vec::new(); s.vertex_corners.len()];
+        for e in &edges {
+            lists[e.vertices[0].index()].push(e.vertices[1]);
+            lists[e.vertices[1].index()].push(e.vertices[0]);
+        }
+        let mut nbr_offsets = vec![0u32];
+        let mut nbrs = Vec::new();
+        for mut l in lists {
+            l.sort_unstable();
+            nbrs.extend(l);
+            nbr_offsets.push(nbrs.len() as u32);
+        }
+        (edges, Lists::from_parts(offsets, items), surfel_edges, Lists::from_parts(nbr_offsets, nbrs))
+    }
+
+    fn agrees_with_sorting(vol: &LabelVolume) {
+        let Ok(s) = DigitalSurface::from_volume(vol) else { return };
+        let (edges, edge_surfels, surfel_edges, neighbours) = by_sorting(&s);
+        assert_eq!(s.edges, edges);
+        assert_eq!(s.edge_surfels, edge_surfels);
+        assert_eq!(s.surfel_edges, surfel_edges);
+        assert_eq!(s.vertex_neighbours, neighbours);
+    }
+
+    /// Many pieces of vertices: a random 30^3 volume of three labels, closed and open.
+    #[test]
+    fn edges_built_per_vertex_are_those_of_a_sort_of_all_sides() {
+        let mut x = 12345u64;
+        let labels: Vec<u32> = (0..27_000)
+            .map(|_| {
+                x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+                ((x >> 33) % 3) as u32
+            })
+            .collect();
+        let vol = LabelVolume::from_x_fastest([30, 30, 30], labels).unwrap();
+        let s = DigitalSurface::from_volume(&vol).unwrap();
+        assert!(s.num_vertices() > 4 * crate::csr::PIECE);
+        agrees_with_sorting(&vol);
+        agrees_with_sorting(&vol.with_background(None));
+    }
+
+    proptest! {
+        #[test]
+        fn edges_built_per_vertex_are_those_of_a_sort_of_small_volumes(
+            (dims, labels) in (1usize..=5, 1usize..=5, 1usize..=5).prop_flat_map(|(x, y, z)| {
+                (Just([x, y, z]), proptest::collection::vec(0u32..4, x * y * z))
+            }),
+            open in any::<bool>(),
+        ) {
+            let vol = LabelVolume::from_x_fastest(dims, labels).unwrap();
+            agrees_with_sorting(&if open { vol.with_background(None) } else { vol });
         }
     }
 }
