@@ -6,7 +6,7 @@ use rustc_hash::FxHashSet as HashSet;
 use voxreg_digisurf::{DigitalSurface, VertexId};
 
 use crate::boxqp::Boxes;
-use crate::faces::FaceIndex;
+use crate::faces::FaceKeys;
 
 /// The voxels (lattice coordinates, possibly one outside the domain) whose two neighbours
 /// along some axis are both separated from them by a surfel: the thin voxels of every
@@ -16,19 +16,11 @@ pub(crate) fn thin_voxels(surface: &DigitalSurface) -> HashSet<[i64; 3]> {
     thin_and_faces(surface).0
 }
 
-/// The thin voxels and the surfels by face.
-fn thin_and_faces(surface: &DigitalSurface) -> (HashSet<[i64; 3]>, FaceIndex) {
-    let faces = FaceIndex::new(surface);
-    let mut thin = HashSet::default();
-    for s in surface.surfels() {
-        // Surfel (axis, cell) is the lower face of voxel `cell`: is its upper face one too?
-        let (axis, cell) = (s.axis as usize, s.cell.map(i64::from));
-        let mut up = cell;
-        up[axis] += 1;
-        if faces.contains(axis, up) {
-            thin.insert(cell);
-        }
-    }
+/// The thin voxels and the surfels' faces.
+fn thin_and_faces(surface: &DigitalSurface) -> (HashSet<[i64; 3]>, FaceKeys) {
+    let faces = FaceKeys::new(surface);
+    // Surfel (axis, cell) is the lower face of voxel `cell`: is its upper face one too?
+    let thin = faces.between_two_faces().into_iter().collect();
     (thin, faces)
 }
 
