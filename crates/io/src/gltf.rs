@@ -6,6 +6,7 @@ use std::path::Path;
 use base64::{engine::general_purpose::STANDARD as BASE64, Engine as _};
 use glam::{DVec3, Vec3};
 use gltf::json::{self as gj, validation::Checked, validation::USize64, Index};
+use rayon::prelude::*;
 
 use crate::mesh::write_atomically;
 use crate::volume::lowercase_extension;
@@ -106,6 +107,16 @@ fn parts(mesh: &QuadMesh) -> Vec<Part> {
     out
 }
 
+/// `out` as one little-endian `f32 x 3` record of `at(v)` per vertex `v` of `vertices`,
+/// written in parallel.
+fn vec3_records(out: &mut [u8], vertices: &[u32], at: impl Fn(usize) -> Vec3 + Sync) {
+    out.par_chunks_mut(12).zip(vertices.par_iter()).for_each(|(o, &v)| {
+        for (chunk, c) in o.chunks_exact_mut(4).zip(at(v as usize).to_array()) {
+            chunk.copy_from_slice(&c.to_le_bytes());
+        }
+    })
+}
+
 fn material_json(m: &Material) -> gj::Material {
     let [r, g, b] = m.linear_rgb();
     let opacity = m.opacity();
@@ -145,15 +156,17 @@ fn encode_gltf(mesh: &QuadMesh, binary: bool, w: &mut dyn Write) -> io::Result<(
     // One buffer: per part, positions and normals (f32 x 3), then u32 indices.
     let mut bin: Vec<u8> = Vec::new();
     let buffer = Index::new(0);
-    let view = |root: &mut gj::Root, bin: &mut Vec<u8>, bytes: &[u8], target| {
+    // A view of `len` bytes appended to the buffer, written by `fill`.
+    let view = |root: &mut gj::Root, bin: &mut Vec<u8>, len: usize, target, fill: &dyn Fn(&mut [u8])| {
         while bin.len() % 4 != 0 {
             bin.push(0);
         }
         let offset = bin.len();
-        bin.extend_from_slice(bytes);
+        bin.resize(offset + len, 0);
+        fill(&mut bin[offset..]);
         root.push(gj::buffer::View {
             buffer,
-            byte_length: USize64::from(bytes.len()),
+            byte_length: USize64::from(len),
             byte_offset: Some(USize64::from(offset)),
             byte_stride: None,
             name: None,
@@ -176,32 +189,45 @@ fn encode_gltf(mesh: &QuadMesh, binary: bool, w: &mut dyn Write) -> io::Result<(
         normalized: false,
         sparse: None,
     };
+    let reserved: usize = parts.iter().map(|p| 24 * p.vertices.len() + 4 * p.triangles.len()).sum();
+    bin.reserve_exact(reserved);
     let mut primitives = Vec::new();
     for part in &parts {
-        let pos: Vec<Vec3> = part.vertices.iter().map(|&v| mesh.positions[v as usize].as_vec3()).collect();
-        let lo = pos.iter().fold(Vec3::splat(f32::INFINITY), |a, &b| a.min(b));
-        let hi = pos.iter().fold(Vec3::splat(f32::NEG_INFINITY), |a, &b| a.max(b));
-        let pos_bytes: Vec<u8> = pos.iter().flat_map(|p| p.to_array()).flat_map(f32::to_le_bytes).collect();
-        let nrm_bytes: Vec<u8> = part
-            .vertices
-            .iter()
-            .flat_map(|&v| normals[v as usize].to_array())
-            .flat_map(f32::to_le_bytes)
-            .collect();
-        let idx_bytes: Vec<u8> = part.triangles.iter().flat_map(|i| i.to_le_bytes()).collect();
-        let vp = view(&mut root, &mut bin, &pos_bytes, gj::buffer::Target::ArrayBuffer);
-        let vn = view(&mut root, &mut bin, &nrm_bytes, gj::buffer::Target::ArrayBuffer);
-        let vi = view(&mut root, &mut bin, &idx_bytes, gj::buffer::Target::ElementArrayBuffer);
+        let position = |v: usize| mesh.positions[v].as_vec3();
+        let (lo, hi) =
+            part.vertices.par_iter().map(|&v| (position(v as usize), position(v as usize))).reduce(
+                || (Vec3::splat(f32::INFINITY), Vec3::splat(f32::NEG_INFINITY)),
+                |a, b| (a.0.min(b.0), a.1.max(b.1)),
+            );
+        let nv = part.vertices.len();
+        let vp = view(&mut root, &mut bin, 12 * nv, gj::buffer::Target::ArrayBuffer, &|out| {
+            vec3_records(out, &part.vertices, position)
+        });
+        let vn = view(&mut root, &mut bin, 12 * nv, gj::buffer::Target::ArrayBuffer, &|out| {
+            vec3_records(out, &part.vertices, |v| normals[v])
+        });
+        let indices = |out: &mut [u8]| {
+            out.par_chunks_mut(4)
+                .zip(part.triangles.par_iter())
+                .for_each(|(o, i)| o.copy_from_slice(&i.to_le_bytes()))
+        };
+        let vi = view(
+            &mut root,
+            &mut bin,
+            4 * part.triangles.len(),
+            gj::buffer::Target::ElementArrayBuffer,
+            &indices,
+        );
         let f32c = gj::accessor::ComponentType::F32;
         let ap = root.push(accessor(
             vp,
-            pos.len(),
+            nv,
             f32c,
             gj::accessor::Type::Vec3,
             Some(gj::Value::from(lo.to_array().to_vec())),
             Some(gj::Value::from(hi.to_array().to_vec())),
         ));
-        let an = root.push(accessor(vn, pos.len(), f32c, gj::accessor::Type::Vec3, None, None));
+        let an = root.push(accessor(vn, nv, f32c, gj::accessor::Type::Vec3, None, None));
         let ai = root.push(accessor(
             vi,
             part.triangles.len(),
@@ -280,8 +306,7 @@ fn encode_gltf(mesh: &QuadMesh, binary: bool, w: &mut dyn Write) -> io::Result<(
             json: json.into(),
             bin: Some(bin.into()),
         };
-        let bytes = glb.to_vec().map_err(io::Error::other)?;
-        w.write_all(&bytes)
+        glb.to_writer(w).map_err(io::Error::other)
     } else {
         w.write_all(&json)
     }
