@@ -306,7 +306,7 @@ fn encode_gltf(mesh: &QuadMesh, binary: bool, w: &mut dyn Write) -> io::Result<(
             json: json.into(),
             bin: Some(bin.into()),
         };
-        glb.to_writer(w).map_err(io::Error::other)
+        glb.to_writer(crate::mesh::SmallWrites(w)).map_err(io::Error::other)
     } else {
         w.write_all(&json)
     }

@@ -525,6 +525,21 @@ pub(crate) fn write_temporary(
     Ok(tmp)
 }
 
+/// A writer that passes each write on in parts of at most 8 KiB. On the machine measured,
+/// writing a large buffer to a file in one call took the kernel longer than in small
+/// parts (the parts a `BufWriter` would flush).
+pub(crate) struct SmallWrites<'a>(pub(crate) &'a mut dyn Write);
+
+impl Write for SmallWrites<'_> {
+    fn write(&mut self, buf: &[u8]) -> io::Result<usize> {
+        self.0.write(&buf[..buf.len().min(1 << 13)])
+    }
+
+    fn flush(&mut self) -> io::Result<()> {
+        self.0.flush()
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use voxreg_digisurf::LabelVolume;

@@ -5,7 +5,7 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
-use crate::mesh::{write_atomically, write_temporary};
+use crate::mesh::{write_atomically, write_temporary, SmallWrites};
 use crate::{IoError, QuadMesh};
 
 /// Writes `mesh` to `path` as an ASCII Wavefront OBJ file.
@@ -143,12 +143,8 @@ fn write_lines(w: &mut dyn Write, n: usize, line: impl Fn(&mut Vec<u8>, usize) +
                 line(out, i);
             }
         });
-        // In pieces of a few kilobytes, as formatted one line at a time: on the machine
-        // measured, writes of hundreds of kilobytes took longer in the kernel.
         for piece in &buffers {
-            for part in piece.chunks(1 << 13) {
-                w.write_all(part)?;
-            }
+            SmallWrites(&mut *w).write_all(piece)?;
         }
     }
     Ok(())
