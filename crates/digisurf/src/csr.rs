@@ -47,15 +47,10 @@ impl<T: Copy + Default + Send + Sync> Lists<T> {
             offsets[i + 1] += offsets[i];
         }
         let mut items = vec![T::default(); offsets[n] as usize];
-        let mut pieces = Vec::with_capacity(n.div_ceil(PIECE));
-        let mut rest: &mut [T] = &mut items;
-        for start in (0..n).step_by(PIECE) {
-            let end = (start + PIECE).min(n);
-            let (head, tail) = rest.split_at_mut((offsets[end] - offsets[start]) as usize);
-            pieces.push((start, end, head));
-            rest = tail;
-        }
-        pieces.into_par_iter().for_each_init(Vec::new, |out, (start, end, piece)| {
+        let ranges: Vec<(usize, usize)> = (0..n).step_by(PIECE).map(|s| (s, (s + PIECE).min(n))).collect();
+        let pieces =
+            split_lengths(&mut items, ranges.iter().map(|&(s, e)| (offsets[e] - offsets[s]) as usize));
+        ranges.into_par_iter().zip(pieces).for_each_init(Vec::new, |out, ((start, end), piece)| {
             let mut at = 0;
             for i in start..end {
                 out.clear();
@@ -70,6 +65,20 @@ impl<T: Copy + Default + Send + Sync> Lists<T> {
 
 /// Lists per piece of [`Lists::par_from_fn`].
 pub(crate) const PIECE: usize = 4096;
+
+/// `slice` cut into consecutive parts of the given lengths (for filling them in parallel).
+pub(crate) fn split_lengths<T>(
+    mut slice: &mut [T],
+    lengths: impl IntoIterator<Item = usize>,
+) -> Vec<&mut [T]> {
+    let mut parts = Vec::new();
+    for len in lengths {
+        let (head, tail) = std::mem::take(&mut slice).split_at_mut(len);
+        parts.push(head);
+        slice = tail;
+    }
+    parts
+}
 
 impl<T> Lists<T> {
     /// Builds from explicit offsets and items.

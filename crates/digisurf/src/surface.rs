@@ -5,7 +5,7 @@ use std::collections::HashMap;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::csr::Lists;
+use crate::csr::{split_lengths, Lists};
 use crate::data::VertexData;
 use crate::{
     EdgeId, InterfaceId, LabelStorage, LabelView, LabelVolume, RegionId, RegionMap, Regions, SurfaceError,
@@ -673,20 +673,22 @@ impl DigitalSurface {
         let mut offsets = vec![0u32; num_edges + 1];
         let mut items = vec![SurfelId(0); num_sides];
         let surfel_edges: Vec<AtomicU32> = (0..num_sides).map(|_| AtomicU32::new(0)).collect();
-        // Each piece's slices of the outputs.
-        let mut pieces = Vec::with_capacity(counts.len());
-        let (mut e_rest, mut o_rest, mut i_rest) = (&mut edges[..], &mut offsets[1..], &mut items[..]);
-        let (mut e_base, mut i_base) = (0usize, 0usize);
-        for (p, &(ne, ns)) in counts.iter().enumerate() {
-            let (e, et) = e_rest.split_at_mut(ne);
-            let (o, ot) = o_rest.split_at_mut(ne);
-            let (i, it) = i_rest.split_at_mut(ns);
-            pieces.push((p, e_base, i_base, e, o, i));
-            (e_rest, o_rest, i_rest) = (et, ot, it);
-            e_base += ne;
-            i_base += ns;
-        }
-        pieces.into_par_iter().for_each_init(Vec::new, |out, (p, e_base, i_base, edges, ends, items)| {
+        // Each piece's slices of the outputs, and where they start.
+        let bases: Vec<(usize, usize)> = counts
+            .iter()
+            .scan((0, 0), |at, &(ne, ns)| {
+                let base = *at;
+                *at = (at.0 + ne, at.1 + ns);
+                Some(base)
+            })
+            .collect();
+        let pieces = bases
+            .into_par_iter()
+            .enumerate()
+            .zip(split_lengths(&mut edges, counts.iter().map(|c| c.0)))
+            .zip(split_lengths(&mut offsets[1..], counts.iter().map(|c| c.0)))
+            .zip(split_lengths(&mut items, counts.iter().map(|c| c.1)));
+        pieces.for_each_init(Vec::new, |out, ((((p, (e_base, i_base)), edges), ends), items)| {
             let (mut le, mut li) = (0, 0);
             for a in p * PIECE..((p + 1) * PIECE).min(nv) {
                 this.owned_sides(a, out);

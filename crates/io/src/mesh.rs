@@ -525,9 +525,9 @@ pub(crate) fn write_temporary(
     Ok(tmp)
 }
 
-/// A writer that passes each write on in parts of at most 8 KiB. On the machine measured,
-/// writing a large buffer to a file in one call took the kernel longer than in small
-/// parts (the parts a `BufWriter` would flush).
+/// A writer that passes each write on in parts of at most 8 KiB, the parts a `BufWriter`
+/// flushes. Why: a large buffer written to a file in one call took the kernel longer than
+/// the same bytes in small parts (`docs/performance.md`, "Writing large meshes").
 pub(crate) struct SmallWrites<'a>(pub(crate) &'a mut dyn Write);
 
 impl Write for SmallWrites<'_> {
