@@ -948,6 +948,41 @@ fn face_row_reads(stencil: &Stencil, changed: &[bool], i: usize) -> bool {
         })
 }
 
+/// Below one changed vertex in this many, a face update finds the rows to recompute from
+/// the changed vertices ([`rows_near`]) rather than by testing every row
+/// ([`face_row_reads`]): a late active-set round changes a few hundred holds of millions.
+const SPARSE_CHANGES: usize = 256;
+
+/// The aggregates holding a vertex within two edges of one of `changes` (ascending, each
+/// once): every row whose [`face_row`] reads a changed vertex, since a row reads its
+/// members, their faces' vertices (edge neighbours) and their fairness 2-rings (fairness
+/// neighbours are edge neighbours, some cut by a mask), and edges go both ways. Where a
+/// mask cuts fairness neighbours it may hold a few rows more, which recompute to the same
+/// numbers.
+fn rows_near(stencil: &Stencil, agg: &Aggregation, changes: &[u32]) -> Vec<usize> {
+    let parent = &agg.parent;
+    let mut rows: Vec<u32> = changes
+        .par_iter()
+        .flat_map_iter(|&c| {
+            let c = c as usize;
+            let mut out = vec![parent[c]];
+            for s in stencil.faces(c) {
+                for v in [s.prev as usize, s.next as usize] {
+                    out.push(parent[v]);
+                    for t in stencil.faces(v) {
+                        out.push(parent[t.prev as usize]);
+                        out.push(parent[t.next as usize]);
+                    }
+                }
+            }
+            out
+        })
+        .collect();
+    rows.par_sort_unstable();
+    rows.dedup();
+    rows.into_iter().map(|a| a as usize).collect()
+}
+
 /// [`l1_smoother`] of a face's level: `M_I = A_II + sum_{J != I} (G_IJ + |d_IJ|)` (`G` the
 /// majorant part, `d` the diagonal part of [`FACE`]); a coordinate that no free vertex
 /// moves (a zero row) gets the identity.
@@ -1533,14 +1568,19 @@ impl Vcycle {
         built: FaceLevels,
     ) -> Option<FaceLevels> {
         let agg = self.aggregations.first()?;
-        let count = changed.iter().filter(|&&c| c).count();
-        if 2 * count >= face.len() {
+        let changes: Vec<u32> =
+            (0..changed.len()).into_par_iter().filter(|&i| changed[i]).map(|i| i as u32).collect();
+        if 2 * changes.len() >= face.len() {
             return None;
         }
-        let mut dirty: Vec<usize> = (0..agg.len())
-            .into_par_iter()
-            .filter(|&a| agg.members(a).iter().any(|&i| face_row_reads(stencil, changed, i as usize)))
-            .collect();
+        let mut dirty: Vec<usize> = if changes.len() * SPARSE_CHANGES < face.len() {
+            rows_near(stencil, agg, &changes)
+        } else {
+            (0..agg.len())
+                .into_par_iter()
+                .filter(|&a| agg.members(a).iter().any(|&i| face_row_reads(stencil, changed, i as usize)))
+                .collect()
+        };
         let FaceLevels { mut levels, mut rows, face: mut kept, .. } = built;
         if rows.len() != levels.len()
             || !rows[0].recompute(&dirty, |acc, a| face_row(acc, stencil, coef, agg, face, a))
@@ -1831,11 +1871,48 @@ pub(crate) mod tests {
         });
     }
 
+    /// The rows found from the changed vertices are those that read one, and a superset
+    /// of them where a fairness mask cuts neighbours.
+    #[test]
+    fn rows_near_the_changes_are_the_rows_that_read_them() {
+        let torus = Torus { major: 8.0, minor: 3.0 };
+        let s = DigitalSurface::from_volume(&digitize(&torus, 1.0)).unwrap();
+        let mut rng = Lcg::new(11);
+        let cut: Vec<bool> = (0..s.num_edges()).map(|_| rng.next_f64() < 0.2).collect();
+        let mask = crate::FairnessMask::from_cut_edges(&s, &cut).unwrap();
+        for m in [None, Some(&mask)] {
+            let st = Stencil::new(&s, m).unwrap();
+            let params = MultigridParams { coarsest_nodes: 20, ..Default::default() };
+            let h = Hierarchy::new(&st, crate::stencil::lattice_corners(&s), &params);
+            let agg = &h.aggregations[0];
+            for count in [1, 7, 60] {
+                let mut changed = vec![false; st.len()];
+                for _ in 0..count {
+                    changed[rng.below(st.len() as u32) as usize] = true;
+                }
+                let changes: Vec<u32> = (0..st.len() as u32).filter(|&i| changed[i as usize]).collect();
+                let near = rows_near(&st, agg, &changes);
+                let read: Vec<usize> = (0..agg.len())
+                    .filter(|&a| agg.members(a).iter().any(|&i| face_row_reads(&st, &changed, i as usize)))
+                    .collect();
+                assert!(!read.is_empty());
+                match m {
+                    None => assert_eq!(near, read),
+                    Some(_) => {
+                        assert!(read.iter().all(|a| near.binary_search(a).is_ok()));
+                        assert!(near.len() < 2 * read.len(), "{} rows near, {} read", near.len(), read.len());
+                    }
+                }
+            }
+        }
+    }
+
     #[test]
     fn updated_face_levels_are_those_built_anew() {
         on_torus(0.0, 3, |st, c, h, rng| {
             let first = random_face(st.len(), rng);
-            // The next face: the first one with one vertex, a few, or a third of them changed
+            // The next face: the first one with one vertex, a few (the rows to rewrite found
+            // from the changes, or by testing every row), or a third of them changed
             // (updates: a few rows rewritten one by one, or most rows, all rewritten in
             // parallel), then one with most of them changed (built anew).
             let flipped = |step: usize| {
@@ -1845,10 +1922,13 @@ pub(crate) mod tests {
                 }
                 next
             };
-            let (one, few, third) = (flipped(st.len()), flipped(37), flipped(3));
+            let (one, two, few, third) =
+                (flipped(st.len()), flipped(st.len().div_ceil(2)), flipped(37), flipped(3));
+            // One and two changes: below the share where the rows are found from the changes.
+            assert!(2 * SPARSE_CHANGES < st.len() && st.len() / 37 * SPARSE_CHANGES > st.len());
             let many = random_face(st.len(), rng);
             let r: Vec<DVec3> = (0..st.len()).map(|_| rng.vec3(-1.0, 1.0)).collect();
-            for next in [one, few, third, many] {
+            for next in [one, two, few, third, many] {
                 let mut updated = h.numeric(st, c, &Interrupt::never(), None).unwrap();
                 updated.set_face(st, c, &first, false);
                 updated.set_face(st, c, &next, true);
