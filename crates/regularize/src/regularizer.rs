@@ -324,7 +324,16 @@ impl Regularizer {
         };
         times.normals = t.elapsed().as_secs_f64();
 
-        // The solver, kept while its settings do not change.
+        // The solver, kept while its settings do not change. Its setup (the operator's
+        // structure, the multigrid hierarchy, the clamping boxes) is the first solve's
+        // stage for a progress display, as it is the report's `assemble`, not `normals`.
+        interrupt.check()?;
+        progress(&Event {
+            stage: Stage::Solve { round: 0 },
+            fraction: 1.0 / stages_total,
+            iteration: None,
+            input: None,
+        });
         interrupt.check()?;
         if self.solver.as_ref().is_none_or(|(p, _)| *p != params.solver) {
             self.solver = Some((params.solver, Solver::new(&surface, &params.solver)?));
