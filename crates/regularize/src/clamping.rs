@@ -13,15 +13,24 @@ use crate::faces::FaceKeys;
 /// region, background included (one-voxel slits).
 #[cfg(test)]
 pub(crate) fn thin_voxels(surface: &DigitalSurface) -> HashSet<[i64; 3]> {
-    thin_and_faces(surface).0
+    thin_and_corners(surface).0
 }
 
-/// The thin voxels and the surfels' faces.
-fn thin_and_faces(surface: &DigitalSurface) -> (HashSet<[i64; 3]>, FaceKeys) {
-    let faces = FaceKeys::new(surface);
+/// The thin voxels, and per vertex whether it is a corner of one: each corner of a thin
+/// voxel lies on one of the two surfels that make it thin, whose vertices are the
+/// surface's at those corners (one vertex per lattice corner).
+fn thin_and_corners(surface: &DigitalSurface) -> (HashSet<[i64; 3]>, Vec<bool>) {
     // Surfel (axis, cell) is the lower face of voxel `cell`: is its upper face one too?
-    let thin = faces.between_two_faces().into_iter().collect();
-    (thin, faces)
+    let pairs = FaceKeys::new(surface).between_two_faces();
+    let mut corner = vec![false; surface.num_vertices()];
+    for (_, surfels) in &pairs {
+        for s in surfels {
+            for v in surface.surfels()[*s as usize].vertices {
+                corner[v.index()] = true;
+            }
+        }
+    }
+    (pairs.into_iter().map(|p| p.0).collect(), corner)
 }
 
 /// The boxes of the displacement from the input: `[-half, half]` voxel along each axis
@@ -39,14 +48,19 @@ pub(crate) fn clamp_boxes(surface: &DigitalSurface, half: f64, thin: Option<f64>
     let mut boxes = Boxes::uniform(n, half * h);
     let Some(t) = thin else { return boxes };
     let cap = t.min(half) * h;
-    let (thin, faces) = thin_and_faces(surface);
+    let (thin, corner) = thin_and_corners(surface);
     if thin.is_empty() {
         return boxes;
     }
-    // Each vertex bounds only its own box: in parallel.
+    // Each vertex bounds only its own box, and only a thin voxel's corner has one to bound:
+    // in parallel.
     let Boxes { lo, hi } = &mut boxes;
     lo.par_iter_mut().zip(hi.par_iter_mut()).enumerate().for_each(|(v, (lo, hi))| {
-        let k = surface.vertex_corner(VertexId(v as u32)).map(i64::from);
+        if !corner[v] {
+            return;
+        }
+        let v = VertexId(v as u32);
+        let k = surface.vertex_corner(v).map(i64::from);
         for o in 0..8usize {
             let off = [o & 1, (o >> 1) & 1, (o >> 2) & 1];
             // Voxel `k - off` has its centre on the + side along axis a when off[a] = 0.
@@ -59,7 +73,12 @@ pub(crate) fn clamp_boxes(surface: &DigitalSurface, half: f64, thin: Option<f64>
                 // voxel is on the + side.
                 let mut cell = voxel;
                 cell[a] += off[a] as i64;
-                if !faces.contains(a, cell) {
+                // The face has the vertex's corner: a surfel there is one of the vertex's.
+                let surfel = surface.vertex_surfels(v).iter().any(|&s| {
+                    let s = surface.surfel(s);
+                    s.axis as usize == a && s.cell.map(i64::from) == cell
+                });
+                if !surfel {
                     continue;
                 }
                 if off[a] == 0 {
@@ -78,6 +97,61 @@ mod tests {
     use super::*;
     use glam::DVec3;
     use voxreg_digisurf::{LabelVolume, RegionMap};
+
+    /// [`clamp_boxes`] computed the long way: every vertex tests the eight voxels at its
+    /// corner, and each face in the surface's sorted faces.
+    fn boxes_by_lookups(surface: &DigitalSurface, half: f64, t: f64) -> Boxes {
+        let h = surface.spacing();
+        let cap = t.min(half) * h;
+        let thin = thin_voxels(surface);
+        let faces = FaceKeys::new(surface);
+        let mut boxes = Boxes::uniform(surface.num_vertices(), half * h);
+        for v in 0..surface.num_vertices() {
+            let k = surface.vertex_corner(VertexId(v as u32)).map(i64::from);
+            for o in 0..8usize {
+                let off = [o & 1, (o >> 1) & 1, (o >> 2) & 1];
+                let voxel = [k[0] - off[0] as i64, k[1] - off[1] as i64, k[2] - off[2] as i64];
+                if !thin.contains(&voxel) {
+                    continue;
+                }
+                for a in 0..3 {
+                    let mut cell = voxel;
+                    cell[a] += off[a] as i64;
+                    if faces.contains(a, cell) {
+                        if off[a] == 0 {
+                            boxes.hi[v][a] = boxes.hi[v][a].min(cap[a]);
+                        } else {
+                            boxes.lo[v][a] = boxes.lo[v][a].max(-cap[a]);
+                        }
+                    }
+                }
+            }
+        }
+        boxes
+    }
+
+    /// The boxes bounded from the thin voxels' corners and the vertices' own surfels are
+    /// those of every vertex looking every face up, on random volumes of a few labels
+    /// (pinched edges and vertices, one-voxel parts and slits), with and without a
+    /// background label.
+    #[test]
+    fn boxes_from_the_thin_voxels_corners_are_those_of_every_vertex() {
+        let mut rng = voxreg_testkit::Lcg::new(7);
+        for (case, labels) in [2u32, 3, 4, 2].into_iter().enumerate() {
+            let dims = [6 + rng.below(5) as usize, 5 + rng.below(5) as usize, 4 + rng.below(5) as usize];
+            let volume = LabelVolume::from_fn(dims, |_| rng.below(labels));
+            let volume = if case % 2 == 0 { volume.with_background(Some(0)) } else { volume };
+            let surface = DigitalSurface::new(&volume, &RegionMap::per_label()).unwrap();
+            assert!(!thin_voxels(&surface).is_empty());
+            for (half, t) in [(0.495, 0.2), (0.3, 0.45)] {
+                assert_eq!(
+                    clamp_boxes(&surface, half, Some(t)),
+                    boxes_by_lookups(&surface, half, t),
+                    "case {case}"
+                );
+            }
+        }
+    }
 
     #[test]
     fn a_plate_is_thin_and_its_vertices_keep_a_quarter_voxel_from_its_mid_plane() {

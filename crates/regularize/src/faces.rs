@@ -92,14 +92,15 @@ impl FaceKeys {
     }
 
     /// Whether face `(axis, cell)` is a surfel.
+    #[cfg(test)]
     pub(crate) fn contains(&self, axis: usize, cell: [i64; 3]) -> bool {
         self.find_from(0, axis, cell).is_some()
     }
 
     /// The voxels whose two faces along some axis are both surfels, each once per such
-    /// axis, in parallel: each surfel looks for the face one voxel after it along its
-    /// axis, which comes after it in the keys' order.
-    pub(crate) fn between_two_faces(&self) -> Vec<[i64; 3]> {
+    /// axis, with those two surfels (lower, upper), in parallel: each surfel looks for the
+    /// face one voxel after it along its axis, which comes after it in the keys' order.
+    pub(crate) fn between_two_faces(&self) -> Vec<([i64; 3], [u32; 2])> {
         (0..self.keys.len())
             .into_par_iter()
             .with_min_len(4096)
@@ -107,7 +108,7 @@ impl FaceKeys {
                 let (axis, cell) = self.face(self.keys[p].0);
                 let mut up = cell;
                 up[axis] += 1;
-                self.find_from(p, axis, up).map(|_| cell)
+                self.find_from(p, axis, up).map(|q| (cell, [self.keys[p].1, self.keys[q].1]))
             })
             .collect()
     }
@@ -169,7 +170,16 @@ mod tests {
                 }
             }
         }
-        let mut found = keys.between_two_faces();
+        let pairs = keys.between_two_faces();
+        // Each voxel's two surfels: its lower face, and the face one voxel up the same axis.
+        for (cell, [lower, upper]) in &pairs {
+            let (lo, hi) = (surface.surfels()[*lower as usize], surface.surfels()[*upper as usize]);
+            assert_eq!(lo.axis, hi.axis);
+            let mut up = *cell;
+            up[lo.axis as usize] += 1;
+            assert_eq!((lo.cell.map(i64::from), hi.cell.map(i64::from)), (*cell, up));
+        }
+        let mut found: Vec<[i64; 3]> = pairs.into_iter().map(|p| p.0).collect();
         found.sort_unstable();
         both.sort_unstable();
         assert!(!both.is_empty());
