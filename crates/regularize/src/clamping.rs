@@ -1,6 +1,7 @@
 //! The clamping boxes of voxel art: the papers' cubes around each vertex, shrunk around
 //! thin voxels so that one-voxel parts keep their thickness.
 
+use glam::DVec3;
 use rayon::prelude::*;
 use rustc_hash::FxHashSet as HashSet;
 use voxreg_digisurf::{DigitalSurface, VertexId};
@@ -60,36 +61,52 @@ pub(crate) fn clamp_boxes(surface: &DigitalSurface, half: f64, thin: Option<f64>
             return;
         }
         let v = VertexId(v as u32);
-        let k = surface.vertex_corner(v).map(i64::from);
-        for o in 0..8usize {
-            let off = [o & 1, (o >> 1) & 1, (o >> 2) & 1];
-            // Voxel `k - off` has its centre on the + side along axis a when off[a] = 0.
-            let voxel = [k[0] - off[0] as i64, k[1] - off[1] as i64, k[2] - off[2] as i64];
-            if !thin.contains(&voxel) {
-                continue;
-            }
-            for a in 0..3 {
-                // The voxel's face on the vertex's side along a: its lower face when the
-                // voxel is on the + side.
-                let mut cell = voxel;
-                cell[a] += off[a] as i64;
-                // The face has the vertex's corner: a surfel there is one of the vertex's.
-                let surfel = surface.vertex_surfels(v).iter().any(|&s| {
-                    let s = surface.surfel(s);
-                    s.axis as usize == a && s.cell.map(i64::from) == cell
-                });
-                if !surfel {
-                    continue;
-                }
-                if off[a] == 0 {
-                    hi[a] = hi[a].min(cap[a]);
-                } else {
-                    lo[a] = lo[a].max(-cap[a]);
-                }
-            }
-        }
+        // A face at the vertex's corner that is a surfel is one of the vertex's.
+        let is_surfel = |a: usize, cell: [i64; 3]| {
+            surface.vertex_surfels(v).iter().any(|&s| {
+                let s = surface.surfel(s);
+                s.axis as usize == a && s.cell.map(i64::from) == cell
+            })
+        };
+        bound_towards_thin(surface.vertex_corner(v), &thin, cap, lo, hi, is_surfel);
     });
     boxes
+}
+
+/// Bounds the box `[lo, hi]` of the vertex at lattice corner `corner` towards each thin
+/// voxel at that corner, along each axis where the voxel's face on the vertex's side is a
+/// surfel (`is_surfel(axis, cell)`), to `cap`.
+fn bound_towards_thin(
+    corner: [u32; 3],
+    thin: &HashSet<[i64; 3]>,
+    cap: DVec3,
+    lo: &mut DVec3,
+    hi: &mut DVec3,
+    is_surfel: impl Fn(usize, [i64; 3]) -> bool,
+) {
+    let k = corner.map(i64::from);
+    for o in 0..8usize {
+        let off = [o & 1, (o >> 1) & 1, (o >> 2) & 1];
+        // Voxel `k - off` has its centre on the + side along axis a when off[a] = 0.
+        let voxel = [k[0] - off[0] as i64, k[1] - off[1] as i64, k[2] - off[2] as i64];
+        if !thin.contains(&voxel) {
+            continue;
+        }
+        for a in 0..3 {
+            // The voxel's face on the vertex's side along a: its lower face when the
+            // voxel is on the + side.
+            let mut cell = voxel;
+            cell[a] += off[a] as i64;
+            if !is_surfel(a, cell) {
+                continue;
+            }
+            if off[a] == 0 {
+                hi[a] = hi[a].min(cap[a]);
+            } else {
+                lo[a] = lo[a].max(-cap[a]);
+            }
+        }
+    }
 }
 
 #[cfg(test)]
@@ -98,34 +115,16 @@ mod tests {
     use glam::DVec3;
     use voxreg_digisurf::{LabelVolume, RegionMap};
 
-    /// [`clamp_boxes`] computed the long way: every vertex tests the eight voxels at its
-    /// corner, and each face in the surface's sorted faces.
+    /// [`clamp_boxes`] computed the long way: every vertex, each face looked up in the
+    /// surface's sorted faces.
     fn boxes_by_lookups(surface: &DigitalSurface, half: f64, t: f64) -> Boxes {
         let h = surface.spacing();
-        let cap = t.min(half) * h;
-        let thin = thin_voxels(surface);
-        let faces = FaceKeys::new(surface);
+        let (thin, faces) = (thin_voxels(surface), FaceKeys::new(surface));
         let mut boxes = Boxes::uniform(surface.num_vertices(), half * h);
         for v in 0..surface.num_vertices() {
-            let k = surface.vertex_corner(VertexId(v as u32)).map(i64::from);
-            for o in 0..8usize {
-                let off = [o & 1, (o >> 1) & 1, (o >> 2) & 1];
-                let voxel = [k[0] - off[0] as i64, k[1] - off[1] as i64, k[2] - off[2] as i64];
-                if !thin.contains(&voxel) {
-                    continue;
-                }
-                for a in 0..3 {
-                    let mut cell = voxel;
-                    cell[a] += off[a] as i64;
-                    if faces.contains(a, cell) {
-                        if off[a] == 0 {
-                            boxes.hi[v][a] = boxes.hi[v][a].min(cap[a]);
-                        } else {
-                            boxes.lo[v][a] = boxes.lo[v][a].max(-cap[a]);
-                        }
-                    }
-                }
-            }
+            let corner = surface.vertex_corner(VertexId(v as u32));
+            let (lo, hi) = (&mut boxes.lo[v], &mut boxes.hi[v]);
+            bound_towards_thin(corner, &thin, t.min(half) * h, lo, hi, |a, cell| faces.contains(a, cell));
         }
         boxes
     }
