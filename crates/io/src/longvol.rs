@@ -5,13 +5,10 @@
 //! them), `x` fastest, then `y`, then `z`. Version 2 stores them raw, version 3
 //! compresses them with zlib.
 
-use std::io::Read;
 use std::path::Path;
 
-use flate2::read::ZlibDecoder;
-
 use crate::samples::{check_data_len, data_len, decode, Layout, Order};
-use crate::vol::parse_header;
+use crate::vol::{inflate_at_most, parse_header};
 use crate::volume::{checked_voxel_count, read_file};
 use crate::{DataType, Endian, IoError, Voxels};
 
@@ -35,22 +32,7 @@ pub fn read_longvol(path: &Path) -> Result<Voxels, IoError> {
 pub fn read_longvol_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> {
     let (header, data_start) = parse_header(bytes, path, ".longvol")?;
     let dims = header.dims(path)?;
-    let compressed = match header.get("Version") {
-        Some("2") => false,
-        Some("3") => true,
-        Some(v) => {
-            return Err(IoError::unsupported(
-                path,
-                format!("Version {v}: only versions 2 (raw) and 3 (zlib) are read"),
-            ))
-        }
-        None => {
-            return Err(IoError::unsupported(
-                path,
-                "no Version field: the pre-version-2 layout (binary size header) is not read",
-            ))
-        }
-    };
+    let compressed = header.compressed(path)?;
     checked_voxel_count(path, dims, 8 + 8)?;
     let layout = Layout {
         dims: dims.map(|d| d as usize), // fits: each is at most the voxel count
@@ -61,13 +43,7 @@ pub fn read_longvol_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> 
     let expected = data_len(&layout);
     let data = &bytes[data_start..];
     if compressed {
-        // Inflate at most one byte more than declared: a zlib bomb or a header that
-        // understates the data is caught without inflating everything.
-        let mut voxels = Vec::new();
-        ZlibDecoder::new(data)
-            .take(expected + 1)
-            .read_to_end(&mut voxels)
-            .map_err(|e| IoError::format(path, format!("corrupt or truncated zlib voxel data: {e}")))?;
+        let voxels = inflate_at_most(data, expected as usize, path)?;
         check_data_len(path, voxels.len(), expected as usize, &layout)?;
         decode(path, &voxels, layout, None)
     } else {

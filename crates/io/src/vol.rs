@@ -52,34 +52,13 @@ pub fn read_vol_bytes(bytes: &[u8], path: &Path) -> Result<LabelVolume, IoError>
             ));
         }
     }
-    let compressed = match header.get("Version") {
-        Some("2") => false,
-        Some("3") => true,
-        Some(v) => {
-            return Err(IoError::unsupported(
-                path,
-                format!("Version {v}: only versions 2 (raw) and 3 (zlib) are read"),
-            ))
-        }
-        None => {
-            return Err(IoError::unsupported(
-                path,
-                "no Version field: the pre-version-2 layout (binary size header) is not read",
-            ))
-        }
-    };
+    let compressed = header.compressed(path)?;
     let count = checked_voxel_count(path, dims, 1 + 4)?;
     let data = &bytes[data_start..];
     let describe = || format!("{}x{}x{} = {count} voxels declared", dims[0], dims[1], dims[2]);
 
     let labels: Vec<u32> = if compressed {
-        // Decompress at most one byte more than declared, so that a zlib bomb or a
-        // header understating the data is caught without inflating everything.
-        let mut voxels = Vec::with_capacity(count.min(1 << 24));
-        ZlibDecoder::new(data)
-            .take(count as u64 + 1)
-            .read_to_end(&mut voxels)
-            .map_err(|e| IoError::format(path, format!("corrupt or truncated zlib voxel data: {e}")))?;
+        let voxels = inflate_at_most(data, count, path)?;
         check_len(path, voxels.len(), count, &describe, " after decompression")?;
         voxels.into_iter().map(u32::from).collect()
     } else {
@@ -121,6 +100,23 @@ impl Header {
         self.fields.iter().find(|(k, _)| k == key).map(|(_, v)| v.as_str())
     }
 
+    /// Whether the voxel data is zlib-compressed: `Version` 3, or 2 for raw data; other
+    /// versions are refused.
+    pub(crate) fn compressed(&self, path: &Path) -> Result<bool, IoError> {
+        match self.get("Version") {
+            Some("2") => Ok(false),
+            Some("3") => Ok(true),
+            Some(v) => Err(IoError::unsupported(
+                path,
+                format!("Version {v}: only versions 2 (raw) and 3 (zlib) are read"),
+            )),
+            None => Err(IoError::unsupported(
+                path,
+                "no Version field: the pre-version-2 layout (binary size header) is not read",
+            )),
+        }
+    }
+
     pub(crate) fn dims(&self, path: &Path) -> Result<[u64; 3], IoError> {
         let parse = |key: &str, text: &str| {
             text.parse::<u64>().map_err(|_| {
@@ -155,6 +151,18 @@ impl Header {
         }
         Ok(dims)
     }
+}
+
+/// Inflates zlib `data` declared to hold `expected` bytes, reading at most one byte more:
+/// a zlib bomb or a header that understates the data is caught without inflating
+/// everything (the caller compares the length with `expected`).
+pub(crate) fn inflate_at_most(data: &[u8], expected: usize, path: &Path) -> Result<Vec<u8>, IoError> {
+    let mut out = Vec::with_capacity(expected.min(1 << 24));
+    ZlibDecoder::new(data)
+        .take(expected as u64 + 1)
+        .read_to_end(&mut out)
+        .map_err(|e| IoError::format(path, format!("corrupt or truncated zlib voxel data: {e}")))?;
+    Ok(out)
 }
 
 /// Splits the header off `bytes`: its fields and the offset of the voxel data. `format`
