@@ -151,10 +151,12 @@ pub(crate) fn checked_voxel_count(
     dims: [u64; 3],
     bytes_per_voxel: u64,
 ) -> Result<usize, IoError> {
-    let count = dims.iter().map(|&d| u128::from(d)).product::<u128>();
-    if count > u128::from(MAX_VOXELS) {
+    // Checked: three declared dimensions of up to 2^64 can overflow even a u128 (and a
+    // product that wrapped to a small count would pass the limits).
+    let count = dims.iter().try_fold(1u128, |a, &d| a.checked_mul(u128::from(d)));
+    let Some(count) = count.filter(|&c| c <= u128::from(MAX_VOXELS)) else {
         return Err(IoError::TooLarge { path: path.to_path_buf(), dims, limit: MAX_VOXELS });
-    }
+    };
     let what = format!("a volume of {}x{}x{} voxels", dims[0], dims[1], dims[2]);
     crate::check_memory(path, &what, count * u128::from(bytes_per_voxel))?;
     usize::try_from(count).map_err(|_| IoError::TooLarge {
@@ -193,6 +195,8 @@ mod tests {
         );
         assert!(matches!(checked_voxel_count(p, [1 << 11, 1 << 10, 1025], 1), Err(IoError::TooLarge { .. })));
         assert!(matches!(checked_voxel_count(p, [u64::MAX; 3], 1), Err(IoError::TooLarge { .. })));
+        // 2^63 * 2^63 * 4 = 2^128: a product that wraps to 0.
+        assert!(matches!(checked_voxel_count(p, [1 << 63, 1 << 63, 4], 1), Err(IoError::TooLarge { .. })));
     }
 
     #[test]

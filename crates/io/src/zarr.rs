@@ -207,11 +207,14 @@ fn read_store<S: ReadableStorageTraits + ?Sized + 'static>(
     // The samples, decoded, plus the labels made of them.
     let count = checked_voxel_count(path, dims, size as u64 + 4)?;
     let chunk = array.chunk_shape(&vec![0; n]).map_err(|e| IoError::format(path, one_line(e)))?;
-    let chunk_elements = chunk.iter().map(|c| u128::from(c.get())).product::<u128>();
+    // Saturating: a declared chunk shape can overflow even a u128.
+    let chunk_elements = chunk.iter().fold(1u128, |a, c| a.saturating_mul(u128::from(c.get())));
     let what = format!("a chunk of {:?} elements", chunk.iter().map(|c| c.get()).collect::<Vec<_>>());
     // zarrs decodes chunks in parallel: about as many at once as there are threads.
     let threads = std::thread::available_parallelism().map_or(1, usize::from) as u128;
-    crate::check_memory(path, &what, chunk_elements * size as u128 * threads + (count * (size + 4)) as u128)?;
+    let need =
+        chunk_elements.saturating_mul(size as u128 * threads).saturating_add((count * (size + 4)) as u128);
+    crate::check_memory(path, &what, need)?;
     // zarrs can panic on a corrupt shard index (a byte range past the chunk's end): that
     // is the file's fault, so it becomes the same one-line error as any other corruption.
     let retrieved = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {

@@ -310,6 +310,12 @@ fn zarr_bad_input() {
         err.to_string().starts_with("big.zarr: a chunk of [100000, 100000, 100000] elements needs"),
         "{err}"
     );
+    // 2^63 * 2^63 * 4 elements: a product that wraps to 0 in 128 bits.
+    let err = voxreg_io::with_max_memory(1 << 30, || {
+        array("[4, 4, 4]", "[9223372036854775808, 9223372036854775808, 4]")
+    })
+    .unwrap_err();
+    assert!(matches!(err, IoError::OverBudget { .. }), "{err}");
     let err = array("[4, 4]", "[4, 4]").unwrap_err();
     assert_eq!(err.to_string(), "big.zarr: unsupported: a 2-dimensional array (3 are read)");
     let err = array("[4, 4, 4]", "[4, 4]").unwrap_err();
