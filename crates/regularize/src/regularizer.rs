@@ -467,7 +467,10 @@ impl Regularizer {
             };
             let stage = Stage::Solve { round };
             let base = done / stages_total;
-            progress(&Event { stage, fraction: base, iteration: None, input: None });
+            if round > 0 {
+                // The first solve's stage was announced before the solver's setup.
+                progress(&Event { stage, fraction: base, iteration: None, input: None });
+            }
             let mut report = |p: &Progress| {
                 // Iterations close the gap to the tolerance geometrically: show the
                 // fraction of the way (in log scale) from the first error estimate.
