@@ -11,7 +11,7 @@ from the preset's output and from random points, with L-BFGS-B:
   a penalty: every solid thin voxel's centre at least D from the mesh (sampled on a
   barycentric grid of each triangle, so `voxreg check --voxels` must confirm it);
 - folds penalized with a margin (triangles of a quad at least 78 degrees from folding,
-  adjacent quads at most 110 degrees apart), so the minimum has no folded quad or pair;
+  adjacent quads at most 110 degrees apart), so that the minima keep clear of folding;
 - optionally `--attach L`: plus L times the mean squared distance to the preset's output.
 
 A local search, so its value bounds the reachable minimum from above, not below; the
@@ -26,23 +26,18 @@ a clamped voxel-art output (each vertex within half a voxel of its corner, unit 
 the corners are the rounded positions.
 """
 import argparse
+import os
+import sys
 
 import autograd.numpy as anp
 import numpy as np
 from autograd import value_and_grad
 from scipy.optimize import minimize
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from mean_angle import adjacent_pairs, load  # noqa: E402
+
 HALF = 0.495
-
-
-def load_obj(path):
-    verts, quads = [], []
-    for line in open(path):
-        if line.startswith("v "):
-            verts.append([float(x) for x in line.split()[1:4]])
-        elif line.startswith("f "):
-            quads.append([int(x.split("/")[0]) - 1 for x in line.split()[1:]])
-    return np.array(verts), np.array(quads)
 
 
 def write_obj(path, verts, quads):
@@ -74,7 +69,7 @@ def thin_voxels(axis, cells):
         up[a] += 1
         if (a, tuple(up)) in keys:
             thin.add(c)  # voxel c has both faces along a
-    return keys, thin
+    return thin
 
 
 def clamp_boxes(corners, quads, axis, cells, thin, cap):
@@ -102,14 +97,6 @@ def clamp_boxes(corners, quads, axis, cells, thin, cap):
     return lo, hi
 
 
-def adjacent_pairs(quads):
-    edges = {}
-    for f, q in enumerate(quads):
-        for i in range(4):
-            edges.setdefault(tuple(sorted((q[i], q[(i + 1) % 4]))), []).append(f)
-    return np.array([fs for fs in edges.values() if len(fs) == 2])
-
-
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n")[0])
     ap.add_argument("mesh")
@@ -121,10 +108,11 @@ def main():
     ap.add_argument("--out")
     args = ap.parse_args()
 
-    start, quads = load_obj(args.mesh)
+    start, quads = load(args.mesh)
+    quads = np.array(quads)
     corners = np.round(start)
     axis, cells, behind = surfels(corners, quads)
-    _, thin = thin_voxels(axis, cells)
+    thin = thin_voxels(axis, cells)
     if args.uniform_depth is None:
         lo, hi = clamp_boxes(corners, quads, axis, cells, thin, min(0.5 - args.thin_depth, HALF))
     else:
@@ -132,7 +120,7 @@ def main():
     d0 = start - corners
     if (d0 < lo - 1e-9).any() or (d0 > hi + 1e-9).any():
         raise SystemExit(f"{args.mesh}: a vertex lies outside its box: not this preset's output")
-    pairs = adjacent_pairs(quads)
+    pairs = np.array(adjacent_pairs(quads.tolist()))
     centres = np.array(sorted(thin & set(behind)), float) + 0.5
     k = 8
     bary = np.array([(i / k, j / k, 1 - (i + j) / k) for i in range(k + 1) for j in range(k + 1 - i)])
