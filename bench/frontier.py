@@ -474,6 +474,8 @@ def analysis(results):
     """The frontier questions, answered from the medians: a list of Markdown lines."""
     shapes = [s for s in results if "error" in next(iter(results[s].values()))]
     lines = []
+    if not shapes:
+        return ["(no analytic shape in these samples)"]
     vox = [k for k in results[shapes[0]] if k.startswith("voxreg")]
     for it in SNETS:
         sn = f"SurfaceNets3D {it}"
@@ -517,9 +519,10 @@ def analysis(results):
             cheap = min(half) if half else None
             fast = [(results[s][v]["error"]["mean"], v) for v in vox if med(results[s][v]) <= ts]
             best = min(fast) if fast else None
+            acc = min((results[s][v]["error"]["mean"], v) for v in vox)
             lines.append(
                 f"| {s} | {it} | {es:.3f} | "
-                + (f"{cheap[1][7:]}: {cheap[0]:.1f}x" if cheap else "none")
+                + (f"{cheap[1][7:]}: {cheap[0]:.1f}x" if cheap else f"none (the best, {acc[1][7:]}: {acc[0]:.3f}, {acc[0] / es:.2f} of it)")
                 + " | "
                 + (f"{best[1][7:]}: {best[0]:.3f} ({best[0] / es:.2f} of it)" if best else "none")
                 + " |"
@@ -538,7 +541,7 @@ def markdown(results, args, meta):
         " Compute time as in `bench/vs_vtk.py`: voxreg, the sum of its report's stages (reading and writing"
         " excluded; the release CLI in a child process); SurfaceNets3D, the filter's `Update()` alone (in the"
         " script's process, labels already in a `vtkImageData`). Ratios are to SurfaceNets3D's default (16"
-        " smoothing iterations) on the same input in the same run.",
+        " smoothing iterations) on the same input in the same runs.",
         "",
         "Errors against the analytic surface (the shapes digitized as `crates/testkit` does): vertex distance in"
         " voxels of the finest spacing (mean / max), the area-weighted mean (and max) angle between each face and"
@@ -583,7 +586,8 @@ def markdown(results, args, meta):
     out.append(
         "voxreg's stages (medians, seconds) against SurfaceNets3D without smoothing (its extraction) and with"
         " its default smoothing: `surface` is the digital surface's extraction, `normals` the estimator,"
-        " `assemble` + `solve` the first solve, `refine` the refinement rounds (their normals and solves)."
+        " `assemble` + `solve` every solve (all rounds together), `refine` the normal re-estimates and re-centring"
+        " between solves."
     )
     out.append("")
     out.append("| input | setting | surface / SNets 0 | normals / SNets 16 | assemble + solve / SNets 16 | refine / SNets 16 | total / SNets 16 |")
@@ -647,9 +651,12 @@ def plot(results, path):
         ax.scatter([p[0] for p in vx], [p[1] for p in vx], s=14, color="tab:blue", alpha=0.5)
         front = pareto([(t, e) for t, e, _ in vx])
         ax.plot([p[0] for p in front], [p[1] for p in front], "s-", color="tab:blue", label="voxreg (Pareto front of its settings)")
-        for t, e, k in vx:
-            if (t, e) in front:
+        last = None
+        for t, e, k in sorted(vx):
+            # Label the front's points, skipping those too close to the last labelled one.
+            if (t, e) in front and (last is None or t > 1.25 * last[0] or abs(np.log(e / last[1])) > 0.2):
                 ax.annotate(k, (t, e), textcoords="offset points", xytext=(4, -9), fontsize=6, color="tab:blue")
+                last = (t, e)
         half = [(t, 0.5 * e) for t, e, _ in sn]
         ax.plot([p[0] for p in half], [p[1] for p in half], ":", color="tab:red", alpha=0.6, label="half SurfaceNets3D's error")
         ax.set_xscale("log")
@@ -660,8 +667,9 @@ def plot(results, path):
         ax.grid(True, which="both", alpha=0.3)
     for ax in axes.ravel()[len(shapes) :]:
         ax.axis("off")
-    axes.ravel()[0].legend(fontsize=7, loc="upper right")
-    fig.tight_layout()
+    handles, names = axes.ravel()[0].get_legend_handles_labels()
+    fig.legend(handles, names, loc="lower center", ncol=3, fontsize=9)
+    fig.tight_layout(rect=(0, 0.04, 1, 1))
     os.makedirs(os.path.dirname(path), exist_ok=True)
     fig.savefig(path, dpi=110)
 
@@ -680,14 +688,31 @@ def main():
     ap.add_argument("--json", help="write the raw samples here")
     ap.add_argument("--add-to", help="start from the samples of this JSON file (inputs measured earlier)")
     ap.add_argument("--no-shapes", action="store_true", help="skip the analytic shapes")
-    ap.add_argument("--from-json", help="render the report from these samples instead of running")
+    ap.add_argument("--from-json", nargs="+", help="render the report from these samples (pooled) instead of running")
+    ap.add_argument("--command-note", help="with --from-json: the commands that made the samples, for the report")
     ap.add_argument("--md", help="write the Markdown report here (default: print it)")
     ap.add_argument("--png", help="write the plot here")
     args = ap.parse_args()
     if args.from_json:
-        with open(args.from_json) as f:
-            saved = json.load(f)
-        results, meta = saved["results"], saved["meta"]
+        # Several files: their samples pooled per input and setting (rounds of separate runs,
+        # each interleaved), the first file's description kept.
+        results, meta = {}, None
+        for path in args.from_json:
+            with open(path) as f:
+                saved = json.load(f)
+            meta = meta or saved["meta"]
+            for name, entry in saved["results"].items():
+                for setting, e in entry.items():
+                    into = results.setdefault(name, {}).setdefault(setting, {"runs": []})
+                    into["runs"] += e["runs"]
+                    if "error" in e:
+                        into["error"] = e["error"]
+        if args.command_note:
+            meta["command"] = args.command_note
+        meta["runs"] = max((len(e["runs"]) for n, x in results.items() for e in x.values() if "error" in e), default=0)
+        meta["volume_runs"] = max((len(e["runs"]) for n, x in results.items() for e in x.values() if "error" not in e), default=0)
+        if args.conditions:
+            meta["conditions"] = args.conditions
     else:
         import platform
 
