@@ -534,7 +534,7 @@ def markdown(results, args, meta):
     out = [
         "# The speed/accuracy frontier: voxreg against SurfaceNets3D",
         "",
-        f"Made by `{meta['command']}` on {meta['date']} ({meta['machine']}; VTK {meta['vtk']}).",
+        f"Made by {meta['command']} on {meta['date']} ({meta['machine']}; VTK {meta['vtk']}).",
         "",
         f"Conditions: {meta['conditions']} Every setting ran once per round, rounds"
         f" repeated ({meta['runs']} on the shapes, {meta['volume_runs']} on the volumes); times are medians."
@@ -737,7 +737,7 @@ def main():
                 vs = SHORT_VOLUME_SETTINGS if args.volume_settings == "short" else VOLUME_SETTINGS
                 run_volumes(args, exe, tmp, [s for s in vs if s in settings], results)
         meta = {
-            "command": "python bench/frontier.py " + " ".join(sys.argv[1:]),
+            "command": "`python bench/frontier.py " + " ".join(sys.argv[1:]) + "`",
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
             "machine": f"{os.cpu_count()} cores, {platform.machine()}, load average {os.getloadavg()[0]:.1f} at the end",
             "vtk": vcore.vtkVersion.GetVTKVersion(),

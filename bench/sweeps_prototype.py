@@ -24,6 +24,7 @@ the true normal at their centroid's nearest point (degrees, orientation ignored)
 
     python bench/sweeps_prototype.py            # sphere R = 20 at h = 1, torus at h = 0.25
     python bench/sweeps_prototype.py --cheap    # no ii: trivial normals, sweeps, re-estimates
+    python bench/sweeps_prototype.py --cheap --goursat   # the same on goursat, h = 0.5 and 0.25
 """
 
 import sys
@@ -35,6 +36,7 @@ import scipy.sparse as sp
 import scipy.sparse.linalg as spla
 from scipy.spatial import cKDTree
 
+sys.dont_write_bytecode = True  # importing frontier.py leaves no __pycache__ in bench/
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
 from frontier import Sphere, Torus, Goursat, digitize, face_geometry  # noqa: E402
 
@@ -244,6 +246,10 @@ def run_cheap(name, shape, h, rounds=3, per_round=8, radius=3.0):
 
 def main():
     if "--cheap" in sys.argv:
+        if "--goursat" in sys.argv:
+            for h in (0.5, 0.25):
+                run_cheap(f"goursat h = {h}", Goursat(), h, per_round=8)
+            return
         for per_round in (4, 8):
             run_cheap("sphere R = 20, h = 1", Sphere(20.0), 1.0, per_round=per_round)
             run_cheap("torus R = 6, r = 2, h = 0.25", Torus(6.0, 2.0), 0.25, per_round=per_round)
