@@ -607,14 +607,14 @@ def markdown(results, args, meta):
     vols = [s for s in results if "error" not in next(iter(results[s].values()))]
     if vols:
         out += ["## Volumes (time only)", ""]
-        out.append("| input | tool, setting | compute | vs SNets 16 | stages (s) |")
-        out.append("|---|---|---|---|---|")
+        out.append("| input | tool, setting | faces (quads; SurfaceNets3D: triangles when smoothed) | compute | vs SNets 16 | stages (s) |")
+        out.append("|---|---|---|---|---|---|")
         for s in vols:
             entry = results[s]
             ref = med(entry["SurfaceNets3D 16"])
             for k, e in sorted(entry.items(), key=lambda kv: med(kv[1])):
                 st = ", ".join(f"{a} {b:.2f}" for a, b in med_stages(e).items()) if "stages" in e["runs"][0] else ""
-                out.append(f"| {s} ({e['runs'][0]['faces']} faces) | {k} | {fmt_t(med(e))} | {med(e) / ref:.2f}x | {st} |")
+                out.append(f"| {s} | {k} | {e['runs'][0]['faces']} | {fmt_t(med(e))} | {med(e) / ref:.2f}x | {st} |")
         out.append("")
     return "\n".join(out) + "\n"
 
