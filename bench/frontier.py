@@ -548,6 +548,12 @@ def markdown(results, args, meta):
         " the true normal at its centroid's nearest surface point, in degrees, orientation ignored; on the split"
         " ball also the distance of the junction vertices (labels 0, 1 and 2 meet) to the true circle.",
         "",
+        "voxreg's settings: `N rounds` is `--refine N` (the default preset has 3), `tol` `--tolerance` (default"
+        " 1e-3 voxel), `ii r=5` `--radius` of 5 voxels (the default rule gives 3 voxels at unit spacing, 7.6 at"
+        " h = 0.25), `convolved` and `trivial` `--normals` (default `ii`), `papers` `--preset papers`; the rest is"
+        " the default preset. SurfaceNets3D: `SmoothingOff()` for 0, else `SetNumberOfIterations`, every other"
+        " option VTK 9.7.2's default (relaxation factor 0.5, its default constraint; triangles when smoothed, quads not).",
+        "",
         "![frontier](figures/frontier.png)",
         "",
         "## Can voxreg beat each SurfaceNets3D setting today?",
