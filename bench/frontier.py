@@ -552,7 +552,8 @@ def markdown(results, args, meta):
         " 1e-3 voxel), `ii r=5` `--radius` of 5 voxels (the default rule gives 3 voxels at unit spacing, 7.6 at"
         " h = 0.25), `convolved` and `trivial` `--normals` (default `ii`), `papers` `--preset papers`; the rest is"
         " the default preset. SurfaceNets3D: `SmoothingOff()` for 0, else `SetNumberOfIterations`, every other"
-        " option VTK 9.7.2's default (relaxation factor 0.5, its default constraint; triangles when smoothed, quads not).",
+        f" option VTK {meta['vtk']}'s default (relaxation factor 0.5, its default constraint; triangles when smoothed,"
+        " quads not).",
         "",
         "![frontier](figures/frontier.png)",
         "",
