@@ -95,11 +95,13 @@
 //!
 //! None.
 
+mod commit;
 mod error;
 mod gltf;
 mod grey;
 pub mod inflight;
 mod input;
+mod input_files;
 mod limits;
 mod longvol;
 mod material;
@@ -125,10 +127,12 @@ mod vtp;
 mod write_volume;
 mod zarr;
 
+pub use commit::Outputs;
 pub use error::IoError;
 pub use gltf::write_gltf;
 pub use grey::{GreyVolume, NotALabel, Voxels};
 pub use input::{read_input, Background, Input, InputError, InputOptions};
+pub use input_files::{input_files, same_output, InputFiles};
 pub use limits::{
     check_memory, default_max_memory, format_size, max_memory, parse_size, set_max_memory, with_max_memory,
     FALLBACK_MAX_MEMORY,
