@@ -206,3 +206,72 @@ impl Outputs {
         Ok(written)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use std::io::Write as _;
+
+    use super::*;
+
+    fn names(dir: &Path) -> Vec<String> {
+        let mut v: Vec<String> = std::fs::read_dir(dir)
+            .unwrap()
+            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
+            .collect();
+        v.sort();
+        v
+    }
+
+    fn text(outputs: &mut Outputs, target: &Path, text: &str) -> Result<(), IoError> {
+        outputs.write(target, |p| crate::write_file_atomically(p, |w| w.write_all(text.as_bytes())))
+    }
+
+    #[test]
+    fn files_in_several_directories_are_committed_together() {
+        let dir = tempfile::tempdir().unwrap();
+        std::fs::create_dir(dir.path().join("sub")).unwrap();
+        let (a, b) = (dir.path().join("a.json"), dir.path().join("sub/b.json"));
+        std::fs::write(&a, b"old").unwrap();
+        let mut outputs = Outputs::new();
+        text(&mut outputs, &a, "new a").unwrap();
+        text(&mut outputs, &b, "new b").unwrap();
+        assert_eq!(std::fs::read(&a).unwrap(), b"old", "nothing replaced before the commit");
+        assert!(!b.exists());
+        let written = outputs.commit().unwrap();
+        assert_eq!(written.len(), 2);
+        assert_eq!(std::fs::read(&a).unwrap(), b"new a");
+        assert_eq!(std::fs::read(&b).unwrap(), b"new b");
+        assert_eq!(names(dir.path()), ["a.json", "sub"], "staging directories left");
+        assert_eq!(names(&dir.path().join("sub")), ["b.json"]);
+    }
+
+    #[test]
+    fn a_failed_write_or_a_target_in_the_way_changes_nothing() {
+        let dir = tempfile::tempdir().unwrap();
+        let (a, b) = (dir.path().join("a.json"), dir.path().join("b.json"));
+        std::fs::write(&a, b"old").unwrap();
+        // A write that fails: the outputs are dropped, the staged file with them.
+        let mut outputs = Outputs::new();
+        text(&mut outputs, &a, "new a").unwrap();
+        let e = outputs
+            .write(&b, |p| crate::write_file_atomically(p, |_| Err(std::io::Error::other("disk full"))))
+            .unwrap_err();
+        assert_eq!(e.path(), b, "the error names the target, not the staged file");
+        drop(outputs);
+        assert_eq!(std::fs::read(&a).unwrap(), b"old");
+        assert_eq!(names(dir.path()), ["a.json"]);
+        // A directory in the way of the second file: refused before the first moves.
+        std::fs::create_dir(&b).unwrap();
+        let mut outputs = Outputs::new();
+        text(&mut outputs, &a, "new a").unwrap();
+        text(&mut outputs, &b, "new b").unwrap();
+        let e = outputs.commit().unwrap_err();
+        assert!(e.to_string().contains("a directory is in the way"), "{e}");
+        assert_eq!(std::fs::read(&a).unwrap(), b"old");
+        assert_eq!(names(dir.path()), ["a.json", "b.json"]);
+        // The same file twice.
+        let mut outputs = Outputs::new();
+        text(&mut outputs, &a, "one").unwrap();
+        assert!(text(&mut outputs, &dir.path().join("a.json"), "two").is_err());
+    }
+}

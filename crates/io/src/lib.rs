@@ -61,7 +61,10 @@
 //! the target, so a failed write leaves no partial file. Parts of the surface (one
 //! interface, one region's closed surface: a [`Patch`](voxreg_digisurf::Patch)) become
 //! meshes by [`QuadMesh::from_patch`], and [`MeshBatch`] writes many into a directory
-//! all or nothing.
+//! all or nothing. [`Outputs`] stages every file of a run (meshes, batches, reports)
+//! and commits them together or none; [`input_files`] lists what an input will read, so
+//! that a front end can refuse outputs that would replace it. Temporaries are owned
+//! through file locks ([`inflight`]).
 //!
 //! **Label names.** Where the input names its labels (`.seg.nrrd` segments, `.vox`
 //! materials with a `_name`), the [`Palette`] keeps the names ([`Palette::names`]);
