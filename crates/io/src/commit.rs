@@ -209,8 +209,6 @@ impl Outputs {
 
 #[cfg(test)]
 mod tests {
-    use std::io::Write as _;
-
     use super::*;
 
     fn names(dir: &Path) -> Vec<String> {

@@ -230,7 +230,7 @@ pub(crate) fn temp_file(dir: &Path, suffix: &str) -> io::Result<tempfile::NamedT
     let prefix = temp_prefix();
     let mut in_flight = lock();
     note_dir(&mut in_flight, dir);
-    tempfile::Builder::new().prefix(&prefix).suffix(suffix).make_in(dir, |path| create_locked(path))
+    tempfile::Builder::new().prefix(&prefix).suffix(suffix).make_in(dir, create_locked)
 }
 
 /// A staging directory of this process in `dir`, locked through its lock file; removed

@@ -156,7 +156,7 @@ mod tests {
         std::fs::create_dir(&store).unwrap();
         std::fs::write(store.join("zarr.json"), b"{}").unwrap();
         let files = input_files(&store, false);
-        assert_eq!(files.dirs, [store.clone()]);
+        assert_eq!(files.dirs, std::slice::from_ref(&store));
         assert!(files.clash(&store.join("zarr.json")).is_some());
         assert!(files.clash(&store.join("c/new")).is_some(), "new paths inside the store too");
         assert!(files.clash(&dir.path().join("s.json")).is_none());
