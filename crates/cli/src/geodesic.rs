@@ -5,17 +5,18 @@ use anyhow::{Context, Result};
 use glam::DVec3;
 use voxreg_digisurf::DigitalSurface;
 use voxreg_geodesic::{distances_from, GeodesicMesh};
-use voxreg_io::{scalar_ramp, write_ply_with_vertex_field, QuadMesh};
+use voxreg_io::{scalar_ramp, write_ply_with_vertex_field, Outputs, QuadMesh};
 
 use crate::args::{GeodesicOptions, RegularizeArgs, SurfaceKind};
 
 /// The distance written at vertices that no source reaches (other components).
 const UNREACHED: f64 = -1.0;
 
-/// Computes the distances of `opts` on `surface` (regularized to `proxy`) and writes the
-/// mesh of `-o`; returns what was written, for the summary line.
+/// Computes the distances of `opts` on `surface` (regularized to `proxy`) and stages the
+/// mesh of `-o` in `outputs`; returns what was written, for the summary line.
 pub(crate) fn write_distances(
     args: &RegularizeArgs,
+    outputs: &mut Outputs,
     opts: &GeodesicOptions,
     surface: &DigitalSurface,
     proxy: &[DVec3],
@@ -53,7 +54,8 @@ pub(crate) fn write_distances(
         .collect();
     let values: Vec<f64> = d.iter().map(|&x| if x.is_finite() { x } else { UNREACHED }).collect();
     let out = QuadMesh::from_surface(surface, pick(opts.on));
-    write_ply_with_vertex_field(&args.output, &out, "distance", &values, &colours)?;
+    outputs
+        .write(&args.output, |path| write_ply_with_vertex_field(path, &out, "distance", &values, &colours))?;
     Ok(format!(
         "{} ({} source{}, largest distance {largest:.4}, iso-lines every {spacing:.4})",
         args.output.display(),

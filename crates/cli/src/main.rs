@@ -14,7 +14,7 @@ mod view;
 
 use anyhow::{bail, Context, Result};
 use clap::Parser as _;
-use voxreg_io::{read_mesh, write_ply_with_vertex_scalar, write_volume, QuadMesh};
+use voxreg_io::{read_mesh, write_ply_with_vertex_scalar, write_volume, Outputs, QuadMesh};
 use voxreg_regularize::Regularizer;
 use voxreg_upscale::{upscale, UpscaleParams};
 
@@ -136,6 +136,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     let path = &args.input.input;
     let ((volume, palette, _units), read) = stages.run("read volume", || input::read_input(&args.input))?;
     output::check_volume(args, product, &volume)?;
+    output::check_library(args, product, palette.is_some())?;
     let (mut regularizer, _) = stages.run("digital surface", || {
         // Refused before the surface is built: the count is one pass over the voxels.
         let (surfels, bytes) = Regularizer::estimated_bytes_of(&volume, &params)
@@ -166,13 +167,17 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     })?;
     let surface = &out.surface;
     let mut io = IoTimes { read, ..Default::default() };
+    // Every file of the run is staged, then committed together (or none, on an error).
+    let mut outputs = Outputs::new();
     let written = match product {
         Product::Mesh => {
             let (written, secs) = stages.run("write mesh", || {
-                let written = output::write_meshes(args, surface, &out.positions, palette.as_ref())?;
+                let written =
+                    output::write_meshes(args, &mut outputs, surface, &out.positions, palette.as_ref())?;
                 if let (Some(path), Some(v)) = (&args.features, &out.features) {
                     let mesh = QuadMesh::from_surface(surface, &out.positions);
-                    write_ply_with_vertex_scalar(path, &mesh, "feature", v.as_slice())?;
+                    outputs
+                        .write(path, |p| write_ply_with_vertex_scalar(p, &mesh, "feature", v.as_slice()))?;
                 }
                 Ok(written)
             })?;
@@ -181,7 +186,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         }
         Product::Geodesic(opts) => {
             let (written, secs) = stages.run("geodesic distances", || {
-                geodesic::write_distances(args, opts, surface, &out.positions)
+                geodesic::write_distances(args, &mut outputs, opts, surface, &out.positions)
             })?;
             io.write = secs;
             written
@@ -194,16 +199,14 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
             })?;
             io.upscale = Some(secs);
             output::check_upscaled(args, volume, &fine, factor)?;
-            let ((), secs) =
-                stages.run("write volume", || Ok(write_volume(&args.output, &fine, palette.as_ref())?))?;
+            let ((), secs) = stages.run("write volume", || {
+                Ok(outputs.write(&args.output, |p| write_volume(p, &fine, palette.as_ref()))?)
+            })?;
             io.write = secs;
             args.output.display().to_string()
         }
     };
     let r = &out.report;
-    if !args.quiet {
-        eprintln!("{}; wrote {written}", r.summary());
-    }
     if let Some(report) = &args.report {
         let full = CliReport {
             input: path.display().to_string(),
@@ -212,7 +215,11 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
             io,
             run: r,
         };
-        report::write_report(report, &full)?;
+        report::write_report(&mut outputs, report, &full)?;
+    }
+    outputs.commit()?;
+    if !args.quiet {
+        eprintln!("{}; wrote {written}", r.summary());
     }
     Ok(())
 }

@@ -1,11 +1,11 @@
 //! Writing the regularized surface: one mesh, a directory of split meshes, or an
 //! upscaled volume; and checking the output paths before any work.
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId};
-use voxreg_io::{named_interface_name, named_region_name, write_mesh, MeshBatch, Palette, QuadMesh};
+use voxreg_io::{named_interface_name, named_region_name, write_mesh, MeshBatch, Outputs, Palette, QuadMesh};
 
 use crate::args::{GeodesicOptions, RegularizeArgs, Split};
 
@@ -47,6 +47,9 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product<'_>) -> Resu
         _ => {}
     }
     check_paths(args, product)?;
+    if crate::input::voxel_art(&args.input) {
+        check_library(args, product, true)?;
+    }
     if let Some(path) = &args.features {
         if product != Product::Mesh {
             bail!("--features {}: only voxreg regularize writes the feature field", path.display());
@@ -61,22 +64,52 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product<'_>) -> Resu
     Ok(())
 }
 
-/// Every output path (`-o`, `--report`, `--features`) can be written: its directory
-/// exists and is writable, it is not a directory (except `-o` with `--split`), it is not
-/// the input, and no two outputs are the same file.
+/// Every output path (`-o`, `--report`, `--features`, and the `.mtl` beside an OBJ) can
+/// be written: a plain file name (no trailing `/`, at most 255 bytes), a regular file or a
+/// new path (never a symbolic link, a device, a FIFO or a socket; a directory only for
+/// `-o` with `--split`), its directory exists and is writable, it resolves to none of
+/// the files the input reads, and no two outputs resolve to the same file.
 fn check_paths(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     let split = product == Product::Mesh && args.split != Split::None;
-    let mut outputs: Vec<(&str, &Path)> = vec![("-o", &args.output)];
-    outputs.extend(args.report.as_deref().map(|p| ("--report", p)));
-    outputs.extend(args.features.as_deref().map(|p| ("--features", p)));
-    for (k, &(option, path)) in outputs.iter().enumerate() {
-        if same_file(path, &args.input.input) {
-            bail!("{}: {option} would overwrite the input", path.display());
+    let mut outputs: Vec<(&str, PathBuf)> = vec![("-o", args.output.clone())];
+    outputs.extend(args.report.clone().map(|p| ("--report", p)));
+    outputs.extend(args.features.clone().map(|p| ("--features", p)));
+    // Reserved whether or not the mesh has materials: no other output may take its name.
+    if let Some(mtl) = library(args, product) {
+        outputs.push((LIBRARY, mtl));
+    }
+    let input = &args.input.input;
+    let read = voxreg_io::input_files(input, args.input.dims.is_some());
+    for (k, (option, path)) in outputs.iter().enumerate() {
+        let option = *option;
+        let dir_output = split && option == "-o";
+        check_name(option, path, dir_output)?;
+        if option != LIBRARY {
+            check_kind(option, path, dir_output)?;
         }
-        if let Some(&(other, _)) = outputs[..k].iter().find(|(_, p)| same_file(p, path)) {
+        if let Some(file) = read.clash(path) {
+            if read.dirs.iter().any(|d| d == file) {
+                bail!("{}: {option} lies inside {}, which the input reads", path.display(), file.display());
+            }
+            if file == input.as_path() {
+                bail!("{}: {option} would overwrite the input", path.display());
+            }
+            bail!("{}: {option} would overwrite {}, which the input reads", path.display(), file.display());
+        }
+        if let Some((other, _)) = outputs[..k].iter().find(|(_, p)| voxreg_io::same_output(p, path)) {
             bail!("{}: {option} and {other} name the same file", path.display());
         }
-        if split && option == "-o" {
+        if split && option != "-o" && split_name(args, path) {
+            bail!(
+                "{}: {option} may be one of the files --split writes in {}",
+                path.display(),
+                args.output.display()
+            );
+        }
+        if option == LIBRARY {
+            continue;
+        }
+        if dir_output {
             // The directory is created if missing: its nearest existing ancestor must be
             // a writable directory.
             let existing = path.ancestors().find(|a| a.as_os_str().is_empty() || a.exists());
@@ -87,9 +120,6 @@ fn check_paths(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
                 None => {}
             }
             continue;
-        }
-        if path.is_dir() {
-            bail!("{}: {option} names a directory", path.display());
         }
         let parent = match path.parent() {
             Some(p) if !p.as_os_str().is_empty() => p,
@@ -103,24 +133,108 @@ fn check_paths(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     Ok(())
 }
 
-/// Whether `a` and `b` are the same file: equal paths, or both existing with the same
-/// device and inode (or the same canonical path off Unix).
-fn same_file(a: &Path, b: &Path) -> bool {
-    if a == b {
-        return true;
+/// How errors name the `.mtl` beside an OBJ `-o`.
+const LIBRARY: &str = "the material library of -o";
+
+/// The most bytes of a file name that common file systems take.
+const NAME_MAX: usize = 255;
+
+/// Refuses an output path that names no file (a trailing `/`, or `.` or `..` last)
+/// unless it is the `--split` directory, and a file name longer than file systems take.
+fn check_name(option: &str, path: &Path, dir_output: bool) -> Result<()> {
+    let text = path.as_os_str().to_string_lossy();
+    let trailing = text.ends_with('/') || text.ends_with(std::path::MAIN_SEPARATOR);
+    match path.file_name() {
+        Some(name) if name.len() > NAME_MAX => bail!(
+            "{}: {option}: the file name is {} bytes long, over the {NAME_MAX} that file systems take",
+            path.display(),
+            name.len()
+        ),
+        _ if dir_output => Ok(()),
+        Some(_) if !trailing => Ok(()),
+        _ => bail!("{}: {option} names a directory, not a file", path.display()),
     }
+}
+
+/// Refuses an output that exists and is not a regular file: a symbolic link (replacing
+/// it would replace the link, not the file it points to, and writing through it would
+/// write where the command line does not say), a device (`/dev/null`), a FIFO or a
+/// socket; a directory unless `dir_output` (the `--split` directory, which may be a link
+/// to one: the files are written inside it).
+fn check_kind(option: &str, path: &Path, dir_output: bool) -> Result<()> {
+    let Ok(meta) = std::fs::symlink_metadata(path) else { return Ok(()) };
+    let t = meta.file_type();
+    if t.is_file() || (dir_output && path.is_dir()) {
+        return Ok(());
+    }
+    if t.is_dir() {
+        bail!("{}: {option} names a directory", path.display());
+    }
+    if t.is_symlink() {
+        bail!(
+            "{}: {option} is a symbolic link: voxreg writes only regular files or new paths (name the file it points to)",
+            path.display()
+        );
+    }
+    bail!(
+        "{}: {option} is {}, not a regular file: voxreg writes only regular files or new paths",
+        path.display(),
+        kind(&meta)
+    )
+}
+
+/// What a file that is neither a regular file, a directory nor a link is.
+fn kind(meta: &std::fs::Metadata) -> &'static str {
     #[cfg(unix)]
     {
-        use std::os::unix::fs::MetadataExt;
-        match (std::fs::metadata(a), std::fs::metadata(b)) {
-            (Ok(x), Ok(y)) => x.dev() == y.dev() && x.ino() == y.ino(),
-            _ => false,
+        use std::os::unix::fs::FileTypeExt;
+        let t = meta.file_type();
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_socket() {
+            return "a socket";
         }
     }
-    #[cfg(not(unix))]
-    {
-        matches!((a.canonicalize(), b.canonicalize()), (Ok(x), Ok(y)) if x == y)
+    let _ = meta;
+    "a special file"
+}
+
+/// The material library an OBJ `-o` may come with: `<stem>.mtl` beside it.
+fn library(args: &RegularizeArgs, product: Product<'_>) -> Option<PathBuf> {
+    let obj = args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("obj"));
+    (product == Product::Mesh && args.split == Split::None && obj).then(|| args.output.with_extension("mtl"))
+}
+
+/// Whether `path` lies in the `--split` directory under a name the split files take.
+fn split_name(args: &RegularizeArgs, path: &Path) -> bool {
+    let parent = match path.parent() {
+        Some(p) if !p.as_os_str().is_empty() => p,
+        _ => Path::new("."),
+    };
+    let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+    (name.starts_with("region_") || name.starts_with("interface_"))
+        && voxreg_io::same_output(parent, &args.output)
+}
+
+/// Checks what writing the materials of a coloured input needs: the `.mtl` beside an OBJ
+/// `-o` has a name OBJ can write (no whitespace) and is a regular file or a new path.
+/// Called before any work for inputs known to be coloured (voxel art), else once the
+/// input is read and has a palette.
+pub(crate) fn check_library(args: &RegularizeArgs, product: Product<'_>, coloured: bool) -> Result<()> {
+    let Some(mtl) = library(args, product).filter(|_| coloured) else { return Ok(()) };
+    let name = mtl.file_name().map(|n| n.to_string_lossy().into_owned()).unwrap_or_default();
+    if name.chars().any(char::is_whitespace) {
+        bail!(
+            "{}: the material library name '{name}' holds whitespace, which OBJ cannot name (the input is \
+             coloured): rename the output",
+            args.output.display()
+        );
     }
+    check_kind(LIBRARY, &mtl, false)
 }
 
 /// Checks that `dir` is a directory in which a file can be created (by creating and
@@ -255,10 +369,11 @@ fn split_meshes(
     }
 }
 
-/// Writes the regularized surface: one file, or with `--split` a directory of files
-/// written all or nothing. Returns what was written, for the summary line.
+/// Stages the regularized surface in `outputs`: one file, or with `--split` a directory
+/// of files. Returns what is written, for the summary line.
 pub(crate) fn write_meshes(
     args: &RegularizeArgs,
+    outputs: &mut Outputs,
     surface: &DigitalSurface,
     positions: &[glam::DVec3],
     palette: Option<&Palette>,
@@ -271,13 +386,15 @@ pub(crate) fn write_meshes(
         mesh
     };
     if args.split == Split::None {
-        write_mesh(&args.output, &colour(QuadMesh::from_surface(surface, positions)))?;
+        let mesh = colour(QuadMesh::from_surface(surface, positions));
+        outputs.write(&args.output, |path| write_mesh(path, &mesh))?;
         return Ok(args.output.display().to_string());
     }
     let mut batch = MeshBatch::new(&args.output)?;
     for (name, mesh) in split_meshes(args, surface, positions, palette) {
         batch.write(&name, &colour(mesh))?;
     }
-    let files = batch.commit()?;
-    Ok(format!("{} files in {}", files.len(), args.output.display()))
+    let files = batch.names().len();
+    outputs.add_batch(batch);
+    Ok(format!("{files} files in {}", args.output.display()))
 }

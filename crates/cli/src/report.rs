@@ -6,7 +6,7 @@ use std::path::Path;
 use anyhow::{Context, Result};
 use serde::Serialize;
 use voxreg_digisurf::LabelVolume;
-use voxreg_io::Palette;
+use voxreg_io::{Outputs, Palette};
 use voxreg_regularize::Report;
 
 /// Seconds of the command's own stages.
@@ -55,10 +55,13 @@ pub(crate) struct CliReport<'a> {
     pub(crate) run: &'a Report,
 }
 
-/// Writes `report` through a temporary file and a rename, like the mesh writers.
-pub(crate) fn write_report(path: &Path, report: &CliReport<'_>) -> Result<()> {
-    voxreg_io::write_file_atomically(path, |w| {
-        serde_json::to_writer_pretty(&mut *w, report).map_err(std::io::Error::other)
-    })
-    .with_context(|| format!("{}: cannot write", path.display()))
+/// Stages `report` in `outputs`, committed with the run's other files.
+pub(crate) fn write_report(outputs: &mut Outputs, path: &Path, report: &CliReport<'_>) -> Result<()> {
+    outputs
+        .write(path, |staged| {
+            voxreg_io::write_file_atomically(staged, |w| {
+                serde_json::to_writer_pretty(&mut *w, report).map_err(std::io::Error::other)
+            })
+        })
+        .with_context(|| format!("{}: cannot write", path.display()))
 }

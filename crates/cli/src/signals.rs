@@ -1,9 +1,10 @@
-//! Interruption: SIGINT, SIGTERM and SIGHUP end the run with nothing half-written.
+//! Interruption: SIGINT, SIGTERM, SIGHUP and SIGQUIT end the run with nothing half-written.
 //!
 //! A thread waits for the signals; on one it removes this process's temporary files and
 //! staging directories (`voxreg_io::inflight::remove_in_flight`, which also keeps any
 //! new one from being created and any `--split` commit from being cut in two), then
-//! exits with 128 + the signal number (130 for SIGINT, 143 for SIGTERM). SIGXFSZ (the
+//! exits with 128 + the signal number (130 for SIGINT, 143 for SIGTERM, 129 for SIGHUP,
+//! 131 for SIGQUIT: no core dump). SIGXFSZ (the
 //! file size limit) is caught too, so a write past the limit fails like any other write,
 //! removing its temporary file, instead of killing the process.
 
@@ -13,10 +14,10 @@ pub(crate) fn install() {
     use std::sync::atomic::AtomicBool;
     use std::sync::Arc;
 
-    use signal_hook::consts::{SIGHUP, SIGINT, SIGTERM, SIGXFSZ};
+    use signal_hook::consts::{SIGHUP, SIGINT, SIGQUIT, SIGTERM, SIGXFSZ};
 
     let _ = signal_hook::flag::register(SIGXFSZ, Arc::new(AtomicBool::new(false)));
-    let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP]) else {
+    let Ok(mut signals) = signal_hook::iterator::Signals::new([SIGINT, SIGTERM, SIGHUP, SIGQUIT]) else {
         return;
     };
     std::thread::spawn(move || {
@@ -25,6 +26,7 @@ pub(crate) fn install() {
             let name = match signal {
                 SIGINT => "SIGINT",
                 SIGTERM => "SIGTERM",
+                SIGQUIT => "SIGQUIT",
                 _ => "SIGHUP",
             };
             eprintln!("\nerror: interrupted by {name}; temporary files removed");

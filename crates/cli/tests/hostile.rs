@@ -301,25 +301,6 @@ fn sigint_and_sigterm_exit_with_nothing_left_behind() {
 }
 
 #[test]
-fn leftovers_of_a_killed_run_are_removed_by_the_next_run() {
-    let dir = tempfile::tempdir().unwrap();
-    // Left by a process that no longer runs (Linux pids stay below 2^22).
-    let stale_file = dir.path().join(".voxreg-999999999-a1b2.tmp");
-    let stale_dir = dir.path().join(".voxreg-999999999-c3d4");
-    std::fs::write(&stale_file, b"partial").unwrap();
-    std::fs::create_dir(&stale_dir).unwrap();
-    std::fs::write(stale_dir.join("part.ply"), b"partial").unwrap();
-    let out = dir.path().join("cube.ply");
-    let input = data("bunny-32.vol");
-    let run = voxreg(&["regularize", s(&input), "-o", s(&out), "-q"]);
-    assert!(run.status.success(), "{}", stderr(&run));
-    assert!(out.exists());
-    if Path::new("/proc/self").exists() {
-        assert!(!stale_file.exists() && !stale_dir.exists(), "stale entries kept");
-    }
-}
-
-#[test]
 fn a_vanishing_alpha_is_refused_naming_it() {
     let input = data("bunny-32.vol");
     let dir = tempfile::tempdir().unwrap();

@@ -107,6 +107,25 @@ impl IoError {
         }
     }
 
+    /// The same error, said of the file under `to` where it was about one under `from`
+    /// (a staged file, for the file it stands for).
+    pub(crate) fn relocated(mut self, from: &std::path::Path, to: &std::path::Path) -> Self {
+        let path = match &mut self {
+            IoError::Io { path, .. }
+            | IoError::Format { path, .. }
+            | IoError::Unsupported { path, .. }
+            | IoError::TooLarge { path, .. }
+            | IoError::OverBudget { path, .. }
+            | IoError::UnsupportedExtension { path, .. }
+            | IoError::InvalidMesh { path, .. }
+            | IoError::Volume { path, .. } => path,
+        };
+        if let Ok(rest) = path.strip_prefix(from) {
+            *path = to.join(rest);
+        }
+        self
+    }
+
     pub(crate) fn io(path: &std::path::Path, source: std::io::Error) -> Self {
         IoError::Io { path: path.to_path_buf(), source }
     }

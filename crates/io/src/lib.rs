@@ -61,7 +61,10 @@
 //! the target, so a failed write leaves no partial file. Parts of the surface (one
 //! interface, one region's closed surface: a [`Patch`](voxreg_digisurf::Patch)) become
 //! meshes by [`QuadMesh::from_patch`], and [`MeshBatch`] writes many into a directory
-//! all or nothing.
+//! all or nothing. [`Outputs`] stages every file of a run (meshes, batches, reports)
+//! and commits them together or none; [`input_files`] lists what an input will read, so
+//! that a front end can refuse outputs that would replace it. Temporaries are owned
+//! through file locks ([`inflight`]).
 //!
 //! **Label names.** Where the input names its labels (`.seg.nrrd` segments, `.vox`
 //! materials with a `_name`), the [`Palette`] keeps the names ([`Palette::names`]);
@@ -95,11 +98,13 @@
 //!
 //! None.
 
+mod commit;
 mod error;
 mod gltf;
 mod grey;
 pub mod inflight;
 mod input;
+mod input_files;
 mod limits;
 mod longvol;
 mod material;
@@ -125,10 +130,12 @@ mod vtp;
 mod write_volume;
 mod zarr;
 
+pub use commit::Outputs;
 pub use error::IoError;
 pub use gltf::write_gltf;
 pub use grey::{GreyVolume, NotALabel, Voxels};
 pub use input::{read_input, Background, Input, InputError, InputOptions};
+pub use input_files::{input_files, same_output, InputFiles};
 pub use limits::{
     check_memory, default_max_memory, format_size, max_memory, parse_size, set_max_memory, with_max_memory,
     FALLBACK_MAX_MEMORY,

@@ -305,16 +305,19 @@ fn first_label(surface: &DigitalSurface, r: RegionId) -> u32 {
 /// Writes several meshes into one directory, all or nothing.
 ///
 /// [`MeshBatch::write`] writes each mesh (any format of [`write_mesh`]) into a hidden
-/// temporary directory inside the target directory; [`MeshBatch::commit`] then renames
-/// every file into place. Dropping the batch before `commit` (after an error, say)
-/// removes the temporary directory and everything in it, so a failed run leaves no
-/// partial output. Renames within one directory are atomic per file; should one of
-/// them fail (a full disk cannot cause it), `commit` stops and reports which file.
+/// staging directory inside the target directory, locked by this process (see
+/// [`inflight`](crate::inflight)); [`MeshBatch::commit`] then renames every file into
+/// place. Dropping the batch before `commit` (after an error, say) removes the staging
+/// directory and everything in it, and the directories the batch created, so a failed
+/// run leaves no partial output. Renames within one directory are atomic per file;
+/// should one of them fail (a full disk cannot cause it), `commit` takes back what it
+/// moved and reports which file. A batch can also be committed with a run's other files
+/// ([`Outputs::add_batch`](crate::Outputs::add_batch)).
 #[derive(Debug)]
 pub struct MeshBatch {
     dir: std::path::PathBuf,
     /// `None` once dropped.
-    staging: Option<tempfile::TempDir>,
+    stage: Option<crate::commit::Stage>,
     names: Vec<String>,
     /// The outermost directory this batch created, removed again (with what it holds)
     /// unless the batch is committed.
@@ -323,7 +326,7 @@ pub struct MeshBatch {
 
 impl Drop for MeshBatch {
     fn drop(&mut self) {
-        drop(self.staging.take());
+        drop(self.stage.take());
         if let Some(created) = self.created.take() {
             let mut in_flight = crate::inflight::lock();
             let _ = std::fs::remove_dir_all(&created);
@@ -346,98 +349,64 @@ impl MeshBatch {
         if let Some(c) = &created {
             crate::inflight::note_created(&mut in_flight, c, true);
         }
-        crate::inflight::note_dir(&mut in_flight, dir);
-        let staging = tempfile::Builder::new()
-            .prefix(&crate::inflight::temp_prefix())
-            .tempdir_in(dir)
-            .map_err(|e| {
-                if let Some(c) = &created {
-                    let _ = std::fs::remove_dir_all(c);
-                    crate::inflight::note_created(&mut in_flight, c, false);
-                }
-                IoError::io(dir, e)
-            })?;
-        Ok(MeshBatch { dir: dir.to_path_buf(), staging: Some(staging), names: Vec::new(), created })
+        let staging = crate::inflight::StagingDir::new_in(&mut in_flight, dir).map_err(|e| {
+            if let Some(c) = &created {
+                let _ = std::fs::remove_dir_all(c);
+                crate::inflight::note_created(&mut in_flight, c, false);
+            }
+            IoError::io(dir, e)
+        })?;
+        let stage = crate::commit::Stage { target: dir.to_path_buf(), staging };
+        Ok(MeshBatch { dir: dir.to_path_buf(), stage: Some(stage), names: Vec::new(), created })
     }
 
-    fn staging(&self) -> &Path {
-        self.staging.as_ref().map_or(Path::new(""), |s| s.path())
+    pub(crate) fn stage(&self) -> Option<&crate::commit::Stage> {
+        self.stage.as_ref()
+    }
+
+    /// The names of the meshes written so far, in order.
+    pub fn names(&self) -> &[String] {
+        &self.names
     }
 
     /// Writes `mesh` as `name` (a plain file name with a mesh extension) in the staging
     /// directory; errors name the final path.
     pub fn write(&mut self, name: &str, mesh: &QuadMesh) -> Result<(), IoError> {
         let target = self.dir.join(name);
-        if Path::new(name).file_name().map(|n| n.to_string_lossy()) != Some(name.into()) {
+        let plain = Path::new(name).file_name().map(|n| n.to_string_lossy()) == Some(name.into());
+        let Some(stage) = self.stage.as_ref().filter(|_| plain && name != crate::inflight::LOCK_FILE) else {
             return Err(IoError::InvalidMesh {
                 path: target,
                 message: format!("'{name}' is not a plain file name"),
             });
-        }
-        let staged = self.staging().join(name);
-        write_mesh(&staged, mesh).map_err(|e| match e {
-            IoError::InvalidMesh { message, .. } => IoError::InvalidMesh { path: target, message },
-            other => other,
-        })?;
+        };
+        write_mesh(&stage.staging.path().join(name), mesh).map_err(|e| stage.relocate(e))?;
         self.names.push(name.to_string());
         Ok(())
+    }
+
+    /// Once committed: the directories the batch created stay.
+    pub(crate) fn committed(&mut self, in_flight: &mut crate::inflight::InFlight) {
+        if let Some(created) = self.created.take() {
+            crate::inflight::note_created(in_flight, &created, false);
+        }
     }
 
     /// Moves every file written so far (and companions such as `.mtl` libraries) into
     /// the target directory, replacing files of the same names, and removes the
     /// staging directory. Returns the paths written.
     ///
-    /// All or nothing: a target that is a directory is refused before anything moves;
-    /// files being replaced are first moved aside into the staging directory, and if a
-    /// rename fails, every file already moved in is taken out again and the replaced
-    /// ones are put back.
+    /// All or nothing: a target that exists and is not a regular file (a directory, a
+    /// symbolic link, a device...) is refused before anything moves; files being replaced
+    /// are first moved aside into the staging directory, and if a rename fails, every
+    /// file already moved in is taken out again and the replaced ones are put back.
     pub fn commit(mut self) -> Result<Vec<std::path::PathBuf>, IoError> {
         // Not cut in two by an interruption (see `remove_in_flight`).
         let mut in_flight = crate::inflight::lock();
-        let staging = self.staging().to_path_buf();
-        let mut files: Vec<std::path::PathBuf> = std::fs::read_dir(&staging)
-            .and_then(|entries| entries.map(|e| e.map(|e| e.path())).collect())
-            .map_err(|e| IoError::io(&self.dir, e))?;
-        files.sort();
-        let targets: Vec<std::path::PathBuf> =
-            files.iter().map(|f| self.dir.join(f.file_name().unwrap_or_default())).collect();
-        if let Some(t) = targets.iter().find(|t| t.is_dir()) {
-            return Err(IoError::io(t, io::Error::other("a directory is in the way of the file")));
-        }
-        let old = staging.join(".replaced");
-        std::fs::create_dir(&old).map_err(|e| IoError::io(&self.dir, e))?;
-        let mut moved_aside = Vec::new();
-        let mut moved_in = Vec::new();
-        let mut failure = None;
-        for (file, target) in files.iter().zip(&targets) {
-            let aside = old.join(file.file_name().unwrap_or_default());
-            if target.exists() {
-                if let Err(e) = std::fs::rename(target, &aside) {
-                    failure = Some(IoError::io(target, e));
-                    break;
-                }
-                moved_aside.push((aside, target.clone()));
-            }
-            if let Err(e) = std::fs::rename(file, target) {
-                failure = Some(IoError::io(target, e));
-                break;
-            }
-            moved_in.push(target.clone());
-        }
-        if let Some(e) = failure {
-            for target in &moved_in {
-                let _ = std::fs::remove_file(target);
-            }
-            for (aside, target) in &moved_aside {
-                let _ = std::fs::rename(aside, target);
-            }
-            return Err(e);
-        }
-        if let Some(created) = self.created.take() {
-            // Committed: the directory stays.
-            crate::inflight::note_created(&mut in_flight, &created, false);
-        }
-        Ok(targets)
+        let stages: Vec<&crate::commit::Stage> = self.stage.iter().collect();
+        let written = crate::commit::commit_stages(&stages)?;
+        self.committed(&mut in_flight);
+        Ok(written)
     }
 }
 
@@ -503,21 +472,7 @@ pub(crate) fn write_temporary(
         Some(dir) if !dir.as_os_str().is_empty() => dir,
         _ => Path::new("."),
     };
-    let prefix = crate::inflight::temp_prefix();
-    let mut builder = tempfile::Builder::new();
-    builder.prefix(&prefix).suffix(".tmp");
-    #[cfg(unix)]
-    {
-        // The mode a plain `File::create` would give (0o666 less the umask), rather
-        // than the temporary file's private 0o600.
-        use std::os::unix::fs::PermissionsExt;
-        builder.permissions(std::fs::Permissions::from_mode(0o666));
-    }
-    let mut tmp = {
-        let mut in_flight = crate::inflight::lock();
-        crate::inflight::note_dir(&mut in_flight, dir);
-        builder.tempfile_in(dir).map_err(|e| IoError::io(path, e))?
-    };
+    let mut tmp = crate::inflight::temp_file(dir, ".tmp").map_err(|e| IoError::io(path, e))?;
     {
         let mut writer = BufWriter::new(tmp.as_file_mut());
         encode(&mut writer).and_then(|()| writer.flush()).map_err(|e| IoError::io(path, e))?;

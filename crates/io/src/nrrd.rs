@@ -158,7 +158,7 @@ enum Encoding {
 
 /// What the header says.
 #[derive(Debug)]
-struct Header {
+pub(crate) struct Header {
     /// Header bytes, up to and including the empty line.
     len: usize,
     sizes: [u64; 3],
@@ -167,7 +167,7 @@ struct Header {
     encoding: Encoding,
     byte_skip: i64,
     line_skip: usize,
-    data_file: Option<PathBuf>,
+    pub(crate) data_file: Option<PathBuf>,
     /// Columns: the world steps of the three index axes.
     directions: DMat3,
     origin: DVec3,
@@ -176,7 +176,7 @@ struct Header {
 }
 
 impl Header {
-    fn parse(bytes: &[u8], path: &Path) -> Result<Header, IoError> {
+    pub(crate) fn parse(bytes: &[u8], path: &Path) -> Result<Header, IoError> {
         let not_nrrd = |m: String| IoError::format(path, format!("not a NRRD file: {m}"));
         let bad = |m: String| IoError::format(path, m);
         if !bytes.starts_with(b"NRRD000") || !bytes.get(7).is_some_and(|v| (b'1'..=b'5').contains(v)) {

@@ -43,6 +43,15 @@ pub fn write_obj(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
         });
     }
     mesh.check().map_err(|message| IoError::InvalidMesh { path: path.to_path_buf(), message })?;
+    if let Ok(meta) = std::fs::symlink_metadata(&mtl) {
+        if !meta.is_file() {
+            let what = crate::commit::file_kind(&meta);
+            return Err(IoError::io(
+                &mtl,
+                io::Error::other(format!("{what} is in the way of the material library")),
+            ));
+        }
+    }
     // Both written in full before either replaces anything: a failed OBJ leaves the old
     // OBJ and its old library.
     let mtl_tmp = write_temporary(&mtl, |w| encode_mtl(mesh, w))?;
