@@ -252,7 +252,8 @@ fn quads_of(quads: &PyReadonlyArray2<'_, i64>, n: usize) -> Result<Vec<[u32; 4]>
 }
 
 /// The quality counts of a quad mesh (`voxreg check`): faces, self-intersecting face
-/// pairs, folded quads, folded adjacent pairs, and the first intersecting pair.
+/// pairs, folded quads, folded adjacent pairs, the first intersecting pair, and the mean
+/// angle between adjacent quads (`voxreg_quality::mean_adjacent_angle_deg`).
 #[pyfunction]
 pub(crate) fn check<'py>(
     py: Python<'py>,
@@ -261,7 +262,14 @@ pub(crate) fn check<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let positions = positions_of(&vertices)?;
     let quads = quads_of(&quads, positions.len())?;
-    let r = py.detach(|| no_panic(|| Ok(voxreg_quality::check(&positions, &quads))))?;
+    let (r, mean_angle) = py.detach(|| {
+        no_panic(|| {
+            Ok((
+                voxreg_quality::check(&positions, &quads),
+                voxreg_quality::mean_adjacent_angle_deg(&positions, &quads),
+            ))
+        })
+    })?;
     let d = PyDict::new(py);
     d.set_item("faces", r.faces)?;
     d.set_item("intersecting_pairs", r.intersecting_pairs)?;
@@ -277,6 +285,7 @@ pub(crate) fn check<'py>(
 #[pyo3(signature = (path, vertices, quads, labels, colors=None))]
 pub(crate) fn write_arrays(
     py: Python<'_>,
+    d.set_item("mean_angle_deg", mean_angle)?;
     path: PathBuf,
     vertices: PyReadonlyArray2<'_, f64>,
     quads: PyReadonlyArray2<'_, i64>,
