@@ -200,18 +200,11 @@ fn run_surface_nets(dir: &Path, volumes: &[LabelVolume]) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     for (k, volume) in volumes.iter().enumerate() {
         let [nx, ny, nz] = volume.dims();
-        let mut header = format!("{{'descr': '<u4', 'fortran_order': False, 'shape': ({nx}, {ny}, {nz}), }}");
-        while (10 + header.len() + 1) % 64 != 0 {
-            header.push(' ');
-        }
-        header.push('\n');
         let path = dir.join(format!("case_{k}.npy"));
         let mut f = std::io::BufWriter::new(
             std::fs::File::create(&path).with_context(|| format!("{}: cannot create", path.display()))?,
         );
-        f.write_all(b"\x93NUMPY\x01\x00")?;
-        f.write_all(&(header.len() as u16).to_le_bytes())?;
-        f.write_all(header.as_bytes())?;
+        f.write_all(&voxreg_testkit::npy_bytes("<u4", [nx, ny, nz], []))?;
         // C order, shape (X, Y, Z): z fastest.
         for x in 0..nx as i64 {
             for y in 0..ny as i64 {

@@ -72,6 +72,20 @@ fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask sits in the workspace").to_path_buf()
 }
 
+/// The arguments `[--runs N] [FILE...]`: `N` (default `runs`) and the files.
+fn runs_and_files(args: &[String], mut runs: usize) -> Result<(usize, Vec<PathBuf>)> {
+    let mut files = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        if a == "--runs" {
+            runs = it.next().context("--runs needs a number")?.parse().context("--runs needs a number")?;
+        } else {
+            files.push(PathBuf::from(a));
+        }
+    }
+    Ok((runs, files))
+}
+
 fn median(mut v: Vec<f64>) -> f64 {
     v.sort_by(f64::total_cmp);
     v[v.len() / 2]
@@ -106,16 +120,7 @@ fn run_once(path: &Path, out: &Path) -> Result<Run> {
 }
 
 fn timings(args: &[String]) -> Result<()> {
-    let mut runs = 5;
-    let mut files = Vec::new();
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        if a == "--runs" {
-            runs = it.next().context("--runs needs a number")?.parse().context("--runs needs a number")?;
-        } else {
-            files.push(PathBuf::from(a));
-        }
-    }
+    let (runs, mut files) = runs_and_files(args, 5)?;
     if files.is_empty() {
         files = vec![root().join("data/bunny-128.vol"), root().join("data/cat10.vol")];
     }

@@ -90,10 +90,6 @@ impl NormalEstimator for Refined<'_> {
         "refined"
     }
 
-    fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
-        self.estimate_interruptible(surface, &Interrupt::never())
-    }
-
     /// Polls `interrupt` once per surfel: a raised one skips the remaining discs.
     fn estimate_interruptible(
         &self,

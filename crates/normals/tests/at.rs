@@ -34,7 +34,8 @@ use std::collections::HashMap;
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, LabelVolume, VertexId};
 use voxreg_normals::{
-    AmbrosioTortorelli, AtParams, AtSolver, FeatureField, NormalError, NormalEstimator, NormalField, Trivial,
+    AmbrosioTortorelli, AtParams, AtSolver, FeatureField, Interrupt, NormalError, NormalEstimator,
+    NormalField, Trivial,
 };
 use voxreg_testkit::{angles_deg, digitize, mean_max, surfel_centre, true_normals, Cuboid, Shape, Sphere};
 
@@ -52,7 +53,11 @@ impl NormalEstimator for Blurred {
         "blurred"
     }
 
-    fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
+    fn estimate_interruptible(
+        &self,
+        surface: &DigitalSurface,
+        _interrupt: &Interrupt,
+    ) -> Result<NormalField, NormalError> {
         let h = surface.spacing().min_element();
         let r = self.radius * h;
         let centres: Vec<DVec3> = (0..surface.num_surfels()).map(|s| surfel_centre(surface, s)).collect();
