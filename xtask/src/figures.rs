@@ -679,22 +679,32 @@ fn fig10(index: &mut Index, quick: bool) -> Result<()> {
     )
 }
 
-fn fig11_15(index: &mut Index, path: &Path) -> Result<()> {
-    let (loaded, surface) = load(path)?;
-    let input = surface.positions();
-    let (lo, hi) = bounds(&input);
-    let camera = Camera::fit(lo, hi, DVec3::new(-0.6, 0.75, -0.3), DVec3::Z);
-    let mut qm = QuadMesh::from_surface(&surface, &input);
-    let colours: Option<Vec<[u8; 3]>> = loaded.palette.as_ref().map(|p| {
-        qm.assign_materials(p);
+/// Each quad's colour from `palette` (its material's, as the writers give it), where there
+/// is a palette.
+pub(crate) fn palette_colours(
+    palette: Option<&voxreg_io::Palette>,
+    surface: &DigitalSurface,
+    positions: &[DVec3],
+) -> Option<Vec<[u8; 3]>> {
+    let mut qm = QuadMesh::from_surface(surface, positions);
+    qm.assign_materials(palette?);
+    Some(
         qm.face_materials
             .iter()
             .map(|&m| {
                 let c = qm.materials[m as usize].color;
                 [c[0], c[1], c[2]]
             })
-            .collect()
-    });
+            .collect(),
+    )
+}
+
+fn fig11_15(index: &mut Index, path: &Path) -> Result<()> {
+    let (loaded, surface) = load(path)?;
+    let input = surface.positions();
+    let (lo, hi) = bounds(&input);
+    let camera = Camera::fit(lo, hi, DVec3::new(-0.6, 0.75, -0.3), DVec3::Z);
+    let colours = palette_colours(loaded.palette.as_ref(), &surface, &input);
     let normals = ii_normals(&surface)?;
     let shot = |caption: &str, x: &[DVec3], wire: bool| Shot {
         caption: caption.into(),

@@ -1,7 +1,7 @@
 //! The multi-label and anisotropic part of `cargo xtask compare`: the test kit's label
 //! shapes (split ball, quartered ball, touching balls) and anisotropically sampled
 //! spheres and tori, voxreg against marching cubes (and, with `--surfacenets`, VTK's
-//! SurfaceNets3D run by `bench/surfacenets_labels.py`), by part: surfaces (interfaces with
+//! SurfaceNets3D run by `bench/accuracy/surfacenets_labels.py`), by part: surfaces (interfaces with
 //! the background), inner interfaces, junction curves, junction points.
 
 use std::fmt::Write as _;
@@ -154,11 +154,11 @@ background; inner interface = two labels, neither the background; junction curve
 curve; junction points = where the curves end. Normals: unsigned angle between each face's normal and the true \
 normal at the nearest point of its interface, mean / max. voxreg: the default pipeline. Marching cubes: iso 0.5 on \
 each label's indicator, separately (no shared junction vertices), each vertex measured against the interface of the \
-two labels at the ends of its lattice edge. VTK SurfaceNets3D (`--surfacenets`, `bench/surfacenets_labels.py`): its \
+two labels at the ends of its lattice edge. VTK SurfaceNets3D (`--surfacenets`, `bench/accuracy/surfacenets_labels.py`): its \
 defaults (every label, constrained smoothing on, triangles), each vertex measured by the labels of its triangles.\n";
 
 /// The tables of every [`label_cases`] case; with `surfacenets`, a folder where each
-/// case's volume is written and `bench/surfacenets_labels.py` meshes it, a row for VTK's
+/// case's volume is written and `bench/accuracy/surfacenets_labels.py` meshes it, a row for VTK's
 /// SurfaceNets3D too.
 pub(crate) fn label_tables(surfacenets: Option<&Path>) -> Result<String> {
     let cases = label_cases();
@@ -195,23 +195,16 @@ pub(crate) fn label_tables(surfacenets: Option<&Path>) -> Result<String> {
 }
 
 /// Writes each volume to `dir/case_K.npy` (`u32` labels, shape `(X, Y, Z)`) with its
-/// spacing and origin in `dir/case_K.json`, and runs `bench/surfacenets_labels.py` on `dir`.
+/// spacing and origin in `dir/case_K.json`, and runs `bench/accuracy/surfacenets_labels.py` on `dir`.
 fn run_surface_nets(dir: &Path, volumes: &[LabelVolume]) -> Result<()> {
     std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     for (k, volume) in volumes.iter().enumerate() {
         let [nx, ny, nz] = volume.dims();
-        let mut header = format!("{{'descr': '<u4', 'fortran_order': False, 'shape': ({nx}, {ny}, {nz}), }}");
-        while (10 + header.len() + 1) % 64 != 0 {
-            header.push(' ');
-        }
-        header.push('\n');
         let path = dir.join(format!("case_{k}.npy"));
         let mut f = std::io::BufWriter::new(
             std::fs::File::create(&path).with_context(|| format!("{}: cannot create", path.display()))?,
         );
-        f.write_all(b"\x93NUMPY\x01\x00")?;
-        f.write_all(&(header.len() as u16).to_le_bytes())?;
-        f.write_all(header.as_bytes())?;
+        f.write_all(&voxreg_testkit::npy_bytes("<u4", [nx, ny, nz], []))?;
         // C order, shape (X, Y, Z): z fastest.
         for x in 0..nx as i64 {
             for y in 0..ny as i64 {
@@ -230,7 +223,7 @@ fn run_surface_nets(dir: &Path, volumes: &[LabelVolume]) -> Result<()> {
             ),
         )?;
     }
-    let script = crate::root().join("bench/surfacenets_labels.py");
+    let script = crate::root().join("bench/accuracy/surfacenets_labels.py");
     let status = std::process::Command::new("python3")
         .arg(&script)
         .arg(dir)
@@ -242,7 +235,7 @@ fn run_surface_nets(dir: &Path, volumes: &[LabelVolume]) -> Result<()> {
     Ok(())
 }
 
-/// The fidelity of a SurfaceNets3D mesh written by `bench/surfacenets_labels.py`, with
+/// The fidelity of a SurfaceNets3D mesh written by `bench/accuracy/surfacenets_labels.py`, with
 /// [`label_fidelity`]'s metric: each vertex measured against the part given by the labels
 /// of its triangles (two labels: an interface; three or more: a junction curve or point),
 /// each triangle's normal against its interface's; distances over `unit`.

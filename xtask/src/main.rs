@@ -9,7 +9,7 @@
 //!   against every metric of `voxreg-baselines` on analytic shapes; Markdown and CSV tables
 //!   in `target/xtask/compare/` (see `compare.rs`). `--labels`: the label shapes' tables
 //!   alone (`labelled.rs`); `--surfacenets`: with VTK's SurfaceNets3D on them, run by
-//!   `bench/surfacenets_labels.py` (needs Python with numpy and pip's `vtk`).
+//!   `bench/accuracy/surfacenets_labels.py` (needs Python with numpy and pip's `vtk`).
 //! - `table1 [--runs N] [FILE...]`: the paper's Table 1 (normals, precomputation, direct
 //!   and CG solves) on ball+tet 40^3 and bunny-128 (see `table1.rs`).
 //! - `synth-labels [--dims X,Y,Z] [--seed N] [--out FILE.npy]`: a deterministic 25-label volume of
@@ -24,8 +24,12 @@
 //!   `voxart.rs`).
 //! - `gallery [--out DIR]`: every bundled model rendered as voxels and output, two views,
 //!   into `docs/gallery/` (see `voxart.rs`).
+//! - `diag NAME [VOLUME]`: measurements and diagnostics that print figures (the solver
+//!   table, AT's CG tolerance, chunked solves against the whole volume, interrupt latency,
+//!   geodesic speed; see `diag.rs`).
 
 mod compare;
+mod diag;
 mod figures;
 mod labelled;
 mod synth;
@@ -49,6 +53,7 @@ fn main() -> Result<()> {
         Some("figures") => figures::figures(&args[1..]),
         Some("voxart") => voxart::voxart(&args[1..]),
         Some("gallery") => voxart::gallery(&args[1..]),
+        Some("diag") => diag::diag(&args[1..]),
         _ => {
             eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
             eprintln!("       cargo xtask compare [--quick] [--labels] [--surfacenets] [--out DIR]");
@@ -57,6 +62,7 @@ fn main() -> Result<()> {
             eprintln!("       cargo xtask figures [--quick] [--out DIR]");
             eprintln!("       cargo xtask voxart [--smoothness S] [--no-clamp] [FILE.vox...]");
             eprintln!("       cargo xtask gallery [--out DIR]");
+            eprintln!("       cargo xtask diag NAME [VOLUME] (cargo xtask diag: the names)");
             bail!("unknown or missing command")
         }
     }
@@ -64,6 +70,20 @@ fn main() -> Result<()> {
 
 fn root() -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).parent().expect("xtask sits in the workspace").to_path_buf()
+}
+
+/// The arguments `[--runs N] [FILE...]`: `N` (default `runs`) and the files.
+fn runs_and_files(args: &[String], mut runs: usize) -> Result<(usize, Vec<PathBuf>)> {
+    let mut files = Vec::new();
+    let mut it = args.iter();
+    while let Some(a) = it.next() {
+        if a == "--runs" {
+            runs = it.next().context("--runs needs a number")?.parse().context("--runs needs a number")?;
+        } else {
+            files.push(PathBuf::from(a));
+        }
+    }
+    Ok((runs, files))
 }
 
 fn median(mut v: Vec<f64>) -> f64 {
@@ -100,16 +120,7 @@ fn run_once(path: &Path, out: &Path) -> Result<Run> {
 }
 
 fn timings(args: &[String]) -> Result<()> {
-    let mut runs = 5;
-    let mut files = Vec::new();
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        if a == "--runs" {
-            runs = it.next().context("--runs needs a number")?.parse().context("--runs needs a number")?;
-        } else {
-            files.push(PathBuf::from(a));
-        }
-    }
+    let (runs, mut files) = runs_and_files(args, 5)?;
     if files.is_empty() {
         files = vec![root().join("data/bunny-128.vol"), root().join("data/cat10.vol")];
     }

@@ -106,20 +106,13 @@ pub(crate) fn synth_labels(args: &[String]) -> Result<()> {
             }
         }
     }
-    let mut header = format!("{{'descr': '|u1', 'fortran_order': False, 'shape': ({nx}, {ny}, {nz}), }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
     if let Some(dir) = out.parent() {
         std::fs::create_dir_all(dir)?;
     }
     let mut f = std::io::BufWriter::new(
         std::fs::File::create(&out).with_context(|| format!("{}: cannot create", out.display()))?,
     );
-    f.write_all(b"\x93NUMPY\x01\x00")?;
-    f.write_all(&(header.len() as u16).to_le_bytes())?;
-    f.write_all(header.as_bytes())?;
+    f.write_all(&voxreg_testkit::npy_bytes("|u1", dims, []))?;
     f.write_all(&data)?;
     f.flush()?;
     let mut counts = [0u64; 256];

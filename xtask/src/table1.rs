@@ -7,7 +7,6 @@
 //! medians of `--runs` runs (default 3). Inputs: the ball+tet shape at 40^3 (as in the
 //! paper) and the bundled `bunny-128.vol` (the paper's bunny row), or the given files.
 
-use std::path::PathBuf;
 use std::time::Instant;
 
 use anyhow::{Context, Result};
@@ -18,6 +17,7 @@ use voxreg_regularize::{CgParams, CgSolver, DirectSolver, Energy, EnergyParams};
 use voxreg_testkit::digitize;
 
 use crate::compare::BallTet;
+use crate::median;
 
 /// Seconds of each measured step of one run.
 struct Run {
@@ -50,23 +50,9 @@ fn run_once(surface: &DigitalSurface) -> Result<Run> {
     Ok(Run { normals: normals_s, direct_pre, direct_solve, cg_pre, cg_solve, cg_iterations: info.iterations })
 }
 
-fn median(mut v: Vec<f64>) -> f64 {
-    v.sort_by(f64::total_cmp);
-    v[v.len() / 2]
-}
-
 /// Runs the table; `args`: `[--runs N] [FILE...]`.
 pub(crate) fn table1(args: &[String]) -> Result<()> {
-    let mut runs = 3;
-    let mut files = Vec::new();
-    let mut it = args.iter();
-    while let Some(a) = it.next() {
-        if a == "--runs" {
-            runs = it.next().context("--runs needs a number")?.parse().context("--runs needs a number")?;
-        } else {
-            files.push(PathBuf::from(a));
-        }
-    }
+    let (runs, mut files) = crate::runs_and_files(args, 3)?;
     let mut inputs: Vec<(String, LabelVolume)> = Vec::new();
     if files.is_empty() {
         inputs.push(("ball+tet".into(), digitize(&BallTet::new(), 0.5)));

@@ -18,15 +18,8 @@ use voxreg_render::{Camera, Image, Shading};
 
 use crate::figures::{grid, panel, Shot};
 
-/// The bundled MagicaVoxel models (data/README.md gives their sources and licences).
-pub(crate) const MODELS: [&str; 6] = [
-    "chr_army1.vox",
-    "veh_fire.vox",
-    "axes.vox",
-    "extended.vox",
-    "metal-material.vox",
-    "placeholder-with-materials.vox",
-];
+/// The bundled MagicaVoxel models.
+pub(crate) use voxreg_testkit::BUNDLED_VOX_MODELS as MODELS;
 
 /// The solid voxels of `volume` (every label but the background).
 pub(crate) fn occupancy(volume: &LabelVolume) -> Occupancy {
@@ -171,20 +164,8 @@ pub(crate) fn voxart(args: &[String]) -> Result<()> {
 
 /// The quads' palette colours (grey without a palette).
 fn colours(loaded: &voxreg_io::LoadedVolume, out: &Output) -> Vec<[u8; 3]> {
-    let mut qm = QuadMesh::from_surface(&out.surface, &out.positions);
-    match loaded.palette.as_ref() {
-        Some(p) => {
-            qm.assign_materials(p);
-            qm.face_materials
-                .iter()
-                .map(|&m| {
-                    let c = qm.materials[m as usize].color;
-                    [c[0], c[1], c[2]]
-                })
-                .collect()
-        }
-        None => vec![[200, 200, 200]; qm.quads.len()],
-    }
+    crate::figures::palette_colours(loaded.palette.as_ref(), &out.surface, &out.positions)
+        .unwrap_or_else(|| vec![[200, 200, 200]; out.surface.num_surfels()])
 }
 
 /// `cargo xtask gallery [--out DIR]`: every bundled model as voxels, with the former

@@ -2,6 +2,25 @@
 
 use glam::DVec3;
 
+/// The point of the zero set of `value` nearest to `p` by Newton steps along `gradient`
+/// (at most 30, until a step is under `1e-13`): good for points near the surface.
+pub fn newton_project(value: impl Fn(DVec3) -> f64, gradient: impl Fn(DVec3) -> DVec3, p: DVec3) -> DVec3 {
+    let mut q = p;
+    for _ in 0..30 {
+        let g = gradient(q);
+        let g2 = g.length_squared();
+        if g2 == 0.0 {
+            break;
+        }
+        let step = value(q) / g2 * g;
+        q -= step;
+        if step.length() < 1e-13 {
+            break;
+        }
+    }
+    q
+}
+
 /// An implicit shape: inside where [`Implicit::value`] `<= 0`, with its outward
 /// gradient and the nearest point of its surface.
 ///
@@ -17,20 +36,7 @@ pub trait Implicit: Sync {
     /// The point of the surface nearest to `p`. Default: Newton steps along the gradient
     /// (good for points near the surface); shapes with an exact projection override it.
     fn project(&self, p: DVec3) -> DVec3 {
-        let mut q = p;
-        for _ in 0..30 {
-            let g = self.gradient(q);
-            let g2 = g.length_squared();
-            if g2 == 0.0 {
-                break;
-            }
-            let step = self.value(q) / g2 * g;
-            q -= step;
-            if step.length() < 1e-13 {
-                break;
-            }
-        }
-        q
+        newton_project(|q| self.value(q), |q| self.gradient(q), p)
     }
 
     /// Distance from `p` to the surface, negative inside.

@@ -66,7 +66,7 @@ mod smooth;
 pub use dc::{dual_contour, quantize, DcParams};
 pub use distance::TriangleIndex;
 pub use grid::ScalarGrid;
-pub use implicit::{Ball, Implicit};
+pub use implicit::{newton_project, Ball, Implicit};
 pub use mc::{marching_cubes, marching_cubes_volume};
 pub use mesh::Mesh;
 pub use metrics::{

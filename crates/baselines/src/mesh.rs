@@ -183,23 +183,6 @@ impl Mesh {
         }
         nbrs
     }
-
-    /// The Wavefront OBJ text of the mesh (for inspection; no normals, 1-based indices).
-    pub fn to_obj(&self) -> String {
-        use std::fmt::Write;
-        let mut s = String::new();
-        for p in &self.positions {
-            let _ = writeln!(s, "v {} {} {}", p.x, p.y, p.z);
-        }
-        for face in self.faces() {
-            s.push('f');
-            for &v in face {
-                let _ = write!(s, " {}", v + 1);
-            }
-            s.push('\n');
-        }
-        s
-    }
 }
 
 #[cfg(test)]

@@ -4,7 +4,9 @@
 //! presets ([`voxreg_regularize::Params`]) hold every default.
 
 mod args;
+mod check;
 mod geodesic;
+mod info;
 mod input;
 mod output;
 mod progress;
@@ -12,13 +14,13 @@ mod report;
 mod signals;
 mod view;
 
-use anyhow::{bail, Context, Result};
+use anyhow::{Context, Result};
 use clap::Parser as _;
-use voxreg_io::{read_mesh, write_ply_with_vertex_scalar, write_volume, Outputs, QuadMesh};
+use voxreg_io::{write_ply_with_vertex_scalar, write_volume, Outputs, QuadMesh};
 use voxreg_regularize::Regularizer;
 use voxreg_upscale::{upscale, UpscaleParams};
 
-use crate::args::{CheckArgs, Cli, Command, RegularizeArgs};
+use crate::args::{Cli, Command, RegularizeArgs};
 use crate::output::Product;
 use crate::progress::Stages;
 use crate::report::{CliReport, IoTimes};
@@ -38,7 +40,7 @@ fn main() -> std::process::ExitCode {
     // switches per pass (a tenth of a voxel-art run's time). The viewer serves for its
     // whole life and runs its solves on the pool itself.
     let result = std::panic::catch_unwind(|| match cli.command {
-        Command::Info(args) => input::info(&args),
+        Command::Info(args) => info::info(&args),
         Command::Regularize(args) => rayon::scope(|_| regularize(&args, Product::Mesh)),
         Command::Upscale(args) => {
             rayon::scope(|_| regularize(&args.regularize, Product::Volume { factor: args.factor }))
@@ -46,7 +48,7 @@ fn main() -> std::process::ExitCode {
         Command::Geodesic(args) => {
             rayon::scope(|_| regularize(&args.regularize, Product::Geodesic(&args.geodesic)))
         }
-        Command::Check(args) => rayon::scope(|_| check(&args)),
+        Command::Check(args) => rayon::scope(|_| check::check(&args)),
         Command::View(args) => view::view(&args),
     })
     .unwrap_or_else(|_| {
@@ -220,79 +222,6 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     outputs.commit()?;
     if !args.quiet {
         eprintln!("{}; wrote {written}", r.summary());
-    }
-    Ok(())
-}
-
-/// `voxreg check`: counts the mesh's self-intersections and folds.
-fn check(args: &CheckArgs) -> Result<()> {
-    let mesh = read_mesh(&args.mesh)?;
-    let r = voxreg_quality::check(&mesh.positions, &mesh.quads);
-    print_stdout(&format!(
-        "{}: {} faces, {} self-intersecting face pairs, {} folded quads, {} folded adjacent pairs\n",
-        args.mesh.display(),
-        r.faces,
-        r.intersecting_pairs,
-        r.folded_quads,
-        r.folded_pairs,
-    ))?;
-    if let Some(path) = &args.voxels {
-        let volume = voxreg_io::read_volume(path)?.volume;
-        let (bg, labels) = (volume.background(), volume.labels());
-        let occ = voxreg_quality::Occupancy::from_fn(volume.dims(), volume.origin(), volume.spacing(), |v| {
-            Some(labels[v]) != bg
-        });
-        let s = voxreg_quality::solid_report(&occ, &mesh.positions, &mesh.quads);
-        print_stdout(&format!(
-            "{}: {} of {} solid voxel centres outside, {} of {} empty ones inside, {} of {} thin voxels \
-             less than 0.25 voxel deep (thinnest {:.3})\n",
-            path.display(),
-            s.solid_outside,
-            s.solid_surface_voxels,
-            s.empty_inside,
-            s.empty_surface_voxels,
-            s.thin_shallow,
-            s.thin_voxels,
-            s.thin_min_depth
-        ))?;
-        // Smoothness and sharpness need the staircase: found where every vertex stayed
-        // within half a voxel of its corner (clamped outputs, the voxel-art preset's).
-        if let Some(stair) = occ.staircase_of(&mesh.positions, &mesh.quads) {
-            let a = voxreg_quality::angle_report(
-                &stair,
-                &mesh.positions,
-                &mesh.quads,
-                &occ.thin_quads(&stair, &mesh.quads),
-            );
-            print_stdout(&format!(
-                "{}: mean angle between adjacent quads {:.1} deg (voxels {:.1}; {:.1} on the {} pairs at thin \
-                 voxels, {:.1} on the {} others), {} hard edges at {:.1} deg (90 in the voxels)\n",
-                args.mesh.display(),
-                a.mean,
-                voxreg_quality::mean_adjacent_angle_deg(&stair, &mesh.quads),
-                a.thin.0,
-                a.thin.1,
-                a.elsewhere.0,
-                a.elsewhere.1,
-                a.hard_edges.1,
-                a.hard_edges.0
-            ))?;
-        }
-    }
-    if let Some((a, b)) = r.first_intersection {
-        bail!(
-            "{}: {} self-intersections (first: faces {a} and {b})",
-            args.mesh.display(),
-            r.intersecting_pairs
-        );
-    }
-    if !r.is_clean() {
-        bail!(
-            "{}: {} folded quads, {} folded adjacent pairs",
-            args.mesh.display(),
-            r.folded_quads,
-            r.folded_pairs
-        );
     }
     Ok(())
 }

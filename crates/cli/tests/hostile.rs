@@ -29,25 +29,10 @@ fn s(p: &Path) -> &str {
 
 /// A C-order `.npy` of `u4` labels, shape `dims`, from `f(x, y, z)`.
 fn write_npy_u32(path: &Path, dims: [usize; 3], f: impl Fn(usize, usize, usize) -> u32) {
-    let mut header = format!(
-        "{{'descr': '<u4', 'fortran_order': False, 'shape': ({}, {}, {}), }}",
-        dims[0], dims[1], dims[2]
-    );
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header.as_bytes());
-    for x in 0..dims[0] {
-        for y in 0..dims[1] {
-            for z in 0..dims[2] {
-                bytes.extend(f(x, y, z).to_le_bytes());
-            }
-        }
-    }
-    std::fs::write(path, bytes).unwrap();
+    let [nx, ny, nz] = dims;
+    let labels = (0..nx).flat_map(|x| (0..ny).flat_map(move |y| (0..nz).map(move |z| (x, y, z))));
+    let data = labels.flat_map(|(x, y, z)| f(x, y, z).to_le_bytes());
+    std::fs::write(path, voxreg_testkit::npy_bytes("<u4", dims, data)).unwrap();
 }
 
 fn zlib(bytes: &[u8]) -> Vec<u8> {

@@ -264,19 +264,11 @@ fn raw_data_need_dims_and_read_with_dtype_and_spacing() {
 
 /// A version-1 `.npy` file of little-endian f32 values, shape `(X, Y, Z)` in C order.
 fn write_npy_f32(path: &Path, shape: [usize; 3], values: &[f32]) {
-    let mut header = format!(
-        "{{'descr': '<f4', 'fortran_order': False, 'shape': ({}, {}, {}), }}",
-        shape[0], shape[1], shape[2]
-    );
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend_from_slice(&(header.len() as u16).to_le_bytes());
-    bytes.extend_from_slice(header.as_bytes());
-    bytes.extend(values.iter().flat_map(|v| v.to_le_bytes()));
-    std::fs::write(path, bytes).unwrap();
+    std::fs::write(
+        path,
+        voxreg_testkit::npy_bytes("<f4", shape, values.iter().flat_map(|v| v.to_le_bytes())),
+    )
+    .unwrap();
 }
 
 #[test]

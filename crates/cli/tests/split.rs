@@ -22,22 +22,9 @@ fn run_ok(args: &[&str]) {
 /// Writes `volume`'s labels (all < 256) as a C-order `.npy` of shape (X, Y, Z).
 fn write_npy(path: &Path, volume: &LabelVolume) {
     let [nx, ny, nz] = volume.dims();
-    let mut header = format!("{{'descr': '|u1', 'fortran_order': False, 'shape': ({nx}, {ny}, {nz}), }}");
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header.as_bytes());
-    for x in 0..nx {
-        for y in 0..ny {
-            for z in 0..nz {
-                bytes.push(u8::try_from(volume.labels()[[x, y, z]]).unwrap());
-            }
-        }
-    }
-    std::fs::write(path, bytes).unwrap();
+    let labels = (0..nx).flat_map(|x| (0..ny).flat_map(move |y| (0..nz).map(move |z| [x, y, z])));
+    let data = labels.map(|p| u8::try_from(volume.labels()[p]).unwrap());
+    std::fs::write(path, voxreg_testkit::npy_bytes("|u1", [nx, ny, nz], data)).unwrap();
 }
 
 /// A PLY file as written by voxreg (no colours): `f32` positions as bits, quads, labels.

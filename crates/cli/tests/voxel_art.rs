@@ -12,15 +12,7 @@ use voxreg_quality::{angle_report, check, hard_edges, self_intersections, solid_
 mod common;
 use common::{data, stderr, voxreg};
 
-/// The bundled .vox models (data/README.md gives their sources and licences).
-const MODELS: [&str; 6] = [
-    "chr_army1.vox",
-    "veh_fire.vox",
-    "axes.vox",
-    "extended.vox",
-    "metal-material.vox",
-    "placeholder-with-materials.vox",
-];
+use voxreg_testkit::BUNDLED_VOX_MODELS as MODELS;
 
 /// The solid voxels of a bundled model.
 fn occupancy_of(name: &str) -> Occupancy {

@@ -286,14 +286,6 @@ impl<S: Data<Elem = u32>> LabelVolume<S> {
         self.origin + v * self.spacing
     }
 
-    /// Calls `f` on every label, in memory order (fast whatever the layout).
-    pub fn for_each_label(&self, mut f: impl FnMut(u32)) {
-        match self.labels.as_slice_memory_order() {
-            Some(slice) => slice.iter().for_each(|&l| f(l)),
-            None => self.labels.iter().for_each(|&l| f(l)),
-        }
-    }
-
     /// The largest label (`None` for an empty volume), found in parallel.
     pub fn max_label(&self) -> Option<u32> {
         match self.labels.as_slice_memory_order() {

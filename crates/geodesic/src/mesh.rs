@@ -244,11 +244,6 @@ impl GeodesicMesh {
         self.positions.len()
     }
 
-    /// Number of input polygons.
-    pub fn num_polygons(&self) -> usize {
-        self.polygons.len()
-    }
-
     /// The triangles (indices into the positions), in polygon order.
     pub fn triangles(&self) -> &[[u32; 3]] {
         &self.triangles

@@ -57,7 +57,8 @@
 //! or VTK PolyData with per-face labels and colours ([`write_vtp`]); [`write_ply_with_vertex_scalar`] adds one value
 //! per vertex (a `float` property and a colour ramp) for inspecting a field such as the
 //! AT feature field, and [`write_ply_with_vertex_field`] the same with given colours
-//! (geodesic distances with iso-lines). Writers go through a temporary file renamed onto
+//! (geodesic distances with iso-lines); [`PlyParts`] writes the PLY of a mesh larger than
+//! memory in parts. Writers go through a temporary file renamed onto
 //! the target, so a failed write leaves no partial file. Parts of the surface (one
 //! interface, one region's closed surface: a [`Patch`](voxreg_digisurf::Patch)) become
 //! meshes by [`QuadMesh::from_patch`], and [`MeshBatch`] writes many into a directory
@@ -152,7 +153,7 @@ pub use npy::{read_npy, read_npy_bytes};
 pub use nrrd::{read_nrrd, read_nrrd_bytes};
 pub use obj::write_obj;
 pub use pgm3d::{read_pgm3d, read_pgm3d_bytes};
-pub use ply::{scalar_ramp, write_ply, write_ply_with_vertex_field, write_ply_with_vertex_scalar};
+pub use ply::{scalar_ramp, write_ply, write_ply_with_vertex_field, write_ply_with_vertex_scalar, PlyParts};
 pub use raw::{read_raw, read_raw_bytes, RawSpec};
 pub use read_mesh::{read_mesh, read_mesh_bytes};
 pub use samples::{DataType, Endian};

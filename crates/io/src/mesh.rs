@@ -482,7 +482,7 @@ pub(crate) fn write_temporary(
 
 /// A writer that passes each write on in parts of at most 8 KiB, the parts a `BufWriter`
 /// flushes. Why: a large buffer written to a file in one call took the kernel longer than
-/// the same bytes in small parts (`docs/performance.md`, "Writing large meshes").
+/// the same bytes in small parts (`docs/history.md`, "Writing large meshes").
 pub(crate) struct SmallWrites<'a>(pub(crate) &'a mut dyn Write);
 
 impl Write for SmallWrites<'_> {

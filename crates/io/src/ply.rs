@@ -1,9 +1,11 @@
 //! Binary PLY output.
 
-use std::io::{self, Write};
-use std::path::Path;
+use std::io::{self, Seek, SeekFrom, Write};
+use std::path::{Path, PathBuf};
 
-use crate::mesh::write_atomically;
+use glam::DVec3;
+
+use crate::mesh::{write_atomically, write_temporary};
 use crate::{IoError, QuadMesh};
 
 /// Writes `mesh` to `path` as a binary little-endian PLY file.
@@ -59,39 +61,54 @@ fn check_ply(mesh: &QuadMesh) -> Result<(), String> {
     Ok(())
 }
 
+/// The first line of every PLY file this crate writes, its format and comment.
+const PLY_START: &str = "ply\nformat binary_little_endian 1.0\ncomment voxreg quad mesh\n";
+
+/// The header's elements: `vertices` positions and `faces` quads with their labels.
+fn elements(vertices: usize, faces: usize) -> String {
+    format!(
+        "element vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\n\
+         element face {faces}\nproperty list uchar int vertex_indices\n\
+         property int inner_label\nproperty int outer_label\n"
+    )
+}
+
+/// A vertex's record: its position rounded to `f32`.
+fn vertex_record(p: DVec3) -> [u8; 12] {
+    let mut record = [0u8; 12];
+    for (chunk, c) in record.chunks_exact_mut(4).zip(p.as_vec3().to_array()) {
+        chunk.copy_from_slice(&c.to_le_bytes());
+    }
+    record
+}
+
+/// A face's record: 4, its vertex indices and labels as `int`, and 4 bytes for a colour.
+fn face_record(quad: &[u32; 4], labels: &[u32; 2]) -> [u8; 29] {
+    let mut record = [0u8; 29];
+    record[0] = 4;
+    for (chunk, &v) in record[1..25].chunks_exact_mut(4).zip(quad.iter().chain(labels)) {
+        chunk.copy_from_slice(&(v as i32).to_le_bytes());
+    }
+    record
+}
+
 /// Writes the PLY header and body of `mesh`, assumed checked, to `w`.
 pub(crate) fn encode_ply(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
-    write!(w, "ply\nformat binary_little_endian 1.0\ncomment voxreg quad mesh\n")?;
+    w.write_all(PLY_START.as_bytes())?;
     for label in &mesh.named_labels {
         writeln!(w, "comment {}", label.comment(true))?;
     }
-    write!(
-        w,
-        "element vertex {}\nproperty float x\nproperty float y\nproperty float z\n\
-         element face {}\nproperty list uchar int vertex_indices\n\
-         property int inner_label\nproperty int outer_label\n",
-        mesh.positions.len(),
-        mesh.quads.len()
-    )?;
+    w.write_all(elements(mesh.positions.len(), mesh.quads.len()).as_bytes())?;
     let colored = !mesh.face_materials.is_empty();
     if colored {
         writeln!(w, "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty uchar alpha")?;
     }
     writeln!(w, "end_header")?;
     for p in &mesh.positions {
-        let mut record = [0u8; 12];
-        for (chunk, c) in record.chunks_exact_mut(4).zip(p.as_vec3().to_array()) {
-            chunk.copy_from_slice(&c.to_le_bytes());
-        }
-        w.write_all(&record)?;
+        w.write_all(&vertex_record(*p))?;
     }
     for (f, (quad, labels)) in mesh.quads.iter().zip(&mesh.face_labels).enumerate() {
-        let mut record = [0u8; 29];
-        record[0] = 4;
-        let ints = quad.iter().chain(labels);
-        for (chunk, &v) in record[1..25].chunks_exact_mut(4).zip(ints) {
-            chunk.copy_from_slice(&(v as i32).to_le_bytes());
-        }
+        let mut record = face_record(quad, labels);
         if colored {
             let m = &mesh.materials[mesh.face_materials[f] as usize];
             record[25..28].copy_from_slice(&m.color[..3]);
@@ -102,6 +119,115 @@ pub(crate) fn encode_ply(mesh: &QuadMesh, w: &mut dyn Write) -> io::Result<()> {
         }
     }
     Ok(())
+}
+
+/// A binary PLY file laid out as [`write_ply`] writes a mesh without names or colours,
+/// written in parts: runs of vertices and of faces at their indices, in any order, so that
+/// a mesh larger than memory is written piece by piece (the Python package's chunked
+/// merge writes each label's surface so, one chunk at a time).
+///
+/// The file is a temporary one in the directory of its path until [`PlyParts::finish`]
+/// renames it onto the path, once every vertex and face has been written; dropped before,
+/// it is removed and the path left as it was.
+#[derive(Debug)]
+pub struct PlyParts {
+    path: PathBuf,
+    file: tempfile::NamedTempFile,
+    header: u64,
+    counts: [usize; 2],
+    written: [usize; 2],
+}
+
+impl PlyParts {
+    /// Starts the file of a mesh of `vertices` vertices and `faces` quads at `path`.
+    pub fn create(path: &Path, vertices: usize, faces: usize) -> Result<PlyParts, IoError> {
+        if vertices > i32::MAX as usize {
+            let message = format!("{vertices} vertices: PLY int indices reach {}", i32::MAX);
+            return Err(IoError::InvalidMesh { path: path.to_path_buf(), message });
+        }
+        let header = format!("{PLY_START}{}end_header\n", elements(vertices, faces));
+        let file = write_temporary(path, |w| w.write_all(header.as_bytes()))?;
+        let header = header.len() as u64;
+        Ok(PlyParts { path: path.to_path_buf(), file, header, counts: [vertices, faces], written: [0; 2] })
+    }
+
+    /// Writes `positions` as vertices `first..first + positions.len()`.
+    pub fn write_vertices(&mut self, first: usize, positions: &[DVec3]) -> Result<(), IoError> {
+        self.check_range(0, first, positions.len())?;
+        if let Some(i) = positions.iter().position(|p| !p.as_vec3().is_finite()) {
+            return self.invalid(format!(
+                "vertex {} at {} does not fit a PLY float",
+                first + i,
+                positions[i]
+            ));
+        }
+        let bytes: Vec<u8> = positions.iter().flat_map(|&p| vertex_record(p)).collect();
+        self.write_at(self.header + 12 * first as u64, &bytes)?;
+        self.written[0] += positions.len();
+        Ok(())
+    }
+
+    /// Writes `quads` (vertex indices) with their `[inner, outer]` `labels` as faces
+    /// `first..first + quads.len()`.
+    pub fn write_faces(
+        &mut self,
+        first: usize,
+        quads: &[[u32; 4]],
+        labels: &[[u32; 2]],
+    ) -> Result<(), IoError> {
+        if quads.len() != labels.len() {
+            return self.invalid(format!("{} quads but {} label pairs", quads.len(), labels.len()));
+        }
+        self.check_range(1, first, quads.len())?;
+        if let Some(f) = quads.iter().position(|q| q.iter().any(|&v| v as usize >= self.counts[0])) {
+            return self.invalid(format!("face {} uses a vertex beyond the {}", first + f, self.counts[0]));
+        }
+        if let Some(f) = labels.iter().position(|l| l.iter().any(|&l| l > i32::MAX as u32)) {
+            return self.invalid(format!(
+                "face {} has labels {:?}, beyond the PLY int range",
+                first + f,
+                labels[f]
+            ));
+        }
+        let bytes: Vec<u8> =
+            quads.iter().zip(labels).flat_map(|(q, l)| face_record(q, l)[..25].to_vec()).collect();
+        self.write_at(self.header + 12 * self.counts[0] as u64 + 25 * first as u64, &bytes)?;
+        self.written[1] += quads.len();
+        Ok(())
+    }
+
+    /// Renames the complete file onto its path; fails, removing it, where some vertex or
+    /// face was not written (or written twice).
+    pub fn finish(mut self) -> Result<(), IoError> {
+        if self.written != self.counts {
+            let [v, f] = self.written;
+            let [nv, nf] = self.counts;
+            return self.invalid(format!("{v} of {nv} vertices and {f} of {nf} faces written"));
+        }
+        self.file.as_file_mut().flush().map_err(|e| IoError::io(&self.path, e))?;
+        self.file.persist(&self.path).map_err(|e| IoError::io(&self.path, e.error))?;
+        Ok(())
+    }
+
+    /// Fails where `count` elements of kind `k` (0 vertices, 1 faces) from `first` do not fit.
+    fn check_range(&self, k: usize, first: usize, count: usize) -> Result<(), IoError> {
+        if first.checked_add(count).is_none_or(|end| end > self.counts[k]) {
+            let what = ["vertices", "faces"][k];
+            return self.invalid(format!("{what} {first}..{} beyond the {}", first + count, self.counts[k]));
+        }
+        Ok(())
+    }
+
+    fn invalid<T>(&self, message: String) -> Result<T, IoError> {
+        Err(IoError::InvalidMesh { path: self.path.clone(), message })
+    }
+
+    fn write_at(&mut self, offset: u64, bytes: &[u8]) -> Result<(), IoError> {
+        let file = self.file.as_file_mut();
+        file.seek(SeekFrom::Start(offset))
+            .and_then(|_| file.write_all(bytes))
+            .map_err(|e| IoError::io(&self.path, e))
+    }
 }
 
 /// Writes `mesh` to `path` as a binary PLY file with one scalar per vertex: a `float`

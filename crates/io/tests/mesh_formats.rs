@@ -123,3 +123,36 @@ fn vtp_reads_back_exactly() {
         assert_eq!(*c, expected, "face {f}");
     }
 }
+
+#[test]
+fn ply_written_in_parts_is_write_ply_s_file() {
+    let s = surface();
+    let mut mesh = QuadMesh::from_surface(&s, &s.positions());
+    mesh.groups.clear();
+    let dir = tempfile::tempdir().unwrap();
+    let whole = dir.path().join("whole.ply");
+    write_mesh(&whole, &mesh).unwrap();
+    let (nv, nf) = (mesh.positions.len(), mesh.quads.len());
+    let parts = dir.path().join("parts.ply");
+    let mut w = voxreg_io::PlyParts::create(&parts, nv, nf).unwrap();
+    // Faces first, then vertices, each in two runs written last to first.
+    w.write_faces(nf / 2, &mesh.quads[nf / 2..], &mesh.face_labels[nf / 2..]).unwrap();
+    w.write_faces(0, &mesh.quads[..nf / 2], &mesh.face_labels[..nf / 2]).unwrap();
+    w.write_vertices(nv / 3, &mesh.positions[nv / 3..]).unwrap();
+    assert!(!parts.exists(), "the file appears only when finished");
+    w.write_vertices(0, &mesh.positions[..nv / 3]).unwrap();
+    w.finish().unwrap();
+    assert_eq!(std::fs::read(&parts).unwrap(), std::fs::read(&whole).unwrap());
+
+    // Out of range, or unfinished: an error, and no file.
+    let bad = dir.path().join("bad.ply");
+    let mut w = voxreg_io::PlyParts::create(&bad, nv, nf).unwrap();
+    assert!(w.write_vertices(nv, &mesh.positions[..1]).is_err());
+    assert!(w.write_faces(0, &[[0, 1, 2, nv as u32]], &[[0, 1]]).is_err());
+    w.write_vertices(0, &mesh.positions).unwrap();
+    let e = w.finish().unwrap_err().to_string();
+    assert!(e.contains(&format!("0 of {nf} faces written")), "{e}");
+    assert!(!bad.exists());
+    let names: Vec<_> = std::fs::read_dir(dir.path()).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert_eq!(names.len(), 2, "temporaries left: {names:?}");
+}

@@ -39,11 +39,6 @@ impl NormalField {
         &self.normals
     }
 
-    /// The normals as per-surfel data.
-    pub fn as_data(&self) -> &SurfelData<DVec3> {
-        &self.normals
-    }
-
     /// Largest angle, in degrees, between the directions of `self` and `other`,
     /// orientation ignored (for tests and reports).
     pub fn max_angle_deg(&self, other: &NormalField) -> f64 {

@@ -599,10 +599,6 @@ impl NormalEstimator for IntegralInvariant {
         "ii"
     }
 
-    fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
-        self.estimate_interruptible(surface, &Interrupt::never())
-    }
-
     /// Polls `interrupt` once per surfel.
     fn estimate_interruptible(
         &self,

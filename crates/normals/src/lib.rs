@@ -86,19 +86,19 @@ pub trait NormalEstimator {
     /// A short name (`"trivial"`, `"ii"`, ...), used in reports.
     fn name(&self) -> &'static str;
 
-    /// The normal field of `surface`: one unit vector per surfel, in surfel order.
-    fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError>;
+    /// The normal field of `surface`: one unit vector per surfel, in surfel order
+    /// ([`NormalEstimator::estimate_interruptible`] never interrupted).
+    fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
+        self.estimate_interruptible(surface, &Interrupt::never())
+    }
 
     /// [`NormalEstimator::estimate`], returning [`NormalError::Interrupted`] soon after
     /// `interrupt` is raised (from another thread) instead of finishing. The estimators
-    /// of this crate poll it inside their loops over surfels or iterations; the default
-    /// polls it only before starting.
+    /// of this crate poll it inside their loops over surfels or iterations (the trivial
+    /// one, which has none, before starting).
     fn estimate_interruptible(
         &self,
         surface: &DigitalSurface,
         interrupt: &Interrupt,
-    ) -> Result<NormalField, NormalError> {
-        interrupt.check()?;
-        self.estimate(surface)
-    }
+    ) -> Result<NormalField, NormalError>;
 }

@@ -2,7 +2,7 @@
 
 use voxreg_digisurf::DigitalSurface;
 
-use crate::{NormalError, NormalEstimator, NormalField};
+use crate::{Interrupt, NormalError, NormalEstimator, NormalField};
 
 /// The trivial normal: each surfel's axis, oriented from its lower region to its
 /// higher one (outward for a solid surrounded by background).
@@ -14,7 +14,12 @@ impl NormalEstimator for Trivial {
         "trivial"
     }
 
-    fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
+    fn estimate_interruptible(
+        &self,
+        surface: &DigitalSurface,
+        interrupt: &Interrupt,
+    ) -> Result<NormalField, NormalError> {
+        interrupt.check()?;
         Ok(NormalField::new(surface.surfels().iter().map(|s| s.normal()).collect()))
     }
 }

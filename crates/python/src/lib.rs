@@ -25,6 +25,7 @@ fn _voxreg(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh::check, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::write_arrays, m)?)?;
     m.add_class::<mesh::Surface>()?;
+    m.add_class::<mesh::PlyParts>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;
     Ok(())
 }

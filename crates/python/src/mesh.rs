@@ -251,8 +251,17 @@ fn quads_of(quads: &PyReadonlyArray2<'_, i64>, n: usize) -> Result<Vec<[u32; 4]>
         .collect()
 }
 
+fn labels_of(labels: &PyReadonlyArray2<'_, u32>, m: usize) -> Result<Vec<[u32; 2]>> {
+    let l = labels.as_array();
+    if l.dim() != (m, 2) {
+        return Err(Error::input(format!("labels must be an ({m}, 2) array, got {:?}", l.shape())));
+    }
+    Ok(l.rows().into_iter().map(|r| [r[0], r[1]]).collect())
+}
+
 /// The quality counts of a quad mesh (`voxreg check`): faces, self-intersecting face
-/// pairs, folded quads, folded adjacent pairs, and the first intersecting pair.
+/// pairs, folded quads, folded adjacent pairs, the first intersecting pair, and the mean
+/// angle between adjacent quads (`voxreg_quality::mean_adjacent_angle_deg`).
 #[pyfunction]
 pub(crate) fn check<'py>(
     py: Python<'py>,
@@ -261,7 +270,14 @@ pub(crate) fn check<'py>(
 ) -> PyResult<Bound<'py, PyDict>> {
     let positions = positions_of(&vertices)?;
     let quads = quads_of(&quads, positions.len())?;
-    let r = py.detach(|| no_panic(|| Ok(voxreg_quality::check(&positions, &quads))))?;
+    let (r, mean_angle) = py.detach(|| {
+        no_panic(|| {
+            Ok((
+                voxreg_quality::check(&positions, &quads),
+                voxreg_quality::mean_adjacent_angle_deg(&positions, &quads),
+            ))
+        })
+    })?;
     let d = PyDict::new(py);
     d.set_item("faces", r.faces)?;
     d.set_item("intersecting_pairs", r.intersecting_pairs)?;
@@ -269,6 +285,7 @@ pub(crate) fn check<'py>(
     d.set_item("folded_pairs", r.folded_pairs)?;
     d.set_item("first_intersection", r.first_intersection)?;
     d.set_item("clean", r.is_clean())?;
+    d.set_item("mean_angle_deg", mean_angle)?;
     Ok(d)
 }
 
@@ -286,16 +303,7 @@ pub(crate) fn write_arrays(
     check_extension(&path)?;
     let positions = positions_of(&vertices)?;
     let quads = quads_of(&quads, positions.len())?;
-    let labels = labels.as_array();
-    if labels.dim() != (quads.len(), 2) {
-        return Err(Error::input(format!(
-            "labels must be an ({}, 2) array, got {:?}",
-            quads.len(),
-            labels.shape()
-        ))
-        .into());
-    }
-    let face_labels = labels.rows().into_iter().map(|r| [r[0], r[1]]).collect();
+    let face_labels = labels_of(&labels, quads.len())?;
     let mut mesh = QuadMesh { positions, quads, face_labels, ..Default::default() };
     if let Some(colors) = colors {
         let c = colors.as_array();
@@ -318,4 +326,65 @@ pub(crate) fn write_arrays(
     }
     py.detach(|| no_panic(|| write_mesh(&path, &mesh).map_err(|e| Error::io(&e))))?;
     Ok(())
+}
+
+/// A binary PLY file written in parts (`voxreg_io::PlyParts`: `write_ply`'s file, the
+/// vertices and faces written at their indices in any order): the chunked merge's
+/// per-label files. `finish` renames it onto its path once complete; `discard`, or the
+/// object's end, removes it.
+#[pyclass(module = "voxreg._voxreg")]
+pub(crate) struct PlyParts(Option<voxreg_io::PlyParts>);
+
+impl PlyParts {
+    fn open(&mut self) -> Result<&mut voxreg_io::PlyParts> {
+        self.0.as_mut().ok_or_else(|| Error::input("the PLY file is already finished or discarded"))
+    }
+}
+
+#[pymethods]
+impl PlyParts {
+    #[new]
+    fn new(path: PathBuf, vertices: usize, faces: usize) -> PyResult<Self> {
+        Ok(Self(Some(voxreg_io::PlyParts::create(&path, vertices, faces).map_err(|e| Error::io(&e))?)))
+    }
+
+    /// Writes `vertices` (n, 3) as vertices `first..first + n`.
+    fn write_vertices(
+        &mut self,
+        py: Python<'_>,
+        first: usize,
+        vertices: PyReadonlyArray2<'_, f64>,
+    ) -> PyResult<()> {
+        let positions = positions_of(&vertices)?;
+        let w = self.open()?;
+        py.detach(|| no_panic(|| w.write_vertices(first, &positions).map_err(|e| Error::io(&e))))?;
+        Ok(())
+    }
+
+    /// Writes `quads` (m, 4) with their `labels` (m, 2) as faces `first..first + m`.
+    fn write_faces(
+        &mut self,
+        py: Python<'_>,
+        first: usize,
+        quads: PyReadonlyArray2<'_, i64>,
+        labels: PyReadonlyArray2<'_, u32>,
+    ) -> PyResult<()> {
+        let quads = quads_of(&quads, u32::MAX as usize)?;
+        let labels = labels_of(&labels, quads.len())?;
+        let w = self.open()?;
+        py.detach(|| no_panic(|| w.write_faces(first, &quads, &labels).map_err(|e| Error::io(&e))))?;
+        Ok(())
+    }
+
+    /// Renames the complete file onto its path.
+    fn finish(&mut self, py: Python<'_>) -> PyResult<()> {
+        let w = self.0.take().ok_or_else(|| Error::input("the PLY file is already finished or discarded"))?;
+        py.detach(|| no_panic(|| w.finish().map_err(|e| Error::io(&e))))?;
+        Ok(())
+    }
+
+    /// Removes the unfinished file.
+    fn discard(&mut self) {
+        self.0 = None;
+    }
 }

@@ -60,3 +60,12 @@ def test_check_counts_a_fold():
     v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1, 1, 0]], dtype=float)
     r = voxreg.check((v, [[0, 1, 2, 3]]))
     assert r["faces"] == 1 and not r["clean"]
+
+
+def test_check_gives_the_mean_angle_between_adjacent_quads():
+    # Two unit quads sharing the edge (0, 1): flat, then bent to a right angle.
+    v = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [1, -1, 0], [0, -1, 0]], dtype=float)
+    quads = [[0, 1, 2, 3], [1, 0, 5, 4]]
+    assert voxreg.check((v, quads))["mean_angle_deg"] == 0.0
+    v[4:, 1], v[4:, 2] = 0.0, -1.0
+    assert abs(voxreg.check((v, quads))["mean_angle_deg"] - 90.0) < 1e-9

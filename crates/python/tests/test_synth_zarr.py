@@ -1,4 +1,4 @@
-"""bench/synth_zarr.py: the tissue volume of `cargo xtask synth-labels`, chunk by chunk."""
+"""bench/scale/synth_zarr.py: the tissue volume of `cargo xtask synth-labels`, chunk by chunk."""
 
 import hashlib
 import os
@@ -9,7 +9,7 @@ import pytest
 
 import voxreg
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "..", "bench"))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "..", "bench", "scale"))
 synth = pytest.importorskip("synth_zarr")
 
 DIMS = (64, 60, 40)

@@ -217,10 +217,6 @@ fn owned_part(
 }
 
 #[cfg(test)]
-#[path = "block_diag.rs"]
-mod diag;
-
-#[cfg(test)]
 mod tests {
     use std::collections::BTreeMap;
 

@@ -1,5 +1,31 @@
 //! Small input files written byte by byte, for tests of the readers and writers.
 
+/// The bundled MagicaVoxel models (`data/README.md` gives their sources and licences).
+pub const BUNDLED_VOX_MODELS: [&str; 6] = [
+    "chr_army1.vox",
+    "veh_fire.vox",
+    "axes.vox",
+    "extended.vox",
+    "metal-material.vox",
+    "placeholder-with-materials.vox",
+];
+
+/// A version-1 `.npy` file's bytes: `descr` (`'<u4'`, `'|u1'`, `'<f4'`), shape `(X, Y, Z)`
+/// in C order (z fastest), then `data` (after the header, if `data` is empty: a writer
+/// can stream the values after it).
+pub fn npy_bytes(descr: &str, [x, y, z]: [usize; 3], data: impl IntoIterator<Item = u8>) -> Vec<u8> {
+    let mut header = format!("{{'descr': '{descr}', 'fortran_order': False, 'shape': ({x}, {y}, {z}), }}");
+    while (10 + header.len() + 1) % 64 != 0 {
+        header.push(' ');
+    }
+    header.push('\n');
+    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
+    bytes.extend((header.len() as u16).to_le_bytes());
+    bytes.extend(header.as_bytes());
+    bytes.extend(data);
+    bytes
+}
+
 /// The awkward label names of [`odd_names_seg_nrrd`], for labels 1 to 7: a space, a
 /// slash and a backslash, non-ASCII letters, a duplicate, nothing, and only dots.
 pub const ODD_NAMES: [&str; 7] = ["Left kidney", "a/b\\c", "肝臓 région", "liver", "liver", "", "../.."];

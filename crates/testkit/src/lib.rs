@@ -26,7 +26,7 @@ mod files;
 mod labelled;
 mod rng;
 
-pub use files::{odd_names_seg_nrrd, ODD_NAMES};
+pub use files::{npy_bytes, odd_names_seg_nrrd, BUNDLED_VOX_MODELS, ODD_NAMES};
 
 pub use labelled::{
     digitize_labels, label_fidelity, vertex_labels, JunctionKind, LabelFidelity, LabelShape, QuarteredBall,
@@ -53,20 +53,7 @@ pub trait Shape: Sync {
     /// The point of the surface nearest to `p` (Newton steps along the gradient, for points
     /// near the surface).
     fn project(&self, p: DVec3) -> DVec3 {
-        let mut q = p;
-        for _ in 0..30 {
-            let g = self.gradient(q);
-            let g2 = g.length_squared();
-            if g2 == 0.0 {
-                break;
-            }
-            let step = self.value(q) / g2 * g;
-            q -= step;
-            if step.length() < 1e-13 {
-                break;
-            }
-        }
-        q
+        voxreg_baselines::newton_project(|q| self.value(q), |q| self.gradient(q), p)
     }
 
     /// The outward unit normal at the surface point nearest to `p`.
@@ -307,14 +294,19 @@ pub fn mean_max(values: &[f64]) -> (f64, f64) {
 mod tests {
     use super::*;
 
-    #[test]
-    fn projections_land_on_the_surfaces() {
-        let shapes: Vec<Box<dyn Shape>> = vec![
+    /// One of each shape.
+    fn shapes() -> Vec<Box<dyn Shape>> {
+        vec![
             Box::new(Sphere { radius: 3.0 }),
             Box::new(Torus { major: 6.0, minor: 2.0 }),
             Box::new(Goursat),
             Box::new(Cuboid { half: DVec3::new(1.0, 2.0, 3.0) }),
-        ];
+        ]
+    }
+
+    #[test]
+    fn projections_land_on_the_surfaces() {
+        let shapes = shapes();
         for s in &shapes {
             for p in [DVec3::new(1.0, 2.0, 3.5), DVec3::new(-4.0, 5.5, 1.0), DVec3::new(7.0, 0.3, -0.2)] {
                 let q = s.project(p);
@@ -353,12 +345,7 @@ mod tests {
     #[test]
     fn bounds_contain_the_shapes() {
         // A shape sticking out of its bounds would be cut flat by the digitization's box.
-        let shapes: Vec<Box<dyn Shape>> = vec![
-            Box::new(Sphere { radius: 3.0 }),
-            Box::new(Torus { major: 6.0, minor: 2.0 }),
-            Box::new(Goursat),
-            Box::new(Cuboid { half: DVec3::new(1.0, 2.0, 3.0) }),
-        ];
+        let shapes = shapes();
         for s in &shapes {
             let v = digitize(s.as_ref(), 0.25);
             let [nx, ny, nz] = v.dims();

@@ -57,8 +57,8 @@ const ASSETS: &[Asset] = &[
 /// The viewer: a server bound to a loopback port, and the worker that solves.
 ///
 /// [`Viewer::bind`] listens; [`Viewer::open`] queues the first input; [`Viewer::serve`]
-/// answers requests until [`Viewer::stop`] (from another thread, through a
-/// [`StopHandle`]).
+/// answers requests until [`StopHandle::stop`] (from another thread: [`Viewer::stop_handle`]
+/// gives the handle).
 pub struct Viewer {
     server: Arc<Server>,
     addr: SocketAddr,

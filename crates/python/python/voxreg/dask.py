@@ -331,16 +331,6 @@ _PLY_FACE = np.dtype([("n", "u1"), ("v", "<i4", (4,)), ("l", "<i4", (2,))])
 _LABELS_PER_SWEEP = 128
 
 
-def _ply_header(vertices: int, faces: int) -> bytes:
-    """The header of ``voxreg_io``'s binary PLY for a mesh without colours or names."""
-    return (
-        "ply\nformat binary_little_endian 1.0\ncomment voxreg quad mesh\n"
-        f"element vertex {vertices}\nproperty float x\nproperty float y\nproperty float z\n"
-        f"element face {faces}\nproperty list uchar int vertex_indices\n"
-        "property int inner_label\nproperty int outer_label\nend_header\n"
-    ).encode()
-
-
 def _corners(ids: np.ndarray, dims: Sequence[int]) -> np.ndarray:
     """The lattice corners ``(x, y, z)`` of global vertex ids."""
     ids = ids.astype(np.int64)
@@ -473,17 +463,15 @@ def merge(out: "str | os.PathLike[str]", fragments: Sequence[str], formats: Iter
                 at = border_index(b_ids, b_used)
                 n_vertices = len(b_used) + sum(c[2] for c in counts[label])
                 n_faces = sum(c[1] for c in counts[label])
-                header = _ply_header(n_vertices, n_faces)
                 st = {"border": b_used, "n_vertices": n_vertices, "n_faces": n_faces,
                       "next_vertex": len(b_used), "next_face": 0, "closed": True,
-                      "border_edges": [], "fragments": [], "fd": None}
+                      "border_edges": [], "fragments": [], "ply": None}
                 if write_ply:
-                    st["tmp"] = os.path.join(out, f".label_{label}.ply.tmp-{os.getpid()}")
-                    st["fd"] = os.open(st["tmp"], os.O_WRONLY | os.O_CREAT | os.O_TRUNC, 0o644)
-                    os.pwrite(st["fd"], header, 0)
-                    st["vertex_at"] = len(header)
-                    st["face_at"] = len(header) + 12 * n_vertices
-                    os.pwrite(st["fd"], b_pos[at].astype("<f4").tobytes(), st["vertex_at"])
+                    # The library's PLY writer, fed in parts; the file appears when finished.
+                    name = f"label_{label}.ply" if "ply" in formats else f".label_{label}.ply.tmp-{os.getpid()}"
+                    st["path"] = os.path.join(out, name)
+                    st["ply"] = _voxreg.PlyParts(st["path"], n_vertices, n_faces)
+                    st["ply"].write_vertices(0, np.ascontiguousarray(b_pos[at], dtype=np.float64))
                 state[label] = st
             # Pass 2: each fragment's part of each label.
             for i, path in enumerate(fragments):
@@ -513,13 +501,10 @@ def merge(out: "str | os.PathLike[str]", fragments: Sequence[str], formats: Iter
                     index[~is_inner] = border_index(st["border"], ids[used[~is_inner]])
                     qv = index[local]
                     if write_ply:
-                        os.pwrite(st["fd"], pos[used[is_inner]].astype("<f4").tobytes(),
-                                  st["vertex_at"] + 12 * st["next_vertex"])
-                        rec = np.empty(len(qv), _PLY_FACE)
-                        rec["n"] = 4
-                        rec["v"] = qv
-                        rec["l"] = lab
-                        os.pwrite(st["fd"], rec.tobytes(), st["face_at"] + 25 * st["next_face"])
+                        st["ply"].write_vertices(st["next_vertex"],
+                                                 np.ascontiguousarray(pos[used[is_inner]], dtype=np.float64))
+                        st["ply"].write_faces(st["next_face"], np.ascontiguousarray(qv, dtype=np.int64),
+                                              np.ascontiguousarray(lab, dtype=np.uint32))
                     st["next_vertex"] += n_inner
                     st["next_face"] += len(qv)
                     # Closure: inner edges here, edges touching a border vertex at the end.
@@ -550,22 +535,19 @@ def merge(out: "str | os.PathLike[str]", fragments: Sequence[str], formats: Iter
                 closed = st["closed"] and _balanced(a, b, st["n_vertices"])
                 summary["labels"][str(label)] = {"quads": st["n_faces"], "vertices": st["n_vertices"],
                                                  "closed": closed}
-                if st["fd"] is not None:
-                    os.close(st["fd"])
-                    st["fd"] = None
+                if st["ply"] is not None:
+                    st["ply"].finish()
+                    st["ply"] = None
                     if "glb" in formats:
-                        _ply_to(st["tmp"], os.path.join(out, f"label_{label}.glb"))
-                    if "ply" in formats:
-                        os.replace(st["tmp"], os.path.join(out, f"label_{label}.ply"))
-                    else:
-                        os.remove(st["tmp"])
+                        _ply_to(st["path"], os.path.join(out, f"label_{label}.glb"))
+                    if "ply" not in formats:
+                        os.remove(st["path"])
                 if "precomputed" in formats:
                     _write_json_compact(os.path.join(precomputed, f"{label}:0"), {"fragments": st["fragments"]})
         finally:
             for st in state.values():
-                if st.get("fd") is not None:
-                    os.close(st["fd"])
-                    os.remove(st["tmp"])
+                if st.get("ply") is not None:
+                    st["ply"].discard()
     summary["merge"] = {"wall_s": time.perf_counter() - wall, "cpu_s": time.process_time() - cpu,
                         "peak_rss_bytes": _peak_rss(), "peak_since_merge_start": reset,
                         "border_vertices": int(len(b_ids))}

@@ -3,7 +3,7 @@
 
     perf record -F 4000 --call-graph dwarf,8192 -o perf.data voxreg regularize IN -o out.ply -q
     perf script -i perf.data -F tid,time,ip,sym > samples.txt
-    python3 bench/idle_threads.py samples.txt [--bucket 0.003]
+    python3 bench/speed/idle_threads.py samples.txt [--bucket 0.003]
 
 The samples are cut into time buckets (a few sampling periods each: 3 ms at 4000 Hz,
 20 ms at 500 Hz); in a bucket where one of the two threads with the most samples has none,

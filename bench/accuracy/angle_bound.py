@@ -18,7 +18,7 @@ A local search, so its value bounds the reachable minimum from above, not below;
 random starts sample the rest. Confirm the written mesh with `voxreg check --voxels`.
 
     voxreg regularize data/metal-material.vox -o mm.obj -q
-    python3 bench/angle_bound.py mm.obj --starts 30 --out mm-bound.obj
+    python3 bench/accuracy/angle_bound.py mm.obj --starts 30 --out mm-bound.obj
     voxreg check mm-bound.obj --voxels data/metal-material.vox
 
 Needs numpy, scipy and autograd (`pip install numpy scipy autograd`). The input must be

@@ -1,7 +1,7 @@
 """How much the refinement rounds still move a volume's surface, and how much the output
 depends on the solver's tolerance.
 
-    target/ci-venv/bin/python bench/refine_stability.py target/channels.npy
+    target/ci-venv/bin/python bench/accuracy/refine_stability.py target/channels.npy
 
 Regularizes a label volume (`.npy`, indexed [x, y, z]) with the default parameters and
 `refine` = 1, 2, 3, 4, then once more at half the default tolerance. Prints, between

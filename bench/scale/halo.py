@@ -1,6 +1,6 @@
 """The stitched mesh of voxreg.dask against the whole-volume solve, per halo width.
 
-    target/ci-venv/bin/python bench/halo.py [param=value ...]   # e.g. refine=0
+    target/ci-venv/bin/python bench/scale/halo.py [param=value ...]   # e.g. refine=0
 
 Prints the mean and max vertex deviation (voxels) on the pytest suite's 64^3 five-label
 volume in 32^3 chunks.
@@ -10,7 +10,7 @@ import sys
 
 import numpy as np
 
-sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "crates", "python", "tests"))
+sys.path.insert(0, os.path.join(os.path.dirname(__file__), "..", "..", "crates", "python", "tests"))
 from test_dask import tissue, whole  # noqa: E402
 
 import voxreg.dask as vd  # noqa: E402

@@ -1,6 +1,6 @@
 """A synthetic tissue-like label volume written to a Zarr store chunk by chunk.
 
-    target/pyvenv/bin/python bench/synth_zarr.py OUT.zarr [--dims X,Y,Z] [--chunks C]
+    target/pyvenv/bin/python bench/scale/synth_zarr.py OUT.zarr [--dims X,Y,Z] [--chunks C]
         [--processes N]
 
 The labels are those of ``cargo xtask synth-labels`` for the same dimensions, voxel for

@@ -7,7 +7,7 @@ Reads the first model of a ``.vox`` file (its SIZE and XYZI chunks), repeats it
 copies are not all alike, and writes the labels as a ``.npy`` (uint8, shape (X, Y, Z)).
 Run voxreg on it with the voxel-art preset, as it runs on ``.vox`` files:
 
-    python3 bench/tile_vox.py data/veh_fire.vox 4 2 2 target/bench/fire16.npy     # 96k quads
+    python3 bench/speed/tile_vox.py data/veh_fire.vox 4 2 2 target/bench/fire16.npy     # 96k quads
     voxreg regularize target/bench/fire16.npy --preset voxel-art -o out.ply --report r.json
 
 Standard library only.

@@ -14,10 +14,10 @@ filter's ``Update()`` alone, reading and the numpy-to-VTK copy excluded), its pe
 
 Needs a Python with numpy and pip's ``vtk`` (9.4 or later). Example:
 
-    python bench/vs_vtk.py                 # tissue, channels, bunny-128; 3 runs each
-    python bench/vs_vtk.py --quick         # bunny-128 and a small tissue, 1 run
-    python bench/vs_vtk.py --set-aside     # inputs kept out of tuning: torus, tissue seed 2
-    python bench/vs_vtk.py --before target/voxreg-before --json ab.json   # and an older build
+    python bench/speed/vs_vtk.py                 # tissue, channels, bunny-128; 3 runs each
+    python bench/speed/vs_vtk.py --quick         # bunny-128 and a small tissue, 1 run
+    python bench/speed/vs_vtk.py --set-aside     # inputs kept out of tuning: torus, tissue seed 2
+    python bench/speed/vs_vtk.py --before target/voxreg-before --json ab.json   # and an older build
 
 The tissue volumes are made with ``cargo xtask synth-labels`` and the torus with the
 ``digitize`` example when missing (under target/bench/).
@@ -33,7 +33,7 @@ import tempfile
 import time
 import zlib
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 WORK = os.path.join(ROOT, "target", "bench")
 
 

@@ -15,7 +15,7 @@ scale as VTK sets them), triangles. The settings used are printed.
 
 Needs numpy and pip's `vtk` (9.4 or later, which has vtkSurfaceNets3D):
 
-    python3 bench/surfacenets_labels.py target/xtask/compare/volumes
+    python3 bench/accuracy/surfacenets_labels.py target/xtask/compare/volumes
 """
 
 import json

@@ -1,7 +1,7 @@
 """voxreg.dask end to end on a Zarr store, through a dask.distributed LocalCluster.
 
-    target/pyvenv/bin/python bench/synth_zarr.py target/ooc/tissue.zarr --dims 2048,2048,512
-    target/pyvenv/bin/python bench/scale_ooc.py target/ooc/tissue.zarr --out target/ooc/meshes \\
+    target/pyvenv/bin/python bench/scale/synth_zarr.py target/ooc/tissue.zarr --dims 2048,2048,512
+    target/pyvenv/bin/python bench/scale/scale_ooc.py target/ooc/tissue.zarr --out target/ooc/meshes \\
         [--workers 2] [--memory 2GB] [--chunk 256] [--halo 24] [param=value ...]
 
 Workers have one thread each and the given memory limit (the nanny restarts a worker past

@@ -30,9 +30,9 @@ with ``--from-json`` without running anything).
 
 Needs numpy, matplotlib and pip's ``vtk`` (9.4 or later). Example:
 
-    python bench/frontier.py --voxreg target/release/voxreg --runs 3 \
+    python bench/speed/frontier.py --voxreg target/release/voxreg --runs 3 \
         --md docs/frontier.md --png docs/figures/frontier.png --json target/frontier.json
-    python bench/frontier.py --quick          # two shapes, a few settings, 1 run
+    python bench/speed/frontier.py --quick          # two shapes, a few settings, 1 run
 """
 
 import argparse
@@ -46,7 +46,7 @@ import time
 
 import numpy as np
 
-ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 WORK = os.path.join(ROOT, "target", "bench")
 
 # --- analytic shapes (numpy twins of crates/testkit) -------------------------------------
@@ -744,7 +744,7 @@ def main():
                 vs = SHORT_VOLUME_SETTINGS if args.volume_settings == "short" else VOLUME_SETTINGS
                 run_volumes(args, exe, tmp, [s for s in vs if s in settings], results)
         meta = {
-            "command": "`python bench/frontier.py " + " ".join(sys.argv[1:]) + "`",
+            "command": "`python bench/speed/frontier.py " + " ".join(sys.argv[1:]) + "`",
             "date": time.strftime("%Y-%m-%d %H:%M UTC", time.gmtime()),
             "machine": f"{os.cpu_count()} cores, {platform.machine()}, load average {os.getloadavg()[0]:.1f} at the end",
             "vtk": vcore.vtkVersion.GetVTKVersion(),

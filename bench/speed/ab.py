@@ -1,7 +1,7 @@
 #!/usr/bin/env python3
 """Two commands timed against each other, run by run: A B A B ... after a warm-up.
 
-    python3 bench/ab.py -n 10 --vs "voxreg regularize in.npy -o b.ply -q" -- voxreg regularize in.npy -o a.ply -q
+    python3 bench/speed/ab.py -n 10 --vs "voxreg regularize in.npy -o b.ply -q" -- voxreg regularize in.npy -o a.ply -q
 
 Prints, for A and B, the wall time, CPU time (user + system) and peak resident memory of
 each run (min, median, max), and the A/B ratios taken pair by pair, so that the machine's

@@ -1,12 +1,12 @@
 """Throughput of voxreg.dask on 1 worker against 2, interleaved on the same Zarr volume.
 
-    target/pyvenv/bin/python bench/synth_zarr.py target/ooc/t512.zarr --dims 512,512,512
-    target/pyvenv/bin/python bench/scale_workers.py target/ooc/t512.zarr [--pairs 2]
+    target/pyvenv/bin/python bench/scale/synth_zarr.py target/ooc/t512.zarr --dims 512,512,512
+    target/pyvenv/bin/python bench/scale/scale_workers.py target/ooc/t512.zarr [--pairs 2]
         [--chunk 128] [--halo H (default: voxreg.dask's)] [--workers 2] [param=value ...]
 
 Runs 1-worker and N-worker clusters in turn (1, N, 1, N, ...; each a fresh LocalCluster,
 one thread per worker, output to a scratch directory), and prints per run one JSON line
-(``bench/scale_ooc.py``'s figures), then per pair the speed-up of the compute phase (the
+(``bench/scale/scale_ooc.py``'s figures), then per pair the speed-up of the compute phase (the
 tasks, without the serial merge) and of the whole run. On a machine with other load the
 speed-up is bounded by the cores actually free: run it on an idle machine with at least
 N cores, and quote the load it prints.

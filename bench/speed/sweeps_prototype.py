@@ -22,9 +22,9 @@ sweeps and re-estimates from the trivial normals.
 Errors: vertex distance in voxels (mean / max), area-weighted mean angle of the quads to
 the true normal at their centroid's nearest point (degrees, orientation ignored).
 
-    python bench/sweeps_prototype.py            # sphere R = 20 at h = 1, torus at h = 0.25
-    python bench/sweeps_prototype.py --cheap    # no ii: trivial normals, sweeps, re-estimates
-    python bench/sweeps_prototype.py --cheap --goursat   # the same on goursat, h = 0.5 and 0.25
+    python bench/speed/sweeps_prototype.py            # sphere R = 20 at h = 1, torus at h = 0.25
+    python bench/speed/sweeps_prototype.py --cheap    # no ii: trivial normals, sweeps, re-estimates
+    python bench/speed/sweeps_prototype.py --cheap --goursat   # the same on goursat, h = 0.5 and 0.25
 """
 
 import sys

@@ -1,6 +1,6 @@
 """How far the refinement rounds move the surface closer to the digitized shape.
 
-    target/ci-venv/bin/python bench/refine_rounds.py
+    target/ci-venv/bin/python bench/accuracy/refine_rounds.py
 
 Digitizes a sphere (radius 20 voxels) and a torus (radii 24 and 8 voxels), regularizes each
 with the default parameters and with `refine=0` and `refine=1`, and prints the distance of

@@ -2,7 +2,7 @@
 chunks, stitched, against the whole-volume solve of the same volume.
 
     cargo xtask synth-labels --dims 256,256,256 --out target/synth256.npy
-    target/ci-venv/bin/python bench/scale_exactness.py target/synth256.npy [--chunk 64] [--halo 24] [param=value ...]
+    target/ci-venv/bin/python bench/scale/scale_exactness.py target/synth256.npy [--chunk 64] [--halo 24] [param=value ...]
 
 Prints the face and vertex-id comparison (exact), watertightness per label, and the mean
 and max vertex deviation (voxels) at the halo, with the wall time of each part.

@@ -10,8 +10,8 @@ smallest time per surfel. Standard library only (no numpy: the volumes are made 
 ``cargo xtask synth-labels`` under target/bench/ when missing).
 
     cargo build --release -p voxreg-cli
-    python3 bench/sizes.py                 # factors 0.22 0.5 1 1.83 (46k to 5.3M surfels), one run each
-    python3 bench/sizes.py --runs 3 --factors 0.22,0.25
+    python3 bench/speed/sizes.py                 # factors 0.22 0.5 1 1.83 (46k to 5.3M surfels), one run each
+    python3 bench/speed/sizes.py --runs 3 --factors 0.22,0.25
 """
 
 import argparse

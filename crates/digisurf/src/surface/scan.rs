@@ -1,0 +1,337 @@
+//! The parallel pass of the surface's construction: the faces between voxels of
+//! different regions, found over ranges of z-slabs (read up to `LAYER_BATCH` layers at a
+//! time where the volume is stored `z` fastest), and the sequential numbering of their
+//! vertices through two rolling corner layers (`Scan`).
+
+use std::collections::HashMap;
+
+use super::{Surfel, NONE};
+use crate::{InterfaceId, LabelView, RegionId, Regions, SurfaceError, VertexId};
+
+/// A face between two voxels of different regions, found by the parallel slab pass.
+pub(super) struct RawFace {
+    pub(super) cell: [u32; 3],
+    pub(super) axis: u8,
+    /// Regions and labels of the negative-side and positive-side voxels.
+    pub(super) regions: [u32; 2],
+    pub(super) labels: [u32; 2],
+}
+
+impl RawFace {
+    /// Whether the face becomes a surfel: not on an open border (no region outside).
+    fn is_inner(&self) -> bool {
+        self.regions[0] != NONE && self.regions[1] != NONE
+    }
+}
+
+/// The `(region, label)` beyond each side of the domain, `[axis][low, high]`: the
+/// background's, or [`NONE`] beyond an open side.
+pub(super) type Outside = [[(u32, u32); 2]; 3];
+
+pub(super) fn outside_of(volume: &LabelView<'_>, regions: &Regions) -> Outside {
+    let closed = match (volume.background(), regions.background()) {
+        (Some(l), Some(r)) => (r.0, l),
+        _ => (NONE, NONE),
+    };
+    let open = volume.open_sides();
+    [0, 1, 2].map(|k| [0, 1].map(|side| if open[k][side] { (NONE, NONE) } else { closed }))
+}
+
+/// Fills `rs`/`ls` with the regions and labels of voxel layer `z`, `x` fastest; the
+/// outside beyond the domain.
+pub(super) fn fill_layer(
+    volume: &LabelView<'_>,
+    regions: &Regions,
+    outside: &Outside,
+    z: isize,
+    rs: &mut [u32],
+    ls: &mut [u32],
+) -> Result<(), SurfaceError> {
+    let nz = volume.dims()[2];
+    if z < 0 || z as usize >= nz {
+        let (r, l) = outside[2][usize::from(z >= 0)];
+        rs.fill(r);
+        ls.fill(l);
+        return Ok(());
+    }
+    // Transposed, the slab is [y, x]: logical order is x fastest, matching `x + nx * y`
+    // (and memory order for volumes stored x fastest).
+    let slab = volume.labels().index_axis(ndarray::Axis(2), z as usize);
+    for ((r, l), &label) in rs.iter_mut().zip(ls.iter_mut()).zip(slab.t().iter()) {
+        *l = label;
+        *r = regions.region_of(label).map_or(NONE, |id| id.0);
+    }
+    check_regions(rs, ls)
+}
+
+/// Fails on the first label of a layer that has no region.
+pub(super) fn check_regions(rs: &[u32], ls: &[u32]) -> Result<(), SurfaceError> {
+    match rs.iter().position(|&r| r == NONE) {
+        Some(i) => Err(SurfaceError::InvalidRegions(format!("label {} has no region", ls[i]))),
+        None => Ok(()),
+    }
+}
+
+/// The faces of slabs `range`, one list per slab (see [`slab_faces`]), with rolling layers.
+pub(super) fn range_faces(
+    volume: &LabelView<'_>,
+    regions: &Regions,
+    outside: &Outside,
+    range: std::ops::Range<usize>,
+) -> Result<Vec<Vec<RawFace>>, SurfaceError> {
+    let mut out = Vec::with_capacity(range.len());
+    scan_slabs(volume, regions, outside, range, |prev, cur, k| {
+        let mut faces = Vec::new();
+        slab_faces(volume.dims(), outside, k, prev, cur, |f| {
+            if f.is_inner() {
+                faces.push(f);
+            }
+        });
+        out.push(faces);
+    })?;
+    Ok(out)
+}
+
+/// The number of faces in slabs `range`, without storing them.
+pub(super) fn range_face_count(
+    volume: &LabelView<'_>,
+    regions: &Regions,
+    outside: &Outside,
+    range: std::ops::Range<usize>,
+) -> Result<u64, SurfaceError> {
+    let mut n = 0u64;
+    scan_slabs(volume, regions, outside, range, |prev, cur, k| {
+        slab_faces(volume.dims(), outside, k, prev, cur, |f| n += u64::from(f.is_inner()));
+    })?;
+    Ok(n)
+}
+
+/// Calls `visit(previous layer, current layer, k)` for each slab `k` of `range`, with
+/// rolling region/label layers.
+///
+/// A volume stored `z` fastest (a C-order array indexed `[x, y, z]`, as numpy writes it)
+/// is read [`LAYER_BATCH`] layers at a time, one short contiguous run per `(x, y)`: one
+/// layer alone would read a single label from each cache line and page of the whole
+/// volume.
+pub(super) fn scan_slabs(
+    volume: &LabelView<'_>,
+    regions: &Regions,
+    outside: &Outside,
+    range: std::ops::Range<usize>,
+    mut visit: impl FnMut(&(Vec<u32>, Vec<u32>), &(Vec<u32>, Vec<u32>), usize),
+) -> Result<(), SurfaceError> {
+    let [nx, ny, _] = volume.dims();
+    // At most a quarter of the range's layers at once: the batches of all ranges hold at
+    // most about half as many bytes as the volume's labels.
+    let batch = if z_fastest(volume).is_some() { (range.len() / 4).clamp(1, LAYER_BATCH) } else { 1 };
+    // `layers[0]` is the layer before the next batch.
+    let mut layers: Vec<(Vec<u32>, Vec<u32>)> =
+        (0..=batch).map(|_| (vec![0u32; nx * ny], vec![0u32; nx * ny])).collect();
+    fill_layers(volume, regions, outside, range.start as isize - 1, &mut layers[..1])?;
+    let mut k = range.start;
+    while k < range.end {
+        let m = (layers.len() - 1).min(range.end - k);
+        fill_layers(volume, regions, outside, k as isize, &mut layers[1..=m])?;
+        for j in 0..m {
+            visit(&layers[j], &layers[j + 1], k + j);
+        }
+        layers.swap(0, m);
+        k += m;
+    }
+    Ok(())
+}
+
+/// Layers read together from a volume stored `z` fastest: 32 bytes of each `(x, y)`'s
+/// run of labels per read.
+pub(super) const LAYER_BATCH: usize = 8;
+
+/// The labels as one slice indexed `(x * ny + y) * nz + z`, when stored so.
+pub(super) fn z_fastest<'a>(volume: &'a LabelView<'_>) -> Option<&'a [u32]> {
+    let labels = volume.labels();
+    let [_, _, nz] = volume.dims();
+    (labels.is_standard_layout() && nz > 1).then(|| labels.as_slice()).flatten()
+}
+
+/// Fills `layers[j]` with the regions and labels of voxel layer `z + j`, `x` fastest;
+/// the outside beyond the domain.
+pub(super) fn fill_layers(
+    volume: &LabelView<'_>,
+    regions: &Regions,
+    outside: &Outside,
+    z: isize,
+    layers: &mut [(Vec<u32>, Vec<u32>)],
+) -> Result<(), SurfaceError> {
+    let [nx, ny, nz] = volume.dims();
+    let inside = |j: usize| (0..nz as isize).contains(&(z + j as isize));
+    match z_fastest(volume) {
+        Some(all) if layers.len() > 1 => {
+            // The layers inside the volume, `lo..hi`, from one contiguous run per column.
+            let lo = (0..layers.len()).find(|&j| inside(j)).unwrap_or(layers.len());
+            let hi = (lo..layers.len()).find(|&j| !inside(j)).unwrap_or(layers.len());
+            if lo < hi {
+                let z0 = (z + lo as isize) as usize;
+                for x in 0..nx {
+                    for y in 0..ny {
+                        let start = (x * ny + y) * nz + z0;
+                        let run = &all[start..start + hi - lo];
+                        let i = x + nx * y;
+                        for (layer, &label) in layers[lo..hi].iter_mut().zip(run) {
+                            layer.1[i] = label;
+                            layer.0[i] = regions.region_of(label).map_or(NONE, |id| id.0);
+                        }
+                    }
+                }
+            }
+            for (j, (rs, ls)) in layers.iter_mut().enumerate() {
+                if !inside(j) {
+                    let (r, l) = outside[2][usize::from(z + j as isize >= 0)];
+                    rs.fill(r);
+                    ls.fill(l);
+                } else {
+                    check_regions(rs, ls)?;
+                }
+            }
+            Ok(())
+        }
+        _ => {
+            for (j, (rs, ls)) in layers.iter_mut().enumerate() {
+                fill_layer(volume, regions, outside, z + j as isize, rs, ls)?;
+            }
+            Ok(())
+        }
+    }
+}
+
+/// The faces of slab `k`, in scan order: faces perpendicular to z between voxel layers
+/// `k - 1` and `k`, then (for `k < nz`) faces perpendicular to x, then y, within layer `k`.
+pub(super) fn slab_faces(
+    dims: [usize; 3],
+    outside: &Outside,
+    k: usize,
+    (prev_r, prev_l): &(Vec<u32>, Vec<u32>),
+    (cur_r, cur_l): &(Vec<u32>, Vec<u32>),
+    mut emit: impl FnMut(RawFace),
+) {
+    let [nx, ny, nz] = dims;
+    let kk = k as u32;
+    for y in 0..ny {
+        for x in 0..nx {
+            let i = x + nx * y;
+            if prev_r[i] != cur_r[i] {
+                emit(RawFace {
+                    cell: [x as u32, y as u32, kk],
+                    axis: 2,
+                    regions: [prev_r[i], cur_r[i]],
+                    labels: [prev_l[i], cur_l[i]],
+                });
+            }
+        }
+    }
+    if k == nz {
+        return;
+    }
+    for y in 0..ny {
+        for x in 0..=nx {
+            let (a, la) = if x > 0 { (cur_r[x - 1 + nx * y], cur_l[x - 1 + nx * y]) } else { outside[0][0] };
+            let (b, lb) = if x < nx { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { outside[0][1] };
+            if a != b {
+                emit(RawFace { cell: [x as u32, y as u32, kk], axis: 0, regions: [a, b], labels: [la, lb] });
+            }
+        }
+    }
+    for y in 0..=ny {
+        for x in 0..nx {
+            let (a, la) =
+                if y > 0 { (cur_r[x + nx * (y - 1)], cur_l[x + nx * (y - 1)]) } else { outside[1][0] };
+            let (b, lb) = if y < ny { (cur_r[x + nx * y], cur_l[x + nx * y]) } else { outside[1][1] };
+            if a != b {
+                emit(RawFace { cell: [x as u32, y as u32, kk], axis: 1, regions: [a, b], labels: [la, lb] });
+            }
+        }
+    }
+}
+
+/// Sequential state of the scan: vertex numbering over two rolling corner layers.
+pub(super) struct Scan {
+    pub(super) nx: usize,
+    pub(super) surfels: Vec<Surfel>,
+    pub(super) vertex_corners: Vec<[u32; 3]>,
+    /// Vertex ids of corner layers `k` and `k + 1`.
+    pub(super) corners_lo: Vec<u32>,
+    pub(super) corners_hi: Vec<u32>,
+    pub(super) interface_of_pair: HashMap<(u32, u32), u32>,
+    pub(super) last_pair: ((u32, u32), u32),
+}
+
+/// The most surfels a surface holds: their four corners' slots (`4 F`) are numbered in
+/// `u32`.
+pub(super) const MAX_SURFELS: usize = (1 << 30) - 1;
+
+impl Scan {
+    fn vertex(&mut self, c: [u32; 3], k: usize) -> Result<VertexId, SurfaceError> {
+        let idx = c[0] as usize + (self.nx + 1) * c[1] as usize;
+        let layer = if c[2] as usize == k { &mut self.corners_lo } else { &mut self.corners_hi };
+        if layer[idx] == NONE {
+            let id = u32::try_from(self.vertex_corners.len())
+                .ok()
+                .filter(|&i| i != NONE)
+                .ok_or_else(|| SurfaceError::TooLarge("more than 2^32 - 1 vertices".into()))?;
+            layer[idx] = id;
+            self.vertex_corners.push(c);
+        }
+        Ok(VertexId(layer[idx]))
+    }
+
+    /// Adds the surfel between region `a` (negative side) and `b` (positive side), if any.
+    #[allow(clippy::too_many_arguments)]
+    pub(super) fn face(
+        &mut self,
+        cell: [u32; 3],
+        axis: usize,
+        a: u32,
+        b: u32,
+        la: u32,
+        lb: u32,
+        k: usize,
+    ) -> Result<(), SurfaceError> {
+        if a == b || a == NONE || b == NONE {
+            return Ok(());
+        }
+        if self.surfels.len() >= MAX_SURFELS {
+            return Err(SurfaceError::TooLarge(format!("more than {MAX_SURFELS} surfels")));
+        }
+        let flipped = a > b;
+        let (inner, outer, li, lo) = if flipped { (b, a, lb, la) } else { (a, b, la, lb) };
+        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+        let mut cu = cell;
+        cu[u] += 1;
+        let mut cuv = cu;
+        cuv[v] += 1;
+        let mut cv = cell;
+        cv[v] += 1;
+        let corners = if flipped { [cell, cv, cuv, cu] } else { [cell, cu, cuv, cv] };
+        let mut vertices = [VertexId(0); 4];
+        for (slot, c) in vertices.iter_mut().zip(corners) {
+            *slot = self.vertex(c, k)?;
+        }
+        let pair = (inner, outer);
+        let interface = if self.last_pair.0 == pair {
+            self.last_pair.1
+        } else {
+            let n = self.interface_of_pair.len() as u32;
+            let id = *self.interface_of_pair.entry(pair).or_insert(n);
+            self.last_pair = (pair, id);
+            id
+        };
+        self.surfels.push(Surfel {
+            cell,
+            axis: axis as u8,
+            flipped,
+            regions: [RegionId(inner), RegionId(outer)],
+            labels: [li, lo],
+            vertices,
+            interface: InterfaceId(interface),
+        });
+        Ok(())
+    }
+}
