@@ -251,6 +251,26 @@ pub(crate) fn triangles_meet_off_shared(s: [(u32, DVec3); 3], t: [(u32, DVec3); 
     }
 }
 
+/// Whether two triangles of faces sharing the corners `shared` (ids) meet anywhere outside
+/// the segments between the corners they share, each triangle first fanned around every
+/// shared corner of the other face that lies in it (a folded face can hold its
+/// neighbour's corner inside a triangle that does not have it as a corner): the pieces
+/// are then tested with [`triangles_meet_off_shared`].
+pub(crate) fn pieces_meet(s: [(u32, DVec3); 3], t: [(u32, DVec3); 3], shared: &[u32]) -> bool {
+    for (x, y) in [(s, t), (t, s)] {
+        let inside = x.iter().find(|v| {
+            shared.contains(&v.0) && !y.iter().any(|w| w.0 == v.0) && {
+                let hull = reduce(&y.map(|w| w.1));
+                simplices_meet(&hull, &[v.1])
+            }
+        });
+        if let Some(&p) = inside {
+            return (0..3).any(|i| pieces_meet(x, [p, y[i], y[(i + 1) % 3]], shared));
+        }
+    }
+    triangles_meet_off_shared(s, t)
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;

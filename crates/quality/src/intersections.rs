@@ -44,7 +44,9 @@ pub fn invalid_faces(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<usize> {
 /// count as one (a split pinch, a seam). Two faces intersect when a triangle of one and a
 /// triangle of the other meet anywhere outside the segments between the positions they
 /// share: faces sharing an edge may touch along it, faces sharing a corner at it, and
-/// faces sharing nothing not at all. So a face piercing its neighbour, folded onto it or
+/// faces sharing nothing not at all. (Where a shared corner lies inside a triangle of the
+/// other face that does not have it as a corner, a folded face, that triangle is first
+/// fanned around it.) So a face piercing its neighbour, folded onto it or
 /// overlapping it in their common plane is reported, as is a face touching another
 /// without sharing a corner.
 ///
@@ -210,8 +212,9 @@ fn triangles(positions: &[DVec3], q: [u32; 4]) -> [[(u32, DVec3); 3]; 2] {
 
 /// Whether two faces (welded corner ids) intersect, as [`self_intersections`] defines it.
 fn quads_intersect(positions: &[DVec3], a: [u32; 4], b: [u32; 4]) -> bool {
+    let shared: Vec<u32> = a.iter().filter(|v| b.contains(v)).copied().collect();
     let (ta, tb) = (triangles(positions, a), triangles(positions, b));
-    ta.iter().any(|s| tb.iter().any(|t| exact::triangles_meet_off_shared(*s, *t)))
+    ta.iter().any(|s| tb.iter().any(|t| exact::pieces_meet(*s, *t, &shared)))
 }
 
 /// Whether two closed triangles intersect (touching counts), exactly. Degenerate
@@ -286,6 +289,20 @@ mod tests {
         away[3] = DVec3::new(-1., -1., -1.);
         away[4] = DVec3::new(-1., -2., 1.);
         assert!(self_intersections(&away, &quads).is_empty());
+    }
+
+    #[test]
+    fn a_shared_corner_inside_a_folded_neighbours_triangle_is_still_shared() {
+        // B, flat in y = 0, folded: its corner q lies inside its triangle (p, b1, b2). A
+        // hinges on the edge p q that both share: they touch along it only.
+        let p = pts(&[[0., 0., 0.], [4., 0., 0.], [4., 0., 4.], [2., 0., 1.], [0., -1., 0.], [2., -1., 1.]]);
+        let (b, a) = ([0, 1, 2, 3], [4, 0, 3, 5]);
+        assert!(self_intersections(&p, &[a, b]).is_empty());
+        // Tilted into B's plane past the edge, A overlaps it.
+        let mut flat = p.clone();
+        flat[4] = DVec3::new(3.0, 0.0, 0.5);
+        flat[5] = DVec3::new(3.5, 0.0, 1.5);
+        assert_eq!(self_intersections(&flat, &[a, b]), vec![(0, 1)]);
     }
 
     #[test]

@@ -203,25 +203,35 @@ fn brute_force(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
         }
     }
     let tris = |f: [u32; 4]| [[f[0], f[1], f[2]], [f[0], f[2], f[3]]];
+    // Two triangles (corner ids), fanned around the faces' shared corners lying inside the
+    // other (the definition's pieces); then whether any two pieces meet outside the
+    // segments between their common corners.
+    fn pieces(s: [u32; 3], t: [u32; 3], shared: &[u32], exact: &[V]) -> bool {
+        let pts = |x: [u32; 3]| -> Vec<V> { x.iter().map(|&v| exact[v as usize].clone()).collect() };
+        for (x, y) in [(s, t), (t, s)] {
+            if let Some(&p) = x.iter().find(|v| {
+                shared.contains(v)
+                    && !y.contains(v)
+                    && !intersection(&[exact[**v as usize].clone()], &pts(y)).is_empty()
+            }) {
+                return (0..3).any(|i| pieces(x, [p, y[i], y[(i + 1) % 3]], shared, exact));
+            }
+        }
+        let p = intersection(&pts(s), &pts(t));
+        if p.is_empty() {
+            return false;
+        }
+        let common: Vec<V> = s.iter().filter(|v| t.contains(v)).map(|&v| exact[v as usize].clone()).collect();
+        !inside_segments(&p, &common)
+    }
     for a in 0..quads.len() {
         for b in a + 1..quads.len() {
             let (Some(fa), Some(fb)) = (faces[a], faces[b]) else { continue };
             if repeated[a] || repeated[b] {
                 continue;
             }
-            let meet = tris(fa).iter().any(|s| {
-                tris(fb).iter().any(|t| {
-                    let sp: Vec<V> = s.iter().map(|&v| exact[v as usize].clone()).collect();
-                    let tp: Vec<V> = t.iter().map(|&v| exact[v as usize].clone()).collect();
-                    let p = intersection(&sp, &tp);
-                    if p.is_empty() {
-                        return false;
-                    }
-                    let shared: Vec<V> =
-                        s.iter().filter(|v| t.contains(v)).map(|&v| exact[v as usize].clone()).collect();
-                    !inside_segments(&p, &shared)
-                })
-            });
+            let shared: Vec<u32> = fa.iter().filter(|v| fb.contains(v)).copied().collect();
+            let meet = tris(fa).iter().any(|s| tris(fb).iter().any(|t| pieces(*s, *t, &shared, &exact)));
             if meet {
                 out.push((a, b));
             }
