@@ -252,7 +252,8 @@ fn quads_of(quads: &PyReadonlyArray2<'_, i64>, n: usize) -> Result<Vec<[u32; 4]>
 }
 
 /// The quality counts of a quad mesh (`voxreg check`): faces, self-intersecting face
-/// pairs, folded quads, folded adjacent pairs, and the first intersecting pair.
+/// pairs, faces with a non-finite vertex, folded quads, folded adjacent pairs, and the
+/// first intersecting pair.
 #[pyfunction]
 pub(crate) fn check<'py>(
     py: Python<'py>,
@@ -265,6 +266,7 @@ pub(crate) fn check<'py>(
     let d = PyDict::new(py);
     d.set_item("faces", r.faces)?;
     d.set_item("intersecting_pairs", r.intersecting_pairs)?;
+    d.set_item("invalid_faces", r.invalid_faces)?;
     d.set_item("folded_quads", r.folded_quads)?;
     d.set_item("folded_pairs", r.folded_pairs)?;
     d.set_item("first_intersection", r.first_intersection)?;
