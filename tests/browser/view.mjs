@@ -18,7 +18,7 @@ import { execFileSync } from 'node:child_process';
 import { mkdtempSync, rmSync } from 'node:fs';
 import { tmpdir } from 'node:os';
 import { join, resolve } from 'node:path';
-import { arg, launchBrowser, root, startView } from './common.mjs';
+import { apiUrl, arg, launchBrowser, root, startView } from './common.mjs';
 
 const measure = process.argv.includes('--measure');
 const voxreg = resolve(arg('--voxreg', process.env.VOXREG ?? join(root, 'target/release/voxreg')));
@@ -139,7 +139,10 @@ try {
     const message = await page.textContent('#error');
     check(message.includes('corrupt.vox'), `the error does not name the file: ${message}`);
     console.log(`corrupt file: "${message}"`);
-    const state = await (await page.request.get(url + 'api/state')).json();
+    const state = await (await page.request.get(apiUrl(url, '/api/state'))).json();
+    // Without the session's token (another user, another site), the API refuses.
+    const untokened = await page.request.get(new URL('/api/state', url).href);
+    check(untokened.status() === 403, `the state is served without the token (${untokened.status()})`);
     check(state.name === 'chr_army1.vox' || state.name === input.split('/').pop(), `the surface changed: ${state.name}`);
     check(await drawnPixels() > 1000, 'the model is gone after the error');
   }

@@ -39,7 +39,8 @@ pub(crate) enum Command {
     /// `distance` and a colour ramp with iso-lines.
     Geodesic(GeodesicArgs),
     /// Count the self-intersections of MESH (.obj or .ply, quads split into two triangles;
-    /// faces sharing a vertex do not count); exits with an error if there are any.
+    /// exact: faces may touch only along the edges and at the corners they share), its
+    /// faces with a non-finite vertex and its folds; exits with an error if there are any.
     Check(CheckArgs),
 }
 

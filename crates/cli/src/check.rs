@@ -69,6 +69,13 @@ pub(crate) fn check(args: &CheckArgs) -> Result<()> {
             r.intersecting_pairs
         );
     }
+    if r.invalid_faces > 0 {
+        bail!(
+            "{}: {} faces with a vertex that is not finite (NaN or infinite)",
+            args.mesh.display(),
+            r.invalid_faces
+        );
+    }
     if !r.is_clean() {
         bail!(
             "{}: {} folded quads, {} folded adjacent pairs",

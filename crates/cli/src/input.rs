@@ -11,6 +11,15 @@ use crate::args::InputArgs;
 /// (`voxreg_io::read_input`), with the errors in the options' names.
 /// Also returns the palette and the unit of the spacing, where the file has them.
 pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palette>, Option<String>)> {
+    read_input_from(args, None)
+}
+
+/// [`read_input`] of INPUT's contents held in memory (a file dropped on the viewer's
+/// page): nothing else is read (`voxreg_io::read_input_bytes`).
+pub(crate) fn read_input_from(
+    args: &InputArgs,
+    bytes: Option<&[u8]>,
+) -> Result<(LabelVolume, Option<Palette>, Option<String>)> {
     let options = InputOptions {
         dims: args.dims,
         dtype: args.dtype,
@@ -26,7 +35,11 @@ pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palett
         },
     };
     let path = &args.input;
-    match voxreg_io::read_input(path, &options) {
+    let read = match bytes {
+        Some(b) => voxreg_io::read_input_bytes(b, path, &options),
+        None => voxreg_io::read_input(path, &options),
+    };
+    match read {
         Ok(input) => Ok((input.volume, input.palette, input.units)),
         Err(InputError::RawNeedsDims(_)) => {
             bail!("{}: raw data have no header: give --dims X,Y,Z and --dtype", path.display())

@@ -1,7 +1,7 @@
 //! `voxreg view`: reads INPUT as `voxreg regularize` does and hands it to the viewer
 //! library (`voxreg_view`), with a loader that reads dropped files the same way.
 
-use std::path::Path;
+use std::path::PathBuf;
 
 use anyhow::{Context, Result};
 use voxreg_view::{Loaded, Viewer};
@@ -9,13 +9,14 @@ use voxreg_view::{Loaded, Viewer};
 use crate::args::{Preset, RegularizeArgs, ViewArgs};
 use crate::input;
 
-/// Reads `args.input` with the options, and the parameters of its first solve.
-fn load(args: &RegularizeArgs) -> Result<Loaded> {
+/// Reads `args.input` with the options (from `bytes`, its contents, where given: nothing
+/// else is read), and the parameters of its first solve.
+fn load(args: &RegularizeArgs, bytes: Option<&[u8]>) -> Result<Loaded> {
     let voxel_art = input::voxel_art(&args.input);
     let preset = args.preset.unwrap_or(if voxel_art { Preset::VoxelArt } else { Preset::Default });
     let params = args.params(voxel_art)?;
     params.validate()?;
-    let (volume, palette, _units) = input::read_input(&args.input)?;
+    let (volume, palette, _units) = input::read_input_from(&args.input, bytes)?;
     let path = &args.input.input;
     let name =
         path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());
@@ -23,18 +24,21 @@ fn load(args: &RegularizeArgs) -> Result<Loaded> {
 }
 
 pub(crate) fn view(args: &ViewArgs) -> Result<()> {
-    let first = load(&args.regularize)?;
+    let first = load(&args.regularize, None)?;
     let options = args.regularize.clone();
-    let loader = move |path: &Path| {
+    // A dropped file: its name and contents, read from memory (never from a path its
+    // header names).
+    let loader = move |name: &str, bytes: &[u8]| {
         let mut a = options.clone();
-        a.input.input = path.to_path_buf();
+        a.input.input = PathBuf::from(name);
         // A dropped file is read with the same options, but its own preset.
         if a.preset.is_some() && input::voxel_art(&a.input) != input::voxel_art(&options.input) {
             a.preset = None;
         }
-        load(&a).map_err(|e| crate::one_line(&e))
+        load(&a, Some(bytes)).map_err(|e| crate::one_line(&e))
     };
     let viewer = Viewer::bind(args.port.unwrap_or(0), Box::new(loader))?;
+    // The address with the session's token: the page and its requests need it.
     let url = viewer.url();
     eprintln!("voxreg view: {url} (Ctrl-C to stop)");
     if args.open {

@@ -527,12 +527,16 @@ fn view_serves_the_input_and_reads_dropped_files_with_the_options() {
     BufReader::new(child.stderr.take().unwrap()).read_line(&mut line).unwrap();
     let result = std::panic::catch_unwind(|| {
         let url = line.trim().strip_prefix("voxreg view: ").unwrap().split_whitespace().next().unwrap();
-        let addr = url.trim_start_matches("http://").trim_end_matches('/');
+        // The address carries the session's token, which every API request needs.
+        let (addr, token) = url.trim_start_matches("http://").split_once("/?token=").unwrap();
         assert!(addr.starts_with("127.0.0.1:"), "{line}");
+        assert_eq!(token.len(), 32, "{line}");
+        assert_eq!(http(addr, "GET", "/api/state", b"").0, 403);
+        let api = |path: &str| format!("{path}{}token={token}", if path.contains('?') { '&' } else { '?' });
         let t = std::time::Instant::now();
         let state = loop {
             let state: serde_json::Value =
-                serde_json::from_str(&http(addr, "GET", "/api/state", b"").1).unwrap();
+                serde_json::from_str(&http(addr, "GET", &api("/api/state"), b"").1).unwrap();
             if state["final"] == true {
                 break state;
             }
@@ -543,12 +547,20 @@ fn view_serves_the_input_and_reads_dropped_files_with_the_options() {
         assert_eq!(state["tuning"]["preset"], "voxel-art");
         assert_eq!(state["tuning"]["gamma"], 0.5);
         // A corrupt drop: the reader's one-line message, naming the dropped file only.
-        let (status, body) = http(addr, "POST", "/api/open?name=bad.vox", b"VOX 1234");
+        let (status, body) = http(addr, "POST", &api("/api/open?name=bad.vox"), b"VOX 1234");
         assert_eq!(status, 400, "{body}");
         let message: serde_json::Value = serde_json::from_str(&body).unwrap();
         let message = message["error"].as_str().unwrap();
         assert!(message.starts_with("bad.vox"), "{message}");
         assert!(!message.contains("/tmp"), "{message}");
+        // A dropped detached header is read from memory: the file it names is not read.
+        let header = format!(
+            "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: {}\n\n",
+            data("cat10.vol").display()
+        );
+        let (status, body) = http(addr, "POST", &api("/api/open?name=a.nhdr"), header.as_bytes());
+        assert_eq!(status, 400, "{body}");
+        assert!(body.contains("a.nhdr") && body.contains("detached"), "{body}");
     });
     child.kill().unwrap();
     child.wait().unwrap();

@@ -104,6 +104,20 @@ pub enum InputError {
 /// by extension; then applies the spacing, the threshold (or checks that grey levels
 /// are labels), the labels kept and the background.
 pub fn read_input(path: &Path, options: &InputOptions<'_>) -> Result<Input, InputError> {
+    read_input_from(path, None, options)
+}
+
+/// [`read_input`] of a file held in memory (an upload to the viewer): `path` only names
+/// it, and nothing else is read ([`read_voxels_bytes`](crate::read_voxels_bytes)).
+pub fn read_input_bytes(bytes: &[u8], path: &Path, options: &InputOptions<'_>) -> Result<Input, InputError> {
+    read_input_from(path, Some(bytes), options)
+}
+
+fn read_input_from(
+    path: &Path,
+    bytes: Option<&[u8]>,
+    options: &InputOptions<'_>,
+) -> Result<Input, InputError> {
     let is_raw = path.extension().is_some_and(|e| e.eq_ignore_ascii_case("raw"));
     let (voxels, palette, units) = match options.dims {
         Some(dims) => {
@@ -113,14 +127,22 @@ pub fn read_input(path: &Path, options: &InputOptions<'_>) -> Result<Input, Inpu
                 endian: options.endian.unwrap_or_default(),
                 spacing: options.spacing.unwrap_or(DVec3::ONE),
             };
-            (read_raw(path, &spec)?, None, None)
+            let voxels = match bytes {
+                Some(b) => crate::read_raw_bytes(b, path, &spec)?,
+                None => read_raw(path, &spec)?,
+            };
+            (voxels, None, None)
         }
         None if is_raw => return Err(InputError::RawNeedsDims(path.to_path_buf())),
         None => {
             if options.vox_model.is_some() && !is_voxel_art(path) {
                 return Err(InputError::ModelNeedsVox(path.to_path_buf()));
             }
-            let loaded = read_voxels_with(path, &ReadOptions { vox_model: options.vox_model })?;
+            let read = ReadOptions { vox_model: options.vox_model };
+            let loaded = match bytes {
+                Some(b) => crate::read_voxels_bytes(b, path, &read)?,
+                None => read_voxels_with(path, &read)?,
+            };
             (loaded.voxels, loaded.palette, loaded.units)
         }
     };

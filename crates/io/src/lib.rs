@@ -135,7 +135,7 @@ pub use commit::Outputs;
 pub use error::IoError;
 pub use gltf::write_gltf;
 pub use grey::{GreyVolume, NotALabel, Voxels};
-pub use input::{read_input, Background, Input, InputError, InputOptions};
+pub use input::{read_input, read_input_bytes, Background, Input, InputError, InputOptions};
 pub use input_files::{input_files, same_output, InputFiles};
 pub use limits::{
     check_memory, default_max_memory, format_size, max_memory, parse_size, set_max_memory, with_max_memory,
@@ -161,8 +161,8 @@ pub use stl::write_stl;
 pub use tiff::{read_tiff, read_tiff_bytes, read_tiff_slices, tiff_slices};
 pub use vol::{read_vol, read_vol_bytes};
 pub use volume::{
-    is_voxel_art, read_volume, read_voxels, read_voxels_with, LoadedVolume, LoadedVoxels, ReadOptions,
-    MAX_VOXELS,
+    is_voxel_art, read_volume, read_voxels, read_voxels_bytes, read_voxels_with, LoadedVolume, LoadedVoxels,
+    ReadOptions, MAX_VOXELS,
 };
 pub use vox::{
     read_vox, read_vox_bytes, read_vox_bytes_with, vox_model_sizes, VoxOptions, VOX_MAX_INSTANCES,

@@ -24,6 +24,18 @@ pub fn read_nrrd(path: &Path) -> Result<LoadedVoxels, IoError> {
     read_nrrd_bytes(&read_file(path)?, path)
 }
 
+/// [`read_nrrd_bytes`] with nothing read but `bytes` (an upload): a detached header,
+/// which names its data file, is refused.
+pub(crate) fn read_nrrd_in_memory(bytes: &[u8], path: &Path) -> Result<LoadedVoxels, IoError> {
+    if Header::parse(bytes, path)?.data_file.is_some() {
+        return Err(IoError::unsupported(
+            path,
+            "a detached header names its data file: only the file itself is read here (attach the data)",
+        ));
+    }
+    read_nrrd_bytes(bytes, path)
+}
+
 /// Reads a NRRD file held in `bytes` (`path` names it in errors, and locates a
 /// detached data file).
 ///

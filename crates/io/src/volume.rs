@@ -130,6 +130,44 @@ pub fn read_voxels_with(path: &Path, options: &ReadOptions) -> Result<LoadedVoxe
     }
 }
 
+/// [`read_voxels_with`] of a file held in memory (an upload): `path` only names the file
+/// (its extension picks the format) and nothing else is read. What names other files is
+/// refused with [`IoError::Unsupported`]: a Zarr store, a directory or pattern of TIFF
+/// slices, a NRRD detached header (`data file`).
+pub fn read_voxels_bytes(bytes: &[u8], path: &Path, options: &ReadOptions) -> Result<LoadedVoxels, IoError> {
+    let plain = |voxels| Ok(LoadedVoxels { voxels, palette: None, units: None });
+    let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
+    let is_nii_gz = name.to_ascii_lowercase().ends_with(".nii.gz");
+    let ext = if is_nii_gz { Some("nii".to_string()) } else { lowercase_extension(path) };
+    if ext.as_deref() == Some("zarr") || name.contains(['*', '?']) {
+        return Err(IoError::unsupported(
+            path,
+            "a store or set of files: only a single file is read from memory",
+        ));
+    }
+    match ext.as_deref() {
+        Some("vol") => plain(Voxels::Labels(crate::read_vol_bytes(bytes, path)?)),
+        Some("longvol") => plain(crate::read_longvol_bytes(bytes, path)?),
+        Some("pgm3d") => plain(Voxels::Labels(crate::read_pgm3d_bytes(bytes, path)?)),
+        Some("vox") => {
+            let vox = crate::VoxOptions { model: options.vox_model };
+            let LoadedVolume { volume, palette, .. } = crate::read_vox_bytes_with(bytes, path, &vox)?;
+            Ok(LoadedVoxels { voxels: Voxels::Labels(volume), palette, units: None })
+        }
+        Some("nii") => plain(crate::read_nifti_bytes(bytes, path)?),
+        Some("vti") => plain(crate::read_vti_bytes(bytes, path)?),
+        Some("npy") => plain(crate::read_npy_bytes(bytes, path)?),
+        Some("tif" | "tiff") => crate::read_tiff_bytes(bytes, path),
+        Some("nrrd" | "nhdr") => crate::nrrd::read_nrrd_in_memory(bytes, path),
+        Some("mrc" | "map" | "rec") => crate::read_mrc_bytes(bytes, path),
+        Some("raw") => Err(IoError::unsupported(
+            path,
+            "raw voxel data have no header: give their dimensions and type (read_raw_bytes with a RawSpec)",
+        )),
+        _ => Err(IoError::UnsupportedExtension { path: path.to_path_buf(), expected: KNOWN_EXTENSIONS }),
+    }
+}
+
 /// Whether `path` names a format of voxel art (MagicaVoxel `.vox`): coloured voxels of
 /// one object rather than a sampled shape, which voxreg regularizes with its voxel-art
 /// preset (one solid region, clamped solve).

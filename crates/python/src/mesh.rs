@@ -260,8 +260,9 @@ fn labels_of(labels: &PyReadonlyArray2<'_, u32>, m: usize) -> Result<Vec<[u32; 2
 }
 
 /// The quality counts of a quad mesh (`voxreg check`): faces, self-intersecting face
-/// pairs, folded quads, folded adjacent pairs, the first intersecting pair, and the mean
-/// angle between adjacent quads (`voxreg_quality::mean_adjacent_angle_deg`).
+/// pairs, faces with a non-finite vertex, folded quads, folded adjacent pairs, the first
+/// intersecting pair, and the mean angle between adjacent quads
+/// (`voxreg_quality::mean_adjacent_angle_deg`).
 #[pyfunction]
 pub(crate) fn check<'py>(
     py: Python<'py>,
@@ -281,6 +282,7 @@ pub(crate) fn check<'py>(
     let d = PyDict::new(py);
     d.set_item("faces", r.faces)?;
     d.set_item("intersecting_pairs", r.intersecting_pairs)?;
+    d.set_item("invalid_faces", r.invalid_faces)?;
     d.set_item("folded_quads", r.folded_quads)?;
     d.set_item("folded_pairs", r.folded_pairs)?;
     d.set_item("first_intersection", r.first_intersection)?;

@@ -96,3 +96,43 @@ def test_docstrings_tell_units_and_defaults():
     for word in ["physical units", "default (1, 1, 1)", "alpha : float > 0, default None (preset: 1e-2",
                  "threads : int >= 0, default 0", "voxels"]:
         assert word in doc
+
+
+@pytest.mark.parametrize("background", [-1, 2**32, 1.5, "0", True])
+def test_a_bad_background_is_a_parameter_error(background):
+    with pytest.raises(voxreg.ParameterError, match="background must be"):
+        voxreg.regularize(ball_labels(8, 3), background=background)
+
+
+@pytest.mark.parametrize("palette, message", [
+    ({"materials": []}, "needs 'colors'"),
+    ({"colors": np.zeros((4, 3), np.uint8), "materials": [{"name": "a"}]}, "material 0 has no color"),
+    ({"colors": np.zeros((4, 3), np.uint8), "materials": [
+        {"name": "a", "color": "red", "metallic": 0, "roughness": 0, "emission": 0, "transparency": 0}]},
+     "material 0"),
+    ({"colors": np.zeros((4, 3), np.uint8), "names": {"one": "a"}}, "'names' must map"),
+])
+def test_a_bad_palette_is_a_parameter_error(palette, message):
+    with pytest.raises(voxreg.ParameterError, match=message):
+        voxreg.regularize(ball_labels(8, 3), palette=palette)
+
+
+def test_check_reports_non_finite_vertices():
+    vertices = np.full((4, 3), np.nan)
+    report = voxreg.check((vertices, np.array([[0, 1, 2, 3]])))
+    assert report["invalid_faces"] == 1 and not report["clean"]
+
+
+def test_dask_chunks_may_be_one_integer():
+    pytest.importorskip("dask")
+    import voxreg.dask
+
+    labels = ball_labels(12, 4)
+    one = voxreg.dask.regularize(labels, chunks=8, scheduler="synchronous")
+    three = voxreg.dask.regularize(labels, chunks=(8, 8, 8), scheduler="synchronous")
+    assert np.array_equal(one.quads, three.quads)
+    for bad in [0, -3, (8, 8), "8", 2.5]:
+        with pytest.raises(voxreg.ParameterError, match="chunks must be"):
+            voxreg.dask.regularize(labels, chunks=bad, scheduler="synchronous")
+    with pytest.raises(voxreg.ParameterError, match="background must be"):
+        voxreg.dask.regularize(labels, chunks=8, background=-1, scheduler="synchronous")

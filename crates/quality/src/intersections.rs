@@ -1,35 +1,60 @@
-//! Self-intersections of quad meshes: a uniform grid of face boxes, then exact-style
-//! triangle-triangle tests (each quad split into two triangles).
+//! Self-intersections of quad meshes: a uniform grid of face boxes, then exact
+//! triangle-triangle tests (each quad split into two triangles; see [`crate::exact`]).
 
 use std::collections::HashMap;
 
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::exact;
+
 /// A face whose box spans more grid cells than this is tested against every face instead
 /// of being entered in the grid, so one huge face cannot blow the grid up.
 const MAX_CELLS_PER_FACE: u64 = 64;
 
-/// Each vertex's smallest-index twin at the same position (bit for bit), so that
-/// duplicated vertices (a split pinch, a seam) count as shared.
+/// Each vertex's smallest-index twin at the same position, so that duplicated vertices
+/// (a split pinch, a seam) count as shared. `-0.0` and `0.0` are one position.
 fn welded(positions: &[DVec3]) -> Vec<u32> {
     let mut first: HashMap<[u64; 3], u32> = HashMap::with_capacity(positions.len());
     positions
         .iter()
         .enumerate()
-        .map(|(i, p)| *first.entry(p.to_array().map(f64::to_bits)).or_insert(i as u32))
+        .map(|(i, p)| *first.entry((*p + DVec3::ZERO).to_array().map(f64::to_bits)).or_insert(i as u32))
         .collect()
 }
 
-/// The pairs `(a, b)`, `a < b`, of quads of the mesh that intersect, sorted.
+/// The faces with a corner index out of range or a position that is not finite (NaN or
+/// infinite): no geometry to check, a defect of their own.
+pub fn invalid_faces(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<usize> {
+    let n = positions.len();
+    quads
+        .par_iter()
+        .enumerate()
+        .filter(|(_, q)| !q.iter().all(|&v| (v as usize) < n && positions[v as usize].is_finite()))
+        .map(|(f, _)| f)
+        .collect()
+}
+
+/// The pairs `(a, b)`, `a < b`, of faces of the mesh that intersect, sorted. Exact: every
+/// test is decided by exact orientation predicates on the `f64` positions.
 ///
 /// Each quad `[v0, v1, v2, v3]` is embedded as the triangles `(v0, v1, v2)` and
 /// `(v0, v2, v3)` (so inside the convex hull of its vertices, rule (i) of the paper's
-/// Proposition 2). Quads that share a vertex (adjacent across an edge or at a corner)
-/// are never reported, whatever their geometry; vertices at the same position (bit for
-/// bit) count as one, so duplicated pinch vertices are shared too. Two quads touching at
-/// a point or along a segment without sharing a vertex are reported. Quads with an index
-/// out of range or a non-finite position are ignored.
+/// Proposition 2; a triangle is a quad repeating a corner). Vertices at the same position
+/// count as one (a split pinch, a seam). Two faces intersect when a triangle of one and a
+/// triangle of the other meet anywhere outside the segments between the positions they
+/// share: faces sharing an edge may touch along it, faces sharing a corner at it, and
+/// faces sharing nothing not at all. (Where a shared corner lies inside a triangle of the
+/// other face that does not have it as a corner, a folded face, that triangle is first
+/// fanned around it.) So a face piercing its neighbour, folded onto it or
+/// overlapping it in their common plane is reported, as is a face touching another
+/// without sharing a corner.
+///
+/// A face with the same corners (after welding, in any order) as an earlier face is
+/// reported once, paired with the first such face, and not tested again: thousands of
+/// stacked copies of one face make as many pairs, not their square. Faces with an index
+/// out of range or a non-finite position are left out here and counted by
+/// [`invalid_faces`].
 ///
 /// Cost: a grid of cells about the mean edge length; each quad is tested against the
 /// quads whose boxes overlap its own, in parallel. Linear in the number of quads on
@@ -38,14 +63,36 @@ fn welded(positions: &[DVec3]) -> Vec<u32> {
 /// instead, so memory stays linear whatever the geometry.
 pub fn self_intersections(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize, usize)> {
     let n = positions.len();
-    let valid = |q: &[u32; 4]| q.iter().all(|&v| (v as usize) < n && positions[v as usize].is_finite());
+    let finite = |q: &[u32; 4]| q.iter().all(|&v| (v as usize) < n && positions[v as usize].is_finite());
     let weld = welded(positions);
     let canonical: Vec<[u32; 4]> =
-        quads.iter().map(|q| if valid(q) { q.map(|v| weld[v as usize]) } else { *q }).collect();
-    let boxes: Vec<Option<(DVec3, DVec3)>> = quads
-        .par_iter()
-        .map(|q| {
-            valid(q).then(|| {
+        quads.iter().map(|q| if finite(q) { q.map(|v| weld[v as usize]) } else { *q }).collect();
+    // Repeated faces: paired with their first copy, then left out of the geometry.
+    let mut first_copy: HashMap<[u32; 4], usize> = HashMap::new();
+    let mut duplicates: Vec<(usize, usize)> = Vec::new();
+    let mut repeated = vec![false; quads.len()];
+    for (f, q) in canonical.iter().enumerate() {
+        if !finite(&quads[f]) {
+            continue;
+        }
+        let mut key = *q;
+        key.sort_unstable();
+        match first_copy.entry(key) {
+            std::collections::hash_map::Entry::Occupied(e) => {
+                duplicates.push((*e.get(), f));
+                repeated[f] = true;
+            }
+            std::collections::hash_map::Entry::Vacant(e) => {
+                e.insert(f);
+            }
+        }
+    }
+    let live = |f: usize| !repeated[f] && finite(&quads[f]);
+    let boxes: Vec<Option<(DVec3, DVec3)>> = (0..quads.len())
+        .into_par_iter()
+        .map(|f| {
+            let q = &quads[f];
+            live(f).then(|| {
                 let p = q.map(|v| positions[v as usize]);
                 (p[0].min(p[1]).min(p[2]).min(p[3]), p[0].max(p[1]).max(p[2]).max(p[3]))
             })
@@ -59,7 +106,7 @@ pub fn self_intersections(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize
         count += 1;
     }
     if count < 2 || !lo.is_finite() || !hi.is_finite() {
-        return Vec::new();
+        return duplicates;
     }
     // Cells about twice the mean box size, and at most ~2^20 per axis.
     let extent = (hi - lo).max_element().max(f64::MIN_POSITIVE);
@@ -106,7 +153,6 @@ pub fn self_intersections(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize
         .flat_map_iter(|a| {
             let mut out = Vec::new();
             let (Some((ba_lo, ba_hi)), Some((ca, cb))) = (boxes[a], ranges[a]) else { return out };
-            let qa = quads[a];
             for z in ca.z..=cb.z {
                 for y in ca.y..=cb.y {
                     for x in ca.x..=cb.x {
@@ -124,11 +170,7 @@ pub fn self_intersections(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize
                             if ca.max(cc) != c {
                                 continue;
                             }
-                            let qb = quads[b];
-                            if canonical[a].iter().any(|v| canonical[b].contains(v)) {
-                                continue;
-                            }
-                            if quads_intersect(positions, qa, qb) {
+                            if quads_intersect(positions, canonical[a], canonical[b]) {
                                 out.push((a, b));
                             }
                         }
@@ -151,87 +193,34 @@ pub fn self_intersections(positions: &[DVec3], quads: &[[u32; 4]]) -> Vec<(usize
                 if b == a || (other_big && b < a) || lo_a.cmpgt(hi_b).any() || lo_b.cmpgt(hi_a).any() {
                     return None;
                 }
-                if canonical[a].iter().any(|v| canonical[b].contains(v)) {
-                    return None;
-                }
-                quads_intersect(positions, quads[a], quads[b]).then_some((a.min(b), a.max(b)))
+                quads_intersect(positions, canonical[a], canonical[b]).then_some((a.min(b), a.max(b)))
             })
         })
         .collect();
     pairs.append(&mut extra);
+    pairs.append(&mut duplicates);
     pairs.sort_unstable();
     pairs.dedup();
     pairs
 }
 
-fn triangles(positions: &[DVec3], q: [u32; 4]) -> [[DVec3; 3]; 2] {
-    let p = q.map(|v| positions[v as usize]);
-    [[p[0], p[1], p[2]], [p[0], p[2], p[3]]]
+/// The two triangles of a quad of welded corner ids, each corner with its position.
+fn triangles(positions: &[DVec3], q: [u32; 4]) -> [[(u32, DVec3); 3]; 2] {
+    let c = q.map(|v| (v, positions[v as usize]));
+    [[c[0], c[1], c[2]], [c[0], c[2], c[3]]]
 }
 
+/// Whether two faces (welded corner ids) intersect, as [`self_intersections`] defines it.
 fn quads_intersect(positions: &[DVec3], a: [u32; 4], b: [u32; 4]) -> bool {
+    let shared: Vec<u32> = a.iter().filter(|v| b.contains(v)).copied().collect();
     let (ta, tb) = (triangles(positions, a), triangles(positions, b));
-    ta.iter().any(|s| tb.iter().any(|t| triangles_intersect(s, t)))
+    ta.iter().any(|s| tb.iter().any(|t| exact::pieces_meet(*s, *t, &shared)))
 }
 
-/// Whether two closed triangles intersect (touching counts). Degenerate triangles are
-/// handled as the segments or points they are.
+/// Whether two closed triangles intersect (touching counts), exactly. Degenerate
+/// triangles are handled as the segments or points they are.
 pub fn triangles_intersect(a: &[DVec3; 3], b: &[DVec3; 3]) -> bool {
-    let scale = a.iter().chain(b).map(|p| p.abs().max_element()).fold(1.0, f64::max);
-    let eps = 1e-12 * scale;
-    let lo = a[0].min(a[1]).min(a[2]).max(b[0].min(b[1]).min(b[2]));
-    let hi = a[0].max(a[1]).max(a[2]).min(b[0].max(b[1]).max(b[2]));
-    if (lo - hi).max_element() > eps {
-        return false;
-    }
-    // Separating axis theorem: face normals, then edge-edge cross products; for coplanar
-    // triangles, the in-plane edge normals.
-    let na = (a[1] - a[0]).cross(a[2] - a[0]);
-    let nb = (b[1] - b[0]).cross(b[2] - b[0]);
-    let separated = |axis: DVec3| {
-        let len = axis.length();
-        if len <= 1e-300 {
-            return false;
-        }
-        let axis = axis / len;
-        let pa = a.map(|p| p.dot(axis));
-        let pb = b.map(|p| p.dot(axis));
-        let (amin, amax) = (pa[0].min(pa[1]).min(pa[2]), pa[0].max(pa[1]).max(pa[2]));
-        let (bmin, bmax) = (pb[0].min(pb[1]).min(pb[2]), pb[0].max(pb[1]).max(pb[2]));
-        amin > bmax + eps || bmin > amax + eps
-    };
-    if separated(na) || separated(nb) {
-        return false;
-    }
-    let ea = [a[1] - a[0], a[2] - a[1], a[0] - a[2]];
-    let eb = [b[1] - b[0], b[2] - b[1], b[0] - b[2]];
-    for u in &ea {
-        for v in &eb {
-            if separated(u.cross(*v)) {
-                return false;
-            }
-        }
-    }
-    // Coplanar (or degenerate) configurations: in-plane normals of the edges.
-    let normal = if na.length_squared() >= nb.length_squared() { na } else { nb };
-    if normal.length_squared() > 0.0 {
-        for e in ea.iter().chain(&eb) {
-            if separated(e.cross(normal)) {
-                return false;
-            }
-        }
-    } else {
-        // Both degenerate (segments or points): separate along the edges and their
-        // perpendiculars in every axis plane.
-        for e in ea.iter().chain(&eb) {
-            for k in [DVec3::X, DVec3::Y, DVec3::Z] {
-                if separated(*e) || separated(e.cross(k)) {
-                    return false;
-                }
-            }
-        }
-    }
-    true
+    exact::simplices_meet(&exact::reduce(a), &exact::reduce(b))
 }
 
 #[cfg(test)]
@@ -258,29 +247,84 @@ mod tests {
         assert!(triangles_intersect(&t, &tri([0.25, -1.0, -0.5], [0.25, 2.0, -0.5], [0.25, 0.25, 0.5])));
     }
 
+    fn pts(a: &[[f64; 3]]) -> Vec<DVec3> {
+        a.iter().map(|&p| DVec3::from_array(p)).collect()
+    }
+
     #[test]
-    fn quads_sharing_vertices_are_not_reported() {
-        // Two unit squares folded onto each other along a shared edge.
-        let p = vec![
-            DVec3::new(0.0, 0.0, 0.0),
-            DVec3::new(1.0, 0.0, 0.0),
-            DVec3::new(1.0, 1.0, 0.0),
-            DVec3::new(0.0, 1.0, 0.0),
-            DVec3::new(0.0, 0.0, 0.0),
-            DVec3::new(1.0, 0.0, 0.0),
-        ];
-        let quads = vec![[0, 1, 2, 3], [1, 0, 3, 2]];
-        assert!(self_intersections(&p, &quads).is_empty());
-        // Duplicated vertices at the same positions count as shared too.
-        let mut p2 = p.clone();
-        p2.push(DVec3::new(1.0, 1.0, 0.0));
-        p2.push(DVec3::new(0.0, 1.0, 0.0));
-        assert!(self_intersections(&p2, &[[0, 1, 2, 3], [5, 4, 7, 6]]).is_empty());
-        // Overlapping squares that share no position do intersect.
-        let shifted: Vec<DVec3> = p2[4..].iter().map(|v| *v + DVec3::new(0.5, 0.0, 0.0)).collect();
-        let mut p3 = p2[..4].to_vec();
+    fn neighbours_may_touch_only_where_they_share() {
+        // Two unit squares side by side, sharing an edge (and, as copies, its positions).
+        let p = pts(&[[0., 0., 0.], [1., 0., 0.], [1., 1., 0.], [0., 1., 0.], [2., 0., 0.], [2., 1., 0.]]);
+        assert!(self_intersections(&p, &[[0, 1, 2, 3], [1, 4, 5, 2]]).is_empty());
+        let mut copies = p.clone();
+        copies.extend(pts(&[[1., 0., 0.], [1., 1., 0.]]));
+        assert!(self_intersections(&copies, &[[0, 1, 2, 3], [6, 4, 5, 7]]).is_empty());
+        // Folded back onto the first over the shared edge: they overlap.
+        let mut folded = p.clone();
+        folded[4] = DVec3::new(0.2, 0.0, 0.0);
+        folded[5] = DVec3::new(0.2, 1.0, 0.0);
+        assert_eq!(self_intersections(&folded, &[[0, 1, 2, 3], [1, 4, 5, 2]]), vec![(0, 1)]);
+        // The same square twice (in either orientation).
+        assert_eq!(self_intersections(&p, &[[0, 1, 2, 3], [3, 2, 1, 0]]), vec![(0, 1)]);
+        // Overlapping squares that share no position.
+        let shifted = pts(&[[0.5, 0., 0.], [1.5, 0., 0.], [1.5, 1., 0.], [0.5, 1., 0.]]);
+        let mut p3 = p[..4].to_vec();
         p3.extend(shifted);
-        assert_eq!(self_intersections(&p3, &[[0, 1, 2, 3], [5, 4, 7, 6]]), vec![(0, 1)]);
+        assert_eq!(self_intersections(&p3, &[[0, 1, 2, 3], [4, 5, 6, 7]]), vec![(0, 1)]);
+    }
+
+    #[test]
+    fn a_triangle_piercing_a_neighbour_through_a_shared_corner() {
+        // Triangles (quads repeating a corner) sharing the vertex 0; the second passes
+        // through the first's interior.
+        let p = pts(&[[0., 0., 0.], [4., 0., 0.], [0., 4., 0.], [2., 1., -1.], [1., 2., 1.]]);
+        let quads = [[0, 1, 2, 2], [0, 3, 4, 4]];
+        assert_eq!(self_intersections(&p, &quads), vec![(0, 1)]);
+        // The same with the shared corner as two copies of one position.
+        let mut q = p.clone();
+        q.push(DVec3::ZERO);
+        assert_eq!(self_intersections(&q, &[[0, 1, 2, 2], [5, 3, 4, 4]]), vec![(0, 1)]);
+        // Tilted away, it touches only at the corner.
+        let mut away = p.clone();
+        away[3] = DVec3::new(-1., -1., -1.);
+        away[4] = DVec3::new(-1., -2., 1.);
+        assert!(self_intersections(&away, &quads).is_empty());
+    }
+
+    #[test]
+    fn a_shared_corner_inside_a_folded_neighbours_triangle_is_still_shared() {
+        // B, flat in y = 0, folded: its corner q lies inside its triangle (p, b1, b2). A
+        // hinges on the edge p q that both share: they touch along it only.
+        let p = pts(&[[0., 0., 0.], [4., 0., 0.], [4., 0., 4.], [2., 0., 1.], [0., -1., 0.], [2., -1., 1.]]);
+        let (b, a) = ([0, 1, 2, 3], [4, 0, 3, 5]);
+        assert!(self_intersections(&p, &[a, b]).is_empty());
+        // Tilted into B's plane past the edge, A overlaps it.
+        let mut flat = p.clone();
+        flat[4] = DVec3::new(3.0, 0.0, 0.5);
+        flat[5] = DVec3::new(3.5, 0.0, 1.5);
+        assert_eq!(self_intersections(&flat, &[a, b]), vec![(0, 1)]);
+    }
+
+    #[test]
+    fn stacked_copies_of_one_triangle_are_each_reported() {
+        let n = 20_000;
+        let mut p = Vec::new();
+        let mut quads = Vec::new();
+        for i in 0..n {
+            let b = 3 * i;
+            p.extend(pts(&[[0., 0., 0.], [1., 0., 0.], [0., 1., 0.]]));
+            quads.push([b, b + 1, b + 2, b + 2]);
+        }
+        let pairs = self_intersections(&p, &quads);
+        assert_eq!(pairs.len(), n as usize - 1);
+        assert!(pairs.iter().all(|&(a, _)| a == 0));
+    }
+
+    #[test]
+    fn faces_without_geometry_are_invalid() {
+        let p = pts(&[[f64::NAN; 3], [f64::NAN; 3], [f64::NAN; 3], [f64::NAN; 3], [0., 0., f64::INFINITY]]);
+        assert_eq!(invalid_faces(&p, &[[0, 1, 2, 3], [0, 1, 4, 4], [0, 1, 2, 9]]), vec![0, 1, 2]);
+        assert!(invalid_faces(&pts(&[[0.; 3]]), &[[0, 0, 0, 0]]).is_empty());
     }
 
     #[test]

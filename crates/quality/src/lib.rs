@@ -1,11 +1,14 @@
 //! Mesh quality checks for quad meshes, shared by `voxreg check`, the tests and xtask.
 //!
 //! A quad `[v0, v1, v2, v3]` is embedded as the triangles `(v0, v1, v2)` and
-//! `(v0, v2, v3)`, as voxreg's writers triangulate it. Three defects are counted
+//! `(v0, v2, v3)`, as voxreg's writers triangulate it. Four defects are counted
 //! ([`check`], [`MeshReport`]):
 //!
-//! - [`self_intersections`]: pairs of quads that share no vertex and intersect (the
-//!   papers' Proposition 2 rules them out for clamped results);
+//! - [`self_intersections`]: pairs of faces that meet anywhere but along the edges and
+//!   at the corners they share (piercing, folded onto or overlapping a neighbour,
+//!   repeated), decided exactly (the papers' Proposition 2 rules them out for clamped
+//!   results);
+//! - [`invalid_faces`]: faces with a non-finite position or a corner out of range;
 //! - [`folded_quads`]: quads bent over their diagonal, their two triangles' normals more
 //!   than 90 degrees apart;
 //! - [`folded_pairs`]: edge-adjacent quads folded onto each other, their normals more
@@ -38,13 +41,14 @@
 //!
 //! None.
 
+mod exact;
 mod intersections;
 mod solid;
 
 use glam::DVec3;
 use rayon::prelude::*;
 
-pub use intersections::{self_intersections, triangles_intersect};
+pub use intersections::{invalid_faces, self_intersections, triangles_intersect};
 pub use solid::{point_triangle_distance, solid_report, Occupancy, SolidReport};
 
 /// What [`check`] counts.
@@ -52,8 +56,11 @@ pub use solid::{point_triangle_distance, solid_report, Occupancy, SolidReport};
 pub struct MeshReport {
     /// Quads.
     pub faces: usize,
-    /// Pairs of quads without a shared vertex that intersect.
+    /// Pairs of faces that intersect ([`self_intersections`]: anywhere but where they
+    /// share corners; repeated faces included).
     pub intersecting_pairs: usize,
+    /// Faces with a non-finite position or a corner out of range ([`invalid_faces`]).
+    pub invalid_faces: usize,
     /// Quads whose two triangles are more than 90 degrees apart.
     pub folded_quads: usize,
     /// Pairs of edge-adjacent quads more than 120 degrees apart.
@@ -63,9 +70,12 @@ pub struct MeshReport {
 }
 
 impl MeshReport {
-    /// No intersection and no fold.
+    /// No intersection, no invalid face and no fold.
     pub fn is_clean(&self) -> bool {
-        self.intersecting_pairs == 0 && self.folded_quads == 0 && self.folded_pairs == 0
+        self.intersecting_pairs == 0
+            && self.invalid_faces == 0
+            && self.folded_quads == 0
+            && self.folded_pairs == 0
     }
 }
 
@@ -75,6 +85,7 @@ pub fn check(positions: &[DVec3], quads: &[[u32; 4]]) -> MeshReport {
     MeshReport {
         faces: quads.len(),
         intersecting_pairs: pairs.len(),
+        invalid_faces: invalid_faces(positions, quads).len(),
         folded_quads: folded_quads(positions, quads).len(),
         folded_pairs: folded_pairs(positions, quads).len(),
         first_intersection: pairs.first().copied(),

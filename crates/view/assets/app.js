@@ -41,13 +41,16 @@ let result = null; // latest positions (Float32Array)
 let normals = null, features = null;
 let frame = -1, loadingModel = 0, fetching = false;
 
+// Every API path with the session's token (index.html read it from the page's address).
+const api = window.voxregEarly?.api ?? ((path) => path);
+
 // A GET that gives up on a stalled connection after a few seconds and tries a fresh one.
 async function get(url) {
   for (let attempt = 0; ; attempt++) {
     const abort = new AbortController();
     const timer = setTimeout(() => abort.abort(), 4000);
     try {
-      const r = await fetch(url, { signal: abort.signal, cache: 'no-store' });
+      const r = await fetch(api(url), { signal: abort.signal, cache: 'no-store' });
       const body = await r.arrayBuffer();
       return { r, body };
     } catch (e) {
@@ -446,7 +449,7 @@ async function onState(s) {
 }
 
 // The stream index.html opened; its latest event, if one came while this module loaded.
-const events = window.voxregEarly?.events ?? new EventSource('/api/events');
+const events = window.voxregEarly?.events ?? new EventSource(api('/api/events'));
 events.onmessage = (e) => onState(JSON.parse(e.data)).catch((err) => showError(`the page could not update: ${err}`));
 if (window.voxregEarly?.last) events.onmessage(window.voxregEarly.last);
 mark('module done');
@@ -457,10 +460,10 @@ $('tuning').addEventListener('change', async (e) => {
   view.solveAskedAt = performance.now(); view.solveLatencyMs = null; view.solveDoneMs = null; view.solveFrames = 0; view.solveJob = null; view.solves++;
   drawnBeforeReply = [];
   if (e.target.id === 'preset') {
-    const r = await fetch('/api/preset?name=' + $('preset').value);
+    const r = await fetch(api('/api/preset?name=' + $('preset').value));
     if (r.ok) setTuning(await r.json());
   }
-  const r = await fetch('/api/solve', { method: 'POST', body: JSON.stringify(tuning()) });
+  const r = await fetch(api('/api/solve'), { method: 'POST', body: JSON.stringify(tuning()) });
   if (!r.ok) { view.solveAskedAt = null; showError((await r.json()).error); return; }
   view.solveJob = (await r.json()).job;
   showError(null);
@@ -496,13 +499,13 @@ renderer.domElement.addEventListener('pointerup', async (e) => {
   view.editPostedAt = performance.now(); view.editDrawnMs = null; view.edits++;
   const d = raycaster.ray.direction;
   const body = { model: model.id, face, add: e.altKey && !e.shiftKey, toward: [d.x, d.y, d.z], tuning: tuning() };
-  const reply = await fetch('/api/edit', { method: 'POST', body: JSON.stringify(body) });
+  const reply = await fetch(api('/api/edit'), { method: 'POST', body: JSON.stringify(body) });
   if (!reply.ok) { view.editPostedAt = null; showError((await reply.json()).error); } else showError(null);
 });
 
 async function open(file) {
   $('status').textContent = `opening ${file.name}…`;
-  const r = await fetch('/api/open?name=' + encodeURIComponent(file.name), { method: 'POST', body: file });
+  const r = await fetch(api('/api/open?name=' + encodeURIComponent(file.name)), { method: 'POST', body: file });
   if (!r.ok) showError((await r.json()).error); else showError(null);
 }
 $('open').onchange = () => $('open').files[0] && open($('open').files[0]);

@@ -21,6 +21,15 @@
 //! library's error message; a request that panics is answered with an error, and the
 //! server keeps serving.
 //!
+//! **Trust.** The server answers loopback peers only, under its own host names; every
+//! API request must carry the session's random token (printed in [`Viewer::url`], as
+//! Jupyter does), and requests from another origin are refused, so that another local
+//! user or a web page open in the same browser can neither read the session nor queue
+//! work. A request body is refused (413) from its declared length before any of it is
+//! read. Uploads are read from memory by the [`Loader`], never from a path their header
+//! names. [`Viewer::respond_to`] answers a request held in memory (the fuzz target's way
+//! in).
+//!
 //! # Example
 //!
 //! ```no_run
@@ -33,12 +42,13 @@
 //!     preset: Preset::Default,
 //!     params: Preset::Default.params(),
 //! };
-//! // What to do with a file dropped on the page (the CLI reads it with its options).
-//! let loader = |path: &std::path::Path| -> Result<Loaded, String> {
-//!     Err(format!("{}: not accepted", path.display()))
+//! // What to do with a file dropped on the page, its name and contents (the CLI reads
+//! // them with its options, from memory).
+//! let loader = |name: &str, _bytes: &[u8]| -> Result<Loaded, String> {
+//!     Err(format!("{name}: not accepted"))
 //! };
 //! let viewer = Viewer::bind(0, Box::new(loader))?;
-//! println!("{}", viewer.url());
+//! println!("{}", viewer.url()); // http://127.0.0.1:PORT/?token=...
 //! viewer.open(loaded);
 //! viewer.serve();
 //! # Ok::<(), voxreg_view::ViewError>(())

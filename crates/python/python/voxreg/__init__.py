@@ -28,7 +28,7 @@ from typing import Any, Callable, Dict, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _voxreg
-from ._errors import InputError, IoError, ParameterError, VoxregError
+from ._errors import InputError, IoError, ParameterError, VoxregError, label_argument
 from ._mesh import Mesh, _report
 
 __all__ = [
@@ -63,15 +63,26 @@ def _palette(palette: Any) -> Tuple[Optional[np.ndarray], Optional[list], Option
     materials = None
     names = None
     if isinstance(palette, dict):
+        if "colors" not in palette:
+            raise ParameterError("palette: a dict palette needs 'colors' (an (n, 3) or (n, 4) array)")
         colors = palette["colors"]
         if palette.get("names"):
-            names = {int(k): str(v) for k, v in palette["names"].items()}
+            try:
+                names = {int(k): str(v) for k, v in palette["names"].items()}
+            except (AttributeError, TypeError, ValueError):
+                raise ParameterError("palette: 'names' must map integer labels to names") from None
         if palette.get("materials") is not None:
-            materials = [
-                (str(m["name"]), tuple(int(c) for c in m["color"]), float(m["metallic"]),
-                 float(m["roughness"]), float(m["emission"]), float(m["transparency"]))
-                for m in palette["materials"]
-            ]
+            keys = ("name", "color", "metallic", "roughness", "emission", "transparency")
+            materials = []
+            for i, m in enumerate(palette["materials"]):
+                missing = [k for k in keys if not isinstance(m, dict) or k not in m]
+                if missing:
+                    raise ParameterError(f"palette: material {i} has no {', '.join(missing)} (each needs {', '.join(keys)})")
+                try:
+                    materials.append((str(m["name"]), tuple(int(c) for c in m["color"]), float(m["metallic"]),
+                                      float(m["roughness"]), float(m["emission"]), float(m["transparency"])))
+                except (TypeError, ValueError) as e:
+                    raise ParameterError(f"palette: material {i}: {e}") from None
     else:
         colors = palette
     colors = np.asarray(colors)
@@ -221,7 +232,8 @@ def regularize(
     """
     colors, materials, names = _palette(palette)
     d = _voxreg.regularize(
-        _labels(labels), _triple("spacing", spacing), _triple("origin", origin), background, regions,
+        _labels(labels), _triple("spacing", spacing), _triple("origin", origin),
+        label_argument("background", background), regions,
         preset, normals, radius, alpha, beta, gamma, refine, preserve_size, texture_aware,
         solver, clamp, smoothness, tolerance, threads, progress, colors, materials, max_memory,
         palette_names=names,
@@ -288,13 +300,16 @@ def read(
     spacing_t = None if spacing is None else _triple("spacing", spacing)
     dims_t = None if dims is None else tuple(int(d) for d in dims)
     keep = None if keep_labels is None else [int(l) for l in keep_labels]
-    return _voxreg.read(os.fspath(path), threshold, dims_t, dtype, endian, spacing_t, keep, background)
+    return _voxreg.read(os.fspath(path), threshold, dims_t, dtype, endian, spacing_t, keep,
+                        label_argument("background", background))
 
 
 def check(mesh: Union[Mesh, Tuple[Any, Any]]) -> Dict[str, Any]:
     """Counts the self-intersections and folds of a quad mesh (``voxreg check``).
 
-    Quads are split into two triangles; faces sharing a vertex do not count.
+    Quads are split into two triangles; faces may touch only along the edges and at the
+    corners they share (exact tests); a repeated face counts, and so does a face with a
+    non-finite vertex (``invalid_faces``).
 
     Parameters
     ----------
@@ -304,9 +319,9 @@ def check(mesh: Union[Mesh, Tuple[Any, Any]]) -> Dict[str, Any]:
     -------
     dict
         ``faces``, ``intersecting_pairs`` (self-intersecting face pairs),
-        ``folded_quads``, ``folded_pairs`` (folded adjacent pairs),
-        ``first_intersection`` (a pair of face indices, or None) and ``clean`` (no
-        intersection and no fold).
+        ``invalid_faces`` (with a NaN or infinite vertex), ``folded_quads``,
+        ``folded_pairs`` (folded adjacent pairs), ``first_intersection`` (a pair of face
+        indices, or None) and ``clean`` (none of these).
     """
     if isinstance(mesh, Mesh):
         vertices, quads = mesh.vertices, mesh.quads

@@ -24,6 +24,7 @@ from __future__ import annotations
 
 import itertools
 import json
+import operator
 import os
 import struct
 from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
@@ -31,7 +32,7 @@ from typing import Any, Dict, Iterable, List, Optional, Sequence, Tuple, Union
 import numpy as np
 
 from . import _voxreg
-from ._errors import ParameterError
+from ._errors import ParameterError, label_argument
 from ._mesh import Mesh
 
 #: The halo's default width in voxels: the narrowest of those measured whose stitched mesh
@@ -60,16 +61,23 @@ def _grid(dims: Sequence[int], chunks: Sequence[int]) -> List[List[Tuple[int, in
     return [[(lo, min(lo + c, n)) for lo in range(0, n, c)] for n, c in zip(dims, chunks)]
 
 
-def _chunks_of(array: Any, chunks: Optional[Sequence[int]]) -> Tuple[int, int, int]:
+def _chunks_of(array: Any, chunks: Union[None, int, Sequence[int]]) -> Tuple[int, int, int]:
     if chunks is None:
         size = getattr(array, "chunksize", None) or getattr(array, "chunks", None)
         if isinstance(size, tuple) and len(size) == 3 and all(isinstance(c, int) for c in size):
             chunks = size
         else:
             chunks = (64, 64, 64)
-    if len(chunks) != 3 or any(int(c) < 1 for c in chunks):
-        raise ParameterError(f"chunks must be three positive integers, got {chunks!r}")
-    return tuple(int(c) for c in chunks)  # type: ignore[return-value]
+    # One integer, as dask takes it: the same on every axis.
+    if isinstance(chunks, (int, np.integer)) and not isinstance(chunks, bool):
+        chunks = (chunks,) * 3
+    try:
+        parsed = tuple(operator.index(c) for c in chunks)
+    except TypeError:
+        parsed = ()
+    if len(parsed) != 3 or any(c < 1 for c in parsed):
+        raise ParameterError(f"chunks must be a positive integer or three, got {chunks!r}")
+    return parsed  # type: ignore[return-value]
 
 
 def regularize_chunk(labels: Any, start: Sequence[int], owned: Sequence[Sequence[int]],
@@ -90,7 +98,8 @@ def regularize_chunk(labels: Any, start: Sequence[int], owned: Sequence[Sequence
     chunk_origin = np.asarray(origin, dtype=np.float64) + np.asarray(start) * sp
     labels = np.asarray(labels)
     return _voxreg.regularize_block(
-        labels, tuple(sp), tuple(chunk_origin), background, tuple(int(s) for s in start),
+        labels, tuple(sp), tuple(chunk_origin), label_argument("background", background),
+        tuple(int(s) for s in start),
         tuple(tuple(int(x) for x in o) for o in owned), tuple(int(n) for n in global_dims),
         p["regions"], p["preset"], p["normals"], p["radius"], p["alpha"], p["beta"], p["gamma"],
         p["refine"], p["preserve_size"], p["texture_aware"], p["solver"], p["clamp"],
@@ -167,7 +176,7 @@ def _task(source: Any, sliced: bool, index: Tuple[int, int, int], start: Sequenc
     return {"path": path, "stats": stats}
 
 
-def regularize(array: Any, chunks: Optional[Sequence[int]] = None, halo: int = DEFAULT_HALO,
+def regularize(array: Any, chunks: Union[None, int, Sequence[int]] = None, halo: int = DEFAULT_HALO,
                out: "Optional[str | os.PathLike[str]]" = None,
                formats: Iterable[str] = ("ply",), scheduler: Any = None,
                spacing: Sequence[float] = (1.0, 1.0, 1.0), origin: Sequence[float] = (0.0, 0.0, 0.0),
@@ -178,9 +187,9 @@ def regularize(array: Any, chunks: Optional[Sequence[int]] = None, halo: int = D
     ----------
     array : dask array, Zarr array, numpy array, or str (a Zarr array's path)
         The labels, indexed ``[x, y, z]``, any integer dtype.
-    chunks : three ints, default None
-        The chunk each task owns, in voxels: by default the array's own chunks (dask or
-        Zarr), else 64.
+    chunks : int or three ints, default None
+        The chunk each task owns, in voxels (one int: the same on every axis, as dask
+        takes it): by default the array's own chunks (dask or Zarr), else 64.
     halo : int >= 2, default DEFAULT_HALO (64)
         Voxels read around each chunk. The stitched mesh has the whole-volume mesh's
         quads and vertex ids at any halo; its positions approach the whole-volume solve
@@ -228,6 +237,7 @@ def regularize(array: Any, chunks: Optional[Sequence[int]] = None, halo: int = D
     out_dir = None if out is None else os.fspath(out)
     if out_dir is not None:
         os.makedirs(os.path.join(out_dir, "fragments"), exist_ok=True)
+    background = label_argument("background", background)
     kwargs = dict(params, spacing=spacing, origin=origin, background=background, threads=threads)
     # A Zarr path travels as the path (each worker opens it), a Zarr array as itself
     # (each worker reads its slice); a dask array as its slices; numpy as its slices.

@@ -26,12 +26,12 @@ fn ball(name: &str) -> Loaded {
     }
 }
 
-/// Reads what the command line reads (no options), as the CLI's loader does.
-fn load(path: &Path) -> Result<Loaded, String> {
-    let v = voxreg_io::read_volume(path).map_err(|e| e.to_string())?;
-    let name = path.display().to_string();
+/// Reads what the command line reads (no options), from memory, as the CLI's loader does.
+fn load(name: &str, bytes: &[u8]) -> Result<Loaded, String> {
+    let v = voxreg_io::read_input_bytes(bytes, Path::new(name), &voxreg_io::InputOptions::default())
+        .map_err(|e| e.to_string())?;
     Ok(Loaded {
-        name,
+        name: name.to_string(),
         volume: v.volume,
         palette: v.palette,
         preset: Preset::Papers,
@@ -41,6 +41,7 @@ fn load(path: &Path) -> Result<Loaded, String> {
 
 struct Running {
     addr: SocketAddr,
+    token: String,
     stop: StopHandle,
     thread: Option<std::thread::JoinHandle<()>>,
 }
@@ -62,9 +63,22 @@ fn start_with(loaded: Loaded) -> Running {
     let viewer = Viewer::bind(0, Box::new(load)).unwrap();
     assert!(viewer.addr().ip().is_loopback());
     assert!(viewer.url().starts_with("http://127.0.0.1:"));
+    assert!(viewer.url().ends_with(&format!("/?token={}", viewer.token())));
     viewer.open(loaded);
-    let (addr, stop) = (viewer.addr(), viewer.stop_handle());
-    Running { addr, stop, thread: Some(std::thread::spawn(move || viewer.serve())) }
+    let (addr, stop, token) = (viewer.addr(), viewer.stop_handle(), viewer.token().to_string());
+    Running { addr, token, stop, thread: Some(std::thread::spawn(move || viewer.serve())) }
+}
+
+impl Running {
+    /// `path` with the session's token.
+    fn tokened(&self, path: &str) -> String {
+        let sep = if path.contains('?') { '&' } else { '?' };
+        format!("{path}{sep}token={}", self.token)
+    }
+
+    fn host(&self) -> String {
+        format!("127.0.0.1:{}", self.addr.port())
+    }
 }
 
 /// One request (`Connection: close`): the status and the body.
@@ -114,12 +128,14 @@ fn decode_body(head: &[u8], body: &[u8]) -> Vec<u8> {
     }
 }
 
+/// A GET of `path` with the session's token.
 fn get(r: &Running, path: &str) -> (u16, Vec<u8>) {
-    request(r.addr, "GET", path, Some(&format!("127.0.0.1:{}", r.addr.port())), b"")
+    request(r.addr, "GET", &r.tokened(path), Some(&r.host()), b"")
 }
 
+/// A POST of `body` to `path` with the session's token.
 fn post(r: &Running, path: &str, body: &[u8]) -> (u16, Vec<u8>) {
-    request(r.addr, "POST", path, Some(&format!("127.0.0.1:{}", r.addr.port())), body)
+    request(r.addr, "POST", &r.tokened(path), Some(&r.host()), body)
 }
 
 fn json(bytes: &[u8]) -> serde_json::Value {
@@ -166,6 +182,163 @@ fn serves_the_page_and_its_assets_to_its_own_host_only() {
     assert_eq!(error_of(request(r.addr, "DELETE", "/", Some(&localhost), b"")).0, 405);
 }
 
+/// Sends `head` (no body, whatever it declares) and reads the answer: status and body.
+fn send_head(addr: SocketAddr, head: &str) -> (u16, String) {
+    let mut s = TcpStream::connect(addr).unwrap();
+    s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
+    s.write_all(head.as_bytes()).unwrap();
+    let mut out = Vec::new();
+    s.read_to_end(&mut out).unwrap();
+    let text = String::from_utf8_lossy(&out).into_owned();
+    let status = text.get(9..12).and_then(|c| c.parse().ok()).unwrap_or(0);
+    (status, text.split_once("\r\n\r\n").map(|(_, b)| b.to_string()).unwrap_or_default())
+}
+
+#[test]
+fn a_huge_declared_body_is_refused_before_it_is_read() {
+    let r = start();
+    wait_for(&r, |s| s["final"] == true);
+    // A terabyte declared (and not sent), to every kind of route: answered at once, and
+    // the server stays up.
+    for (method, path) in
+        [("POST", "/api/open?name=a.vox"), ("POST", "/api/solve"), ("GET", "/api/state"), ("GET", "/")]
+    {
+        let head = format!(
+            "{method} {} HTTP/1.1\r\nHost: {}\r\nContent-Length: 1000000000000\r\n\r\n",
+            r.tokened(path),
+            r.host()
+        );
+        let (status, body) = send_head(r.addr, &head);
+        assert_eq!(status, 413, "{method} {path}: {body}");
+        assert!(body.contains("the request body is over"), "{body}");
+    }
+    // Chunked bodies (no length to check first), conflicting lengths and huge heads too.
+    let chunked = format!(
+        "POST {} HTTP/1.1\r\nHost: {}\r\nTransfer-Encoding: chunked\r\n\r\n",
+        r.tokened("/api/solve"),
+        r.host()
+    );
+    assert_eq!(send_head(r.addr, &chunked).0, 411);
+    let two = format!(
+        "POST {} HTTP/1.1\r\nHost: {}\r\nContent-Length: 2\r\nContent-Length: 3\r\n\r\n",
+        r.tokened("/api/solve"),
+        r.host()
+    );
+    assert_eq!(send_head(r.addr, &two).0, 400);
+    let big = format!("GET / HTTP/1.1\r\nHost: {}\r\nX-Pad: {}\r\n\r\n", r.host(), "a".repeat(20_000));
+    assert_eq!(send_head(r.addr, &big).0, 431);
+    assert_eq!(json(&get(&r, "/api/state").1)["final"], true);
+}
+
+#[test]
+fn the_api_needs_the_session_token_and_refuses_other_origins() {
+    let r = start();
+    let state = wait_for(&r, |s| s["final"] == true);
+    let host = r.host();
+    // The page itself is public; its API is not, without the token or with a wrong one.
+    assert_eq!(request(r.addr, "GET", "/", Some(&host), b"").0, 200);
+    for path in ["/api/state", "/api/surface", "/api/positions", "/api/events", "/api/download?format=ply"] {
+        let (status, message) = error_of(request(r.addr, "GET", path, Some(&host), b""));
+        assert_eq!(status, 403, "{path}");
+        assert!(message.contains("token"), "{message}");
+        let wrong = format!("{path}{}token=0123", if path.contains('?') { '&' } else { '?' });
+        assert_eq!(request(r.addr, "GET", &wrong, Some(&host), b"").0, 403, "{wrong}");
+    }
+    // The token in a header does as well as in the query.
+    let head = format!("GET /api/state HTTP/1.1\r\nHost: {host}\r\nX-Voxreg-Token: {}\r\n\r\n", r.token);
+    assert_eq!(send_head(r.addr, &head).0, 200);
+    // Another site's page, posting a solve as text/plain (no preflight): refused, with or
+    // without the token, and nothing is queued.
+    let mut tuning = state["tuning"].clone();
+    tuning["refine"] = serde_json::json!(1_000_000);
+    let body = tuning.to_string();
+    for path in ["/api/solve".to_string(), r.tokened("/api/solve")] {
+        let head = format!(
+            "POST {path} HTTP/1.1\r\nHost: {host}\r\nOrigin: https://evil.example\r\nContent-Type: text/plain\r\n\
+             Content-Length: {}\r\n\r\n{body}",
+            body.len()
+        );
+        assert_eq!(send_head(r.addr, &head).0, 403, "{path}");
+    }
+    let fetch_site = format!(
+        "POST {} HTTP/1.1\r\nHost: {host}\r\nSec-Fetch-Site: cross-site\r\nContent-Length: {}\r\n\r\n{body}",
+        r.tokened("/api/solve"),
+        body.len()
+    );
+    assert_eq!(send_head(r.addr, &fetch_site).0, 403);
+    let upload = format!(
+        "POST /api/open?name=x.vox HTTP/1.1\r\nHost: {host}\r\nOrigin: null\r\nContent-Length: 3\r\n\r\nVOX"
+    );
+    assert_eq!(send_head(r.addr, &upload).0, 403);
+    let now = json(&get(&r, "/api/state").1);
+    assert_eq!(now["job"], state["job"], "{now}");
+    // The page's own origin, with the token: accepted.
+    tuning["refine"] = state["tuning"]["refine"].clone();
+    let body = tuning.to_string();
+    let own = format!(
+        "POST {} HTTP/1.1\r\nHost: {host}\r\nOrigin: http://{host}\r\nSec-Fetch-Site: same-origin\r\n\
+         Content-Length: {}\r\n\r\n{body}",
+        r.tokened("/api/solve"),
+        body.len()
+    );
+    assert_eq!(send_head(r.addr, &own).0, 202);
+}
+
+#[test]
+fn uploads_are_read_from_memory_only() {
+    let r = start();
+    wait_for(&r, |s| s["final"] == true);
+    // A detached NRRD header naming a file outside the upload (present, readable, the
+    // right size): refused, and the surface stays.
+    let dir = tempfile::tempdir().unwrap();
+    let secret = dir.path().join("secret.raw");
+    std::fs::write(&secret, [1u8, 2, 3, 4, 5, 6, 7, 8]).unwrap();
+    for file in [secret.display().to_string(), "../../../../etc/passwd".to_string()] {
+        let header = format!(
+            "NRRD0004\ntype: uint8\ndimension: 3\nsizes: 2 2 2\nencoding: raw\ndata file: {file}\n\n"
+        );
+        let (status, message) = error_of(post(&r, "/api/open?name=evil.nhdr", header.as_bytes()));
+        assert_eq!(status, 400, "{file}: {message}");
+        assert!(message.contains("evil.nhdr") && message.contains("detached"), "{message}");
+    }
+    assert_eq!(json(&get(&r, "/api/state").1)["name"], "ball.vol");
+    // A Zarr store or a pattern of slices names other files too.
+    for name in ["a.zarr", "slice*.tif"] {
+        let (status, message) = error_of(post(&r, &format!("/api/open?name={name}"), b"{}"));
+        assert_eq!(status, 400, "{name}: {message}");
+    }
+}
+
+#[test]
+fn requests_held_in_memory_are_answered_as_over_a_connection() {
+    let viewer = Viewer::bind(0, Box::new(load)).unwrap();
+    viewer.stop_handle().stop();
+    let host = format!("127.0.0.1:{}", viewer.addr().port());
+    let status = |raw: &[u8]| {
+        let out = viewer.respond_to(raw);
+        String::from_utf8_lossy(out.get(9..12).unwrap_or_default()).parse::<u16>().unwrap_or(0)
+    };
+    let page = format!("GET / HTTP/1.1\r\nHost: {host}\r\n\r\n");
+    assert_eq!(status(page.as_bytes()), 200);
+    let state = format!("GET /api/state?token={} HTTP/1.1\r\nHost: {host}\r\n\r\n", viewer.token());
+    assert_eq!(status(state.as_bytes()), 200);
+    let events = format!("GET /api/events?token={} HTTP/1.1\r\nHost: {host}\r\n\r\n", viewer.token());
+    assert!(String::from_utf8_lossy(&viewer.respond_to(events.as_bytes())).contains("\r\n\r\ndata: {"));
+    let solve = format!(
+        "POST /api/solve?token={} HTTP/1.1\r\nHost: {host}\r\nContent-Length: 2\r\n\r\n{{x",
+        viewer.token()
+    );
+    assert_eq!(status(solve.as_bytes()), 400);
+    // Nothing, garbage, a truncated body: never a panic.
+    assert!(viewer.respond_to(b"").is_empty());
+    assert_eq!(status(b"\x00\xff garbage\r\n\r\n"), 400);
+    let short = format!(
+        "POST /api/solve?token={} HTTP/1.1\r\nHost: {host}\r\nContent-Length: 9\r\n\r\n{{}}",
+        viewer.token()
+    );
+    assert_eq!(status(short.as_bytes()), 400);
+}
+
 #[test]
 fn a_solve_streams_its_state_and_its_result_downloads_in_every_format() {
     let r = start();
@@ -202,7 +375,7 @@ fn a_solve_streams_its_state_and_its_result_downloads_in_every_format() {
     // The event stream sends the state.
     let mut s = TcpStream::connect(r.addr).unwrap();
     s.set_read_timeout(Some(Duration::from_secs(30))).unwrap();
-    write!(s, "GET /api/events HTTP/1.1\r\nHost: 127.0.0.1:{}\r\n\r\n", r.addr.port()).unwrap();
+    write!(s, "GET {} HTTP/1.1\r\nHost: {}\r\n\r\n", r.tokened("/api/events"), r.host()).unwrap();
     let mut seen = Vec::new();
     let mut buf = [0u8; 4096];
     while !String::from_utf8_lossy(&seen).contains("\n\n{") && !seen.windows(2).any(|w| w == b"}\n") {
@@ -279,7 +452,7 @@ fn a_request_for_a_newer_frame_waits_for_it() {
     // A frame newer than one already there: at once.
     let t = Instant::now();
     let (status, head, _) =
-        exchange(r.addr, "GET", &format!("/api/positions?after={}", frame - 1), Some(&host), b"");
+        exchange(r.addr, "GET", &r.tokened(&format!("/api/positions?after={}", frame - 1)), Some(&host), b"");
     assert_eq!((status, frame_of(&head)), (200, frame));
     assert!(t.elapsed() < Duration::from_millis(500));
     // One still to come: answered when the re-solve publishes it.
@@ -288,14 +461,15 @@ fn a_request_for_a_newer_frame_waits_for_it() {
     let posted = std::thread::spawn({
         let addr = r.addr;
         let host = host.clone();
+        let path = r.tokened("/api/solve");
         move || {
             std::thread::sleep(Duration::from_millis(200));
-            request(addr, "POST", "/api/solve", Some(&host), tuning.to_string().as_bytes()).0
+            request(addr, "POST", &path, Some(&host), tuning.to_string().as_bytes()).0
         }
     });
     let t = Instant::now();
     let (status, head, body) =
-        exchange(r.addr, "GET", &format!("/api/positions?after={frame}"), Some(&host), b"");
+        exchange(r.addr, "GET", &r.tokened(&format!("/api/positions?after={frame}")), Some(&host), b"");
     let waited = t.elapsed();
     assert_eq!(posted.join().unwrap(), 202);
     assert_eq!(status, 200);
