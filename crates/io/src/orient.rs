@@ -52,7 +52,7 @@ pub(crate) fn place(
     // line: no placement of voxels, whatever rotation is dropped.
     let volume = matrix.determinant().abs();
     let product = cols.iter().map(|c| c.length()).product::<f64>();
-    if !(volume > DEGENERATE_TOLERANCE * product) {
+    if volume.is_nan() || volume <= DEGENERATE_TOLERANCE * product {
         return Err(SurfaceError::InvalidVolume(format!(
             "degenerate index-to-world map: columns {}, {}, {} are collinear or coplanar",
             cols[0], cols[1], cols[2]
@@ -126,7 +126,7 @@ pub fn check_coordinates(dims: [usize; 3], spacing: DVec3, origin: DVec3) -> Res
                 axis[k]
             ));
         }
-        if !(corner(k) <= COORDINATE_RANGE) {
+        if corner(k).is_nan() || corner(k) > COORDINATE_RANGE {
             return Err(format!(
                 "coordinates along {} reach {:e} (origin {:e}, spacing {s}): beyond 1e30, a mesh cannot store them",
                 axis[k],
