@@ -17,7 +17,8 @@ pub(crate) struct Cli {
     #[command(subcommand)]
     pub(crate) command: Command,
     /// Memory budget: inputs (and upscaled volumes) declaring more are refused before
-    /// anything is allocated for them, e.g. 4G, 512M [default: half the physical memory].
+    /// anything is allocated for them, e.g. 4G, 512M [default: half the physical memory;
+    /// never above what `ulimit -v` and the cgroup's memory limit leave].
     #[arg(long, global = true, value_name = "SIZE", value_parser = parse_memory)]
     pub(crate) max_memory: Option<u64>,
 }

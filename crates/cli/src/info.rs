@@ -9,7 +9,8 @@ use crate::args::{InputArgs, Preset};
 use crate::input::{read_input, surface_of, voxel_art};
 use crate::print_stdout;
 
-/// `voxreg info`: the volume's dimensions and labels, and its digital surface's cells.
+/// `voxreg info`: the volume's dimensions and labels, and its digital surface's cells;
+/// refused, as `regularize` is, when the regularization's estimate exceeds the budget.
 pub(crate) fn info(args: &InputArgs) -> Result<()> {
     let mut out = String::new();
     let (volume, palette, units) = read_input(args)?;
@@ -24,8 +25,7 @@ pub(crate) fn info(args: &InputArgs) -> Result<()> {
         None => writeln!(out, "spacing: {} {} {}", s.x, s.y, s.z).ok(),
     };
     if voxel_art(args) {
-        let bytes =
-            std::fs::read(&args.input).with_context(|| format!("{}: cannot read", args.input.display()))?;
+        let bytes = voxreg_io::read_input_file(&args.input)?;
         let sizes = vox_model_sizes(&bytes, &args.input)?;
         writeln!(out, "models: {}", sizes.len()).ok();
         for (k, [x, y, z]) in sizes.iter().enumerate() {
@@ -45,6 +45,14 @@ pub(crate) fn info(args: &InputArgs) -> Result<()> {
             None => writeln!(out, "  {label}: {count} voxels").ok(),
         };
     }
+    // Under the estimate `regularize` checks before it builds the surface: `info` on an
+    // input that `regularize` refuses fails the same way, before the same work.
+    let mut params = preset.params();
+    params.regions = map.clone();
+    let (surfels, bytes) = voxreg_regularize::Regularizer::estimated_bytes_of(&volume, &params)
+        .with_context(|| format!("{}: no surface to regularize", args.input.display()))?;
+    let what = format!("the regularization of its {surfels} surfels");
+    voxreg_io::check_memory(&args.input, &what, u128::from(bytes))?;
     let surface = surface_of(args, &volume, &map)?;
     let c = surface.counts();
     writeln!(out, "regions: {}", surface.regions().len()).ok();

@@ -102,7 +102,10 @@ pub enum InputError {
 
 /// Reads `path` as `options` say: raw data with `dims` (a `.raw` file needs them), else
 /// by extension; then applies the spacing, the threshold (or checks that grey levels
-/// are labels), the labels kept and the background.
+/// are labels), the labels kept and the background. Spacings and origins whose vertex
+/// coordinates a mesh cannot represent distinctly are refused ([`check_coordinates`]).
+///
+/// [`check_coordinates`]: crate::check_coordinates
 pub fn read_input(path: &Path, options: &InputOptions<'_>) -> Result<Input, InputError> {
     read_input_from(path, None, options)
 }
@@ -154,6 +157,8 @@ fn read_input_from(
             .map_err(|source| InputError::Spacing { path: path.to_path_buf(), source })?,
         None => voxels,
     };
+    crate::orient::check_coordinates(voxels.dims(), voxels.spacing(), voxels.origin())
+        .map_err(|m| IoError::format(path, m))?;
     let mut volume = match (options.threshold, voxels) {
         (Some(t), _) if t.is_nan() => return Err(InputError::NanThreshold),
         (Some(t), voxels) => voxels.threshold(t),

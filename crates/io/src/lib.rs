@@ -46,7 +46,7 @@
 //! do not match the data, unsupported types and NaN grey levels are [`IoError`]s naming
 //! the file, and volumes of more than [`MAX_VOXELS`] voxels, or needing more memory than
 //! the budget ([`max_memory`]: half the physical memory unless [`set_max_memory`] says
-//! otherwise), are refused before anything is allocated for them; compressed data are
+//! otherwise, never above the address-space or cgroup limit, [`environment_limit`]), are refused before anything is allocated for them; compressed data are
 //! never inflated past their declared size. Each `read_*_bytes` entry point is fuzzed (`fuzz/`).
 //!
 //! **Writing meshes.** A [`QuadMesh`] (positions, quads, `[inner, outer]` labels per
@@ -138,8 +138,8 @@ pub use grey::{GreyVolume, NotALabel, Voxels};
 pub use input::{read_input, read_input_bytes, Background, Input, InputError, InputOptions};
 pub use input_files::{input_files, same_output, InputFiles};
 pub use limits::{
-    check_memory, default_max_memory, format_size, max_memory, parse_size, set_max_memory, with_max_memory,
-    FALLBACK_MAX_MEMORY,
+    check_memory, default_max_memory, environment_limit, format_size, max_memory, parse_size, set_max_memory,
+    with_max_memory, FALLBACK_MAX_MEMORY,
 };
 pub use longvol::{read_longvol, read_longvol_bytes};
 pub use material::{material_name, Material, NamedLabel, Palette};
@@ -152,6 +152,7 @@ pub use nifti::{read_nifti, read_nifti_bytes};
 pub use npy::{read_npy, read_npy_bytes};
 pub use nrrd::{read_nrrd, read_nrrd_bytes};
 pub use obj::write_obj;
+pub use orient::{check_coordinates, COORDINATE_RANGE};
 pub use pgm3d::{read_pgm3d, read_pgm3d_bytes};
 pub use ply::{scalar_ramp, write_ply, write_ply_with_vertex_field, write_ply_with_vertex_scalar, PlyParts};
 pub use raw::{read_raw, read_raw_bytes, RawSpec};
@@ -161,8 +162,8 @@ pub use stl::write_stl;
 pub use tiff::{read_tiff, read_tiff_bytes, read_tiff_slices, tiff_slices};
 pub use vol::{read_vol, read_vol_bytes};
 pub use volume::{
-    is_voxel_art, read_volume, read_voxels, read_voxels_bytes, read_voxels_with, LoadedVolume, LoadedVoxels,
-    ReadOptions, MAX_VOXELS,
+    is_voxel_art, read_input_file, read_volume, read_voxels, read_voxels_bytes, read_voxels_with,
+    LoadedVolume, LoadedVoxels, ReadOptions, MAX_VOXELS,
 };
 pub use vox::{
     read_vox, read_vox_bytes, read_vox_bytes_with, vox_model_sizes, VoxOptions, VOX_MAX_INSTANCES,

@@ -110,12 +110,14 @@ impl Palette {
         self.names.get(&label).map(String::as_str)
     }
 
-    /// Names `label` (within the palette) `name`: recorded as written (trimmed; an empty
+    /// Names `label` (within the palette) `name`: recorded as written (trimmed, control
+    /// characters written as escapes such as `\u{1b}`; an empty
     /// name records nothing), and the label's material renamed after it as
     /// [`material_name`] makes it, with `_{label}` appended when a material (this
     /// label's unnamed one included) has that name already: material names stay unique.
     pub fn set_name(&mut self, label: u32, name: &str) {
-        let name = name.trim();
+        let name = crate::volume::printable(name.trim());
+        let name = name.as_str();
         let index = label as usize;
         if index >= self.materials.len() {
             return;

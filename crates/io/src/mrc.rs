@@ -29,7 +29,9 @@ pub fn read_mrc(path: &Path) -> Result<LoadedVoxels, IoError> {
 /// sections; `MAPC`/`MAPR`/`MAPS` say which axis each is (permutations applied), after
 /// the `NSYMBT` bytes of extended header. Spacing: the cell length over the sampling
 /// (`CELLA / MX`...) in ångström (units `Å`), unit spacing without a cell; origin:
-/// `ORIGIN`, or the start indices times the spacing when `ORIGIN` is zero.
+/// `ORIGIN`, or the start indices times the spacing when `ORIGIN` is zero. A cell or an
+/// origin that is NaN, infinite or negative (the cell) is an [`IoError::Format`], not
+/// replaced.
 pub fn read_mrc_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVoxels, IoError> {
     let Some(header) = bytes.get(..HEADER_LEN) else {
         return Err(IoError::format(
@@ -81,6 +83,14 @@ pub fn read_mrc_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVoxels, IoError
     }
     let sampling = [word(7), word(8), word(9)];
     let cell = [float(10), float(11), float(12)];
+    // A zero cell (or sampling) is MRC's "unset": spacing 1. A cell that is not a size
+    // is a corrupt header, not a spacing to replace silently.
+    if cell.iter().any(|c| !c.is_finite() || *c < 0.0) {
+        return Err(IoError::format(
+            path,
+            format!("cell {} x {} x {} is not a size (finite, not negative)", cell[0], cell[1], cell[2]),
+        ));
+    }
     let has_cell = (0..3).all(|a| sampling[a] > 0 && cell[a].is_finite() && cell[a] > 0.0);
     let step = if has_cell {
         DVec3::from_array(std::array::from_fn(|a| cell[a] / f64::from(sampling[a])))
@@ -93,7 +103,10 @@ pub fn read_mrc_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVoxels, IoError
         matrix.col_mut(k)[a] = step[a];
     }
     let origin_field = DVec3::new(float(49), float(50), float(51));
-    let origin = if origin_field.is_finite() && origin_field != DVec3::ZERO {
+    if !origin_field.is_finite() {
+        return Err(IoError::format(path, format!("origin {origin_field} is not finite")));
+    }
+    let origin = if origin_field != DVec3::ZERO {
         origin_field
     } else {
         let start = [word(4), word(5), word(6)];

@@ -42,7 +42,10 @@ pub(crate) fn read_nrrd_in_memory(bytes: &[u8], path: &Path) -> Result<LoadedVox
 /// **Header.** `NRRD000N` (versions 1 to 5), then `field: value` lines up to an empty
 /// line: `dimension: 3`, `sizes`, `type` (8 to 64-bit integers, `float`, `double`),
 /// `endian`, `encoding` (`raw`, `gzip`, `ascii`), optional `byte skip` and `line
-/// skip`, and `data file` for a detached header (relative to the header's directory).
+/// skip`, and `data file` for a detached header (relative to the header's directory, and
+/// confined to it: an absolute path, `..` or a link leading out of it is refused;
+/// `LIST` and `%d` patterns of several files are not read). `byte skip: -1` (raw
+/// encoding only) reads the last bytes of the data.
 /// Voxel `[x, y, z]` is the `x + X (y + Y z)`-th value (NRRD's fastest axis first).
 ///
 /// **Space.** `space directions` and `space origin` place the voxel centres (axis flips
@@ -66,14 +69,7 @@ pub fn read_nrrd_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVoxels, IoErro
     let (owned, data_path);
     let data: &[u8] = match &header.data_file {
         Some(file) => {
-            let dir = path.parent().unwrap_or(Path::new(""));
-            data_path = dir.join(file);
-            // Only a regular file, within the budget (not a device that never ends).
-            let meta = std::fs::metadata(&data_path).map_err(|e| IoError::io(&data_path, e))?;
-            if !meta.is_file() {
-                return Err(IoError::format(&data_path, "the detached data file is not a regular file"));
-            }
-            crate::check_memory(&data_path, "the detached data file", u128::from(meta.len()))?;
+            data_path = detached_data_file(path, file)?;
             owned = read_file(&data_path)?;
             &owned
         }
@@ -92,20 +88,58 @@ pub fn read_nrrd_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVoxels, IoErro
             exact(&data_path, data, expected, header.data_file.is_some())?.to_vec()
         }
         Encoding::Gzip => {
-            let skip = usize::try_from(header.byte_skip.max(0)).unwrap_or(usize::MAX);
-            let mut out = Vec::new();
-            let limit = (skip + expected + 1) as u64;
-            MultiGzDecoder::new(data)
-                .take(limit)
-                .read_to_end(&mut out)
-                .map_err(|e| IoError::format(&data_path, format!("corrupt gzip data: {e}")))?;
-            let out = out.get(skip..).unwrap_or(&[]);
-            exact(&data_path, out, expected, true)?.to_vec()
+            // The skipped bytes are inflated and dropped as they come, never held; the
+            // data are inflated up to one byte past their declared size.
+            let corrupt = |e: std::io::Error| IoError::format(&data_path, format!("corrupt gzip data: {e}"));
+            let skip = u64::try_from(header.byte_skip.max(0)).unwrap_or(0);
+            let mut decoder = MultiGzDecoder::new(data);
+            let skipped =
+                std::io::copy(&mut (&mut decoder).take(skip), &mut std::io::sink()).map_err(corrupt)?;
+            if skipped < skip {
+                return Err(IoError::format(
+                    &data_path,
+                    format!("truncated data: {skipped} bytes inflated of the {skip} to skip"),
+                ));
+            }
+            let mut out = Vec::with_capacity(expected);
+            decoder.take(expected as u64 + 1).read_to_end(&mut out).map_err(corrupt)?;
+            exact(&data_path, &out, expected, true)?;
+            out.truncate(expected);
+            out
         }
         Encoding::Ascii => return ascii(&data_path, data, layout).and_then(|v| finish(v, &header, path)),
     };
     let voxels = decode(&data_path, &values, layout, None)?;
     finish(voxels, &header, path)
+}
+
+/// The detached data file `file` names, relative to the header's directory: it must
+/// lie in that directory or below, after links are resolved (an absolute path, `..`
+/// or a link that leaves it is refused: a header from elsewhere must not turn
+/// `/etc/passwd` or `/proc/self/environ` into labels), and be a regular file.
+fn detached_data_file(header: &Path, file: &Path) -> Result<PathBuf, IoError> {
+    let dir = header.parent().unwrap_or(Path::new(""));
+    let data_path = dir.join(file);
+    let dir = if dir.as_os_str().is_empty() { Path::new(".") } else { dir };
+    let outside = || {
+        IoError::format(
+            header,
+            format!(
+                "data file '{}' is outside the header's directory (detached data must lie beside the header; read other files as raw data, naming them and their layout)",
+                file.display()
+            ),
+        )
+    };
+    if file.is_absolute() || file.components().any(|c| matches!(c, std::path::Component::ParentDir)) {
+        return Err(outside());
+    }
+    let real_dir = dir.canonicalize().map_err(|e| IoError::io(dir, e))?;
+    let real = data_path.canonicalize().map_err(|e| IoError::io(&data_path, e))?;
+    if !real.starts_with(&real_dir) {
+        return Err(outside());
+    }
+    crate::volume::regular_file_len(&data_path)?;
+    Ok(data_path)
 }
 
 /// Places the voxels and attaches units and segments.
@@ -295,7 +329,7 @@ impl Header {
                 let mut units: Vec<&str> = u.split_whitespace().map(|w| w.trim_matches('"')).collect();
                 units.dedup();
                 match units[..] {
-                    [u] => Some(u.to_string()),
+                    [u] => Some(crate::volume::printable(u)),
                     _ => {
                         return Err(IoError::unsupported(
                             path,

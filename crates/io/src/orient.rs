@@ -10,6 +10,10 @@ use crate::{GreyVolume, Voxels};
 /// Off-axis entries of a column below this fraction of its largest entry count as zero.
 const AXIS_TOLERANCE: f64 = 1e-6;
 
+/// Columns whose parallelepiped has a volume below this fraction of the product of
+/// their lengths are collinear or coplanar (the sine of their angles, about).
+const DEGENERATE_TOLERANCE: f64 = 1e-6;
+
 /// How a volume was placed by [`place`].
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Placement {
@@ -30,7 +34,8 @@ pub(crate) enum Placement {
 /// fastest, only when that changes anything), so the placement is exact. Otherwise the
 /// rotation is dropped: spacing = the columns' lengths, origin = `translation`.
 ///
-/// Fails on a degenerate (zero, non-finite) column or translation.
+/// Fails on a degenerate (zero, non-finite) column or translation, and on columns that
+/// are collinear or coplanar.
 pub(crate) fn place(
     voxels: Voxels,
     matrix: DMat3,
@@ -40,6 +45,16 @@ pub(crate) fn place(
     if cols.iter().any(|c| !c.is_finite() || c.abs().max_element() == 0.0) {
         return Err(SurfaceError::InvalidVolume(format!(
             "degenerate index-to-world map: columns {}, {}, {}",
+            cols[0], cols[1], cols[2]
+        )));
+    }
+    // Columns that are (nearly) collinear or coplanar map the grid onto a plane or a
+    // line: no placement of voxels, whatever rotation is dropped.
+    let volume = matrix.determinant().abs();
+    let product = cols.iter().map(|c| c.length()).product::<f64>();
+    if volume.is_nan() || volume <= DEGENERATE_TOLERANCE * product {
+        return Err(SurfaceError::InvalidVolume(format!(
+            "degenerate index-to-world map: columns {}, {}, {} are collinear or coplanar",
             cols[0], cols[1], cols[2]
         )));
     }
@@ -77,6 +92,59 @@ pub(crate) fn place(
     }
     let spacing = DVec3::new(cols[0].length(), cols[1].length(), cols[2].length());
     Ok((voxels.with_spacing(spacing)?.with_origin(translation)?, Placement::RotationDropped))
+}
+
+/// The smallest voxel spacing, and the largest coordinate, accepted: well inside the
+/// normal range of `f32`, in which PLY, STL and glTF store positions.
+pub const COORDINATE_RANGE: f64 = 1e30;
+
+/// A voxel spacing must exceed the largest coordinate magnitude times this (`2^-36`):
+/// vertex positions, `f64`, then resolve a voxel in `2^16` steps.
+const RELATIVE_RESOLUTION: f64 = 1.0 / (1u64 << 36) as f64;
+
+/// Checks that the lattice corners of a volume of `dims` voxels of size `spacing`, the
+/// centre of voxel `[0, 0, 0]` at `origin`, have coordinates a mesh can represent
+/// distinctly: every spacing at least `1e-30` ([`COORDINATE_RANGE`]`^-1`), every corner
+/// coordinate at most `1e30` in magnitude, and every spacing at least `2^-36` times the
+/// largest corner coordinate's magnitude. Otherwise vertex positions collapse (an origin
+/// of `1e30` leaves a voxel spacing of `1` below the precision of the coordinates: a flat
+/// mesh), or underflow (a spacing of `1e-40` puts every vertex at `0`). The message says
+/// which axis and why.
+pub fn check_coordinates(dims: [usize; 3], spacing: DVec3, origin: DVec3) -> Result<(), String> {
+    let corner = |k: usize| {
+        let a = origin[k] - 0.5 * spacing[k];
+        let b = origin[k] + (dims[k] as f64 - 0.5) * spacing[k];
+        a.abs().max(b.abs())
+    };
+    let largest = (0..3).map(corner).fold(0.0, f64::max);
+    let axis = ["x", "y", "z"];
+    for k in 0..3 {
+        let s = spacing[k];
+        if !(s.is_finite() && s >= 1.0 / COORDINATE_RANGE) {
+            return Err(format!(
+                "voxel spacing {s:e} along {} is below 1e-30: vertex coordinates would underflow",
+                axis[k]
+            ));
+        }
+        if corner(k).is_nan() || corner(k) > COORDINATE_RANGE {
+            return Err(format!(
+                "coordinates along {} reach {:e} (origin {:e}, spacing {s}): beyond 1e30, a mesh cannot store them",
+                axis[k],
+                corner(k),
+                origin[k]
+            ));
+        }
+        if s < largest * RELATIVE_RESOLUTION {
+            return Err(format!(
+                "voxel spacing {s} along {} is below the precision of coordinates reaching {largest:e} (origin {:e}, {:e}, {:e}): the vertices would collapse; move the origin nearer to 0",
+                axis[k],
+                origin.x,
+                origin.y,
+                origin.z
+            ));
+        }
+    }
+    Ok(())
 }
 
 /// Re-stores the voxels so that new axis `perm[c]` is old axis `c`, reversed where
@@ -177,8 +245,9 @@ mod tests {
         let zero = DMat3::from_cols(DVec3::X, DVec3::ZERO, DVec3::Z);
         assert!(place(labels([1, 1, 1]), zero, DVec3::ZERO).is_err());
         assert!(place(labels([1, 1, 1]), DMat3::IDENTITY, DVec3::NAN).is_err());
-        // Two index axes along the same world axis: not a permutation.
+        // Two index axes along the same world axis: the grid collapses onto a plane.
         let same = DMat3::from_cols(DVec3::X, DVec3::X * 2.0, DVec3::Z);
-        assert_eq!(place(labels([1, 1, 1]), same, DVec3::ZERO).unwrap().1, Placement::RotationDropped);
+        let err = place(labels([1, 1, 1]), same, DVec3::ZERO).unwrap_err().to_string();
+        assert!(err.contains("collinear or coplanar"), "{err}");
     }
 }

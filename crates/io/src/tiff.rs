@@ -187,7 +187,8 @@ impl<'a> Stack<'a> {
         let voxels = decode(self.path, &self.data, layout, None)?
             .with_spacing(self.spacing)
             .map_err(|e| IoError::format(self.path, format!("spacing {}: {e}", self.spacing)))?;
-        Ok(LoadedVoxels { voxels, palette: None, units: self.units })
+        let units = self.units.as_deref().map(crate::volume::printable);
+        Ok(LoadedVoxels { voxels, palette: None, units })
     }
 }
 

@@ -168,6 +168,15 @@ pub fn read_voxels_bytes(bytes: &[u8], path: &Path, options: &ReadOptions) -> Re
     }
 }
 
+/// `text` with its control characters (terminal escape sequences, newlines) written as
+/// escapes (`\u{1b}`), other characters kept: names and units read from a file are
+/// printed, and a file must not drive the terminal.
+pub(crate) fn printable(text: &str) -> String {
+    text.chars()
+        .map(|c| if c.is_control() { c.escape_unicode().to_string() } else { c.to_string() })
+        .collect()
+}
+
 /// Whether `path` names a format of voxel art (MagicaVoxel `.vox`): coloured voxels of
 /// one object rather than a sampled shape, which voxreg regularizes with its voxel-art
 /// preset (one solid region, clamped solve).
@@ -204,9 +213,44 @@ pub(crate) fn checked_voxel_count(
     })
 }
 
-/// Reads a whole file into memory.
-pub(crate) fn read_file(path: &Path) -> Result<Vec<u8>, IoError> {
-    std::fs::read(path).map_err(|e| IoError::io(path, e))
+/// Reads a whole input file into memory, as every reader does, if it is a regular file (a link is followed)
+/// whose size is within the memory budget: a FIFO (which would block), a device
+/// (`/dev/zero` never ends) or a socket is refused before it is opened, and a file too
+/// large for the budget before it is read. At most the size the file had when it was
+/// examined is read (files of `/proc` read as empty).
+pub fn read_input_file(path: &Path) -> Result<Vec<u8>, IoError> {
+    use std::io::Read as _;
+    let len = regular_file_len(path)?;
+    crate::check_memory(path, "the file", u128::from(len))?;
+    let file = std::fs::File::open(path).map_err(|e| IoError::io(path, e))?;
+    let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
+    file.take(len).read_to_end(&mut bytes).map_err(|e| IoError::io(path, e))?;
+    Ok(bytes)
+}
+
+pub(crate) use read_input_file as read_file;
+
+/// The size of `path` when it is a regular file (after links), else the error saying
+/// what it is.
+pub(crate) fn regular_file_len(path: &Path) -> Result<u64, IoError> {
+    let meta = std::fs::metadata(path).map_err(|e| IoError::io(path, e))?;
+    let t = meta.file_type();
+    if t.is_file() {
+        return Ok(meta.len());
+    }
+    let mut what = if t.is_dir() { "a directory" } else { "a special file" };
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt as _;
+        if t.is_fifo() {
+            what = "a FIFO";
+        } else if t.is_char_device() || t.is_block_device() {
+            what = "a device";
+        } else if t.is_socket() {
+            what = "a socket";
+        }
+    }
+    Err(IoError::format(path, format!("{what}, not a regular file: inputs are read from regular files")))
 }
 
 #[cfg(test)]

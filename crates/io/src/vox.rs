@@ -116,6 +116,18 @@ pub fn read_vox_bytes_with(bytes: &[u8], path: &Path, options: &VoxOptions) -> R
         }
         (_, Some(k)) => alone(k),
         (1, None) => alone(0),
+        // Scene-graph chunks that `dot_vox` skipped (it drops a chunk it cannot parse):
+        // placing the models without them would silently drop models.
+        (_, None) if scene_chunks(bytes) != data.scenes.len() => {
+            return Err(IoError::format(
+                path,
+                format!(
+                    "corrupt scene graph: {} of its {} nTRN, nGRP and nSHP chunks could not be read",
+                    scene_chunks(bytes).saturating_sub(data.scenes.len()),
+                    scene_chunks(bytes)
+                ),
+            ))
+        }
         // Models without a scene graph to place them: animation frames; the first.
         (_, None) if data.scenes.is_empty() => alone(0),
         (_, None) => scene_instances(&data, path)?,
@@ -176,6 +188,26 @@ pub fn read_vox_bytes_with(bytes: &[u8], path: &Path, options: &VoxOptions) -> R
         .and_then(|v| v.with_origin(DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64) + 0.5))
         .map_err(|source| IoError::Volume { path: path.to_path_buf(), source })?;
     Ok(LoadedVolume { volume, palette: Some(palette(&data)), units: None })
+}
+
+/// The number of scene-graph chunks (`nTRN`, `nGRP`, `nSHP`) among the children of the
+/// file's `MAIN` chunk.
+fn scene_chunks(bytes: &[u8]) -> usize {
+    let word = |at: usize| -> Option<usize> {
+        let b = bytes.get(at..at.checked_add(4)?)?;
+        Some(u32::from_le_bytes([b[0], b[1], b[2], b[3]]) as usize)
+    };
+    let Some(children) = word(16) else { return 0 };
+    let start = 20 + word(12).unwrap_or(0);
+    let end = start.saturating_add(children).min(bytes.len());
+    let (mut at, mut count) = (start, 0);
+    while at + 12 <= end {
+        let (Some(n), Some(m)) = (word(at + 4), word(at + 8)) else { break };
+        count += usize::from(matches!(&bytes[at..at + 4], b"nTRN" | b"nGRP" | b"nSHP"));
+        let Some(next) = (at + 12).checked_add(n).and_then(|c| c.checked_add(m)) else { break };
+        at = next;
+    }
+    count
 }
 
 /// The positions, in each model's voxel list, of voxels of colour index 0 (empty in

@@ -12,8 +12,11 @@ use std::sync::Arc;
 use glam::DVec3;
 use serde_json::Value;
 use zarrs::array::{Array, DataType as ZarrType};
+use zarrs::storage::byte_range::{ByteRange, ByteRangeIterator};
 use zarrs::storage::store::MemoryStore;
-use zarrs::storage::{ReadableStorageTraits, StoreKey, WritableStorageTraits};
+use zarrs::storage::{
+    MaybeBytes, MaybeBytesIterator, ReadableStorageTraits, StorageError, StoreKey, WritableStorageTraits,
+};
 
 use crate::samples::{decode, Layout, Order};
 use crate::volume::checked_voxel_count;
@@ -57,6 +60,7 @@ pub fn read_zarr(path: &Path) -> Result<LoadedVoxels, IoError> {
         return Err(IoError::io(path, path.metadata().err().unwrap_or(source)));
     }
     let fs = |dir: &Path| {
+        confine_store(dir)?;
         zarrs::filesystem::FilesystemStore::new(dir)
             .map(Arc::new)
             .map_err(|e| IoError::format(path, one_line(e)))
@@ -164,7 +168,7 @@ fn read_store<S: ReadableStorageTraits + ?Sized + 'static>(
             (format!("/{dataset}"), Some(placement))
         }
     };
-    let array = Array::open(store, &array_path).map_err(|e| match array_path.as_str() {
+    let array = Array::open(store.clone(), &array_path).map_err(|e| match array_path.as_str() {
         "/" => IoError::format(path, one_line(e)),
         dataset => IoError::format(path, format!("OME-Zarr dataset {}: {}", &dataset[1..], one_line(e))),
     })?;
@@ -215,6 +219,18 @@ fn read_store<S: ReadableStorageTraits + ?Sized + 'static>(
     let need =
         chunk_elements.saturating_mul(size as u128 * threads).saturating_add((count * (size + 4)) as u128);
     crate::check_memory(path, &what, need)?;
+    // Every chunk's decompression is checked against the chunk's size before zarrs
+    // inflates it (its decoders inflate to the end, whatever the array declares).
+    let chunk_bytes = u64::try_from(chunk_elements.saturating_mul(size as u128)).unwrap_or(u64::MAX);
+    let (compressor, trailing) = outer_compressor(&*store, &array_path);
+    let bounded = Bounded {
+        inner: store,
+        compressor,
+        trailing,
+        bound: chunk_bytes.saturating_add(chunk_bytes / 8).saturating_add(4096),
+    };
+    let array =
+        Array::open(Arc::new(bounded), &array_path).map_err(|e| IoError::format(path, one_line(e)))?;
     // zarrs can panic on a corrupt shard index (a byte range past the chunk's end): that
     // is the file's fault, so it becomes the same one-line error as any other corruption.
     let retrieved = std::panic::catch_unwind(std::panic::AssertUnwindSafe(|| {
@@ -241,6 +257,181 @@ fn read_store<S: ReadableStorageTraits + ?Sized + 'static>(
         .and_then(|v| v.with_origin(xyz(&p.translation)))
         .map_err(volume_error)?;
     Ok(LoadedVoxels { voxels, palette: None, units: units[0].clone() })
+}
+
+/// Refuses a store directory holding a link that leads out of it (after every link is
+/// resolved), or a FIFO, device or socket: a chunk is read from the store's own files
+/// only, and a chunk that is a FIFO would block the read. Broken links are left to the
+/// reader (they read as missing chunks or fail).
+fn confine_store(root: &Path) -> Result<(), IoError> {
+    let real_root = root.canonicalize().map_err(|e| IoError::io(root, e))?;
+    let mut dirs = vec![root.to_path_buf()];
+    while let Some(dir) = dirs.pop() {
+        for entry in std::fs::read_dir(&dir).map_err(|e| IoError::io(&dir, e))? {
+            let entry = entry.map_err(|e| IoError::io(&dir, e))?;
+            let entry_path = entry.path();
+            let kind = entry.file_type().map_err(|e| IoError::io(&entry_path, e))?;
+            if kind.is_dir() {
+                dirs.push(entry_path);
+                continue;
+            }
+            if kind.is_symlink() {
+                let Ok(real) = entry_path.canonicalize() else { continue };
+                if !real.starts_with(&real_root) {
+                    return Err(IoError::format(
+                        &entry_path,
+                        format!(
+                            "a link out of the Zarr store {} (to {}): a store is read from its own files",
+                            root.display(),
+                            real.display()
+                        ),
+                    ));
+                }
+                // A link to a directory inside the store: its entries are walked where
+                // they are.
+                if real.is_dir() {
+                    continue;
+                }
+            }
+            crate::volume::regular_file_len(&entry_path)?;
+        }
+    }
+    Ok(())
+}
+
+/// The compressors whose decompression [`Bounded`] checks.
+#[derive(Clone, Copy, Debug, PartialEq, Eq)]
+enum Compressor {
+    Gzip,
+    Zlib,
+    Zstd,
+    Blosc,
+}
+
+/// The compressor decoded first from the array's chunks (the last bytes-to-bytes codec
+/// of a v3 array, the compressor of a v2 one), and the bytes of checksums appended
+/// after it (`crc32c`). `None` for an array whose chunks are not compressed that way
+/// (sharding: its inner chunks are read by byte ranges).
+fn outer_compressor<S: ReadableStorageTraits + ?Sized>(
+    store: &S,
+    array_path: &str,
+) -> (Option<Compressor>, usize) {
+    let prefix = array_path.trim_start_matches('/');
+    let prefix = if prefix.is_empty() { String::new() } else { format!("{prefix}/") };
+    let json = |name: &str| -> Option<Value> {
+        let key = StoreKey::new(format!("{prefix}{name}")).ok()?;
+        serde_json::from_slice(&store.get(&key).ok()??).ok()
+    };
+    let by_name = |name: &str| match name {
+        "gzip" => Some(Compressor::Gzip),
+        "zlib" | "numcodecs.zlib" => Some(Compressor::Zlib),
+        "zstd" | "numcodecs.zstd" => Some(Compressor::Zstd),
+        "blosc" | "numcodecs.blosc" => Some(Compressor::Blosc),
+        _ => None,
+    };
+    if let Some(meta) = json("zarr.json") {
+        let codecs = meta.get("codecs").and_then(Value::as_array).cloned().unwrap_or_default();
+        let mut trailing = 0;
+        for codec in codecs.iter().rev() {
+            match codec.get("name").and_then(Value::as_str) {
+                Some("crc32c") => trailing += 4,
+                Some(name) => return (by_name(name), trailing),
+                None => break,
+            }
+        }
+        return (None, 0);
+    }
+    let meta = json(".zarray");
+    (meta.as_ref().and_then(|m| m.pointer("/compressor/id")).and_then(Value::as_str).and_then(by_name), 0)
+}
+
+/// A store whose chunks are checked before they are decoded: a compressed chunk that
+/// inflates (or declares it inflates) past `bound` bytes is an error, found by
+/// inflating it into nothing, so that zarrs's decoders, which inflate to the end, never
+/// hold more than the chunk's size.
+struct Bounded<S: ?Sized> {
+    inner: Arc<S>,
+    compressor: Option<Compressor>,
+    /// Checksum bytes after the compressed data.
+    trailing: usize,
+    /// The most bytes a chunk may inflate to.
+    bound: u64,
+}
+
+impl<S: ReadableStorageTraits + ?Sized> Bounded<S> {
+    fn check(&self, key: &StoreKey, bytes: &[u8]) -> Result<(), StorageError> {
+        use std::io::Read as _;
+        let Some(compressor) = self.compressor else { return Ok(()) };
+        let name = key.as_str();
+        let file = name.rsplit('/').next().unwrap_or(name);
+        if matches!(file, "zarr.json" | ".zarray" | ".zattrs" | ".zgroup") {
+            return Ok(());
+        }
+        let data = &bytes[..bytes.len().saturating_sub(self.trailing)];
+        let too_large = || {
+            StorageError::Other(format!(
+                "chunk {name} inflates past the {} bytes a chunk of the array can hold",
+                self.bound
+            ))
+        };
+        let sink = &mut std::io::sink();
+        let limit = self.bound.saturating_add(1);
+        // A stream the decoder cannot read is left to zarrs, which reports it.
+        let inflated = match compressor {
+            Compressor::Gzip => std::io::copy(&mut flate2::read::GzDecoder::new(data).take(limit), sink).ok(),
+            Compressor::Zlib => {
+                std::io::copy(&mut flate2::read::ZlibDecoder::new(data).take(limit), sink).ok()
+            }
+            Compressor::Zstd => match zstd::bulk::Decompressor::upper_bound(data) {
+                // zarrs inflates into a buffer of the declared size, no further.
+                Some(declared) => Some(declared as u64),
+                None => zstd::stream::read::Decoder::new(data)
+                    .ok()
+                    .and_then(|d| std::io::copy(&mut d.take(limit), sink).ok()),
+            },
+            // Blosc's header declares the inflated size, which its decoder allocates.
+            Compressor::Blosc => {
+                data.get(4..8).map(|b| u64::from(u32::from_le_bytes([b[0], b[1], b[2], b[3]])))
+            }
+        };
+        match inflated {
+            Some(n) if n > self.bound => Err(too_large()),
+            _ => Ok(()),
+        }
+    }
+}
+
+impl<S: ReadableStorageTraits + ?Sized> ReadableStorageTraits for Bounded<S> {
+    fn get(&self, key: &StoreKey) -> Result<MaybeBytes, StorageError> {
+        let value = self.inner.get(key)?;
+        if let Some(bytes) = &value {
+            self.check(key, bytes)?;
+        }
+        Ok(value)
+    }
+
+    fn get_partial(&self, key: &StoreKey, byte_range: ByteRange) -> Result<MaybeBytes, StorageError> {
+        match byte_range {
+            ByteRange::FromStart(0, None) => self.get(key),
+            range => self.inner.get_partial(key, range),
+        }
+    }
+
+    fn get_partial_many<'a>(
+        &'a self,
+        key: &StoreKey,
+        byte_ranges: ByteRangeIterator<'a>,
+    ) -> Result<MaybeBytesIterator<'a>, StorageError> {
+        self.inner.get_partial_many(key, byte_ranges)
+    }
+
+    fn size_key(&self, key: &StoreKey) -> Result<Option<u64>, StorageError> {
+        self.inner.size_key(key)
+    }
+
+    fn supports_get_partial(&self) -> bool {
+        self.inner.supports_get_partial()
+    }
 }
 
 /// The dataset path and placement of `level` (its path; `None`: the first dataset) of an
@@ -319,7 +510,7 @@ fn ome_level(image: &Value, level: Option<&str>, path: &Path) -> Result<(String,
     Ok((dataset_path.to_string(), Placement { axes, scale, translation }))
 }
 
-/// An NGFF unit as voxreg writes units elsewhere.
+/// An NGFF unit as voxreg writes units elsewhere (control characters escaped).
 fn unit(name: &str) -> String {
     match name {
         "micrometer" | "micron" => "µm",
@@ -328,7 +519,7 @@ fn unit(name: &str) -> String {
         "centimeter" => "cm",
         "meter" => "m",
         "angstrom" => "Å",
-        other => other,
+        other => return crate::volume::printable(other),
     }
     .to_string()
 }

@@ -20,6 +20,9 @@
 //! - [`materials`]: colours and materials from .vox palettes to glTF, OBJ/MTL and PLY.
 //! - [`mesh_formats`]: STL (closed solids of the right volume) and VTK PolyData, parsed
 //!   back by independent minimal readers.
+//! - [`untrusted`]: inputs reaching outside themselves (detached data, links, FIFOs,
+//!   devices), files and chunks over the budget, unrepresentable placements, corrupt
+//!   scene graphs, control characters in units: clear errors, never a hang.
 //! - [`names`]: label names (`.seg.nrrd` segments, `.vox` material names) in every
 //!   writer (snapshots), file names of awkward names, files without names unchanged.
 
@@ -29,6 +32,7 @@ mod hostile;
 mod materials;
 mod mesh_formats;
 mod names;
+mod untrusted;
 
 use std::collections::BTreeSet;
 use std::path::{Path, PathBuf};

@@ -173,7 +173,9 @@ pub(crate) fn regularize<'py>(
     let params = options.params()?;
     let threads = threads_arg(threads)?;
     let palette = palette_arg(palette_colors, palette_materials, palette_names)?;
+    // Never above what the address-space and cgroup limits leave the process.
     let limit = max_memory_arg(max_memory)?;
+    let limit = voxreg_io::environment_limit().map_or(limit, |e| e.min(limit));
     // Borrowed (uint32) or converted with the GIL held.
     let labels = volume::labels_of(labels, limit)?;
     let volume = volume::volume(labels.view(), spacing, origin, background)?;
@@ -229,7 +231,7 @@ pub(crate) fn regularize<'py>(
 }
 
 /// `max_memory=`: bytes, a size such as `"4G"`, or `None` for the library's budget (half
-/// the physical memory).
+/// the physical memory, or less where the environment limits the process).
 fn max_memory_arg(max_memory: Option<&Bound<'_, PyAny>>) -> Result<u64> {
     let Some(m) = max_memory else { return Ok(voxreg_io::max_memory()) };
     let bad = || {

@@ -150,6 +150,11 @@ pub(crate) fn volume<'a>(
     origin: [f64; 3],
     background: Option<u32>,
 ) -> Result<LabelView<'a>> {
+    let (dims, s, o) = (labels.dim(), DVec3::from_array(spacing), DVec3::from_array(origin));
+    if s.is_finite() && s.min_element() > 0.0 && o.is_finite() {
+        voxreg_io::check_coordinates([dims.0, dims.1, dims.2], s, o)
+            .map_err(|e| Error::parameter(format!("spacing and origin: {e}")))?;
+    }
     LabelView::from_view(labels)
         .with_spacing(DVec3::from_array(spacing))
         .map_err(|e| Error::parameter(format!("spacing: {e}")))?

@@ -211,7 +211,8 @@ def regularize(
         saved files.
     max_memory : int or str, default None (half the physical memory)
         Memory budget in bytes, or a size such as "4G" or "512M" (the CLI's
-        ``--max-memory``). A conversion of the labels to uint32, or a run whose estimated
+        ``--max-memory``), never above what ``ulimit -v`` and the cgroup's memory limit
+        leave. A conversion of the labels to uint32, or a run whose estimated
         peak (about 1.6 kB per surfel) exceeds it, is refused with ``VoxregError``
         before anything is allocated for it.
 
