@@ -10,6 +10,7 @@ mod output;
 mod progress;
 mod report;
 mod signals;
+mod simplify;
 mod view;
 
 use anyhow::{bail, Context, Result};

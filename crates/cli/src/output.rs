@@ -5,7 +5,7 @@ use std::path::Path;
 
 use anyhow::{bail, Result};
 use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId};
-use voxreg_io::{named_interface_name, named_region_name, write_mesh, MeshBatch, Palette, QuadMesh};
+use voxreg_io::{named_interface_name, named_region_name, MeshBatch, Palette, QuadMesh};
 
 use crate::args::{GeodesicOptions, RegularizeArgs, Split};
 
@@ -47,6 +47,7 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product<'_>) -> Resu
         _ => {}
     }
     check_paths(args, product)?;
+    crate::simplify::check(args, product)?;
     if let Some(path) = &args.features {
         if product != Product::Mesh {
             bail!("--features {}: only voxreg regularize writes the feature field", path.display());
@@ -271,8 +272,8 @@ pub(crate) fn write_meshes(
         mesh
     };
     if args.split == Split::None {
-        write_mesh(&args.output, &colour(QuadMesh::from_surface(surface, positions)))?;
-        return Ok(args.output.display().to_string());
+        let mesh = colour(QuadMesh::from_surface(surface, positions));
+        return crate::simplify::write(args, mesh, surface.spacing().min_element());
     }
     let mut batch = MeshBatch::new(&args.output)?;
     for (name, mesh) in split_meshes(args, surface, positions, palette) {
