@@ -251,6 +251,8 @@ impl Preset {
 pub(crate) struct RegularizeArgs {
     #[command(flatten)]
     pub(crate) input: InputArgs,
+    #[command(flatten)]
+    pub(crate) simplify: crate::simplify::SimplifyArgs,
     /// Output mesh: .obj (quads, one group per interface, with an .mtl for coloured
     /// inputs), .ply (binary quads, face labels and colours), .glb or .gltf (glTF 2.0,
     /// triangulated, one material per colour), .stl (binary, triangles only) or .vtp

@@ -12,6 +12,7 @@ mod output;
 mod progress;
 mod report;
 mod signals;
+mod simplify;
 mod view;
 
 use anyhow::{Context, Result};

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId};
-use voxreg_io::{named_interface_name, named_region_name, write_mesh, MeshBatch, Outputs, Palette, QuadMesh};
+use voxreg_io::{named_interface_name, named_region_name, MeshBatch, Outputs, Palette, QuadMesh};
 
 use crate::args::{GeodesicOptions, RegularizeArgs, Split};
 
@@ -50,6 +50,7 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product<'_>) -> Resu
     if crate::input::voxel_art(&args.input) {
         check_library(args, product, true)?;
     }
+    crate::simplify::check(args, product)?;
     if let Some(path) = &args.features {
         if product != Product::Mesh {
             bail!("--features {}: only voxreg regularize writes the feature field", path.display());
@@ -387,8 +388,7 @@ pub(crate) fn write_meshes(
     };
     if args.split == Split::None {
         let mesh = colour(QuadMesh::from_surface(surface, positions));
-        outputs.write(&args.output, |path| write_mesh(path, &mesh))?;
-        return Ok(args.output.display().to_string());
+        return crate::simplify::write(args, outputs, mesh, surface.spacing().min_element());
     }
     let mut batch = MeshBatch::new(&args.output)?;
     for (name, mesh) in split_meshes(args, surface, positions, palette) {

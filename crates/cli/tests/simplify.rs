@@ -1,0 +1,81 @@
+//! End-to-end tests of `voxreg regularize --simplify`, `--max-error` and `--lod`.
+
+use std::collections::HashMap;
+use std::path::Path;
+
+mod common;
+use common::{data, stderr, voxreg};
+
+/// Faces of a mesh file, and whether every edge is used an even number of times.
+fn faces_and_closed(path: &Path) -> (usize, bool) {
+    let mesh = voxreg_io::read_mesh(path).unwrap();
+    let mut edges: HashMap<(u32, u32), usize> = HashMap::new();
+    for q in &mesh.quads {
+        let p: Vec<u32> = (0..4).filter(|&i| q[i] != q[(i + 3) % 4]).map(|i| q[i]).collect();
+        for i in 0..p.len() {
+            let (a, b) = (p[i], p[(i + 1) % p.len()]);
+            *edges.entry((a.min(b), a.max(b))).or_default() += 1;
+        }
+    }
+    (mesh.quads.len(), edges.values().all(|c| c % 2 == 0))
+}
+
+fn regularize(input: &str, out: &Path, extra: &[&str]) -> std::process::Output {
+    let mut args = vec!["regularize", input, "-o", out.to_str().unwrap(), "--quiet"];
+    args.extend_from_slice(extra);
+    voxreg(&args)
+}
+
+#[test]
+fn simplify_writes_a_closed_mesh_with_fewer_faces() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = data("cat10.vol");
+    let full = dir.path().join("full.ply");
+    let small = dir.path().join("small.ply");
+    let o = regularize(input.to_str().unwrap(), &full, &[]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let o = regularize(input.to_str().unwrap(), &small, &["--simplify", "0.2", "--max-error", "0.5"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let (n_full, closed_full) = faces_and_closed(&full);
+    let (n_small, closed_small) = faces_and_closed(&small);
+    assert!(closed_full && closed_small);
+    assert!(n_small * 2 < n_full, "{n_small} faces of {n_full}");
+}
+
+#[test]
+fn simplify_lod_writes_nested_levels() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("cat.obj");
+    let o = regularize(data("cat10.vol").to_str().unwrap(), &out, &["--lod", "3"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!out.exists(), "the levels replace the single file");
+    let counts: Vec<usize> = (0..3)
+        .map(|k| {
+            let (n, closed) = faces_and_closed(&dir.path().join(format!("cat.lod{k}.obj")));
+            assert!(closed, "level {k} open");
+            n
+        })
+        .collect();
+    assert!(counts[1] < counts[0] && counts[2] < counts[1], "{counts:?}");
+}
+
+#[test]
+fn simplify_refuses_bad_options_before_any_work() {
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("x.ply");
+    let input = data("cat10.vol");
+    for extra in [
+        &["--simplify", "0"][..],
+        &["--simplify", "1.5"],
+        &["--max-error", "-1"],
+        &["--lod", "0"],
+        &["--lod", "3", "--simplify", "0.5"],
+        &["--simplify", "0.5", "--split", "regions"],
+    ] {
+        let o = regularize(input.to_str().unwrap(), &out, extra);
+        assert_eq!(o.status.code(), Some(1), "{extra:?}");
+        let err = stderr(&o);
+        assert_eq!(err.trim().lines().count(), 1, "{extra:?}: {err}");
+        assert!(!out.exists());
+    }
+}

@@ -1,0 +1,202 @@
+//! Simplification of a multi-label surface mesh that keeps its partition.
+//!
+//! The input is a [`QuadMesh`] as voxreg writes it (one quad per voxel face, or any mesh of
+//! quads and triangles): each face carries its `[inner, outer]` labels, optionally a
+//! material and a face group. Faces with the same labels, material and group form one
+//! *patch* (an interface, or a colour area of a voxel model). The simplifier works on the
+//! whole non-manifold complex at once, so that:
+//!
+//! - every patch is simplified once, and shared by the two regions it separates (the
+//!   output has one face where the input had one wall between two labels, never two);
+//! - the *feature lines* (edges where three or more faces meet, where patches of
+//!   different keys meet, and open borders) are simplified once, as polylines shared by
+//!   every patch that meets them;
+//! - their *corners* (line end points, vertices where lines meet, pinches) never move;
+//! - the combinatorial type is kept: each collapse passes the link condition of the whole
+//!   complex and keeps every edge's list of incident patches, so each region stays closed
+//!   and keeps its Euler characteristic;
+//! - every vertex of the input lies within the distance budget of the output, tracked by
+//!   construction (each face carries the removed input vertices it answers for);
+//! - no collapse creates an intersection between faces that share no vertex.
+//!
+//! The method is a half-edge collapse on the triangles (each quad split along the diagonal
+//! from its first vertex), ordered by quadric error, then a greedy re-pairing of the
+//! triangles into quads within each patch. Everything runs on one thread in a fixed
+//! order: the output does not depend on the thread count. See
+//! `docs/design/simplification.md`.
+
+mod engine;
+mod grid;
+mod pair;
+mod quadric;
+
+use voxreg_io::QuadMesh;
+
+/// How far one level of detail may go.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Target {
+    /// Stop once the triangles left are at most this fraction of the input's triangles
+    /// (a quad counts two): about the fraction of faces left once the triangles are paired
+    /// into quads again. `None`: as far as `max_error` allows.
+    pub ratio: Option<f64>,
+    /// The largest distance allowed from any input vertex to the output faces, in the
+    /// positions' units. Collapses that would break it are refused, so the ratio may not
+    /// be reached.
+    pub max_error: f64,
+}
+
+/// How collapses are judged and faces rebuilt.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Options {
+    /// A collapse may turn no triangle's normal by more than this angle, in degrees.
+    pub max_normal_change_deg: f64,
+    /// A collapse may make no triangle of quality (`4 sqrt(3) area / sum of squared edge
+    /// lengths`, 1 for an equilateral one) below this bound, unless it was lower already.
+    pub min_triangle_quality: f64,
+    /// Refuse collapses whose new triangles intersect a triangle they share no vertex
+    /// with (exact tests against a grid of the triangles).
+    pub check_intersections: bool,
+    /// Pair the triangles into quads where a good pair exists (else the output is
+    /// triangles only, written as quads repeating their last vertex).
+    pub quads: bool,
+    /// A pair of triangles makes a quad only if the angle between their normals is at
+    /// most this, in degrees.
+    pub max_quad_dihedral_deg: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            max_normal_change_deg: 40.0,
+            min_triangle_quality: 0.1,
+            check_intersections: true,
+            quads: true,
+            max_quad_dihedral_deg: 30.0,
+        }
+    }
+}
+
+/// A simplified mesh and what was done.
+#[derive(Clone, Debug)]
+pub struct Simplified {
+    /// The mesh: quads, and triangles as quads repeating their last vertex; the input's
+    /// labels, groups (same names, same order), materials and label names.
+    pub mesh: QuadMesh,
+    /// Counts and the distance reached.
+    pub stats: Stats,
+}
+
+/// What a simplification did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Stats {
+    /// Faces of the input.
+    pub input_faces: usize,
+    /// Triangles of the input (a quad counts two).
+    pub input_triangles: usize,
+    /// Triangles left after the collapses.
+    pub triangles_left: usize,
+    /// Faces of the output.
+    pub faces: usize,
+    /// Output faces that are quads.
+    pub quads: usize,
+    /// The largest distance of an input vertex to the output face that answers for it:
+    /// every input vertex lies at most this far from the output.
+    pub error_bound: f64,
+    /// Vertices that never move (line end points, meeting points of lines, pinches).
+    pub corners: usize,
+    /// Vertices on one feature line.
+    pub line_vertices: usize,
+}
+
+/// Why a mesh cannot be simplified.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SimplifyError {
+    /// The mesh is inconsistent.
+    #[error("invalid mesh: {0}")]
+    InvalidMesh(String),
+    /// The targets are out of range or not nested.
+    #[error("invalid simplification target: {0}")]
+    InvalidTarget(String),
+}
+
+/// Simplifies `mesh` down to `target`, keeping its partition (see the crate's
+/// documentation).
+///
+/// # Errors
+///
+/// [`SimplifyError::InvalidMesh`] for an index out of range, a non-finite position, label
+/// or material arrays of the wrong length, or a face with fewer than three distinct
+/// vertices; [`SimplifyError::InvalidTarget`] for a ratio outside `(0, 1]` or a negative
+/// or NaN distance.
+pub fn simplify(mesh: &QuadMesh, target: Target, options: &Options) -> Result<Simplified, SimplifyError> {
+    Ok(simplify_levels(mesh, &[target], options)?.pop().expect("one level"))
+}
+
+/// Levels of detail: one simplification run, with a snapshot of the mesh at each target
+/// in turn. Targets must be nested: ratios non-increasing, distances non-decreasing. Each
+/// level is a simplification of the previous one, and the distance bound of each level
+/// holds for every vertex of the full input (not only of the previous level).
+///
+/// # Errors
+///
+/// As [`simplify`], and [`SimplifyError::InvalidTarget`] for targets that are not nested
+/// or an empty list.
+pub fn simplify_levels(
+    mesh: &QuadMesh,
+    targets: &[Target],
+    options: &Options,
+) -> Result<Vec<Simplified>, SimplifyError> {
+    check_targets(targets)?;
+    let mut engine = engine::Engine::new(mesh, options)?;
+    let mut out = Vec::with_capacity(targets.len());
+    for t in targets {
+        engine.run(t);
+        out.push(engine.snapshot());
+    }
+    Ok(out)
+}
+
+/// A pyramid of `levels` targets: level `k` keeps `factor^-k` of the faces within
+/// `max_error * 2^(k-1)` (level 0 is the input itself, with a bound of 0), so that both the
+/// ratios and the bounds nest.
+pub fn pyramid_targets(levels: usize, factor: f64, max_error: f64) -> Vec<Target> {
+    (0..levels)
+        .map(|k| {
+            if k == 0 {
+                Target { ratio: Some(1.0), max_error: 0.0 }
+            } else {
+                Target {
+                    ratio: Some(factor.powi(-(k as i32))),
+                    max_error: max_error * 2f64.powi(k as i32 - 1),
+                }
+            }
+        })
+        .collect()
+}
+
+fn check_targets(targets: &[Target]) -> Result<(), SimplifyError> {
+    let bad = |s: String| Err(SimplifyError::InvalidTarget(s));
+    if targets.is_empty() {
+        return bad("no target".into());
+    }
+    for t in targets {
+        if let Some(r) = t.ratio {
+            if r.is_nan() || r <= 0.0 || r > 1.0 {
+                return bad(format!("ratio {r} is not in (0, 1]"));
+            }
+        }
+        if t.max_error.is_nan() || t.max_error < 0.0 {
+            return bad(format!("distance {} is not a non-negative number", t.max_error));
+        }
+    }
+    for w in targets.windows(2) {
+        let (a, b) = (w[0].ratio.unwrap_or(0.0), w[1].ratio.unwrap_or(0.0));
+        if b > a && w[0].ratio.is_some() || w[0].ratio.is_none() && w[1].ratio.is_some() {
+            return bad("ratios of successive levels must not increase".into());
+        }
+        if w[1].max_error < w[0].max_error {
+            return bad("distances of successive levels must not decrease".into());
+        }
+    }
+    Ok(())
+}

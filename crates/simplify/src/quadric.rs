@@ -1,0 +1,70 @@
+//! Quadrics: sums of squared distances to planes and lines, `p^T A p - 2 b.p + c`.
+
+use glam::DVec3;
+
+/// A symmetric quadratic form in the position.
+#[derive(Clone, Copy, Debug, Default)]
+pub(crate) struct Quadric {
+    /// `A` as `[xx, xy, xz, yy, yz, zz]`.
+    a: [f64; 6],
+    b: DVec3,
+    c: f64,
+}
+
+impl Quadric {
+    /// `w` times the squared distance to the plane through `p` of unit normal `n`.
+    pub(crate) fn plane(p: DVec3, n: DVec3, w: f64) -> Quadric {
+        let d = -n.dot(p);
+        Quadric {
+            a: [n.x * n.x, n.x * n.y, n.x * n.z, n.y * n.y, n.y * n.z, n.z * n.z].map(|x| w * x),
+            b: -d * w * n,
+            c: w * d * d,
+        }
+    }
+
+    /// `w` times the squared distance to the line through `p` of unit direction `t`.
+    pub(crate) fn line(p: DVec3, t: DVec3, w: f64) -> Quadric {
+        let a = [1.0 - t.x * t.x, -t.x * t.y, -t.x * t.z, 1.0 - t.y * t.y, -t.y * t.z, 1.0 - t.z * t.z];
+        let ap = DVec3::new(
+            a[0] * p.x + a[1] * p.y + a[2] * p.z,
+            a[1] * p.x + a[3] * p.y + a[4] * p.z,
+            a[2] * p.x + a[4] * p.y + a[5] * p.z,
+        );
+        Quadric { a: a.map(|x| w * x), b: w * ap, c: w * p.dot(ap) }
+    }
+
+    /// The form's value at `p` (clamped at 0 against rounding).
+    pub(crate) fn eval(&self, p: DVec3) -> f64 {
+        let a = &self.a;
+        let ap = DVec3::new(
+            a[0] * p.x + a[1] * p.y + a[2] * p.z,
+            a[1] * p.x + a[3] * p.y + a[4] * p.z,
+            a[2] * p.x + a[4] * p.y + a[5] * p.z,
+        );
+        (p.dot(ap) - 2.0 * self.b.dot(p) + self.c).max(0.0)
+    }
+
+    pub(crate) fn add(&mut self, o: &Quadric) {
+        for k in 0..6 {
+            self.a[k] += o.a[k];
+        }
+        self.b += o.b;
+        self.c += o.c;
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn distances() {
+        let q = Quadric::plane(DVec3::new(0.0, 0.0, 1.0), DVec3::Z, 2.0);
+        assert!((q.eval(DVec3::new(5.0, -3.0, 4.0)) - 18.0).abs() < 1e-12);
+        let l = Quadric::line(DVec3::new(1.0, 1.0, 0.0), DVec3::Z, 1.0);
+        assert!((l.eval(DVec3::new(1.0, 4.0, 7.0)) - 9.0).abs() < 1e-12);
+        let mut s = q;
+        s.add(&l);
+        assert!((s.eval(DVec3::new(1.0, 4.0, 1.0)) - 9.0).abs() < 1e-12);
+    }
+}
