@@ -6,7 +6,9 @@ use anyhow::{bail, Context, Result};
 use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
 use voxreg_io::{is_voxel_art, vox_model_sizes, Background, InputError, InputOptions, Palette};
 
-use crate::args::{InputArgs, Preset};
+use voxreg_regularize::{InputFacts, Preset};
+
+use crate::args::InputArgs;
 use crate::print_stdout;
 
 /// Reads INPUT (raw with `--dims`, else by extension), applies `--spacing`, then
@@ -64,7 +66,7 @@ pub(crate) fn surface_of(args: &InputArgs, volume: &LabelVolume, map: &RegionMap
 pub(crate) fn info(args: &InputArgs) -> Result<()> {
     let mut out = String::new();
     let (volume, palette, units) = read_input(args)?;
-    let preset = if voxel_art(args) { Preset::VoxelArt } else { Preset::Default };
+    let preset = Preset::for_input(&InputFacts::voxel_art(voxel_art(args)));
     let map = args.region_map()?.unwrap_or_else(|| preset.params().regions);
     let [x, y, z] = volume.dims();
     let s = volume.spacing();

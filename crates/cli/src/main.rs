@@ -131,7 +131,6 @@ fn usage_error(e: &clap::Error) -> std::process::ExitCode {
 fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     output::check_outputs(args, product)?;
     let params = args.params(input::voxel_art(&args.input))?;
-    params.validate()?;
     let stages = Stages::new(args.quiet);
     let path = &args.input.input;
     let ((volume, palette, _units), read) = stages.run("read volume", || input::read_input(&args.input))?;

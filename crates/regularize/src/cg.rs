@@ -437,6 +437,8 @@ mod kernel_timings {
         v[10]
     }
 
+    /// The kernels' throughput (printed; `R` sets the sphere's radius), checking each
+    /// kernel's result on the way.
     #[test]
     #[ignore]
     fn kernels() {
@@ -461,6 +463,7 @@ mod kernel_timings {
             )
         });
         eprintln!("n = {n}: triad {:.2} GB/s", 4.0 * 24.0 * n as f64 / triad * 1e-6);
+        assert!(y.iter().zip(&input).all(|(y, a)| *y == *a + 0.5 * DVec3::ONE), "the triad's result");
         let apply = time(&mut || st.apply(&c, &input, &mut y, &mut t, true));
         let bytes = st.bytes() + 24 * normals.len() + 8 * n + 5 * 24 * n;
         eprintln!(
@@ -468,10 +471,13 @@ mod kernel_timings {
             bytes as f64 * 1e-6,
             bytes as f64 / apply * 1e-6
         );
+        assert!(y.iter().chain(&t).all(|v| v.is_finite()), "the product is finite");
         let d = time(&mut || {
             std::hint::black_box(dot(&y, &t));
         });
         eprintln!("dot: {d:.3} ms");
+        let serial: f64 = y.iter().zip(&t).map(|(a, b)| a.dot(*b)).sum();
+        assert!((dot(&y, &t) - serial).abs() <= 1e-9 * serial.abs().max(1.0), "the parallel dot product");
         let upd = time(&mut || {
             std::hint::black_box(cg_update(&mut u, &mut y, 0.1, &t, &input));
         });
@@ -486,7 +492,12 @@ mod kernel_timings {
             })
         );
         let mut v = h.numeric(&st, &c, &Interrupt::never(), None).unwrap();
-        eprintln!("v-cycle: {:.3} ms ({} levels)", time(&mut || v.apply(&st, &y, &mut t)), h.levels());
+        let cycle = time(&mut || v.apply(&st, &y, &mut t));
+        eprintln!("v-cycle: {cycle:.3} ms ({} levels)", h.levels());
+        assert!(h.levels() > 1 && t.iter().all(|v| v.is_finite()), "the cycle's levels and result");
+        for ms in [triad, apply, d, upd, cycle] {
+            assert!(ms.is_finite() && ms > 0.0, "a kernel's time: {ms} ms");
+        }
     }
 }
 

@@ -20,6 +20,8 @@
 //!   the initial normals across runs (parameter sweeps, interactive use). An
 //!   [`Interrupt`] raised from another thread ([`Regularizer::set_interrupt`]) stops a run
 //!   early with [`RegularizeError::Interrupted`] (an interactive front end replacing it).
+//! - [`Preset`] and [`Overrides`]: the one place where a front end's options become
+//!   [`Params`] ([`Overrides::resolve`]), shared by the command line, the viewer and Python.
 //! - [`Params`], with three presets: [`Params::default`] (the fidelity pipeline: solve,
 //!   then refine the normals from the result and solve again, re-centring the targets),
 //!   [`Params::papers`] (the papers' single solve) and [`Params::voxel_art`] (one solve
@@ -74,6 +76,7 @@ mod faces;
 mod info;
 mod iterative;
 mod multigrid;
+mod options;
 mod params;
 mod pipeline;
 mod regularizer;
@@ -93,6 +96,7 @@ pub use energy::{Energy, EnergyParams, EnergyTerms, MAX_STIFFNESS_RATIO};
 pub use info::{BoundedInfo, CgInfo, DirectInfo, SolveInfo, SolveTimings};
 pub use iterative::Preconditioner;
 pub use multigrid::MultigridParams;
+pub use options::{Clamp, InputFacts, Overrides, Preset, Regions};
 pub use params::{EstimatedNormals, Estimator, NormalsParams, Params};
 pub use regularizer::{
     estimated_bytes, regularize, Event, Output, Regularizer, Stage, BYTES_FIXED, BYTES_PER_SURFEL,
@@ -122,6 +126,16 @@ pub enum RegularizeError {
     /// A weight is out of range.
     #[error("invalid parameters: {0}")]
     InvalidParams(String),
+    /// A front end's option is out of range or conflicts with another
+    /// ([`Overrides::resolve`]): `"{option} {message}"`, e.g. `alpha must be finite and
+    /// positive, got 0`.
+    #[error("{option} {message}")]
+    InvalidOption {
+        /// The option, as [`Overrides`] names it (`sharpen_threshold`).
+        option: &'static str,
+        /// What is wrong, starting with a verb.
+        message: String,
+    },
     /// Arrays do not match the surface (normals per surfel, positions per vertex).
     #[error("size mismatch: {0}")]
     SizeMismatch(String),

@@ -29,15 +29,39 @@ pub enum SolverChoice {
 }
 
 impl SolverChoice {
-    /// Parses `auto`, `direct`, `cg` or `bounded` (also `gd`, its former name).
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "auto" => Some(SolverChoice::Auto),
-            "direct" => Some(SolverChoice::Direct),
-            "cg" => Some(SolverChoice::Cg),
-            "bounded" | "gd" => Some(SolverChoice::Bounded),
-            _ => None,
+    /// Every choice.
+    pub const ALL: [SolverChoice; 4] =
+        [SolverChoice::Auto, SolverChoice::Direct, SolverChoice::Cg, SolverChoice::Bounded];
+
+    /// `"auto"`, `"direct"`, `"cg"` or `"bounded"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolverChoice::Auto => "auto",
+            SolverChoice::Direct => "direct",
+            SolverChoice::Cg => "cg",
+            SolverChoice::Bounded => "bounded",
         }
+    }
+}
+
+impl std::fmt::Display for SolverChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for SolverChoice {
+    type Err = String;
+
+    /// A choice's [`SolverChoice::name`], or `gd` (the former name of `bounded`).
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "gd" {
+            return Ok(SolverChoice::Bounded);
+        }
+        SolverChoice::ALL.into_iter().find(|c| c.name() == s).ok_or_else(|| {
+            let names: Vec<String> = SolverChoice::ALL.iter().map(|c| format!("'{}'", c.name())).collect();
+            format!("must be one of {}, got '{s}'", names.join(", "))
+        })
     }
 }
 
@@ -355,8 +379,9 @@ mod tests {
             Err(OverrideError::ClampNeedsBoundedSolver)
         );
         assert_eq!(o(plain, None, Eps(1.5)), Err(OverrideError::ClampOutOfRange(1.5)));
-        assert_eq!(SolverChoice::parse("cg"), Some(SolverChoice::Cg));
-        assert_eq!(SolverChoice::parse("lu"), None);
+        assert_eq!("cg".parse(), Ok(SolverChoice::Cg));
+        assert_eq!("gd".parse(), Ok(SolverChoice::Bounded));
+        assert!("lu".parse::<SolverChoice>().is_err());
     }
 
     #[test]

@@ -14,8 +14,10 @@
 //!
 //! - [`Viewer::bind`], [`Viewer::open`], [`Viewer::serve`]: listen, queue the first input
 //!   ([`Loaded`]), answer requests; [`StopHandle`] stops it.
-//! - [`Tuning`]: the page's parameter panel, mapped onto [`Params`](voxreg_regularize::Params)
-//!   as the command line maps its options, and back to that command line.
+//! - [`Tuning`]: the page's parameter panel, a [`Preset`](voxreg_regularize::Preset) and
+//!   the library's [`Overrides`](voxreg_regularize::Overrides), resolved into
+//!   [`Params`](voxreg_regularize::Params) as the command line resolves its options, and
+//!   back to that command line.
 //!
 //! Bad input from the page (a corrupt file, an absurd parameter) is answered with the
 //! library's error message; a request that panics is answered with an error, and the
@@ -24,14 +26,15 @@
 //! # Example
 //!
 //! ```no_run
-//! use voxreg_view::{Loaded, Preset, Viewer};
+//! use voxreg_regularize::{Overrides, Preset};
+//! use voxreg_view::{Loaded, Viewer};
 //! # let volume = voxreg_digisurf::LabelVolume::from_fn([3, 3, 3], |_| 1);
 //! let loaded = Loaded {
 //!     name: "ball.vol".into(),
 //!     volume,
 //!     palette: None,
 //!     preset: Preset::Default,
-//!     params: Preset::Default.params(),
+//!     overrides: Overrides::default(),
 //! };
 //! // What to do with a file dropped on the page (the CLI reads it with its options).
 //! let loader = |path: &std::path::Path| -> Result<Loaded, String> {
@@ -55,7 +58,7 @@ mod tuning;
 
 pub use model::Loaded;
 pub use server::{Loader, StopHandle, Viewer};
-pub use tuning::{Preset, Tuning};
+pub use tuning::Tuning;
 
 /// What can go wrong starting the viewer.
 #[derive(Debug, thiserror::Error)]

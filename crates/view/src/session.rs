@@ -221,8 +221,19 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, int
     match job {
         Job::Open(loaded, reply, job) => {
             let loaded = *loaded;
-            let tuning = Tuning::of(loaded.preset, &loaded.params);
-            let params = loaded.params.clone();
+            let params =
+                match Tuning::preset(loaded.preset).merged(loaded.preset, &loaded.overrides).resolve() {
+                    Ok(p) => p,
+                    Err(e) => {
+                        let message = format!("{}: {e}", loaded.name);
+                        shared.update(|s| s.error = Some(message.clone()));
+                        if let Some(reply) = reply {
+                            let _ = reply.send(Err(message));
+                        }
+                        return;
+                    }
+                };
+            let tuning = Tuning::of(loaded.preset, &loaded.overrides, &params);
             shared.update(|s| {
                 s.busy = true;
                 s.stage = "digital surface".into();
@@ -254,7 +265,8 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, int
                 shared.update(|s| s.error = Some("no input to solve: open a file".into()));
                 return;
             };
-            let params = match tuning.params(c.loaded.preset, &c.loaded.params) {
+            let tuning = tuning.merged(c.loaded.preset, &c.loaded.overrides);
+            let params = match tuning.resolve() {
                 Ok(p) => p,
                 Err(e) => {
                     shared.update(|s| s.error = Some(e));
@@ -284,10 +296,18 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, int
                 return;
             };
             let tuned = match edit.tuning.clone() {
-                Some(tuning) => tuning.params(c.loaded.preset, &c.loaded.params).map(|p| (tuning, p)),
-                None => Ok(c.tuned.clone().unwrap_or_else(|| {
-                    (Tuning::of(c.loaded.preset, &c.loaded.params), c.loaded.params.clone())
-                })),
+                Some(tuning) => {
+                    let tuning = tuning.merged(c.loaded.preset, &c.loaded.overrides);
+                    tuning.resolve().map(|p| (tuning, p))
+                }
+                None => match c.tuned.clone() {
+                    Some(tp) => Ok(tp),
+                    None => {
+                        let tuning =
+                            Tuning::preset(c.loaded.preset).merged(c.loaded.preset, &c.loaded.overrides);
+                        tuning.resolve().map(|p| (Tuning::of(c.loaded.preset, &c.loaded.overrides, &p), p))
+                    }
+                },
             };
             let (tuning, params) = match tuned {
                 Ok(tp) if tp.1.regions == c.regions => tp,
