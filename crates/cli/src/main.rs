@@ -15,7 +15,7 @@ mod view;
 use anyhow::{bail, Context, Result};
 use clap::Parser as _;
 use voxreg_io::{read_mesh, write_ply_with_vertex_scalar, write_volume, QuadMesh};
-use voxreg_regularize::Regularizer;
+use voxreg_regularize::{Regularizer, Run};
 use voxreg_upscale::{upscale, UpscaleParams};
 
 use crate::args::{CheckArgs, Cli, Command, RegularizeArgs};
@@ -160,7 +160,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     regularizer.set_keep_normals(false);
     let out = stages.pipeline(&params, |progress| {
         regularizer
-            .run_with(&params, None, progress)
+            .run(Run::new(&params).progress(progress))
             .with_context(|| format!("{}: cannot regularize", path.display()))
     })?;
     let surface = &out.surface;

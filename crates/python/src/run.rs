@@ -10,7 +10,7 @@ use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 use voxreg_io::{Material, Palette};
-use voxreg_regularize::{Event, Output, Regularizer, Stage};
+use voxreg_regularize::{Event, Output, Regularizer, Run, Stage};
 
 use crate::error::{panic_error, Error, Result};
 use crate::mesh::{Part, Surface};
@@ -163,7 +163,9 @@ pub(crate) fn regularize<'py>(
                     let mut regularizer = Regularizer::from_volume(volume, &params.regions)
                         .map_err(|e| Error::regularize("labels: no surface to regularize: ", &e))?;
                     regularizer.set_keep_normals(false);
-                    regularizer.run_with(params, None, &mut report).map_err(|e| Error::regularize("", &e))
+                    regularizer
+                        .run(Run::new(params).progress(&mut report))
+                        .map_err(|e| Error::regularize("", &e))
                 }))
             })
         })?

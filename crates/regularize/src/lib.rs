@@ -99,11 +99,14 @@ pub use multigrid::MultigridParams;
 pub use options::{Clamp, InputFacts, Overrides, Preset, Regions};
 pub use params::{EstimatedNormals, Estimator, NormalsParams, Params};
 pub use regularizer::{
-    estimated_bytes, regularize, Event, Output, Regularizer, Stage, BYTES_FIXED, BYTES_PER_SURFEL,
+    estimated_bytes, regularize, Event, Output, Regularizer, Run, Stage, BYTES_FIXED, BYTES_PER_SURFEL,
     BYTES_PER_SURFEL_CLAMPED,
 };
 pub use report::{EnergyReport, NormalsReport, Report, StageTimes};
-pub use solver::{estimate_factor_nnz, ClampOverride, OverrideError, Solver, SolverChoice, SolverParams};
+pub use solver::{
+    estimate_factor_nnz, ClampOverride, OverrideError, SolveRequest, SolveStart, Solver, SolverChoice,
+    SolverParams,
+};
 pub use stencil::MatrixFreeOperator;
 /// The flag that stops a run early ([`Regularizer::set_interrupt`]), from
 /// `voxreg-normals`, whose estimators poll it too.

@@ -7,7 +7,7 @@
 //! [`Regularizer`](voxreg_regularize::Regularizer), so that a re-solve reuses the
 //! surface, the solver's symbolic analysis and unchanged normals, and starts each solve
 //! round from the last run's solution
-//! ([`Regularizer::run_warm`](voxreg_regularize::Regularizer::run_warm)). The page receives the
+//! ([`Run::warm`](voxreg_regularize::Run::warm())). The page receives the
 //! state as server-sent events (`/api/events`) and fetches positions as little-endian
 //! `f32` arrays; while a solve runs, the iterates stream
 //! ([`Event::iterate`](voxreg_regularize::Event::iterate)) at most every 60 ms.

@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 use voxreg_digisurf::{LabelVolume, RegionMap};
 use voxreg_io::{Palette, QuadMesh};
-use voxreg_regularize::{Interrupt, Output, Params, RegularizeError, Regularizer, Stage};
+use voxreg_regularize::{Interrupt, Output, Params, RegularizeError, Regularizer, Run, Stage};
 
 use crate::model::{f32_bytes, Model};
 use crate::tuning::Tuning;
@@ -169,7 +169,7 @@ struct Current {
     regularizer: Regularizer,
     regions: voxreg_digisurf::RegionMap,
     /// The last finished run's solutions on this surface, one per solve round (each
-    /// round's last iterate): the next run's starting guesses ([`Regularizer::run_warm`]);
+    /// round's last iterate): the next run's starting guesses ([`Run::warm`](voxreg_regularize::Run::warm()));
     /// empty on a new surface.
     last: Vec<Vec<DVec3>>,
     /// The last solve's parameters (a voxel edit re-solves with them).
@@ -222,7 +222,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, int
         Job::Open(loaded, reply, job) => {
             let loaded = *loaded;
             let params =
-                match Tuning::preset(loaded.preset).merged(loaded.preset, &loaded.overrides).resolve() {
+                match (Tuning { preset: loaded.preset, overrides: loaded.overrides.clone() }).resolve() {
                     Ok(p) => p,
                     Err(e) => {
                         let message = format!("{}: {e}", loaded.name);
@@ -304,7 +304,7 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, int
                     Some(tp) => Ok(tp),
                     None => {
                         let tuning =
-                            Tuning::preset(c.loaded.preset).merged(c.loaded.preset, &c.loaded.overrides);
+                            Tuning { preset: c.loaded.preset, overrides: c.loaded.overrides.clone() };
                         tuning.resolve().map(|p| (Tuning::of(c.loaded.preset, &c.loaded.overrides, &p), p))
                     }
                 },
@@ -468,7 +468,7 @@ fn solve(
     let warm = c.last.clone();
     let mut rounds: Vec<Vec<DVec3>> = Vec::new();
     c.regularizer.set_interrupt(interrupt.clone());
-    let result = c.regularizer.run_warm(&params, None, &warm, &mut |e| {
+    let result = c.regularizer.run(Run::new(&params).warm(&warm).progress(&mut |e| {
         if let (Stage::Solve { round }, Some(p), Some(input)) = (e.stage, e.iteration, e.input) {
             if rounds.len() <= round {
                 rounds.resize(round + 1, Vec::new());
@@ -501,7 +501,7 @@ fn solve(
             }),
             None => {}
         }
-    });
+    }));
     let ms = t.elapsed().as_secs_f64() * 1e3;
     match result {
         Ok(out) => {
@@ -618,12 +618,12 @@ mod tests {
         let mut r = Regularizer::from_volume(&v.volume, &params.regions).unwrap();
         // Each round's last iterate, the warm starts the worker keeps.
         let mut warm: Vec<Vec<DVec3>> = Vec::new();
-        r.run_warm(&params, None, &[], &mut |e| {
+        r.run(Run::new(&params).warm(&[]).progress(&mut |e| {
             if let (Stage::Solve { round }, Some(x)) = (e.stage, e.iterate()) {
                 warm.resize(warm.len().max(round + 1), Vec::new());
                 warm[round] = x;
             }
-        })
+        }))
         .unwrap();
         // The stage under way, finer than the events' stages: a solve's setup (before its
         // first iterate) apart from its iterations.
@@ -648,14 +648,14 @@ mod tests {
                     s.1 = None;
                     interrupt.raise();
                 });
-                r.run_warm(params, None, &warm, &mut |e| {
+                r.run(Run::new(params).warm(&warm).progress(&mut |e| {
                     let mut s = stage.lock().unwrap();
                     let now = Instant::now();
                     if raised.lock().unwrap().is_some() && s.1.is_none() {
                         s.1 = Some(now);
                     }
                     s.0 = label(e, params);
-                })
+                }))
             });
             let end = Instant::now();
             let (when, under_way) = raised.lock().unwrap().take().expect("raised");
