@@ -6,12 +6,16 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
+use crate::energy::Energy;
+use crate::error::RegularizeError;
 use crate::info::CgInfo;
 use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
+use crate::progress::Progress;
+use crate::stencil::MatrixFreeOperator;
 use crate::stencil::{Coefficients, Stencil, CHUNK};
 use crate::vecops::{cg_update, dot, norm, scale_add, tail_estimate};
-use crate::{Energy, Interrupt, MatrixFreeOperator, Progress, RegularizeError};
+use voxreg_normals::Interrupt;
 
 /// When an iterative solver stops.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default, serde::Serialize)]
@@ -417,11 +421,11 @@ mod kernel_timings {
     //! (`R=` sphere radius, default 140): timings of the iteration's kernels and the
     //! memory bandwidth they are compared with.
     use super::*;
+    use crate::energy::{Energy, EnergyParams};
     use crate::iterative::Pre;
     use crate::multigrid::Hierarchy;
     use crate::stencil::Stencil;
     use crate::vecops::sym_inverse;
-    use crate::{Energy, EnergyParams};
     use voxreg_testkit::{digitize, true_normals, Sphere};
 
     /// Median of 20 runs, in milliseconds.
@@ -506,8 +510,9 @@ mod quick_start {
     //! The quick start of a warm re-solve: the first iterate before the new energy's
     //! multigrid setup, and the same minimizer as a cold solve.
     use super::*;
+    use crate::direct::DirectSolver;
+    use crate::energy::EnergyParams;
     use crate::multigrid::tests::setups;
-    use crate::{DirectSolver, EnergyParams};
     use voxreg_normals::{NormalEstimator, NormalField, Trivial};
     use voxreg_testkit::{digitize, true_normals, Torus};
 
@@ -600,8 +605,9 @@ mod quick_start {
 mod residuals {
     //! The end-of-solve residual without the right-hand side against `b - H u`.
     use super::*;
+    use crate::energy::EnergyParams;
     use crate::stencil::Stencil;
-    use crate::{EnergyParams, FairnessMask, Weights};
+    use crate::weights::{FairnessMask, Weights};
     use voxreg_normals::NormalField;
     use voxreg_testkit::{digitize, true_normals, Lcg, Torus};
 

@@ -2,7 +2,7 @@
 
 use serde::Serialize;
 
-use crate::Preconditioner;
+use crate::iterative::Preconditioner;
 
 /// Seconds spent in each step of a solve.
 ///

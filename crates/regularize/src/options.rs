@@ -11,7 +11,9 @@ use std::str::FromStr;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use voxreg_digisurf::RegionMap;
 
-use crate::{ClampOverride, Estimator, OverrideError, Params, RegularizeError, SolverChoice};
+use crate::error::RegularizeError;
+use crate::params::{Estimator, Params};
+use crate::solver::{ClampOverride, OverrideError, SolverChoice};
 
 /// The named parameter sets every option applies over.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]

@@ -7,7 +7,9 @@ use voxreg_normals::{
     Interrupt, NormalEstimator, NormalField, Trivial,
 };
 
-use crate::{EnergyParams, RegularizeError, SolverChoice, SolverParams};
+use crate::energy::EnergyParams;
+use crate::error::RegularizeError;
+use crate::solver::{SolverChoice, SolverParams};
 
 /// The normal estimators of the alignment term's field.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default, Serialize)]

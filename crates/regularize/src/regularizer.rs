@@ -7,15 +7,17 @@ use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
 use voxreg_normals::{anisotropic_fit_weight, FeatureField, Interrupt, NormalField, ProbeHints, Refined};
 
+use crate::energy::Energy;
+use crate::error::RegularizeError;
+use crate::params::Params;
 use crate::pipeline::{
     crease_weights, hold_thin_sheets, informative_vertices, plateau_weights, relaxed_normals, sagitta_lift,
     sample_weights, surfel_drift, thin_sheets, trusted_drift,
 };
+use crate::progress::Progress;
 use crate::report::{EnergyReport, NormalsReport, Report, StageTimes};
-use crate::{
-    Energy, FairnessMask, Params, Progress, RegularizeError, SolveRequest, SolveStart, Solver, SolverParams,
-    Weights,
-};
+use crate::solver::{SolveRequest, SolveStart, Solver, SolverParams};
+use crate::weights::{FairnessMask, Weights};
 
 /// A stage of the front door's work, for progress displays.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, serde::Serialize)]

@@ -6,10 +6,14 @@ use voxreg_digisurf::DigitalSurface;
 
 use serde::Serialize;
 
-use crate::{
-    BoundedParams, BoundedSolver, CgParams, CgSolver, DirectSolver, Energy, Interrupt, Progress,
-    RegularizeError, SolveInfo,
-};
+use crate::bounded::{BoundedParams, BoundedSolver};
+use crate::cg::{CgParams, CgSolver};
+use crate::direct::DirectSolver;
+use crate::energy::Energy;
+use crate::error::RegularizeError;
+use crate::info::SolveInfo;
+use crate::progress::Progress;
+use voxreg_normals::Interrupt;
 
 /// Which solver [`Solver::new`] builds.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default, Serialize)]
