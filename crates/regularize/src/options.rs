@@ -494,6 +494,8 @@ mod tests {
             .cloned()
             .collect();
         let mut listed: Vec<String> = Overrides::FIELDS.iter().map(|s| s.to_string()).collect();
+        let mut names = names;
+        names.sort();
         listed.sort();
         assert_eq!(names, listed);
     }
