@@ -314,12 +314,20 @@ impl Overrides {
     ];
 
     /// `self`, with every field that `over` gives replaced by `over`'s; the boxes
-    /// (`clamp` and `smoothness`) go together: either given in `over` replaces both.
+    /// (`clamp` and `smoothness`) go together: either given in `over` replaces both, and
+    /// boxes asked for by `over` drop an unbounded solver (`direct`, `cg`) that only `self`
+    /// names, since they need the bounded one.
     pub fn overlaid(&self, over: &Overrides) -> Overrides {
         fn pick<T: Clone>(a: &Option<T>, b: &Option<T>) -> Option<T> {
             b.clone().or_else(|| a.clone())
         }
         let boxes = over.clamp.is_some() || over.smoothness.is_some();
+        let boxed = over.smoothness.is_some() || matches!(over.clamp, Some(Clamp::On | Clamp::Margin(_)));
+        let solver = match (over.solver, self.solver) {
+            (Some(s), _) => Some(s),
+            (None, Some(SolverChoice::Direct | SolverChoice::Cg)) if boxed => None,
+            (None, s) => s,
+        };
         Overrides {
             regions: pick(&self.regions, &over.regions),
             normals: pick(&self.normals, &over.normals),
@@ -329,7 +337,7 @@ impl Overrides {
             alpha: pick(&self.alpha, &over.alpha),
             beta: pick(&self.beta, &over.beta),
             gamma: pick(&self.gamma, &over.gamma),
-            solver: pick(&self.solver, &over.solver),
+            solver,
             clamp: if boxes { over.clamp } else { self.clamp },
             smoothness: if boxes { over.smoothness } else { self.smoothness },
             tolerance: pick(&self.tolerance, &over.tolerance),
