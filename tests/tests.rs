@@ -19,13 +19,13 @@ use glam::DVec3;
 use voxreg::digisurf::{DigitalSurface, LabelVolume, RegionMap};
 use voxreg::io::{read_volume, write_mesh, QuadMesh};
 use voxreg::normals::{NormalEstimator, NormalField, Trivial};
-use voxreg::regularize::{Output, Params, Regularizer, SolverChoice};
+use voxreg::regularize::{Output, Params, Regularizer, Run, SolverChoice};
 
 /// The papers' single solve, exact (sparse Cholesky), from `normals`.
 fn exact(surface: &DigitalSurface, normals: &NormalField) -> Output {
     let mut params = Params::papers();
     params.solver.choice = SolverChoice::Direct;
-    Regularizer::new(surface.clone()).run_from(&params, normals).unwrap()
+    Regularizer::new(surface.clone()).run(Run::new(&params).from_normals(normals)).unwrap()
 }
 
 fn data(name: &str) -> PathBuf {

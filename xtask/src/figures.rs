@@ -31,7 +31,7 @@ use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
 use voxreg_io::{read_volume, QuadMesh};
 use voxreg_normals::{IntegralInvariant, NormalEstimator, NormalField};
 use voxreg_quality::self_intersections;
-use voxreg_regularize::{EnergyParams, Params, Regularizer, SolveInfo, SolverChoice, SolverParams};
+use voxreg_regularize::{EnergyParams, Params, Regularizer, Run, SolveInfo, SolverChoice, SolverParams};
 use voxreg_render::{render, viridis, Camera, Image, RenderParams, Shading};
 use voxreg_testkit::{digitize, Shape};
 
@@ -175,7 +175,7 @@ fn ii_normals(surface: &DigitalSurface) -> Result<NormalField> {
 fn voxreg(surface: &DigitalSurface, normals: &NormalField, params: EnergyParams) -> Result<Vec<DVec3>> {
     let mut p = Params { energy: params, ..Params::papers() };
     p.solver.choice = SolverChoice::Direct;
-    Ok(Regularizer::new(surface.clone()).run_with(&p, Some(normals), &mut |_| {})?.positions.into_vec())
+    Ok(Regularizer::new(surface.clone()).run(Run::new(&p).from_normals(normals))?.positions.into_vec())
 }
 
 /// The clamped minimizer (paper, sec. 3.4): every vertex within its box of edge
@@ -187,7 +187,7 @@ fn voxreg_clamped(surface: &DigitalSurface, normals: &NormalField, eps: f64) -> 
         ..Params::papers()
     };
     let t = Instant::now();
-    let out = Regularizer::new(surface.clone()).run_with(&p, Some(normals), &mut |_| {})?;
+    let out = Regularizer::new(surface.clone()).run(Run::new(&p).from_normals(normals))?;
     if let SolveInfo::Bounded(info) = out.report.last_solve() {
         eprintln!(
             "  clamped solve: {} quads, {} iterations, {} clamped vertices, converged {}, {:.1} s",

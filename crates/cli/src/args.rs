@@ -3,11 +3,13 @@
 
 use std::path::PathBuf;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use clap::{Args, Parser, Subcommand};
 use voxreg_digisurf::RegionMap;
 use voxreg_io::{DataType, Endian};
-use voxreg_regularize::{ClampOverride, Estimator, OverrideError, Params, SolverChoice};
+use voxreg_regularize::{
+    Clamp, Estimator, InputFacts, Overrides, Params, Preset, Regions, RegularizeError, SolverChoice,
+};
 
 /// Regularize voxel data (digital surfaces, multi-label interfaces) into smooth,
 /// faithful quad meshes that keep one quad per voxel face.
@@ -207,43 +209,25 @@ pub(crate) struct InputArgs {
 impl InputArgs {
     /// The region map of `--regions`, or `None` for the preset's.
     pub(crate) fn region_map(&self) -> Result<Option<RegionMap>> {
-        Ok(match self.regions.as_deref() {
-            None => None,
-            Some("label") => Some(RegionMap::per_label()),
-            Some("solid") => Some(RegionMap::single_solid()),
-            Some(spec) => Some(RegionMap::parse(spec).with_context(|| format!("--regions '{spec}'"))?),
-        })
+        self.regions.as_ref().map(|s| Regions::Spec(s.clone()).map().map_err(cli_error)).transpose()
     }
 }
 
-/// The presets of `--preset`.
-#[derive(Copy, Clone, Debug, PartialEq, Eq, clap::ValueEnum)]
-pub(crate) enum Preset {
-    /// The fidelity pipeline: ii normals, alpha 1e-2, 3 refinement rounds, re-centring.
-    Default,
-    /// The papers' single solve (alpha 1e-3, no refinement).
-    Papers,
-    /// One solve clamped to the voxels' boxes (never self-intersecting), all colours one
-    /// solid.
-    VoxelArt,
+/// `--preset`: the library's presets, with their descriptions as the values' help.
+fn preset_parser() -> impl clap::builder::TypedValueParser<Value = Preset> {
+    use clap::builder::{PossibleValue, PossibleValuesParser, TypedValueParser};
+    PossibleValuesParser::new(Preset::ALL.map(|p| PossibleValue::new(p.name()).help(p.description())))
+        .map(|s| s.parse::<Preset>().expect("a listed preset"))
 }
 
-impl Preset {
-    /// The viewer's name for this preset.
-    pub(crate) fn view(self) -> voxreg_view::Preset {
-        match self {
-            Preset::Default => voxreg_view::Preset::Default,
-            Preset::Papers => voxreg_view::Preset::Papers,
-            Preset::VoxelArt => voxreg_view::Preset::VoxelArt,
+/// A library error for the command line: an option's error names its flag
+/// (`--sharpen-threshold must be ...`).
+pub(crate) fn cli_error(e: RegularizeError) -> anyhow::Error {
+    match e {
+        RegularizeError::InvalidOption { option, message } => {
+            anyhow::anyhow!("--{} {message}", option.replace('_', "-"))
         }
-    }
-
-    pub(crate) fn params(self) -> Params {
-        match self {
-            Preset::Default => Params::default(),
-            Preset::Papers => Params::papers(),
-            Preset::VoxelArt => Params::voxel_art(),
-        }
+        e => e.into(),
     }
 }
 
@@ -276,17 +260,55 @@ pub(crate) struct RegularizeArgs {
     pub(crate) manifold: bool,
     /// The parameters every other option starts from [default: voxel-art for .vox input,
     /// default otherwise].
-    #[arg(long, value_enum)]
+    #[arg(long, value_parser = preset_parser())]
     pub(crate) preset: Option<Preset>,
+    #[command(flatten)]
+    pub(crate) options: OverrideArgs,
+    /// With --normals at: also write the Ambrosio-Tortorelli feature field v (low on sharp
+    /// features, about 1 elsewhere) on the output mesh, as a binary PLY with a per-vertex
+    /// float property `feature` and a colour ramp (dark red 0, amber 0.5, light grey 1).
+    #[arg(long, value_name = "FILE.ply")]
+    pub(crate) features: Option<PathBuf>,
+    /// Write a machine-readable JSON report of the run (timings, counts, energies, solver).
+    #[arg(long, value_name = "FILE.json")]
+    pub(crate) report: Option<PathBuf>,
+    /// Print nothing but errors.
+    #[arg(short, long)]
+    pub(crate) quiet: bool,
+}
+
+impl RegularizeArgs {
+    /// The preset: `--preset`, else the one the input calls for.
+    pub(crate) fn preset(&self, voxel_art: bool) -> Preset {
+        self.preset.unwrap_or_else(|| Preset::for_input(&InputFacts::voxel_art(voxel_art)))
+    }
+
+    /// The options given on the command line, as the library's overrides.
+    pub(crate) fn overrides(&self) -> Overrides {
+        self.options.overrides(self.input.regions.as_deref())
+    }
+
+    /// The library's parameters: the preset with every option given on the command line
+    /// applied over it, validated.
+    pub(crate) fn params(&self, voxel_art: bool) -> Result<Params> {
+        self.overrides().resolve(Some(self.preset(voxel_art)), &InputFacts::default()).map_err(cli_error)
+    }
+}
+
+/// The options that become the library's [`Overrides`], one flag per field (`clamp` is
+/// `--clamp [EPS]` and `--no-clamp`, `preserve_size` `--no-preserve-size`); the library
+/// validates them ([`Overrides::resolve`]).
+#[derive(Args, Debug, Clone)]
+pub(crate) struct OverrideArgs {
     /// Attachment weight (must be > 0; the papers use 1e-3, which lets thin curved shapes
     /// shrink) [default: the preset's, 1e-2].
-    #[arg(long, value_parser = positive)]
+    #[arg(long)]
     pub(crate) alpha: Option<f64>,
     /// Alignment weight [default: 1].
-    #[arg(long, value_parser = non_negative)]
+    #[arg(long)]
     pub(crate) beta: Option<f64>,
     /// Fairness weight [default: the preset's, 0.1; 1 for voxel-art].
-    #[arg(long, value_parser = non_negative)]
+    #[arg(long)]
     pub(crate) gamma: Option<f64>,
     /// Normal estimator driving the alignment term [default: ii].
     #[arg(long, value_enum)]
@@ -294,13 +316,8 @@ pub(crate) struct RegularizeArgs {
     /// Radius of the ii, convolved and at estimators, in physical units [default: the
     /// multigrid rule 3 h^(1/3), h the largest voxel spacing, kept within 3 to 12 voxels:
     /// 3 at unit spacing; 2 voxels for the voxel-art preset].
-    #[arg(long, value_name = "R", value_parser = positive_named("--radius"))]
+    #[arg(long, value_name = "R")]
     pub(crate) radius: Option<f64>,
-    /// With --normals at: also write the Ambrosio-Tortorelli feature field v (low on sharp
-    /// features, about 1 elsewhere) on the output mesh, as a binary PLY with a per-vertex
-    /// float property `feature` and a colour ramp (dark red 0, amber 0.5, light grey 1).
-    #[arg(long, value_name = "FILE.ply")]
-    pub(crate) features: Option<PathBuf>,
     /// With --normals at: most alternations of the sharpening stage after the last epsilon
     /// (0 turns it off: plain Ambrosio-Tortorelli, about a quarter faster). It keeps the
     /// edges of boxes sharp down to the surfels next to them [default: 10].
@@ -309,7 +326,7 @@ pub(crate) struct RegularizeArgs {
     /// With --normals at: the sharpening stage's threshold on the feature field v; surfels
     /// with a corner below it trust their input normal less. Higher keeps box edges
     /// sharper, lower smooths small, very curved parts better [default: 0.4].
-    #[arg(long, value_name = "TAU", value_parser = positive_named("--sharpen-threshold"))]
+    #[arg(long, value_name = "TAU")]
     pub(crate) sharpen_threshold: Option<f64>,
     /// Solver: auto (exact factorization for small surfaces, else cg), direct (sparse
     /// Cholesky), cg (multigrid conjugate gradient) or bounded (conjugate gradient inside
@@ -317,11 +334,11 @@ pub(crate) struct RegularizeArgs {
     #[arg(long, value_enum)]
     pub(crate) solver: Option<SolverKind>,
     /// Keep every vertex in the cube of edge (1 - EPS) voxel around its input position,
-    /// which rules out self-intersections (paper, Proposition 2); EPS in voxels, 0.01 when
-    /// omitted. Implies --solver bounded. On in the voxel-art preset (the default for .vox
+    /// which rules out self-intersections (paper, Proposition 2); EPS in voxels [default: the
+    /// preset's, 0.01]. Implies --solver bounded. On in the voxel-art preset (the default for .vox
     /// inputs) unless --no-clamp or --solver direct|cg.
-    #[arg(long, value_name = "EPS", num_args = 0..=1, default_missing_value = "0.01")]
-    pub(crate) clamp: Option<f64>,
+    #[arg(long, value_name = "EPS", num_args = 0..=1)]
+    pub(crate) clamp: Option<Option<f64>>,
     /// Do not clamp, even for .vox inputs (faster; the result may self-intersect where
     /// thin parts collapse: check it with `voxreg check`).
     #[arg(long, conflicts_with = "clamp")]
@@ -334,7 +351,7 @@ pub(crate) struct RegularizeArgs {
     pub(crate) smoothness: Option<f64>,
     /// Iterative solvers: stop when every vertex is estimated within this many voxels of
     /// the exact minimizer [default: 1e-3].
-    #[arg(long, value_name = "VOXELS", value_parser = positive_named("--tolerance"))]
+    #[arg(long, value_name = "VOXELS")]
     pub(crate) tolerance: Option<f64>,
     /// Normal refinement rounds: re-estimate the normals from the regularized quads
     /// (keeping sharp edges) and solve again, K times [default: the preset's: 3, or 0 for
@@ -354,77 +371,34 @@ pub(crate) struct RegularizeArgs {
     /// across a colour (label) boundary, so quad edges follow colour boundaries.
     #[arg(long)]
     pub(crate) texture_aware: bool,
-    /// Write a machine-readable JSON report of the run (timings, counts, energies, solver).
-    #[arg(long, value_name = "FILE.json")]
-    pub(crate) report: Option<PathBuf>,
-    /// Print nothing but errors.
-    #[arg(short, long)]
-    pub(crate) quiet: bool,
 }
 
-impl RegularizeArgs {
-    /// The library's parameters: the preset (`--preset`, else the one the input calls
-    /// for), with every option given on the command line applied over it.
-    pub(crate) fn params(&self, voxel_art: bool) -> Result<Params> {
-        let preset = self.preset.unwrap_or(if voxel_art { Preset::VoxelArt } else { Preset::Default });
-        let mut p = preset.params();
-        if let Some(map) = self.input.region_map()? {
-            p.regions = map;
-        }
-        if let Some(a) = self.alpha {
-            p.energy.alpha = a;
-        }
-        if let Some(b) = self.beta {
-            p.energy.beta = b;
-        }
-        if let Some(g) = self.gamma {
-            p.energy.gamma = g;
-        }
-        if let Some(n) = self.normals {
-            p.normals.estimator = n.estimator();
-        }
-        p.normals.radius = self.radius.or(p.normals.radius);
-        if let Some(k) = self.sharpen {
-            p.normals.at.sharpen_iterations = k;
-        }
-        if let Some(t) = self.sharpen_threshold {
-            p.normals.at.sharpen_threshold = t;
-        }
-        if let Some(k) = self.refine {
-            p.refine = k;
-        }
-        if let Some(f) = self.intermediate_tolerance {
-            if !(f.is_finite() && f >= 1.0) {
-                anyhow::bail!("--intermediate-tolerance: F must be a finite factor of at least 1, got {f}");
-            }
-            p.intermediate_tolerance = f;
-        }
-        if self.no_preserve_size {
-            p.preserve_size = false;
-        }
-        p.texture_aware |= self.texture_aware;
-        if let Some(t) = self.tolerance {
-            p.solver = p.solver.with_tolerance(t);
-        }
-        if let Some(s) = self.smoothness {
-            p = p
-                .with_smoothness(s)
-                .map_err(|_| anyhow::anyhow!("--smoothness: S must be in (0, 1], got {s}"))?;
-        }
-        let clamp = match (self.clamp, self.no_clamp) {
-            (Some(eps), _) => ClampOverride::Eps(eps),
-            (None, true) => ClampOverride::Off,
-            (None, false) => ClampOverride::Keep,
+impl OverrideArgs {
+    /// The overrides, with `regions` (`--regions`, an input option).
+    pub(crate) fn overrides(&self, regions: Option<&str>) -> Overrides {
+        let mut o = Overrides::default();
+        o.regions = regions.map(|s| Regions::Spec(s.to_string()));
+        o.normals = self.normals.map(NormalsKind::estimator);
+        o.radius = self.radius;
+        o.sharpen = self.sharpen;
+        o.sharpen_threshold = self.sharpen_threshold;
+        o.alpha = self.alpha;
+        o.beta = self.beta;
+        o.gamma = self.gamma;
+        o.solver = self.solver.map(SolverKind::choice);
+        o.clamp = match (self.clamp, self.no_clamp) {
+            (Some(Some(eps)), _) => Some(Clamp::Margin(eps)),
+            (Some(None), _) => Some(Clamp::On),
+            (None, true) => Some(Clamp::Off),
+            (None, false) => None,
         };
-        p.solver = p.solver.overridden(self.solver.map(SolverKind::choice), clamp).map_err(|e| match e {
-            OverrideError::ClampNeedsBoundedSolver => {
-                anyhow::anyhow!("--clamp needs the bounded solver (--solver bounded or auto)")
-            }
-            OverrideError::ClampOutOfRange(eps) => {
-                anyhow::anyhow!("--clamp: EPS must be in (0, 1) voxel, got {eps}")
-            }
-        })?;
-        Ok(p)
+        o.smoothness = self.smoothness;
+        o.tolerance = self.tolerance;
+        o.refine = self.refine;
+        o.intermediate_tolerance = self.intermediate_tolerance;
+        o.preserve_size = self.no_preserve_size.then_some(false);
+        o.texture_aware = self.texture_aware.then_some(true);
+        o
     }
 }
 
@@ -552,20 +526,6 @@ fn parse_spacing(s: &str) -> std::result::Result<glam::DVec3, String> {
         return Err(format!("'{s}': voxel sizes must be finite and positive"));
     }
     Ok(spacing)
-}
-
-fn positive(s: &str) -> std::result::Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
-        _ => Err(format!("'{s}' is not a finite positive number")),
-    }
-}
-
-fn non_negative(s: &str) -> std::result::Result<f64, String> {
-    match s.parse::<f64>() {
-        Ok(x) if x.is_finite() && x >= 0.0 => Ok(x),
-        _ => Err(format!("'{s}' is not a finite non-negative number")),
-    }
 }
 
 /// A parser of finite positive numbers whose message names the option.

@@ -5,7 +5,9 @@ use std::fmt::Write as _;
 use anyhow::{Context, Result};
 use voxreg_io::vox_model_sizes;
 
-use crate::args::{InputArgs, Preset};
+use voxreg_regularize::{InputFacts, Preset};
+
+use crate::args::InputArgs;
 use crate::input::{read_input, surface_of, voxel_art};
 use crate::print_stdout;
 
@@ -14,7 +16,7 @@ use crate::print_stdout;
 pub(crate) fn info(args: &InputArgs) -> Result<()> {
     let mut out = String::new();
     let (volume, palette, units) = read_input(args)?;
-    let preset = if voxel_art(args) { Preset::VoxelArt } else { Preset::Default };
+    let preset = Preset::for_input(&InputFacts::voxel_art(voxel_art(args)));
     let map = args.region_map()?.unwrap_or_else(|| preset.params().regions);
     let [x, y, z] = volume.dims();
     let s = volume.spacing();

@@ -18,7 +18,7 @@ mod view;
 use anyhow::{Context, Result};
 use clap::Parser as _;
 use voxreg_io::{write_ply_with_vertex_scalar, write_volume, Outputs, QuadMesh};
-use voxreg_regularize::Regularizer;
+use voxreg_regularize::{Regularizer, Run};
 use voxreg_upscale::{upscale, UpscaleParams};
 
 use crate::args::{Cli, Command, RegularizeArgs};
@@ -134,7 +134,6 @@ fn usage_error(e: &clap::Error) -> std::process::ExitCode {
 fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     output::check_outputs(args, product)?;
     let params = args.params(input::voxel_art(&args.input))?;
-    params.validate()?;
     let stages = Stages::new(args.quiet);
     let path = &args.input.input;
     let ((volume, palette, _units), read) = stages.run("read volume", || input::read_input(&args.input))?;
@@ -165,7 +164,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     regularizer.set_keep_normals(false);
     let out = stages.pipeline(&params, |progress| {
         regularizer
-            .run_with(&params, None, progress)
+            .run(Run::new(&params).progress(progress))
             .with_context(|| format!("{}: cannot regularize", path.display()))
     })?;
     let surface = &out.surface;

@@ -55,7 +55,7 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product<'_>) -> Resu
         if product != Product::Mesh {
             bail!("--features {}: only voxreg regularize writes the feature field", path.display());
         }
-        if args.normals != Some(crate::args::NormalsKind::At) {
+        if args.options.normals != Some(crate::args::NormalsKind::At) {
             bail!("--features {}: only --normals at has a feature field", path.display());
         }
         if !path.extension().is_some_and(|e| e.eq_ignore_ascii_case("ply")) {

@@ -6,21 +6,21 @@ use std::path::PathBuf;
 use anyhow::{Context, Result};
 use voxreg_view::{Loaded, Viewer};
 
-use crate::args::{Preset, RegularizeArgs, ViewArgs};
+use crate::args::{RegularizeArgs, ViewArgs};
 use crate::input;
 
 /// Reads `args.input` with the options (from `bytes`, its contents, where given: nothing
 /// else is read), and the parameters of its first solve.
 fn load(args: &RegularizeArgs, bytes: Option<&[u8]>) -> Result<Loaded> {
     let voxel_art = input::voxel_art(&args.input);
-    let preset = args.preset.unwrap_or(if voxel_art { Preset::VoxelArt } else { Preset::Default });
-    let params = args.params(voxel_art)?;
-    params.validate()?;
+    let preset = args.preset(voxel_art);
+    // Checked now, so that a bad option fails before the viewer starts.
+    args.params(voxel_art)?;
     let (volume, palette, _units) = input::read_input_from(&args.input, bytes)?;
     let path = &args.input.input;
     let name =
         path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());
-    Ok(Loaded { name, volume, palette, preset: preset.view(), params })
+    Ok(Loaded { name, volume, palette, preset, overrides: args.overrides() })
 }
 
 pub(crate) fn view(args: &ViewArgs) -> Result<()> {

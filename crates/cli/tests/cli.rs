@@ -496,7 +496,7 @@ fn view_refuses_bad_input_before_listening() {
     assert!(err.starts_with("error: ") && err.contains("no-such-file.vox"), "{err}");
     let out = voxreg(&["view", data("axes.vox").to_str().unwrap(), "--clamp", "2"]);
     assert_eq!(out.status.code(), Some(1));
-    assert!(stderr(&out).contains("--clamp: EPS must be in (0, 1) voxel"), "{}", stderr(&out));
+    assert!(stderr(&out).contains("--clamp must be a margin in (0, 1) voxel"), "{}", stderr(&out));
 }
 
 /// One request to the viewer (`Connection: close`): the status and the body.

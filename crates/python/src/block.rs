@@ -8,18 +8,14 @@ use pyo3::types::PyDict;
 use voxreg_regularize::{regularize_block as run_block, Block};
 
 use crate::error::{no_panic, Error};
-use crate::params::Options;
-use crate::run::{clamp_arg, on_pool, regions_arg, threads_arg};
+use crate::params;
+use crate::run::{on_pool, threads_arg};
 use crate::volume;
 
 /// The core of `voxreg.dask`'s per-chunk task: `labels` are the voxels from global index
 /// `start` on (the chunk with its halo), `owned` the chunk's half-open global ranges.
 #[pyfunction]
-#[pyo3(signature = (
-    labels, spacing, origin, background, start, owned, global_dims, regions, preset, normals,
-    radius, alpha, beta, gamma, refine, preserve_size, texture_aware, solver, clamp, tolerance,
-    threads
-))]
+#[pyo3(signature = (labels, spacing, origin, background, start, owned, global_dims, preset, options, threads))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn regularize_block<'py>(
     py: Python<'py>,
@@ -30,38 +26,11 @@ pub(crate) fn regularize_block<'py>(
     start: [usize; 3],
     owned: [[usize; 2]; 3],
     global_dims: [usize; 3],
-    regions: Option<&Bound<'py, PyAny>>,
-    preset: String,
-    normals: Option<String>,
-    radius: Option<f64>,
-    alpha: Option<f64>,
-    beta: Option<f64>,
-    gamma: Option<f64>,
-    refine: Option<i64>,
-    preserve_size: Option<bool>,
-    texture_aware: Option<bool>,
-    solver: Option<String>,
-    clamp: Option<&Bound<'py, PyAny>>,
-    tolerance: Option<f64>,
+    preset: &str,
+    options: &Bound<'py, PyDict>,
     threads: i64,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let options = Options {
-        preset,
-        regions: regions_arg(regions)?,
-        normals,
-        radius,
-        alpha,
-        beta,
-        gamma,
-        refine,
-        preserve_size,
-        texture_aware,
-        solver,
-        clamp: clamp_arg(clamp)?,
-        smoothness: None,
-        tolerance,
-    };
-    let params = options.params()?;
+    let params = params::params(preset, options)?;
     let threads = threads_arg(threads)?;
     let labels = volume::labels_of(labels, voxreg_io::max_memory())?;
     let volume = volume::volume(labels.view(), spacing, origin, background)?;

@@ -47,6 +47,7 @@ impl Error {
             RegularizeError::Surface(_) | RegularizeError::SizeMismatch(_) => Kind::Input,
             RegularizeError::Normals(_)
             | RegularizeError::InvalidParams(_)
+            | RegularizeError::InvalidOption { .. }
             | RegularizeError::NotFinite(_) => Kind::Parameter,
             // The binding never raises the regularizer's interrupt (it cancels through
             // the progress callback).

@@ -23,6 +23,7 @@ fn _voxreg(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(read::read, m)?)?;
     m.add_function(wrap_pyfunction!(block::regularize_block, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::check, m)?)?;
+    m.add_function(wrap_pyfunction!(params::option_names, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::write_arrays, m)?)?;
     m.add_class::<mesh::Surface>()?;
     m.add_class::<mesh::PlyParts>()?;

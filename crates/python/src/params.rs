@@ -1,178 +1,124 @@
-//! The keyword arguments of `voxreg.regularize` onto the library's `Params`, as the CLI maps
-//! its options: a preset, then every argument given applied over it (the solver and boxes
-//! by the library's `SolverParams::overridden`).
+//! The keyword arguments of `voxreg.regularize` as the library's `Overrides` (the names
+//! the CLI's flags have), resolved by the library over a preset, as the CLI resolves its
+//! options.
 
-use voxreg_digisurf::RegionMap;
-use voxreg_regularize::{ClampOverride, Estimator, OverrideError, Params, SolverChoice};
+use pyo3::prelude::*;
+use pyo3::types::{PyBool, PyDict, PyString};
+use serde::de::value::{Error as DeError, MapDeserializer, SeqDeserializer};
+use serde::de::{Deserializer, IntoDeserializer, Visitor};
+use serde::Deserialize;
+use voxreg_regularize::{InputFacts, Overrides, Params, Preset};
 
 use crate::error::{Error, Result};
 
-/// `regions=`: the preset's, every label its own region, one solid, or label groups.
-#[derive(Clone, Debug, PartialEq)]
-pub(crate) enum Regions {
-    Label,
-    Solid,
-    /// A spec such as `"1,2,3;7"`, as the CLI's `--regions`.
-    Spec(String),
-    Groups(Vec<Vec<u32>>),
+/// A Python argument as serde reads it (`None` arguments are left out: not given).
+#[derive(Clone, Debug)]
+enum Value {
+    Bool(bool),
+    Int(i64),
+    Float(f64),
+    Str(String),
+    List(Vec<Value>),
 }
 
-/// `clamp=`: `True` (0.01 voxel), `False` (no boxes, even for the voxel-art preset), or an
-/// epsilon in voxels.
-#[derive(Copy, Clone, Debug, PartialEq)]
-pub(crate) enum Clamp {
-    Off,
-    Eps(f64),
-}
-
-/// Every argument of `voxreg.regularize` that shapes `Params`; `None` keeps the preset's.
-#[derive(Clone, Debug, Default)]
-pub(crate) struct Options {
-    pub(crate) preset: String,
-    pub(crate) regions: Option<Regions>,
-    pub(crate) normals: Option<String>,
-    pub(crate) radius: Option<f64>,
-    pub(crate) alpha: Option<f64>,
-    pub(crate) beta: Option<f64>,
-    pub(crate) gamma: Option<f64>,
-    pub(crate) refine: Option<i64>,
-    pub(crate) preserve_size: Option<bool>,
-    pub(crate) texture_aware: Option<bool>,
-    pub(crate) solver: Option<String>,
-    pub(crate) clamp: Option<Clamp>,
-    pub(crate) smoothness: Option<f64>,
-    pub(crate) tolerance: Option<f64>,
-}
-
-fn positive(name: &str, x: Option<f64>) -> Result<Option<f64>> {
-    match x {
-        Some(x) if !(x.is_finite() && x > 0.0) => {
-            Err(Error::parameter(format!("{name} must be finite and positive, got {x}")))
+impl Value {
+    /// `v` (a bool, an int, a float, a str, or a sequence of them).
+    fn of(name: &str, v: &Bound<'_, PyAny>) -> Result<Value> {
+        if let Ok(b) = v.cast::<PyBool>() {
+            return Ok(Value::Bool(b.is_true()));
         }
-        _ => Ok(x),
+        if let Ok(s) = v.cast::<PyString>() {
+            return Ok(Value::Str(s.to_string()));
+        }
+        if let Ok(i) = v.extract::<i64>() {
+            return Ok(Value::Int(i));
+        }
+        if let Ok(x) = v.extract::<f64>() {
+            return Ok(Value::Float(x));
+        }
+        if let Ok(items) = v.try_iter() {
+            let bad = |e: PyErr| Error::parameter(format!("{name}: {e}"));
+            let items: Vec<Value> =
+                items.map(|item| Value::of(name, &item.map_err(bad)?)).collect::<Result<_>>()?;
+            return Ok(Value::List(items));
+        }
+        Err(Error::parameter(format!("{name}: unsupported value {v}")))
     }
 }
 
-fn non_negative(name: &str, x: Option<f64>) -> Result<Option<f64>> {
-    match x {
-        Some(x) if !(x.is_finite() && x >= 0.0) => {
-            Err(Error::parameter(format!("{name} must be finite and non-negative, got {x}")))
+impl<'de> Deserializer<'de> for Value {
+    type Error = DeError;
+
+    fn deserialize_any<V: Visitor<'de>>(self, visitor: V) -> std::result::Result<V::Value, DeError> {
+        match self {
+            Value::Bool(b) => visitor.visit_bool(b),
+            Value::Int(i) => visitor.visit_i64(i),
+            Value::Float(x) => visitor.visit_f64(x),
+            Value::Str(s) => visitor.visit_string(s),
+            Value::List(items) => visitor.visit_seq(SeqDeserializer::new(items.into_iter())),
         }
-        _ => Ok(x),
+    }
+
+    fn deserialize_option<V: Visitor<'de>>(self, visitor: V) -> std::result::Result<V::Value, DeError> {
+        visitor.visit_some(self)
+    }
+
+    serde::forward_to_deserialize_any! {
+        bool i8 i16 i32 i64 i128 u8 u16 u32 u64 u128 f32 f64 char str string bytes byte_buf unit
+        unit_struct newtype_struct seq tuple tuple_struct map struct enum identifier ignored_any
     }
 }
 
-fn one_of<T: Copy>(name: &str, value: &str, choices: &[(&str, T)]) -> Result<T> {
-    choices.iter().find(|(n, _)| *n == value).map(|&(_, t)| t).ok_or_else(|| {
-        let names: Vec<String> = choices.iter().map(|(n, _)| format!("'{n}'")).collect();
-        Error::parameter(format!("{name} must be one of {}, got '{value}'", names.join(", ")))
+impl IntoDeserializer<'_, DeError> for Value {
+    type Deserializer = Self;
+
+    fn into_deserializer(self) -> Self {
+        self
+    }
+}
+
+/// `entries` as overrides; an entry's error names it (`refine must be a non-negative
+/// integer, got -1`).
+fn overrides_of(entries: Vec<(String, Value)>) -> Result<Overrides> {
+    let read =
+        |entries: Vec<(String, Value)>| Overrides::deserialize(MapDeserializer::new(entries.into_iter()));
+    for (name, value) in &entries {
+        if let Err(e) = read(vec![(name.clone(), value.clone())]) {
+            let e = e.to_string();
+            let e = e.lines().next().unwrap_or_default();
+            let sep = if e.starts_with("must") { " " } else { ": " };
+            return Err(Error::parameter(format!("{name}{sep}{e}")));
+        }
+    }
+    read(entries).map_err(|e| Error::parameter(e.to_string()))
+}
+
+/// `preset=`: a preset's name, Python's spelling (`voxel_art`) or the CLI's.
+pub(crate) fn preset(name: &str) -> Result<Preset> {
+    name.parse().map_err(|_| {
+        let names: Vec<String> =
+            Preset::ALL.iter().map(|p| format!("'{}'", p.name().replace('-', "_"))).collect();
+        Error::parameter(format!("preset must be one of {}, got '{name}'", names.join(", ")))
     })
 }
 
-impl Options {
-    /// The region map of `regions=`, or `None` for the preset's.
-    fn region_map(&self) -> Result<Option<RegionMap>> {
-        Ok(match &self.regions {
-            None => None,
-            Some(Regions::Label) => Some(RegionMap::per_label()),
-            Some(Regions::Solid) => Some(RegionMap::single_solid()),
-            Some(Regions::Spec(spec)) => {
-                Some(RegionMap::parse(spec).map_err(|e| Error::parameter(format!("regions '{spec}': {e}")))?)
-            }
-            Some(Regions::Groups(groups)) => Some(
-                RegionMap::from_groups(groups.clone())
-                    .map_err(|e| Error::parameter(format!("regions {groups:?}: {e}")))?,
-            ),
-        })
+/// The library's parameters: `preset` with the options of `options` (a dict of
+/// [`Overrides`] fields; `None` values are not given) applied over it, validated.
+pub(crate) fn params(preset_name: &str, options: &Bound<'_, PyDict>) -> Result<Params> {
+    let preset = preset(preset_name)?;
+    let mut entries = Vec::new();
+    for (k, v) in options.iter() {
+        let name: String = k.extract().map_err(|_| Error::parameter("option names must be strings"))?;
+        if !v.is_none() {
+            entries.push((name.clone(), Value::of(&name, &v)?));
+        }
     }
+    let overrides = overrides_of(entries)?;
+    overrides.resolve(Some(preset), &InputFacts::default()).map_err(|e| Error::regularize("", &e))
+}
 
-    /// The library's parameters, validated.
-    pub(crate) fn params(&self) -> Result<Params> {
-        let mut p = one_of(
-            "preset",
-            &self.preset,
-            &[
-                ("default", Params::default as fn() -> Params),
-                ("papers", Params::papers),
-                ("voxel_art", Params::voxel_art),
-            ],
-        )?();
-        if let Some(map) = self.region_map()? {
-            p.regions = map;
-        }
-        if let Some(a) = positive("alpha", self.alpha)? {
-            p.energy.alpha = a;
-        }
-        if let Some(b) = non_negative("beta", self.beta)? {
-            p.energy.beta = b;
-        }
-        if let Some(g) = non_negative("gamma", self.gamma)? {
-            p.energy.gamma = g;
-        }
-        if let Some(n) = &self.normals {
-            p.normals.estimator = one_of(
-                "normals",
-                n,
-                &[
-                    ("trivial", Estimator::Trivial),
-                    ("convolved", Estimator::Convolved),
-                    ("ii", Estimator::Ii),
-                    ("at", Estimator::At),
-                ],
-            )?;
-        }
-        p.normals.radius = positive("radius", self.radius)?.or(p.normals.radius);
-        if let Some(k) = self.refine {
-            p.refine = usize::try_from(k)
-                .map_err(|_| Error::parameter(format!("refine must be a non-negative integer, got {k}")))?;
-        }
-        if let Some(keep) = self.preserve_size {
-            p.preserve_size = keep;
-        }
-        if let Some(t) = self.texture_aware {
-            p.texture_aware = t;
-        }
-        if let Some(t) = positive("tolerance", self.tolerance)? {
-            p.solver = p.solver.with_tolerance(t);
-        }
-        if let Some(s) = self.smoothness {
-            if self.clamp.is_some() {
-                return Err(Error::parameter(
-                    "smoothness and clamp exclude each other (smoothness sets the boxes)",
-                ));
-            }
-            p = p
-                .with_smoothness(s)
-                .map_err(|_| Error::parameter(format!("smoothness must be in (0, 1], got {s}")))?;
-        }
-        let solver = match &self.solver {
-            None => None,
-            Some(s) => Some(one_of(
-                "solver",
-                s,
-                &[
-                    ("auto", SolverChoice::Auto),
-                    ("direct", SolverChoice::Direct),
-                    ("cg", SolverChoice::Cg),
-                    ("bounded", SolverChoice::Bounded),
-                    ("gd", SolverChoice::Bounded),
-                ],
-            )?),
-        };
-        let clamp = match self.clamp {
-            None => ClampOverride::Keep,
-            Some(Clamp::Off) => ClampOverride::Off,
-            Some(Clamp::Eps(eps)) => ClampOverride::Eps(eps),
-        };
-        p.solver = p.solver.overridden(solver, clamp).map_err(|e| match e {
-            OverrideError::ClampNeedsBoundedSolver => {
-                Error::parameter("clamp needs the bounded solver (solver='bounded' or 'auto')")
-            }
-            OverrideError::ClampOutOfRange(eps) => {
-                Error::parameter(format!("clamp: EPS must be in (0, 1) voxel, got {eps}"))
-            }
-        })?;
-        p.validate().map_err(|e| Error::regularize("", &e))?;
-        Ok(p)
-    }
+/// The names of the options (`Overrides` fields), for the parity tests.
+#[pyfunction]
+pub(crate) fn option_names() -> Vec<&'static str> {
+    Overrides::FIELDS.to_vec()
 }

@@ -8,13 +8,13 @@ use std::time::{Duration, Instant};
 
 use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
-use pyo3::types::{PyBool, PyDict, PyString};
+use pyo3::types::{PyDict, PyString};
 use voxreg_io::{Material, Palette};
-use voxreg_regularize::{Event, Output, Regularizer, Stage};
+use voxreg_regularize::{Event, Output, Regularizer, Run, Stage};
 
 use crate::error::{panic_error, Error, Result};
 use crate::mesh::{Part, Surface};
-use crate::params::{Clamp, Options, Regions};
+use crate::params;
 use crate::volume;
 
 /// The shortest interval between two progress calls (a stage change always calls).
@@ -26,35 +26,6 @@ struct Cancelled;
 /// A material as the Python layer passes it: name, RGBA, metallic, roughness, emission,
 /// transparency.
 type MaterialTuple = (String, [u8; 4], f32, f32, f32, f32);
-
-pub(crate) fn regions_arg(regions: Option<&Bound<'_, PyAny>>) -> Result<Option<Regions>> {
-    let Some(r) = regions else { return Ok(None) };
-    if let Ok(s) = r.cast::<PyString>() {
-        let s = s.to_string();
-        return Ok(Some(match s.as_str() {
-            "label" => Regions::Label,
-            "solid" => Regions::Solid,
-            _ => Regions::Spec(s),
-        }));
-    }
-    let groups: Vec<Vec<u32>> = r.extract().map_err(|_| {
-        Error::parameter(
-            "regions must be None, 'label', 'solid', a spec such as '1,2;7', or a list of label lists",
-        )
-    })?;
-    Ok(Some(Regions::Groups(groups)))
-}
-
-pub(crate) fn clamp_arg(clamp: Option<&Bound<'_, PyAny>>) -> Result<Option<Clamp>> {
-    let Some(c) = clamp else { return Ok(None) };
-    if let Ok(b) = c.cast::<PyBool>() {
-        return Ok(Some(if b.is_true() { Clamp::Eps(0.01) } else { Clamp::Off }));
-    }
-    let eps: f64 = c
-        .extract()
-        .map_err(|_| Error::parameter("clamp must be None, True, False or an epsilon in voxels"))?;
-    Ok(Some(Clamp::Eps(eps)))
-}
 
 fn palette_arg(
     colors: Option<PyReadonlyArray2<'_, u8>>,
@@ -105,10 +76,19 @@ fn palette_arg(
     }))
 }
 
+/// The most threads a private pool may have: more only costs their start-up.
+pub(crate) const MAX_THREADS: i64 = 1024;
+
 pub(crate) fn threads_arg(threads: i64) -> Result<usize> {
-    usize::try_from(threads).map_err(|_| {
-        Error::parameter(format!("threads must be a non-negative integer (0: every core), got {threads}"))
-    })
+    match usize::try_from(threads) {
+        Ok(n) if threads <= MAX_THREADS => Ok(n),
+        Ok(_) => Err(Error::parameter(format!(
+            "threads must be at most {MAX_THREADS} (0: every core), got {threads}"
+        ))),
+        Err(_) => Err(Error::parameter(format!(
+            "threads must be a non-negative integer (0: every core), got {threads}"
+        ))),
+    }
 }
 
 /// Runs `f` on a private pool of `threads` threads (0: rayon's default, every core).
@@ -122,9 +102,8 @@ pub(crate) fn on_pool<T: Send>(threads: usize, f: impl FnOnce() -> T + Send) -> 
 /// The core of `voxreg.regularize` (documented there).
 #[pyfunction]
 #[pyo3(signature = (
-    labels, spacing, origin, background, regions, preset, normals, radius, alpha, beta, gamma,
-    refine, preserve_size, texture_aware, solver, clamp, smoothness, tolerance, threads, progress,
-    palette_colors, palette_materials, max_memory, palette_names=None
+    labels, spacing, origin, background, preset, options, threads, progress, palette_colors,
+    palette_materials, max_memory, palette_names=None
 ))]
 #[allow(clippy::too_many_arguments)]
 pub(crate) fn regularize<'py>(
@@ -133,20 +112,8 @@ pub(crate) fn regularize<'py>(
     spacing: [f64; 3],
     origin: [f64; 3],
     background: Option<u32>,
-    regions: Option<&Bound<'py, PyAny>>,
-    preset: String,
-    normals: Option<String>,
-    radius: Option<f64>,
-    alpha: Option<f64>,
-    beta: Option<f64>,
-    gamma: Option<f64>,
-    refine: Option<i64>,
-    preserve_size: Option<bool>,
-    texture_aware: Option<bool>,
-    solver: Option<String>,
-    clamp: Option<&Bound<'py, PyAny>>,
-    smoothness: Option<f64>,
-    tolerance: Option<f64>,
+    preset: &str,
+    options: &Bound<'py, PyDict>,
     threads: i64,
     progress: Option<Py<PyAny>>,
     palette_colors: Option<PyReadonlyArray2<'py, u8>>,
@@ -154,23 +121,7 @@ pub(crate) fn regularize<'py>(
     max_memory: Option<&Bound<'py, PyAny>>,
     palette_names: Option<std::collections::BTreeMap<u32, String>>,
 ) -> PyResult<Bound<'py, PyDict>> {
-    let options = Options {
-        preset,
-        regions: regions_arg(regions)?,
-        normals,
-        radius,
-        alpha,
-        beta,
-        gamma,
-        refine,
-        preserve_size,
-        texture_aware,
-        solver,
-        clamp: clamp_arg(clamp)?,
-        smoothness,
-        tolerance,
-    };
-    let params = options.params()?;
+    let params = params::params(preset, options)?;
     let threads = threads_arg(threads)?;
     let palette = palette_arg(palette_colors, palette_materials, palette_names)?;
     // Never above what the address-space and cgroup limits leave the process.
@@ -214,7 +165,9 @@ pub(crate) fn regularize<'py>(
                     let mut regularizer = Regularizer::from_volume(volume, &params.regions)
                         .map_err(|e| Error::regularize("labels: no surface to regularize: ", &e))?;
                     regularizer.set_keep_normals(false);
-                    regularizer.run_with(params, None, &mut report).map_err(|e| Error::regularize("", &e))
+                    regularizer
+                        .run(Run::new(params).progress(&mut report))
+                        .map_err(|e| Error::regularize("", &e))
                 }))
             })
         })?

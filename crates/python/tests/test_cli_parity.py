@@ -113,3 +113,67 @@ def test_smoothness_errors(kwargs, message):
 
     with pytest.raises(voxreg.ParameterError, match=message):
         voxreg.regularize(ball_labels(), **kwargs)
+
+
+def cli_flag(name):
+    """The command line's flag of an option (an `Overrides` field)."""
+    return {"preserve_size": "--no-preserve-size"}.get(name, "--" + name.replace("_", "-"))
+
+
+def test_every_option_reaches_the_cli_and_python(cli):
+    """One mapping: every library option is a keyword of voxreg.regularize and a flag."""
+    import inspect
+
+    names = voxreg._voxreg.option_names()
+    assert "alpha" in names and "clamp" in names
+    keywords = inspect.signature(voxreg.regularize).parameters
+    help_text = cli("regularize", "--help").stdout
+    for name in names:
+        assert name in keywords, name
+        assert cli_flag(name) in help_text, name
+    assert "--no-clamp" in help_text
+
+
+@pytest.mark.parametrize("args, kwargs", [
+    (["--beta", "0.5", "--gamma", "0.2", "--texture-aware"], dict(beta=0.5, gamma=0.2, texture_aware=True)),
+    (["--normals", "at", "--sharpen", "3", "--sharpen-threshold", "0.3", "--refine", "1"],
+     dict(normals="at", sharpen=3, sharpen_threshold=0.3, refine=1)),
+    (["--refine", "2", "--intermediate-tolerance", "3"], dict(refine=2, intermediate_tolerance=3)),
+    (["--clamp", "--refine", "0"], dict(clamp=True, refine=0)),
+    (["--clamp", "0.2", "--refine", "0"], dict(clamp=0.2, refine=0)),
+    (["--smoothness", "0.4", "--preset", "voxel-art"], dict(smoothness=0.4, preset="voxel_art")),
+    (["--preset", "voxel-art", "--no-clamp"], dict(preset="voxel_art", clamp=False)),
+    (["--preset", "papers", "--solver", "direct"], dict(preset="papers", solver="direct")),
+])
+def test_options_resolve_to_the_same_params(cli, data, tmp_path, args, kwargs):
+    import json
+
+    report = tmp_path / "r.json"
+    r = cli("regularize", data / "cat10.vol", "-o", tmp_path / "o.obj", "-q", "--report", report, *args)
+    assert r.returncode == 0, r.stderr
+    labels, info = voxreg.read(data / "cat10.vol")
+    mesh = voxreg.regularize(labels, **dict(info, **kwargs))
+    assert json.loads(report.read_text())["params"] == mesh.report["params"]
+
+
+@pytest.mark.parametrize("args, kwargs, message", [
+    (["--alpha=0"], dict(alpha=0), "alpha must be finite and positive, got 0"),
+    (["--refine", "1000000000"], dict(refine=10**9), "refinement rounds must be at most 100"),
+    (["--clamp", "2"], dict(clamp=2.0), r"clamp must be a margin in \(0, 1\) voxel, got 2"),
+    (["--intermediate-tolerance", "0.5"], dict(intermediate_tolerance=0.5), "intermediate tolerance"),
+])
+def test_the_same_options_are_refused_with_the_same_message(cli, data, tmp_path, args, kwargs, message):
+    import re
+
+    r = cli("regularize", data / "cat10.vol", "-o", tmp_path / "o.obj", *args)
+    assert r.returncode == 1 and re.search(message, r.stderr), r.stderr
+    assert not (tmp_path / "o.obj").exists()
+    with pytest.raises(voxreg.ParameterError, match=message):
+        voxreg.regularize(voxreg.read(data / "cat10.vol")[0], **kwargs)
+
+
+def test_threads_are_bounded():
+    from conftest import ball_labels
+
+    with pytest.raises(voxreg.ParameterError, match="threads must be at most 1024"):
+        voxreg.regularize(ball_labels(), threads=10**9)

@@ -32,7 +32,7 @@ def test_input_errors(labels, message):
     (dict(normals="pca"), "normals must be one of"),
     (dict(solver="lu"), "solver must be one of"),
     (dict(solver="cg", clamp=0.1), "clamp needs the bounded solver"),
-    (dict(clamp=1.5), r"clamp: EPS must be in \(0, 1\) voxel, got 1.5"),
+    (dict(clamp=1.5), r"clamp must be a margin in \(0, 1\) voxel, got 1.5"),
     (dict(refine=-1), "refine must be a non-negative integer"),
     (dict(threads=-2), "threads must be a non-negative integer"),
     (dict(spacing=(1, 0, 1)), "spacing: invalid volume: voxel spacing must be finite and positive"),

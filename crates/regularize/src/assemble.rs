@@ -6,7 +6,8 @@ use glam::{DMat3, DVec3};
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, VertexId};
 
-use crate::{Energy, RegularizeError};
+use crate::energy::Energy;
+use crate::error::RegularizeError;
 
 /// The sparsity pattern of the operator: for each vertex, the sorted vertices within two
 /// edge-hops (the fairness term couples a vertex with its neighbours' neighbours).

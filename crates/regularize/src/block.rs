@@ -14,7 +14,10 @@
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, LabelStorage, LabelVolume, SurfaceError};
 
-use crate::{Params, RegularizeError, Regularizer, Report};
+use crate::error::RegularizeError;
+use crate::params::Params;
+use crate::regularizer::Regularizer;
+use crate::report::Report;
 
 /// Where a sub-volume sits in the whole volume, and what of it the block owns.
 #[derive(Clone, Debug, PartialEq, Eq)]

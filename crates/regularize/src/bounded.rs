@@ -13,12 +13,16 @@ use crate::boxqp::{
 };
 use crate::cg::check_tolerance;
 use crate::clamping::clamp_boxes;
+use crate::energy::Energy;
+use crate::error::RegularizeError;
 use crate::info::BoundedInfo;
 use crate::iterative::{Preconditioner, Prepared, Setup};
 use crate::multigrid::MultigridParams;
+use crate::progress::Progress;
+use crate::stencil::MatrixFreeOperator;
 use crate::stencil::CHUNK;
 use crate::vecops::{dot, norm, tail_estimate};
-use crate::{Energy, Interrupt, MatrixFreeOperator, Progress, RegularizeError};
+use voxreg_normals::Interrupt;
 
 /// Parameters of [`BoundedSolver`].
 #[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]

@@ -21,9 +21,10 @@ use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 
 use crate::iterative::{Pre, Prepared};
+use crate::progress::Progress;
 use crate::stencil::{Coefficients, Stencil, CHUNK};
 use crate::vecops::{cg_update, dot, scale_add, tail_estimate};
-use crate::{Interrupt, Progress};
+use voxreg_normals::Interrupt;
 
 /// Per-vertex boxes of the displacement from the input: `lo <= u <= hi` coordinate-wise,
 /// with `lo <= 0 <= hi` (the input is feasible).
@@ -787,7 +788,8 @@ mod tests {
     /// would spread through the dot products into the result.
     #[test]
     fn every_phase_writes_the_shared_vectors_before_reading_them() {
-        use crate::{BoundedParams, BoundedSolver, Energy, EnergyParams};
+        use crate::bounded::{BoundedParams, BoundedSolver};
+        use crate::energy::{Energy, EnergyParams};
         use voxreg_digisurf::DigitalSurface;
         use voxreg_normals::NormalField;
         use voxreg_testkit::{digitize, true_normals, Sphere};

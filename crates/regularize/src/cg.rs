@@ -6,12 +6,16 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
+use crate::energy::Energy;
+use crate::error::RegularizeError;
 use crate::info::CgInfo;
 use crate::iterative::{Preconditioner, Setup};
 use crate::multigrid::MultigridParams;
+use crate::progress::Progress;
+use crate::stencil::MatrixFreeOperator;
 use crate::stencil::{Coefficients, Stencil, CHUNK};
 use crate::vecops::{cg_update, dot, norm, scale_add, tail_estimate};
-use crate::{Energy, Interrupt, MatrixFreeOperator, Progress, RegularizeError};
+use voxreg_normals::Interrupt;
 
 /// When an iterative solver stops.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default, serde::Serialize)]
@@ -417,11 +421,11 @@ mod kernel_timings {
     //! (`R=` sphere radius, default 140): timings of the iteration's kernels and the
     //! memory bandwidth they are compared with.
     use super::*;
+    use crate::energy::{Energy, EnergyParams};
     use crate::iterative::Pre;
     use crate::multigrid::Hierarchy;
     use crate::stencil::Stencil;
     use crate::vecops::sym_inverse;
-    use crate::{Energy, EnergyParams};
     use voxreg_testkit::{digitize, true_normals, Sphere};
 
     /// Median of 20 runs, in milliseconds.
@@ -437,6 +441,8 @@ mod kernel_timings {
         v[10]
     }
 
+    /// The kernels' throughput (printed; `R` sets the sphere's radius), checking each
+    /// kernel's result on the way.
     #[test]
     #[ignore]
     fn kernels() {
@@ -461,6 +467,7 @@ mod kernel_timings {
             )
         });
         eprintln!("n = {n}: triad {:.2} GB/s", 4.0 * 24.0 * n as f64 / triad * 1e-6);
+        assert!(y.iter().zip(&input).all(|(y, a)| *y == *a + 0.5 * DVec3::ONE), "the triad's result");
         let apply = time(&mut || st.apply(&c, &input, &mut y, &mut t, true));
         let bytes = st.bytes() + 24 * normals.len() + 8 * n + 5 * 24 * n;
         eprintln!(
@@ -468,10 +475,13 @@ mod kernel_timings {
             bytes as f64 * 1e-6,
             bytes as f64 / apply * 1e-6
         );
+        assert!(y.iter().chain(&t).all(|v| v.is_finite()), "the product is finite");
         let d = time(&mut || {
             std::hint::black_box(dot(&y, &t));
         });
         eprintln!("dot: {d:.3} ms");
+        let serial: f64 = y.iter().zip(&t).map(|(a, b)| a.dot(*b)).sum();
+        assert!((dot(&y, &t) - serial).abs() <= 1e-9 * serial.abs().max(1.0), "the parallel dot product");
         let upd = time(&mut || {
             std::hint::black_box(cg_update(&mut u, &mut y, 0.1, &t, &input));
         });
@@ -486,7 +496,12 @@ mod kernel_timings {
             })
         );
         let mut v = h.numeric(&st, &c, &Interrupt::never(), None).unwrap();
-        eprintln!("v-cycle: {:.3} ms ({} levels)", time(&mut || v.apply(&st, &y, &mut t)), h.levels());
+        let cycle = time(&mut || v.apply(&st, &y, &mut t));
+        eprintln!("v-cycle: {cycle:.3} ms ({} levels)", h.levels());
+        assert!(h.levels() > 1 && t.iter().all(|v| v.is_finite()), "the cycle's levels and result");
+        for ms in [triad, apply, d, upd, cycle] {
+            assert!(ms.is_finite() && ms > 0.0, "a kernel's time: {ms} ms");
+        }
     }
 }
 
@@ -495,8 +510,9 @@ mod quick_start {
     //! The quick start of a warm re-solve: the first iterate before the new energy's
     //! multigrid setup, and the same minimizer as a cold solve.
     use super::*;
+    use crate::direct::DirectSolver;
+    use crate::energy::EnergyParams;
     use crate::multigrid::tests::setups;
-    use crate::{DirectSolver, EnergyParams};
     use voxreg_normals::{NormalEstimator, NormalField, Trivial};
     use voxreg_testkit::{digitize, true_normals, Torus};
 
@@ -589,8 +605,9 @@ mod quick_start {
 mod residuals {
     //! The end-of-solve residual without the right-hand side against `b - H u`.
     use super::*;
+    use crate::energy::EnergyParams;
     use crate::stencil::Stencil;
-    use crate::{EnergyParams, FairnessMask, Weights};
+    use crate::weights::{FairnessMask, Weights};
     use voxreg_normals::NormalField;
     use voxreg_testkit::{digitize, true_normals, Lcg, Torus};
 

@@ -11,8 +11,10 @@ use faer::sparse::linalg::cholesky::{
 use faer::{Conj, MatMut, Side};
 use glam::DVec3;
 
+use crate::assemble::{Operator, OperatorPattern};
+use crate::energy::Energy;
+use crate::error::RegularizeError;
 use crate::info::{DirectInfo, SolveTimings};
-use crate::{Energy, Operator, OperatorPattern, RegularizeError};
 
 /// A direct solver for the energy's linear system, reusable across solves on the same
 /// surface.

@@ -5,8 +5,9 @@ use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, VertexId};
 use voxreg_normals::NormalField;
 
+use crate::error::RegularizeError;
 use crate::vecops::ordered_sum;
-use crate::{RegularizeError, Weights};
+use crate::weights::Weights;
 
 /// Weights of the three terms of the energy (eq. 2 of the paper).
 #[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]

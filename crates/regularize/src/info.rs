@@ -2,7 +2,7 @@
 
 use serde::Serialize;
 
-use crate::Preconditioner;
+use crate::iterative::Preconditioner;
 
 /// Seconds spent in each step of a solve.
 ///
@@ -50,7 +50,7 @@ pub struct CgInfo {
     /// Iterations.
     pub iterations: usize,
     /// Of those, the first ones preconditioned by the previous solve's multigrid cycle (a
-    /// quick start of a warm re-solve, [`crate::Regularizer::run_warm`]; 0 otherwise).
+    /// quick start of a warm re-solve, [`crate::Run::warm`](crate::Run::warm()); 0 otherwise).
     pub quick_start_iterations: usize,
     /// Products by the operator `H` (matrix-free).
     pub operator_applications: usize,

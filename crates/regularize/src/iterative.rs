@@ -6,10 +6,14 @@ use std::time::Instant;
 use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 
+use crate::energy::Energy;
+use crate::error::RegularizeError;
+use crate::info::SolveTimings;
 use crate::multigrid::{Hierarchy, MultigridParams, Vcycle};
 use crate::stencil::{Coefficients, MatrixFreeOperator, Stencil, CHUNK};
 use crate::vecops::{sym_inverse, sym_mul};
-use crate::{Energy, FairnessMask, Interrupt, RegularizeError, SolveTimings};
+use crate::weights::FairnessMask;
+use voxreg_normals::Interrupt;
 
 /// The preconditioner of the iterative solvers ([`crate::CgSolver`],
 /// [`crate::BoundedSolver`]).

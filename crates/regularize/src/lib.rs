@@ -20,6 +20,8 @@
 //!   the initial normals across runs (parameter sweeps, interactive use). An
 //!   [`Interrupt`] raised from another thread ([`Regularizer::set_interrupt`]) stops a run
 //!   early with [`RegularizeError::Interrupted`] (an interactive front end replacing it).
+//! - [`Preset`] and [`Overrides`]: the one place where a front end's options become
+//!   [`Params`] ([`Overrides::resolve`]), shared by the command line, the viewer and Python.
 //! - [`Params`], with three presets: [`Params::default`] (the fidelity pipeline: solve,
 //!   then refine the normals from the result and solve again, re-centring the targets),
 //!   [`Params::papers`] (the papers' single solve) and [`Params::voxel_art`] (one solve
@@ -70,12 +72,15 @@ mod cg;
 mod clamping;
 mod direct;
 mod energy;
+mod error;
 mod faces;
 mod info;
 mod iterative;
 mod multigrid;
+mod options;
 mod params;
 mod pipeline;
+mod progress;
 mod regularizer;
 mod report;
 mod solver;
@@ -90,102 +95,24 @@ pub use bounded::{BoundedParams, BoundedSolver};
 pub use cg::{CgParams, CgSolver, StoppingRule};
 pub use direct::DirectSolver;
 pub use energy::{Energy, EnergyParams, EnergyTerms, MAX_STIFFNESS_RATIO};
+pub use error::RegularizeError;
 pub use info::{BoundedInfo, CgInfo, DirectInfo, SolveInfo, SolveTimings};
 pub use iterative::Preconditioner;
 pub use multigrid::MultigridParams;
+pub use options::{Clamp, InputFacts, Overrides, Preset, Regions};
 pub use params::{EstimatedNormals, Estimator, NormalsParams, Params};
+pub use progress::Progress;
 pub use regularizer::{
-    estimated_bytes, regularize, Event, Output, Regularizer, Stage, BYTES_FIXED, BYTES_PER_SURFEL,
+    estimated_bytes, regularize, Event, Output, Regularizer, Run, Stage, BYTES_FIXED, BYTES_PER_SURFEL,
     BYTES_PER_SURFEL_CLAMPED,
 };
 pub use report::{EnergyReport, NormalsReport, Report, StageTimes};
-pub use solver::{estimate_factor_nnz, ClampOverride, OverrideError, Solver, SolverChoice, SolverParams};
+pub use solver::{
+    estimate_factor_nnz, ClampOverride, OverrideError, SolveRequest, SolveStart, Solver, SolverChoice,
+    SolverParams,
+};
 pub use stencil::MatrixFreeOperator;
 /// The flag that stops a run early ([`Regularizer::set_interrupt`]), from
 /// `voxreg-normals`, whose estimators poll it too.
 pub use voxreg_normals::Interrupt;
 pub use weights::{colour_discontinuities, junction_vertices, FairnessMask, Weights};
-
-use glam::DVec3;
-use voxreg_digisurf::SurfaceError;
-use voxreg_normals::NormalError;
-
-/// What can go wrong when regularizing.
-#[derive(Debug, thiserror::Error, Clone, PartialEq)]
-pub enum RegularizeError {
-    /// The volume has no surface to regularize, or its regions are invalid.
-    #[error(transparent)]
-    Surface(#[from] SurfaceError),
-    /// The normal estimator failed or was given invalid parameters.
-    #[error(transparent)]
-    Normals(NormalError),
-    /// A weight is out of range.
-    #[error("invalid parameters: {0}")]
-    InvalidParams(String),
-    /// Arrays do not match the surface (normals per surfel, positions per vertex).
-    #[error("size mismatch: {0}")]
-    SizeMismatch(String),
-    /// The factorization failed (e.g. the system is not positive definite).
-    #[error("factorization failed: {0}")]
-    Factorization(String),
-    /// Not enough memory for a solver's data.
-    #[error("out of memory: {0}")]
-    OutOfMemory(String),
-    /// The computation left the finite numbers (weights or spacings whose scale the
-    /// double-precision arithmetic cannot hold): never reported as converged.
-    #[error("numerical failure: {0}")]
-    NotFinite(String),
-    /// The run's [`Interrupt`] was raised ([`Regularizer::set_interrupt`]): it stopped
-    /// before its end, and returned nothing.
-    #[error("interrupted")]
-    Interrupted,
-}
-
-impl From<NormalError> for RegularizeError {
-    /// [`NormalError::Interrupted`] becomes [`RegularizeError::Interrupted`]; the others
-    /// are wrapped.
-    fn from(e: NormalError) -> Self {
-        match e {
-            NormalError::Interrupted => RegularizeError::Interrupted,
-            e => RegularizeError::Normals(e),
-        }
-    }
-}
-
-/// What an iterative solver reports after each iteration (for progress bars, and for
-/// viewers that show the surface converge).
-#[derive(Copy, Clone, PartialEq)]
-pub struct Progress<'a> {
-    /// Iterations done.
-    pub iteration: usize,
-    /// The energy at the current iterate.
-    pub energy: f64,
-    /// `|grad E|_2` at the current iterate (for the clamped descent: of the projected
-    /// gradient).
-    pub gradient_norm: f64,
-    /// `gradient_norm` relative to its value at the input positions.
-    pub relative_gradient: f64,
-    /// The current guaranteed error bound in voxels (`gradient_norm / (2 alpha_min h)`),
-    /// which the iterative solvers drive below their tolerance.
-    pub error_bound: f64,
-    /// The current estimate of that distance in voxels (see [`StoppingRule::Estimate`]).
-    pub error_estimate: f64,
-    /// The current iterate minus the solve's input positions ([`Energy::input`], the
-    /// attachment targets), one per vertex: the iterate is `input[i] + displacement[i]`.
-    pub displacement: &'a [DVec3],
-}
-
-impl std::fmt::Debug for Progress<'_> {
-    // The displacement has one entry per vertex: show its length, not its values.
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("Progress")
-            .field("iteration", &self.iteration)
-            .field("energy", &self.energy)
-            .field("gradient_norm", &self.gradient_norm)
-            .field("relative_gradient", &self.relative_gradient)
-            .field("error_bound", &self.error_bound)
-            .field("error_estimate", &self.error_estimate)
-            .field("displacement", &format_args!("[{} vectors]", self.displacement.len()))
-            .finish()
-    }
-}

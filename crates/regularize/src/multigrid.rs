@@ -33,9 +33,10 @@ use faer::{Conj, MatMut, Side};
 use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 
+use crate::error::RegularizeError;
 use crate::stencil::{Coefficients, Stencil, CHUNK};
 use crate::vecops::sym_inverse;
-use crate::{Interrupt, RegularizeError};
+use voxreg_normals::Interrupt;
 
 /// Settings of the multigrid preconditioner.
 #[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]
@@ -1723,8 +1724,8 @@ pub(crate) mod tests {
     use voxreg_testkit::{digitize, true_normals, Lcg, Torus};
 
     use super::*;
+    use crate::energy::{Energy, EnergyParams};
     use crate::stencil::Stencil;
-    use crate::{Energy, EnergyParams};
 
     /// Rows built in several parts (some rows empty) read back and recomputed in place
     /// across the parts' boundaries as if they were one array.

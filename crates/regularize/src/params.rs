@@ -7,7 +7,9 @@ use voxreg_normals::{
     Interrupt, NormalEstimator, NormalField, Trivial,
 };
 
-use crate::{EnergyParams, RegularizeError, SolverChoice, SolverParams};
+use crate::energy::EnergyParams;
+use crate::error::RegularizeError;
+use crate::solver::{SolverChoice, SolverParams};
 
 /// The normal estimators of the alignment term's field.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default, Serialize)]
@@ -27,6 +29,9 @@ pub enum Estimator {
 }
 
 impl Estimator {
+    /// Every estimator.
+    pub const ALL: [Estimator; 4] = [Estimator::Trivial, Estimator::Convolved, Estimator::Ii, Estimator::At];
+
     /// `"trivial"`, `"convolved"`, `"ii"` or `"at"`.
     pub fn name(self) -> &'static str {
         match self {
@@ -35,6 +40,24 @@ impl Estimator {
             Estimator::Ii => "ii",
             Estimator::At => "at",
         }
+    }
+}
+
+impl std::fmt::Display for Estimator {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for Estimator {
+    type Err = String;
+
+    /// An estimator's [`Estimator::name`].
+    fn from_str(s: &str) -> Result<Self, String> {
+        Estimator::ALL.into_iter().find(|e| e.name() == s).ok_or_else(|| {
+            let names: Vec<String> = Estimator::ALL.iter().map(|e| format!("'{}'", e.name())).collect();
+            format!("must be one of {}, got '{s}'", names.join(", "))
+        })
     }
 }
 
@@ -260,6 +283,14 @@ impl Params {
         }
     }
 
+    /// The box margin, in voxels, of [`Params::voxel_art`] and of a front end's clamping
+    /// option given without a margin ([`crate::Clamp::On`]).
+    pub const CLAMP_MARGIN: f64 = 0.01;
+
+    /// The most refinement rounds [`Params::validate`] accepts: each round is a solve,
+    /// and the rounds' bookkeeping is allocated up front.
+    pub const MAX_REFINE: usize = 100;
+
     /// The depth kept inside thin voxels by [`Params::voxel_art`], in voxels
     /// ([`crate::BoundedParams::thin_depth`]).
     pub const THIN_DEPTH: f64 = 0.3;
@@ -276,7 +307,7 @@ impl Params {
     /// radius 3 and `gamma = 0.1` with box edges at least as sharp
     /// (`docs/design/voxel-art-clamping.md`).
     pub fn voxel_art() -> Self {
-        let mut solver = SolverParams::default().clamped(Some(0.01));
+        let mut solver = SolverParams::default().clamped(Some(Self::CLAMP_MARGIN));
         solver.bounded.thin_depth = Some(Self::THIN_DEPTH);
         let normals = NormalsParams { radius_voxels: Some(Self::VOXEL_ART_RADIUS), ..Default::default() };
         Params {
@@ -314,6 +345,13 @@ impl Params {
         self.energy.validate()?;
         self.normals.validate()?;
         self.solver.validate()?;
+        if self.refine > Self::MAX_REFINE {
+            return Err(RegularizeError::InvalidParams(format!(
+                "the refinement rounds must be at most {}, got {}",
+                Self::MAX_REFINE,
+                self.refine
+            )));
+        }
         let positive = |x: f64| x.is_finite() && x > 0.0;
         if !positive(self.refine_radius) || !positive(self.recentre_sigma) {
             return Err(RegularizeError::InvalidParams(format!(

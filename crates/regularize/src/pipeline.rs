@@ -6,8 +6,8 @@ use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, Surfel, SurfelId, VertexId};
 use voxreg_normals::{FeatureRamp, Interrupt, NormalField};
 
+use crate::error::RegularizeError;
 use crate::faces::FaceIndex;
-use crate::RegularizeError;
 
 /// Per-surfel alignment multipliers: `weight` for the quads whose normal in `field` is
 /// more than `feature_angle_deg` from the normal of an edge-adjacent quad of the same

@@ -7,12 +7,17 @@ use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
 use voxreg_normals::{anisotropic_fit_weight, FeatureField, Interrupt, NormalField, ProbeHints, Refined};
 
+use crate::energy::Energy;
+use crate::error::RegularizeError;
+use crate::params::Params;
 use crate::pipeline::{
     crease_weights, hold_thin_sheets, informative_vertices, plateau_weights, relaxed_normals, sagitta_lift,
     sample_weights, surfel_drift, thin_sheets, trusted_drift,
 };
+use crate::progress::Progress;
 use crate::report::{EnergyReport, NormalsReport, Report, StageTimes};
-use crate::{Energy, FairnessMask, Params, Progress, RegularizeError, Solver, SolverParams, Weights};
+use crate::solver::{SolveRequest, SolveStart, Solver, SolverParams};
+use crate::weights::{FairnessMask, Weights};
 
 /// A stage of the front door's work, for progress displays.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, serde::Serialize)]
@@ -126,6 +131,70 @@ pub fn estimated_bytes(surfels: u64, params: &Params) -> u64 {
     surfels.saturating_mul(per).saturating_add(BYTES_FIXED)
 }
 
+/// One run of a [`Regularizer`] ([`Regularizer::run`]): the parameters, and how the run
+/// starts and reports. `&Params` converts into a plain run.
+#[non_exhaustive]
+pub struct Run<'a> {
+    /// The parameters.
+    pub params: &'a Params,
+    /// The initial normal field (one direction per surfel), instead of estimating
+    /// `params.normals`. Default: `None`.
+    pub initial: Option<&'a NormalField>,
+    /// Warm state: solve round `k` starts from `warm[k]` (one position per vertex) where
+    /// given, instead of from the input (round 0) or the previous round's result: a re-run
+    /// after a small parameter change, from the previous run's solutions (each round's
+    /// last iterate, [`Event::iterate`]), takes fewer iterations. The minimizers are the
+    /// same (the energy is convex), so the result matches a cold run's within the
+    /// solver's tolerance. The iterative solvers use the starts (the bounded one projects
+    /// them into its boxes, which may have changed); the direct solver is exact and
+    /// ignores them. A started round of the conjugate gradient reports its first iterate
+    /// before the new energy's multigrid setup ([`crate::CgInfo::quick_start_iterations`]).
+    /// Default: none.
+    pub warm: &'a [Vec<DVec3>],
+    /// Called at each stage and solver iteration. Default: none.
+    pub progress: Option<&'a mut dyn FnMut(&Event)>,
+    /// The flag this run and the next poll, replacing [`Regularizer::set_interrupt`]'s.
+    /// Default: `None` (keep the regularizer's).
+    pub interrupt: Option<Interrupt>,
+}
+
+impl<'a> Run<'a> {
+    /// A plain run of `params`.
+    pub fn new(params: &'a Params) -> Self {
+        Run { params, initial: None, warm: &[], progress: None, interrupt: None }
+    }
+
+    /// Starts from the normal field `initial` (the field `initial`).
+    pub fn from_normals(mut self, initial: &'a NormalField) -> Self {
+        self.initial = Some(initial);
+        self
+    }
+
+    /// Starts the solve rounds from `warm` (the field `warm`).
+    pub fn warm(mut self, warm: &'a [Vec<DVec3>]) -> Self {
+        self.warm = warm;
+        self
+    }
+
+    /// Reports to `progress` (the field `progress`).
+    pub fn progress(mut self, progress: &'a mut dyn FnMut(&Event)) -> Self {
+        self.progress = Some(progress);
+        self
+    }
+
+    /// Polls `interrupt` (the field `interrupt`).
+    pub fn interrupt(mut self, interrupt: Interrupt) -> Self {
+        self.interrupt = Some(interrupt);
+        self
+    }
+}
+
+impl<'a> From<&'a Params> for Run<'a> {
+    fn from(params: &'a Params) -> Self {
+        Run::new(params)
+    }
+}
+
 /// The front door's reusable form: keeps the digital surface, its solver (symbolic
 /// analysis, multigrid hierarchy) and the initial normal field across runs, for
 /// parameter sweeps and interactive use. A run whose solver settings or initial-normal
@@ -228,50 +297,25 @@ impl Regularizer {
         self.interrupt = interrupt;
     }
 
-    /// Runs `params` from the initial normals `params.normals` describes.
-    pub fn run(&mut self, params: &Params) -> Result<Output, RegularizeError> {
-        self.run_with(params, None, &mut |_| {})
-    }
-
-    /// Runs `params` from the given initial normal field (instead of estimating
-    /// `params.normals`).
-    pub fn run_from(&mut self, params: &Params, initial: &NormalField) -> Result<Output, RegularizeError> {
-        self.run_with(params, Some(initial), &mut |_| {})
-    }
-
-    /// Runs `params`, starting from the normal field `initial` when given (instead of
-    /// estimating `params.normals`), reporting progress to `progress`.
+    /// Runs the pipeline: `run` is a [`Run`] (the parameters, and how the run starts and
+    /// reports), or `&Params` for a plain run from the initial normals `params.normals`
+    /// describes.
     ///
-    /// The pipeline: one solve of the energy, then `params.refine` rounds of (refine the
-    /// normals from the regularized quads, re-centre the attachment targets, solve).
-    pub fn run_with(
-        &mut self,
-        params: &Params,
-        initial: Option<&NormalField>,
-        progress: &mut dyn FnMut(&Event),
-    ) -> Result<Output, RegularizeError> {
-        self.run_warm(params, initial, &[], progress)
+    /// The stages: the initial normals, one solve of the energy, then `params.refine`
+    /// rounds of (refine the normals from the regularized quads, re-centre the attachment
+    /// targets, solve), then the finish (fold-free post-condition, energies, report).
+    pub fn run<'a>(&mut self, run: impl Into<Run<'a>>) -> Result<Output, RegularizeError> {
+        let Run { params, initial, warm, progress, interrupt } = run.into();
+        if let Some(i) = interrupt {
+            self.interrupt = i;
+        }
+        match progress {
+            Some(p) => self.run_stages(params, initial, warm, p),
+            None => self.run_stages(params, initial, warm, &mut |_| {}),
+        }
     }
 
-    /// [`Regularizer::run_with`], the iterations of solve round `k` starting from `warm[k]`
-    /// (one position per vertex) where given, instead of from the input (round 0) or the
-    /// previous round's result (the refinement rounds): a re-run after a small parameter
-    /// change, from the previous run's solutions (each round's last iterate,
-    /// [`Event::iterate`]), takes fewer iterations. The minimizers are the same (the
-    /// energy is convex), so the result matches a cold run's within the solver's
-    /// tolerance. The iterative solvers use the starts ([`Solver::solve_from`]; the
-    /// bounded one projects them into its boxes, which may have changed); the direct
-    /// solver is exact and ignores them. Rounds past the end of `warm` start as without
-    /// it.
-    ///
-    /// A started round of the conjugate gradient reports its first iterate before the
-    /// new energy's multigrid setup: that iteration is preconditioned by the last solve's
-    /// cycle with its fine level put on the new operator (still symmetric positive
-    /// definite), then the energy's own cycle is built and the iterations restart from
-    /// that iterate ([`crate::CgInfo::quick_start_iterations`]). An interactive re-solve
-    /// shows its first iterate after the coefficients and one iteration, not after the
-    /// coarse levels' Galerkin products and factorization.
-    pub fn run_warm(
+    fn run_stages(
         &mut self,
         params: &Params,
         initial: Option<&NormalField>,
@@ -395,11 +439,6 @@ impl Regularizer {
         let mut hints = ProbeHints::default();
         for round in 0..=params.refine {
             if round > 0 {
-                if warm.get(round).is_none() {
-                    // This round's solve builds its own cycle: the last one's memory goes
-                    // to the refinement first.
-                    solver.forget_kept_cycle();
-                }
                 let t = Instant::now();
                 progress(&Event {
                     stage: Stage::Refine { round },
@@ -488,20 +527,25 @@ impl Regularizer {
             // feed the refinement: a looser tolerance.
             let last = round == params.refine;
             let factor = if last { 1.0 } else { params.intermediate_tolerance };
-            solver.set_cg_tolerance(params.solver.cg.tolerance * factor)?;
-            solver.set_quick_start(warm.get(round).is_some());
             // The bounded solver's refinement rounds start as its first does (a cold run's
             // results stay those its measurements describe); given starts it takes.
             let chained = round > 0 && !matches!(solver, Solver::Bounded(_));
-            let (x, info) = match warm.get(round) {
-                Some(start) => solver.solve_from(&energy, start, &mut report)?,
-                None if chained => solver.solve_from_owned(
-                    &energy,
-                    std::mem::take(&mut positions).into_vec(),
-                    &mut report,
-                )?,
-                None => solver.solve_with(&energy, &mut report)?,
+            let start = match warm.get(round) {
+                Some(start) => SolveStart::Given(start),
+                None if chained => SolveStart::Owned(std::mem::take(&mut positions).into_vec()),
+                None => SolveStart::Input,
             };
+            // A next round without a given start builds its own cycle: this one's memory
+            // goes to the refinement first (the last solve's is kept for a next run).
+            let keep_cycle = last || warm.get(round + 1).is_some();
+            let request = SolveRequest {
+                start,
+                tolerance: Some(params.solver.cg.tolerance * factor),
+                quick_start: warm.get(round).is_some(),
+                keep_cycle,
+                progress: Some(&mut report),
+            };
+            let (x, info) = solver.solve(&energy, request)?;
             if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {
                 let h = surface.spacing();
                 return Err(RegularizeError::NotFinite(format!(

@@ -4,7 +4,9 @@ use serde::Serialize;
 use voxreg_digisurf::SurfaceCounts;
 use voxreg_normals::AtInfo;
 
-use crate::{EnergyTerms, Params, SolveInfo};
+use crate::energy::EnergyTerms;
+use crate::info::SolveInfo;
+use crate::params::Params;
 
 /// Seconds spent in each stage of a run (all rounds together).
 #[derive(Copy, Clone, Debug, Default, PartialEq, Serialize)]

@@ -6,10 +6,14 @@ use voxreg_digisurf::DigitalSurface;
 
 use serde::Serialize;
 
-use crate::{
-    BoundedParams, BoundedSolver, CgParams, CgSolver, DirectSolver, Energy, Interrupt, Progress,
-    RegularizeError, SolveInfo,
-};
+use crate::bounded::{BoundedParams, BoundedSolver};
+use crate::cg::{CgParams, CgSolver};
+use crate::direct::DirectSolver;
+use crate::energy::Energy;
+use crate::error::RegularizeError;
+use crate::info::SolveInfo;
+use crate::progress::Progress;
+use voxreg_normals::Interrupt;
 
 /// Which solver [`Solver::new`] builds.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default, Serialize)]
@@ -29,15 +33,39 @@ pub enum SolverChoice {
 }
 
 impl SolverChoice {
-    /// Parses `auto`, `direct`, `cg` or `bounded` (also `gd`, its former name).
-    pub fn parse(s: &str) -> Option<Self> {
-        match s {
-            "auto" => Some(SolverChoice::Auto),
-            "direct" => Some(SolverChoice::Direct),
-            "cg" => Some(SolverChoice::Cg),
-            "bounded" | "gd" => Some(SolverChoice::Bounded),
-            _ => None,
+    /// Every choice.
+    pub const ALL: [SolverChoice; 4] =
+        [SolverChoice::Auto, SolverChoice::Direct, SolverChoice::Cg, SolverChoice::Bounded];
+
+    /// `"auto"`, `"direct"`, `"cg"` or `"bounded"`.
+    pub fn name(self) -> &'static str {
+        match self {
+            SolverChoice::Auto => "auto",
+            SolverChoice::Direct => "direct",
+            SolverChoice::Cg => "cg",
+            SolverChoice::Bounded => "bounded",
         }
+    }
+}
+
+impl std::fmt::Display for SolverChoice {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for SolverChoice {
+    type Err = String;
+
+    /// A choice's [`SolverChoice::name`], or `gd` (the former name of `bounded`).
+    fn from_str(s: &str) -> Result<Self, String> {
+        if s == "gd" {
+            return Ok(SolverChoice::Bounded);
+        }
+        SolverChoice::ALL.into_iter().find(|c| c.name() == s).ok_or_else(|| {
+            let names: Vec<String> = SolverChoice::ALL.iter().map(|c| format!("'{}'", c.name())).collect();
+            format!("must be one of {}, got '{s}'", names.join(", "))
+        })
     }
 }
 
@@ -222,31 +250,6 @@ impl Solver {
         }
     }
 
-    /// Sets the conjugate gradient's tolerance for the next solves (in voxels); the
-    /// direct solver is exact and the bounded one keeps its own.
-    pub(crate) fn set_cg_tolerance(&mut self, tolerance: f64) -> Result<(), RegularizeError> {
-        match self {
-            Solver::Cg(s) => s.set_tolerance(tolerance),
-            _ => Ok(()),
-        }
-    }
-
-    /// Whether the conjugate gradient's next solves from a given start begin on the last
-    /// solve's multigrid cycle ([`CgSolver::set_quick_start`]); the others ignore it.
-    pub(crate) fn set_quick_start(&mut self, on: bool) {
-        if let Solver::Cg(s) = self {
-            s.set_quick_start(on);
-        }
-    }
-
-    /// Drops the conjugate gradient's cycle kept for a quick start
-    /// ([`CgSolver::forget_kept_cycle`]); the others keep none.
-    pub(crate) fn forget_kept_cycle(&mut self) {
-        if let Solver::Cg(s) = self {
-            s.forget_kept_cycle();
-        }
-    }
-
     /// The flag the iterative solvers poll in their setup and iterations (the direct
     /// solver's factorization cannot be stopped, and is small).
     pub(crate) fn set_interrupt(&mut self, interrupt: Interrupt) {
@@ -257,55 +260,100 @@ impl Solver {
         }
     }
 
-    /// Minimizes `energy` (see each solver's `solve`).
-    pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
-        self.solve_with(energy, &mut |_| {})
-    }
-
-    /// [`Solver::solve`], reporting each iteration of the iterative solvers to `progress`
-    /// (the direct solver reports nothing).
-    pub fn solve_with(
+    /// Minimizes `energy` as `request` asks: from its start, to its tolerance, reporting
+    /// each iteration of the iterative solvers to its progress (the direct solver is exact,
+    /// ignores the start and reports nothing).
+    pub fn solve(
         &mut self,
         energy: &Energy<'_>,
-        progress: &mut dyn FnMut(&Progress),
+        request: SolveRequest<'_>,
     ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
-        match self {
-            Solver::Direct(s) => s.solve(energy).map(|(x, i)| (x, SolveInfo::Direct(i))),
-            Solver::Cg(s) => s.solve_with(energy, progress).map(|(x, i)| (x, SolveInfo::Cg(i))),
-            Solver::Bounded(s) => s.solve_with(energy, progress).map(|(x, i)| (x, SolveInfo::Bounded(i))),
-        }
-    }
-
-    /// [`Solver::solve_with`], the iterative solvers starting from `start` (one position
-    /// per vertex; see [`CgSolver::solve_from`], and [`BoundedSolver::solve_from`], which
-    /// projects it into its boxes). The direct solver is exact and ignores `start`.
-    pub fn solve_from(
-        &mut self,
-        energy: &Energy<'_>,
-        start: &[DVec3],
-        progress: &mut dyn FnMut(&Progress),
-    ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
-        match self {
-            Solver::Cg(s) => s.solve_from(energy, start, progress).map(|(x, i)| (x, SolveInfo::Cg(i))),
-            Solver::Bounded(s) => {
-                s.solve_from(energy, start, progress).map(|(x, i)| (x, SolveInfo::Bounded(i)))
+        let SolveRequest { start, tolerance, quick_start, keep_cycle, progress } = request;
+        let mut silent = |_: &Progress| {};
+        let progress: &mut dyn FnMut(&Progress) = match progress {
+            Some(p) => p,
+            None => &mut silent,
+        };
+        if let Solver::Cg(s) = self {
+            if let Some(t) = tolerance {
+                s.set_tolerance(t)?;
             }
-            Solver::Direct(_) => self.solve_with(energy, progress),
+            s.set_quick_start(quick_start);
         }
+        let out = match (&mut *self, start) {
+            (Solver::Direct(s), _) => s.solve(energy).map(|(x, i)| (x, SolveInfo::Direct(i))),
+            (Solver::Cg(s), SolveStart::Input) => {
+                s.solve_with(energy, progress).map(|(x, i)| (x, SolveInfo::Cg(i)))
+            }
+            (Solver::Cg(s), SolveStart::Given(x)) => {
+                s.solve_from(energy, x, progress).map(|(x, i)| (x, SolveInfo::Cg(i)))
+            }
+            (Solver::Cg(s), SolveStart::Owned(x)) => {
+                s.solve_from_owned(energy, x, progress).map(|(x, i)| (x, SolveInfo::Cg(i)))
+            }
+            (Solver::Bounded(s), SolveStart::Input) => {
+                s.solve_with(energy, progress).map(|(x, i)| (x, SolveInfo::Bounded(i)))
+            }
+            (Solver::Bounded(s), SolveStart::Given(x)) => {
+                s.solve_from(energy, x, progress).map(|(x, i)| (x, SolveInfo::Bounded(i)))
+            }
+            (Solver::Bounded(s), SolveStart::Owned(x)) => {
+                s.solve_from(energy, &x, progress).map(|(x, i)| (x, SolveInfo::Bounded(i)))
+            }
+        }?;
+        if !keep_cycle {
+            if let Solver::Cg(s) = self {
+                s.forget_kept_cycle();
+            }
+        }
+        Ok(out)
     }
+}
 
-    /// [`Solver::solve_from`] with a start the solver may take (the conjugate gradient
-    /// iterates in its vector: one vector fewer held during the solve).
-    pub(crate) fn solve_from_owned(
-        &mut self,
-        energy: &Energy<'_>,
-        start: Vec<DVec3>,
-        progress: &mut dyn FnMut(&Progress),
-    ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
-        match self {
-            Solver::Cg(s) => s.solve_from_owned(energy, start, progress).map(|(x, i)| (x, SolveInfo::Cg(i))),
-            _ => self.solve_from(energy, &start, progress),
-        }
+/// Where a solve's iterations start ([`SolveRequest::start`]).
+#[derive(Debug, Default)]
+pub enum SolveStart<'a> {
+    /// The energy's input positions.
+    #[default]
+    Input,
+    /// These positions, one per vertex (the bounded solver projects them into its boxes).
+    Given(&'a [DVec3]),
+    /// These positions, which the solver may take (the conjugate gradient iterates in
+    /// them: one vector fewer held during the solve).
+    Owned(Vec<DVec3>),
+}
+
+/// One solve of a [`Solver`] ([`Solver::solve`]): where it starts, to which tolerance, and
+/// what it reports.
+#[non_exhaustive]
+#[derive(Default)]
+pub struct SolveRequest<'a> {
+    /// Where the iterations start. Default: [`SolveStart::Input`].
+    pub start: SolveStart<'a>,
+    /// The conjugate gradient's tolerance in voxels, for this solve and the next (the
+    /// bounded solver keeps its own). Default: `None`, unchanged.
+    pub tolerance: Option<f64>,
+    /// Whether the conjugate gradient, from a given start, begins on the last solve's
+    /// multigrid cycle, its fine level put on the new energy, and builds the energy's own
+    /// cycle only after the first iteration, restarting from that iterate: the first
+    /// iterate comes without waiting for the coarse levels' setup. Default: `false`.
+    pub quick_start: bool,
+    /// Whether the conjugate gradient keeps this solve's cycle for a next quick start;
+    /// `false` frees its memory for what runs before the next solve. Default: `false`.
+    pub keep_cycle: bool,
+    /// Called after each iteration of the iterative solvers. Default: none.
+    pub progress: Option<&'a mut dyn FnMut(&Progress)>,
+}
+
+impl std::fmt::Debug for SolveRequest<'_> {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("SolveRequest")
+            .field("start", &self.start)
+            .field("tolerance", &self.tolerance)
+            .field("quick_start", &self.quick_start)
+            .field("keep_cycle", &self.keep_cycle)
+            .field("progress", &self.progress.is_some())
+            .finish()
     }
 }
 
@@ -355,8 +403,9 @@ mod tests {
             Err(OverrideError::ClampNeedsBoundedSolver)
         );
         assert_eq!(o(plain, None, Eps(1.5)), Err(OverrideError::ClampOutOfRange(1.5)));
-        assert_eq!(SolverChoice::parse("cg"), Some(SolverChoice::Cg));
-        assert_eq!(SolverChoice::parse("lu"), None);
+        assert_eq!("cg".parse(), Ok(SolverChoice::Cg));
+        assert_eq!("gd".parse(), Ok(SolverChoice::Bounded));
+        assert!("lu".parse::<SolverChoice>().is_err());
     }
 
     #[test]

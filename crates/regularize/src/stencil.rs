@@ -9,7 +9,9 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, VertexId};
 
-use crate::{Energy, FairnessMask, RegularizeError};
+use crate::energy::Energy;
+use crate::error::RegularizeError;
+use crate::weights::FairnessMask;
 
 pub(crate) use crate::vecops::CHUNK;
 
@@ -383,7 +385,9 @@ mod tests {
     use voxreg_normals::NormalField;
 
     use super::*;
-    use crate::{EnergyParams, Operator, OperatorPattern, Weights};
+    use crate::assemble::{Operator, OperatorPattern};
+    use crate::energy::EnergyParams;
+    use crate::weights::Weights;
 
     /// Three labels, no background (open interfaces, junctions, rims), random normals
     /// and weights, and a fairness mask: the matrix-free product, its diagonal blocks and

@@ -4,7 +4,7 @@ use std::sync::Arc;
 
 use voxreg_digisurf::{DigitalSurface, EdgeId, SurfelData, VertexData, VertexId};
 
-use crate::RegularizeError;
+use crate::error::RegularizeError;
 
 /// Optional per-element weights, each multiplying the global weight of
 /// [`EnergyParams`](crate::EnergyParams):

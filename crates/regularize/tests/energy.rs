@@ -5,7 +5,7 @@ use proptest::prelude::*;
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
 use voxreg_normals::{NormalEstimator, NormalField, Trivial};
 use voxreg_regularize::{
-    DirectSolver, Energy, EnergyParams, Operator, OperatorPattern, Params, Regularizer, SolverChoice,
+    DirectSolver, Energy, EnergyParams, Operator, OperatorPattern, Params, Regularizer, Run, SolverChoice,
 };
 use voxreg_testkit::Lcg;
 
@@ -119,7 +119,7 @@ fn operator_matches_gradient_and_energy() {
 fn exact_solve(s: &DigitalSurface, normals: &NormalField) -> voxreg_regularize::Output {
     let mut params = Params::papers();
     params.solver.choice = SolverChoice::Direct;
-    Regularizer::new(s.clone()).run_from(&params, normals).unwrap()
+    Regularizer::new(s.clone()).run(Run::new(&params).from_normals(normals)).unwrap()
 }
 
 #[test]

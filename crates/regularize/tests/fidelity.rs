@@ -6,7 +6,7 @@ use glam::DVec3;
 use voxreg_baselines::{accuracy, quality, Accuracy, Mesh, QualityParams};
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
 use voxreg_normals::{IntegralInvariant, NormalEstimator, NormalField, Refined, Trivial};
-use voxreg_regularize::{Params, Regularizer, SolverParams};
+use voxreg_regularize::{Params, Regularizer, Run, SolverParams};
 use voxreg_testkit::{angles_deg, digitize, mean_max, Cuboid, Goursat, Shape, Sphere, Torus};
 
 /// Digitizes `shape` at step `h`, runs the pipeline from default integral-invariant
@@ -71,7 +71,7 @@ fn refinement_keeps_the_edges_of_a_cube_sharp() {
     let truth = normals.as_slice();
     let mut regularizer = Regularizer::new(surface.clone());
     let mut worst = |params: &Params| {
-        let out = regularizer.run_from(params, &normals).unwrap();
+        let out = regularizer.run(Run::new(params).from_normals(&normals)).unwrap();
         let mesh = Mesh::from_surface(&surface, &out.positions);
         let faces: Vec<DVec3> = (0..mesh.num_faces()).map(|f| mesh.vector_area(f)).collect();
         mean_max(&angles_deg(&faces, truth)).1
@@ -127,7 +127,8 @@ fn two_balls() -> DigitalSurface {
 fn multi_label_surfaces_are_refined_per_interface() {
     let surface = two_balls();
     let normals = IntegralInvariant { radius: Some(3.0) }.estimate(&surface).unwrap();
-    let out = Regularizer::new(surface.clone()).run_from(&Params::default(), &normals).unwrap();
+    let out =
+        Regularizer::new(surface.clone()).run(Run::new(&Params::default()).from_normals(&normals)).unwrap();
     assert!(out.positions.iter().all(|p| p.is_finite()));
     assert!(out.normals.as_slice().iter().all(|n| (n.length() - 1.0).abs() < 1e-9));
     // Re-centring moved targets by less than a voxel, and the result stays near the input.
@@ -141,7 +142,7 @@ fn clamping_keeps_every_vertex_in_its_box() {
     let surface = two_balls();
     let normals: NormalField = IntegralInvariant { radius: Some(3.0) }.estimate(&surface).unwrap();
     let params = Params { solver: SolverParams::default().clamped(Some(0.01)), ..Default::default() };
-    let out = Regularizer::new(surface.clone()).run_from(&params, &normals).unwrap();
+    let out = Regularizer::new(surface.clone()).run(Run::new(&params).from_normals(&normals)).unwrap();
     let input = surface.positions();
     assert_eq!(out.targets, input, "clamping keeps the targets (the boxes' centres) at the input");
     let half = 0.5 * (1.0 - 0.01) + 1e-12;

@@ -5,7 +5,7 @@
 use glam::DVec3;
 use voxreg_digisurf::{LabelVolume, RegionMap};
 use voxreg_regularize::{
-    Estimator, Interrupt, Output, Params, RegularizeError, Regularizer, SolverChoice, Stage,
+    Estimator, Interrupt, Output, Params, RegularizeError, Regularizer, Run, SolverChoice, Stage,
 };
 use voxreg_testkit::{digitize, Torus};
 
@@ -24,14 +24,14 @@ fn raised_at(
     let interrupt = Interrupt::new();
     r.set_interrupt(interrupt.clone());
     let (mut seen, mut after) = (0, 0);
-    let result = r.run_warm(params, None, warm, &mut |_| {
+    let result = r.run(Run::new(params).warm(warm).progress(&mut |_| {
         if seen == k {
             interrupt.raise();
         } else if seen > k {
             after += 1;
         }
         seen += 1;
-    });
+    }));
     r.set_interrupt(Interrupt::never());
     (result, after)
 }
@@ -40,9 +40,9 @@ fn raised_at(
 /// raised.
 fn raise_points(r: &mut Regularizer, params: &Params, warm: &[Vec<DVec3>]) -> Vec<usize> {
     let mut labels = Vec::new();
-    r.run_warm(params, None, warm, &mut |e| {
+    r.run(Run::new(params).warm(warm).progress(&mut |e| {
         labels.push(format!("{:?} {}", e.stage, e.iteration.is_some()));
-    })
+    }))
     .unwrap();
     (0..labels.len())
         .filter(|&k| {
@@ -104,21 +104,21 @@ fn a_warm_run_after_an_interrupted_one_reaches_the_same_minimizers() {
     params.solver.choice = SolverChoice::Cg;
     let mut r = Regularizer::from_volume(&volume, &params.regions).unwrap();
     let mut warm: Vec<Vec<DVec3>> = Vec::new();
-    r.run_warm(&params, None, &[], &mut |e| {
+    r.run(Run::new(&params).warm(&[]).progress(&mut |e| {
         if let (Stage::Solve { round }, Some(x)) = (e.stage, e.iterate()) {
             warm.resize(warm.len().max(round + 1), Vec::new());
             warm[round] = x;
         }
-    })
+    }))
     .unwrap();
     params.energy.gamma *= 1.2;
     let mut reference = Regularizer::from_volume(&volume, &params.regions).unwrap();
     reference.run(&params).unwrap();
-    let expected = reference.run_warm(&params, None, &warm, &mut |_| {}).unwrap();
+    let expected = reference.run(Run::new(&params).warm(&warm)).unwrap();
     for k in [1, 2, 3] {
         let (result, _) = raised_at(&mut r, &params, &warm, k);
         assert_eq!(result.err(), Some(RegularizeError::Interrupted));
-        let out = r.run_warm(&params, None, &warm, &mut |_| {}).unwrap();
+        let out = r.run(Run::new(&params).warm(&warm)).unwrap();
         assert!(out.report.converged());
         // Each solve within the tolerance of its minimizer: the results agree to a few
         // times it.

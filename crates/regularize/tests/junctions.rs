@@ -6,7 +6,7 @@
 use glam::{DVec2, DVec3};
 use voxreg_digisurf::DigitalSurface;
 use voxreg_normals::{NormalEstimator, Trivial};
-use voxreg_regularize::{Params, Regularizer};
+use voxreg_regularize::{Params, Regularizer, Run};
 use voxreg_testkit::{
     digitize_labels, label_fidelity, Cuboid, LabelFidelity, LabelShape, QuarteredBall, Shape, Solid, Sphere,
     SplitBall, Torus, TouchingBalls,
@@ -183,7 +183,8 @@ fn refinement_keeps_the_edges_of_a_cube_sharp_on_thick_slices() {
     let surface =
         DigitalSurface::from_volume(&digitize_labels(&Solid(&cube), DVec3::new(1.0, 1.0, 2.5))).unwrap();
     let normals = Trivial.estimate(&surface).unwrap();
-    let out = Regularizer::new(surface.clone()).run_from(&Params::default(), &normals).unwrap();
+    let out =
+        Regularizer::new(surface.clone()).run(Run::new(&Params::default()).from_normals(&normals)).unwrap();
     let worst = surface
         .surfels()
         .iter()

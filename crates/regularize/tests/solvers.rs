@@ -8,7 +8,7 @@ use voxreg_normals::{NormalEstimator, NormalField, Trivial};
 use voxreg_quality::self_intersections;
 use voxreg_regularize::{
     BoundedParams, BoundedSolver, CgParams, CgSolver, DirectSolver, Energy, EnergyParams, FairnessMask,
-    Preconditioner, StoppingRule, Weights,
+    Preconditioner, Run, StoppingRule, Weights,
 };
 use voxreg_testkit::{digitize, true_normals, Lcg, Sphere, Torus};
 
@@ -580,14 +580,14 @@ fn streamed_round(
     let mut iterates = Vec::new();
     let mut energies = Vec::new();
     let out = r
-        .run_with(params, None, &mut |e| {
+        .run(Run::new(params).progress(&mut |e| {
             if let (Stage::Solve { round: k }, Some(x)) = (e.stage, e.iterate()) {
                 if k == round {
                     iterates.push(x);
                     energies.push(e.iteration.unwrap().energy);
                 }
             }
-        })
+        }))
         .unwrap();
     (r, out, iterates, energies)
 }

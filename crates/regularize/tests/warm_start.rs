@@ -1,10 +1,10 @@
-//! Warm starts of the front door (`Regularizer::run_warm`): a re-run from the previous
+//! Warm starts of the front door (`Run::warm`): a re-run from the previous
 //! positions reaches the same minimizer as a cold run, in fewer iterations.
 
 use glam::DVec3;
 use voxreg_digisurf::RegionMap;
 use voxreg_regularize::{
-    Output, Params, RegularizeError, Regularizer, SolveInfo, SolverChoice, SolverParams, Stage,
+    Output, Params, RegularizeError, Regularizer, Run, SolveInfo, SolverChoice, SolverParams, Stage,
 };
 use voxreg_testkit::{digitize, Sphere, Torus};
 
@@ -29,12 +29,12 @@ fn run_keeping_iterates(
 ) -> (Output, Vec<Vec<DVec3>>) {
     let mut rounds: Vec<Vec<DVec3>> = Vec::new();
     let out = r
-        .run_warm(params, None, warm, &mut |e| {
+        .run(Run::new(params).warm(warm).progress(&mut |e| {
             if let (Stage::Solve { round }, Some(x)) = (e.stage, e.iterate()) {
                 rounds.resize(round + 1, Vec::new());
                 rounds[round] = x;
             }
-        })
+        }))
         .unwrap();
     (out, rounds)
 }
@@ -54,7 +54,7 @@ fn a_warm_single_solve_reaches_the_cold_minimizer_in_fewer_iterations() {
         let mut after = before.clone();
         change(&mut after);
         let cold = r.run(&after).unwrap();
-        let warm = r.run_warm(&after, None, &[previous.positions.to_vec()], &mut |_| {}).unwrap();
+        let warm = r.run(Run::new(&after).warm(&[previous.positions.to_vec()])).unwrap();
         let exact = r.run(&with_solver(after.clone(), SolverChoice::Direct)).unwrap();
         let tol = after.solver.cg.tolerance;
         // Both within the tolerance of the exact minimizer, so within twice it of each other.
@@ -140,10 +140,10 @@ fn the_direct_solver_ignores_the_start_and_a_wrong_length_is_an_error() {
     let p = with_solver(Params::papers(), SolverChoice::Direct);
     let cold = r.run(&p).unwrap();
     let far: Vec<DVec3> = cold.positions.iter().map(|x| *x + DVec3::splat(3.0)).collect();
-    let warm = r.run_warm(&p, None, std::slice::from_ref(&far), &mut |_| {}).unwrap();
+    let warm = r.run(Run::new(&p).warm(std::slice::from_ref(&far))).unwrap();
     assert_eq!(warm.positions.as_slice(), cold.positions.as_slice());
     let short = far[..far.len() - 1].to_vec();
-    let err = r.run_warm(&p, None, &[far, short], &mut |_| {}).unwrap_err();
+    let err = r.run(Run::new(&p).warm(&[far, short])).unwrap_err();
     assert!(matches!(err, RegularizeError::SizeMismatch(_)), "{err}");
     assert!(err.to_string().contains("start positions"), "{err}");
 }

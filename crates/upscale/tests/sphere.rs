@@ -2,7 +2,7 @@
 
 use voxreg_digisurf::DigitalSurface;
 use voxreg_normals::NormalField;
-use voxreg_regularize::{Params, Regularizer, SolverChoice};
+use voxreg_regularize::{Params, Regularizer, Run, SolverChoice};
 use voxreg_testkit::{digitize, surfel_centre, Shape, Sphere};
 use voxreg_upscale::{upscale, UpscaleParams};
 
@@ -15,7 +15,7 @@ fn upscaled_ball_is_closer_to_the_sphere_than_blocks() {
         NormalField::new((0..s.num_surfels()).map(|i| sphere.normal_near(surfel_centre(&s, i))).collect());
     let mut params = Params::papers();
     params.solver.choice = SolverChoice::Direct;
-    let r = Regularizer::new(s.clone()).run_from(&params, &normals).unwrap();
+    let r = Regularizer::new(s.clone()).run(Run::new(&params).from_normals(&normals)).unwrap();
     let k = 4;
     let smooth = upscale(&s, &r.positions, &coarse, &UpscaleParams { factor: k }).unwrap();
     let blocky = upscale(&s, &s.positions(), &coarse, &UpscaleParams { factor: k }).unwrap();

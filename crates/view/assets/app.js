@@ -397,20 +397,24 @@ function showSmoothness(s) {
   $('smoothness').value = s; $('smoothness-value').textContent = (+s).toFixed(2);
   $('smoothness-row').hidden = $('preset').value !== 'voxel-art';
 }
+// The panel's state is the library's Overrides: `clamp` is false (off), true (the
+// preset's margin) or a margin; with `smoothness` set, the boxes come from it instead.
 function setTuning(t) {
-  $('preset').value = t.preset; $('estimator').value = t.estimator;
+  $('preset').value = t.preset; $('estimator').value = t.normals;
   $('alpha').value = t.alpha; $('beta').value = t.beta; $('gamma').value = t.gamma; $('refine').value = t.refine;
-  $('clamped').checked = t.clamp !== null; if (t.clamp !== null) $('clamp').value = t.clamp;
-  $('texture-aware').checked = t.texture_aware;
   smoothnessSet = t.smoothness != null;
-  showSmoothness(smoothnessSet ? t.smoothness : t.clamp !== null ? Math.min(Math.max((1 - t.clamp) / 0.99, 0.05), 1) : 1);
+  const margin = typeof t.clamp === 'number' ? t.clamp : smoothnessSet ? +(1 - 0.99 * t.smoothness).toFixed(4) : t.clamp === true ? 0.01 : null;
+  $('clamped').checked = margin !== null; if (margin !== null) $('clamp').value = margin;
+  $('texture-aware').checked = t.texture_aware;
+  showSmoothness(smoothnessSet ? t.smoothness : margin !== null ? Math.min(Math.max((1 - margin) / 0.99, 0.05), 1) : 1);
 }
 
 function tuning() {
   const smoothness = smoothnessSet && $('clamped').checked ? parseFloat($('smoothness').value) : null;
-  return { preset: $('preset').value, estimator: $('estimator').value, alpha: parseFloat($('alpha').value),
+  const clamp = smoothness !== null ? null : $('clamped').checked ? parseFloat($('clamp').value) : false;
+  return { preset: $('preset').value, normals: $('estimator').value, alpha: parseFloat($('alpha').value),
     beta: parseFloat($('beta').value), gamma: parseFloat($('gamma').value), refine: parseInt($('refine').value) || 0,
-    clamp: $('clamped').checked ? parseFloat($('clamp').value) : null, smoothness, texture_aware: $('texture-aware').checked };
+    clamp, smoothness, texture_aware: $('texture-aware').checked };
 }
 $('smoothness').addEventListener('input', () => {
   const s = parseFloat($('smoothness').value);

@@ -7,15 +7,17 @@
 //! [`Regularizer`](voxreg_regularize::Regularizer), so that a re-solve reuses the
 //! surface, the solver's symbolic analysis and unchanged normals, and starts each solve
 //! round from the last run's solution
-//! ([`Regularizer::run_warm`](voxreg_regularize::Regularizer::run_warm)). The page receives the
+//! ([`Run::warm`](voxreg_regularize::Run::warm())). The page receives the
 //! state as server-sent events (`/api/events`) and fetches positions as little-endian
 //! `f32` arrays; while a solve runs, the iterates stream
 //! ([`Event::iterate`](voxreg_regularize::Event::iterate)) at most every 60 ms.
 //!
 //! - [`Viewer::bind`], [`Viewer::open`], [`Viewer::serve`]: listen, queue the first input
 //!   ([`Loaded`]), answer requests; [`StopHandle`] stops it.
-//! - [`Tuning`]: the page's parameter panel, mapped onto [`Params`](voxreg_regularize::Params)
-//!   as the command line maps its options, and back to that command line.
+//! - [`Tuning`]: the page's parameter panel, a [`Preset`](voxreg_regularize::Preset) and
+//!   the library's [`Overrides`](voxreg_regularize::Overrides), resolved into
+//!   [`Params`](voxreg_regularize::Params) as the command line resolves its options, and
+//!   back to that command line.
 //!
 //! Bad input from the page (a corrupt file, an absurd parameter) is answered with the
 //! library's error message; a request that panics is answered with an error, and the
@@ -33,14 +35,15 @@
 //! # Example
 //!
 //! ```no_run
-//! use voxreg_view::{Loaded, Preset, Viewer};
+//! use voxreg_regularize::{Overrides, Preset};
+//! use voxreg_view::{Loaded, Viewer};
 //! # let volume = voxreg_digisurf::LabelVolume::from_fn([3, 3, 3], |_| 1);
 //! let loaded = Loaded {
 //!     name: "ball.vol".into(),
 //!     volume,
 //!     palette: None,
 //!     preset: Preset::Default,
-//!     params: Preset::Default.params(),
+//!     overrides: Overrides::default(),
 //! };
 //! // What to do with a file dropped on the page, its name and contents (the CLI reads
 //! // them with its options, from memory).
@@ -65,7 +68,7 @@ mod tuning;
 
 pub use model::Loaded;
 pub use server::{Loader, StopHandle, Viewer};
-pub use tuning::{Preset, Tuning};
+pub use tuning::Tuning;
 
 /// What can go wrong starting the viewer.
 #[derive(Debug, thiserror::Error)]

@@ -4,9 +4,7 @@
 use serde::Serialize;
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
 use voxreg_io::{interface_name, Palette};
-use voxreg_regularize::Params;
-
-use crate::tuning::Preset;
+use voxreg_regularize::{Overrides, Preset};
 
 /// An input the viewer shows: the volume, its palette, and the parameters to start from.
 #[derive(Clone, Debug)]
@@ -17,10 +15,11 @@ pub struct Loaded {
     pub volume: LabelVolume,
     /// The `.vox` palette (colours of the labels), if any.
     pub palette: Option<Palette>,
-    /// The preset `params` came from.
+    /// The preset of the first solve.
     pub preset: Preset,
-    /// The parameters of the first solve (a preset with the command line's options).
-    pub params: Params,
+    /// The options applied over it (the command line's), kept by the panel's solves
+    /// while the preset stays.
+    pub overrides: Overrides,
 }
 
 /// A group of faces the page lists, with a visibility toggle and a colour: the interfaces

@@ -19,7 +19,9 @@ use std::time::Duration;
 use serde_json::json;
 
 use crate::session::{mesh_file, panic_message, Edit, Job, Shared};
-use crate::tuning::{Preset, Tuning};
+use voxreg_regularize::Preset;
+
+use crate::tuning::Tuning;
 use crate::{Loaded, ViewError};
 
 /// Reads a file dropped on the page, from its name (whose extension says the format) and
@@ -404,12 +406,9 @@ impl Viewer {
             ("GET", "/api/features") => self.finished_bytes(|f| f.features.clone()),
             ("GET", "/api/preset") => {
                 let name = query_value(query, "name").unwrap_or_default();
-                match [Preset::Default, Preset::Papers, Preset::VoxelArt]
-                    .into_iter()
-                    .find(|p| p.name() == name)
-                {
-                    Some(p) => json_response(200, &json!(Tuning::of(p, &p.params()))),
-                    None => error(400, &format!("unknown preset '{name}' (default, papers or voxel-art)")),
+                match name.parse::<Preset>() {
+                    Ok(p) => json_response(200, &json!(Tuning::preset(p))),
+                    Err(e) => error(400, &format!("preset {e}")),
                 }
             }
             ("GET", "/api/report") => {
@@ -453,7 +452,7 @@ impl Viewer {
                 drop(s);
                 // Refuse bad values at once, with the library's message; the base
                 // parameters only matter for the preset's other fields.
-                if let Err(e) = tuning.params(tuning.preset, &tuning.preset.params()) {
+                if let Err(e) = tuning.resolve() {
                     return error(400, &e);
                 }
                 let job = self.shared.next_job();
@@ -477,7 +476,7 @@ impl Viewer {
                 }
                 drop(s);
                 if let Some(t) = &edit.tuning {
-                    if let Err(e) = t.params(t.preset, &t.preset.params()) {
+                    if let Err(e) = t.resolve() {
                         return error(400, &e);
                     }
                 }

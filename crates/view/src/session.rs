@@ -11,7 +11,7 @@ use std::time::{Duration, Instant};
 use glam::DVec3;
 use voxreg_digisurf::{LabelVolume, RegionMap};
 use voxreg_io::{Palette, QuadMesh};
-use voxreg_regularize::{Interrupt, Output, Params, RegularizeError, Regularizer, Stage};
+use voxreg_regularize::{Interrupt, Output, Params, RegularizeError, Regularizer, Run, Stage};
 
 use crate::model::{f32_bytes, Model};
 use crate::tuning::Tuning;
@@ -169,7 +169,7 @@ struct Current {
     regularizer: Regularizer,
     regions: voxreg_digisurf::RegionMap,
     /// The last finished run's solutions on this surface, one per solve round (each
-    /// round's last iterate): the next run's starting guesses ([`Regularizer::run_warm`]);
+    /// round's last iterate): the next run's starting guesses ([`Run::warm`](voxreg_regularize::Run::warm()));
     /// empty on a new surface.
     last: Vec<Vec<DVec3>>,
     /// The last solve's parameters (a voxel edit re-solves with them).
@@ -221,8 +221,19 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, int
     match job {
         Job::Open(loaded, reply, job) => {
             let loaded = *loaded;
-            let tuning = Tuning::of(loaded.preset, &loaded.params);
-            let params = loaded.params.clone();
+            let params =
+                match (Tuning { preset: loaded.preset, overrides: loaded.overrides.clone() }).resolve() {
+                    Ok(p) => p,
+                    Err(e) => {
+                        let message = format!("{}: {e}", loaded.name);
+                        shared.update(|s| s.error = Some(message.clone()));
+                        if let Some(reply) = reply {
+                            let _ = reply.send(Err(message));
+                        }
+                        return;
+                    }
+                };
+            let tuning = Tuning::of(loaded.preset, &loaded.overrides, &params);
             shared.update(|s| {
                 s.busy = true;
                 s.stage = "digital surface".into();
@@ -254,7 +265,8 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, int
                 shared.update(|s| s.error = Some("no input to solve: open a file".into()));
                 return;
             };
-            let params = match tuning.params(c.loaded.preset, &c.loaded.params) {
+            let tuning = tuning.merged(c.loaded.preset, &c.loaded.overrides);
+            let params = match tuning.resolve() {
                 Ok(p) => p,
                 Err(e) => {
                     shared.update(|s| s.error = Some(e));
@@ -284,10 +296,18 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, int
                 return;
             };
             let tuned = match edit.tuning.clone() {
-                Some(tuning) => tuning.params(c.loaded.preset, &c.loaded.params).map(|p| (tuning, p)),
-                None => Ok(c.tuned.clone().unwrap_or_else(|| {
-                    (Tuning::of(c.loaded.preset, &c.loaded.params), c.loaded.params.clone())
-                })),
+                Some(tuning) => {
+                    let tuning = tuning.merged(c.loaded.preset, &c.loaded.overrides);
+                    tuning.resolve().map(|p| (tuning, p))
+                }
+                None => match c.tuned.clone() {
+                    Some(tp) => Ok(tp),
+                    None => {
+                        let tuning =
+                            Tuning { preset: c.loaded.preset, overrides: c.loaded.overrides.clone() };
+                        tuning.resolve().map(|p| (Tuning::of(c.loaded.preset, &c.loaded.overrides, &p), p))
+                    }
+                },
             };
             let (tuning, params) = match tuned {
                 Ok(tp) if tp.1.regions == c.regions => tp,
@@ -448,7 +468,7 @@ fn solve(
     let warm = c.last.clone();
     let mut rounds: Vec<Vec<DVec3>> = Vec::new();
     c.regularizer.set_interrupt(interrupt.clone());
-    let result = c.regularizer.run_warm(&params, None, &warm, &mut |e| {
+    let result = c.regularizer.run(Run::new(&params).warm(&warm).progress(&mut |e| {
         if let (Stage::Solve { round }, Some(p), Some(input)) = (e.stage, e.iteration, e.input) {
             if rounds.len() <= round {
                 rounds.resize(round + 1, Vec::new());
@@ -481,7 +501,7 @@ fn solve(
             }),
             None => {}
         }
-    });
+    }));
     let ms = t.elapsed().as_secs_f64() * 1e3;
     match result {
         Ok(out) => {

@@ -1,148 +1,108 @@
-//! The live-tuning panel's parameters, their translation into the library's [`Params`]
-//! (as `voxreg regularize` translates its options), and the equivalent command line.
+//! The live-tuning panel's state: a preset and the library's [`Overrides`], resolved
+//! into [`Params`] as `voxreg regularize` resolves its options, and the equivalent
+//! command line.
 
-use serde::{Deserialize, Serialize};
-use voxreg_regularize::{ClampOverride, Estimator, OverrideError, Params, SolverChoice};
+use serde::{Deserialize, Deserializer, Serialize};
+use voxreg_regularize::{InputFacts, Overrides, Params, Preset};
 
-/// The presets of the panel, those of `voxreg regularize --preset`.
-#[derive(Copy, Clone, Debug, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Preset {
-    /// [`Params::default`]: the fidelity pipeline.
-    Default,
-    /// [`Params::papers`]: the papers' single solve.
-    Papers,
-    /// [`Params::voxel_art`]: one solve clamped to the voxels' boxes.
-    VoxelArt,
-}
-
-impl Preset {
-    /// The preset's parameters.
-    pub fn params(self) -> Params {
-        match self {
-            Preset::Default => Params::default(),
-            Preset::Papers => Params::papers(),
-            Preset::VoxelArt => Params::voxel_art(),
-        }
-    }
-
-    /// The name `--preset` takes.
-    pub fn name(self) -> &'static str {
-        match self {
-            Preset::Default => "default",
-            Preset::Papers => "papers",
-            Preset::VoxelArt => "voxel-art",
-        }
-    }
-}
-
-/// What the page's tuning panel sets: the options of `voxreg regularize` that change
-/// the result most, every one explicit.
-#[derive(Clone, Debug, PartialEq, Serialize, Deserialize)]
-#[serde(deny_unknown_fields)]
+/// What the page's tuning panel sets: a preset and the options over it. On the wire, one
+/// JSON object: `preset` and the [`Overrides`] fields (`normals`, `alpha`, `clamp`, ...).
+#[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Tuning {
-    /// The preset the other fields apply over.
+    /// The preset the options apply over.
     pub preset: Preset,
-    /// The initial normal estimator: `trivial`, `convolved`, `ii` or `at`.
-    pub estimator: String,
-    /// Attachment weight (> 0).
-    pub alpha: f64,
-    /// Alignment weight (>= 0).
-    pub beta: f64,
-    /// Fairness weight (>= 0).
-    pub gamma: f64,
-    /// Normal refinement rounds.
-    pub refine: usize,
-    /// Clamping margin in voxels (`0 < eps < 1`), or `None`: no clamping.
-    pub clamp: Option<f64>,
-    /// The voxel-art smoothness `s` in `(0, 1]` (`--smoothness`), or `None`: when given,
-    /// it sets the boxes instead of `clamp` ([`Params::with_smoothness`]: margin `1 -
-    /// 0.99 s`), the slider's view of the same setting. Default: `None`.
-    #[serde(default)]
-    pub smoothness: Option<f64>,
-    /// Texture-aware fairness (quad edges follow colour boundaries).
-    pub texture_aware: bool,
+    /// The options, as the command line's flags and Python's keyword arguments.
+    #[serde(flatten)]
+    pub overrides: Overrides,
 }
 
-fn estimator(name: &str) -> Result<Estimator, String> {
-    Ok(match name {
-        "trivial" => Estimator::Trivial,
-        "convolved" => Estimator::Convolved,
-        "ii" => Estimator::Ii,
-        "at" => Estimator::At,
-        other => return Err(format!("unknown normal estimator '{other}' (trivial, convolved, ii or at)")),
-    })
+impl<'de> Deserialize<'de> for Tuning {
+    /// `preset` and the [`Overrides`] fields; an unknown field is refused.
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        use serde::de::Error;
+        let mut map = serde_json::Map::deserialize(d)?;
+        let preset = map.remove("preset").ok_or_else(|| D::Error::missing_field("preset"))?;
+        let preset = Preset::deserialize(preset).map_err(D::Error::custom)?;
+        let overrides = Overrides::deserialize(serde_json::Value::Object(map)).map_err(D::Error::custom)?;
+        Ok(Tuning { preset, overrides })
+    }
 }
 
 impl Tuning {
-    /// The panel's values for `params` (which came from `preset`).
-    pub fn of(preset: Preset, params: &Params) -> Tuning {
-        let clamped = !matches!(params.solver.choice, SolverChoice::Direct | SolverChoice::Cg);
-        Tuning {
-            preset,
-            estimator: params.normals.estimator.name().to_string(),
-            alpha: params.energy.alpha,
-            beta: params.energy.beta,
-            gamma: params.energy.gamma,
-            refine: params.refine,
-            clamp: params.solver.bounded.clamp.filter(|_| clamped),
-            smoothness: None,
-            texture_aware: params.texture_aware,
-        }
+    /// The panel's values for `params`, resolved from `preset` and `base`: the panel's
+    /// fields explicit ([`Overrides::explicit`]), the others `base`'s.
+    pub fn of(preset: Preset, base: &Overrides, params: &Params) -> Tuning {
+        Tuning { preset, overrides: base.explicit(params) }
     }
 
-    /// The library's parameters: `base` (the parameters the viewer was started with, from
-    /// `base_preset`) when the preset is unchanged, else the preset's own, with every
-    /// field of the panel applied over them; checked by [`Params::validate`]. Errors are
-    /// the library's messages.
-    pub fn params(&self, base_preset: Preset, base: &Params) -> Result<Params, String> {
-        let mut p = if self.preset == base_preset { base.clone() } else { self.preset.params() };
-        p.energy.alpha = self.alpha;
-        p.energy.beta = self.beta;
-        p.energy.gamma = self.gamma;
-        p.normals.estimator = estimator(&self.estimator)?;
-        p.refine = self.refine;
-        p.texture_aware = self.texture_aware;
-        let clamp = match self.clamp {
-            Some(eps) => ClampOverride::Eps(eps),
-            None => ClampOverride::Off,
-        };
-        p.solver = p.solver.overridden(None, clamp).map_err(|e| match e {
-            OverrideError::ClampNeedsBoundedSolver => "clamping needs the bounded solver".to_string(),
-            OverrideError::ClampOutOfRange(eps) => {
-                format!("clamp: the margin must be in (0, 1) voxel, got {eps}")
-            }
-        })?;
-        if let Some(s) = self.smoothness {
-            // Boxes need the bounded solver, as a margin from the panel does.
-            p.solver.choice = SolverChoice::Bounded;
-            p = p.with_smoothness(s).map_err(|_| format!("smoothness: must be in (0, 1], got {s}"))?;
-        }
-        p.validate().map_err(|e| e.to_string())?;
-        Ok(p)
+    /// The panel's values for `preset` alone.
+    pub fn preset(preset: Preset) -> Tuning {
+        Tuning::of(preset, &Overrides::default(), &preset.params())
+    }
+
+    /// The options in force: `base` (those the viewer was started with, over
+    /// `base_preset`) overlaid by the panel's ([`Overrides::overlaid`]) when the preset is
+    /// unchanged, else the panel's alone.
+    pub fn merged(&self, base_preset: Preset, base: &Overrides) -> Tuning {
+        let overrides =
+            if self.preset == base_preset { base.overlaid(&self.overrides) } else { self.overrides.clone() };
+        Tuning { preset: self.preset, overrides }
+    }
+
+    /// The library's parameters of [`Tuning::merged`] ([`Overrides::resolve`]); errors
+    /// are the library's messages.
+    pub fn params(&self, base_preset: Preset, base: &Overrides) -> Result<Params, String> {
+        self.merged(base_preset, base).resolve()
+    }
+
+    /// The library's parameters of these options alone.
+    pub fn resolve(&self) -> Result<Params, String> {
+        self.overrides.resolve(Some(self.preset), &InputFacts::default()).map_err(|e| e.to_string())
     }
 
     /// The `voxreg regularize` command line that computes the same surface from `input`
-    /// (a file name, quoted for a POSIX shell when needed), writing `output`.
+    /// (a file name, quoted for a POSIX shell when needed), writing `output`: one flag
+    /// per given option, in [`Overrides::FIELDS`]' order.
     pub fn command_line(&self, input: &str, output: &str) -> String {
         let mut c = format!(
-            "voxreg regularize {} -o {} --preset {} --normals {} --alpha {} --beta {} --gamma {} --refine {}",
+            "voxreg regularize {} -o {} --preset {}",
             shell_quote(input),
             shell_quote(output),
-            self.preset.name(),
-            self.estimator,
-            self.alpha,
-            self.beta,
-            self.gamma,
-            self.refine
+            self.preset
         );
-        match (self.smoothness, self.clamp) {
-            (Some(s), _) => c.push_str(&format!(" --smoothness {s}")),
-            (None, Some(eps)) => c.push_str(&format!(" --clamp {eps}")),
-            (None, None) => c.push_str(" --no-clamp"),
-        }
-        if self.texture_aware {
-            c.push_str(" --texture-aware");
+        let value = serde_json::to_value(&self.overrides).unwrap_or_default();
+        for &field in Overrides::FIELDS {
+            let flag = field.replace('_', "-");
+            match value.get(field).unwrap_or(&serde_json::Value::Null) {
+                serde_json::Value::Null => {}
+                serde_json::Value::Bool(b) => match (field, b) {
+                    ("clamp", true) => c.push_str(" --clamp"),
+                    ("clamp", false) => c.push_str(" --no-clamp"),
+                    // The command line's flags: `--no-preserve-size`, `--texture-aware`; the
+                    // other values are every preset's.
+                    ("preserve_size", false) | ("texture_aware", true) => {
+                        c.push_str(&format!(" --{}{flag}", if *b { "" } else { "no-" }))
+                    }
+                    _ => {}
+                },
+                serde_json::Value::Number(n) => match n.as_u64() {
+                    Some(k) => c.push_str(&format!(" --{flag} {k}")),
+                    None => c.push_str(&format!(" --{flag} {}", n.as_f64().unwrap_or(f64::NAN))),
+                },
+                serde_json::Value::String(s) => c.push_str(&format!(" --{flag} {}", shell_quote(s))),
+                serde_json::Value::Array(groups) => {
+                    let groups: Vec<String> = groups
+                        .iter()
+                        .map(|g| {
+                            let labels: Vec<String> =
+                                g.as_array().into_iter().flatten().map(|l| l.to_string()).collect();
+                            labels.join(",")
+                        })
+                        .collect();
+                    c.push_str(&format!(" --{flag} {}", shell_quote(&groups.join(";"))));
+                }
+                serde_json::Value::Object(_) => {}
+            }
         }
         c
     }
@@ -161,93 +121,99 @@ fn shell_quote(s: &str) -> String {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use voxreg_regularize::{Clamp, Estimator};
 
     #[test]
     fn every_preset_round_trips_through_the_panel() {
-        for preset in [Preset::Default, Preset::Papers, Preset::VoxelArt] {
+        for preset in Preset::ALL {
             let p = preset.params();
-            let t = Tuning::of(preset, &p);
-            let q = t.params(preset, &p).unwrap();
-            assert_eq!(Tuning::of(preset, &q), t, "{preset:?}");
-            assert_eq!(q.energy, p.energy);
-            assert_eq!(q.solver.bounded.clamp, p.solver.bounded.clamp);
-            assert_eq!(q.solver.choice, p.solver.choice, "{preset:?}");
+            let t = Tuning::preset(preset);
+            let q = t.params(preset, &Overrides::default()).unwrap();
+            assert_eq!(q, p, "{preset:?}");
+            assert_eq!(Tuning::of(preset, &Overrides::default(), &q), t, "{preset:?}");
+            let wire: Tuning = serde_json::from_value(serde_json::to_value(&t).unwrap()).unwrap();
+            assert_eq!(wire, t);
         }
     }
 
     #[test]
-    fn the_panel_overrides_the_preset() {
-        let base = Params::voxel_art();
-        let mut t = Tuning::of(Preset::VoxelArt, &base);
-        t.clamp = None;
-        t.alpha = 0.5;
-        t.estimator = "at".into();
+    fn the_panel_overrides_the_preset_and_keeps_the_command_line_options() {
+        let mut base = Overrides::default();
+        base.radius = Some(1.5);
+        let mut t = Tuning::of(Preset::VoxelArt, &base, &Preset::VoxelArt.params());
+        t.overrides.clamp = Some(Clamp::Off);
+        t.overrides.alpha = Some(0.5);
+        t.overrides.normals = Some(Estimator::At);
         let p = t.params(Preset::VoxelArt, &base).unwrap();
         assert_eq!(p.solver.bounded.clamp, None);
         assert_eq!(p.energy.alpha, 0.5);
         assert_eq!(p.normals.estimator, Estimator::At);
+        assert_eq!(p.normals.radius, Some(1.5));
         // Another preset starts from its own parameters, not the base's.
         t.preset = Preset::Papers;
-        let p = t.params(Preset::VoxelArt, &base).unwrap();
+        let mut panel = Tuning::preset(Preset::Papers);
+        panel.overrides.alpha = Some(0.5);
+        let p = panel.params(Preset::VoxelArt, &base).unwrap();
         assert_eq!(p.regions, Params::papers().regions);
+        assert_eq!(p.normals.radius, None);
     }
 
     #[test]
-    fn bad_values_give_the_library_messages() {
-        let base = Params::default();
-        let t = Tuning::of(Preset::Default, &base);
-        let bad = |f: &dyn Fn(&mut Tuning)| {
+    fn bad_values_give_the_library_messages_and_unknown_fields_are_refused() {
+        let t = Tuning::preset(Preset::Default);
+        let bad = |f: &dyn Fn(&mut Overrides)| {
             let mut t = t.clone();
-            f(&mut t);
-            t.params(Preset::Default, &base).unwrap_err()
+            f(&mut t.overrides);
+            t.params(Preset::Default, &Overrides::default()).unwrap_err()
         };
-        assert!(bad(&|t| t.alpha = 0.0).contains("alpha"), "{}", bad(&|t| t.alpha = 0.0));
-        assert!(bad(&|t| t.beta = f64::NAN).contains("beta"));
-        assert!(bad(&|t| t.clamp = Some(1.5)).contains("(0, 1)"));
-        assert!(bad(&|t| t.estimator = "magic".into()).contains("magic"));
-        assert!(bad(&|t| t.smoothness = Some(0.0)).starts_with("smoothness:"));
-        assert!(bad(&|t| t.smoothness = Some(1.5)).contains("(0, 1]"));
+        assert!(bad(&|o| o.alpha = Some(0.0)).starts_with("alpha must be"));
+        assert!(bad(&|o| o.beta = Some(f64::NAN)).starts_with("beta must be"));
+        assert!(bad(&|o| o.clamp = Some(Clamp::Margin(1.5))).contains("(0, 1)"));
+        assert!(bad(&|o| {
+            o.clamp = None;
+            o.smoothness = Some(0.0)
+        })
+        .starts_with("smoothness must be in (0, 1]"));
+        let mut v = serde_json::to_value(&t).unwrap();
+        v["estimator"] = "ii".into();
+        assert!(serde_json::from_value::<Tuning>(v).is_err());
+        let v = serde_json::json!({"preset": "voxel-art", "normals": "magic"});
+        assert!(serde_json::from_value::<Tuning>(v).unwrap_err().to_string().contains("magic"));
     }
 
     #[test]
     fn the_smoothness_sets_the_boxes_as_the_command_line_does() {
-        let base = Params::voxel_art();
-        let mut t = Tuning::of(Preset::VoxelArt, &base);
-        assert_eq!(t.smoothness, None);
-        t.smoothness = Some(0.3);
-        // It wins over the margin field, as --smoothness without --clamp does.
-        t.clamp = None;
-        let p = t.params(Preset::VoxelArt, &base).unwrap();
+        let mut t = Tuning::preset(Preset::VoxelArt);
+        t.overrides.clamp = None;
+        t.overrides.smoothness = Some(0.3);
+        let p = t.params(Preset::VoxelArt, &Overrides::default()).unwrap();
         let expected = Params::voxel_art().with_smoothness(0.3).unwrap();
         assert_eq!(p.solver, expected.solver);
-        assert_eq!(p.solver.bounded.thin_depth, Some(Params::THIN_DEPTH));
         let line = t.command_line("a.vox", "a.glb");
-        assert!(line.ends_with("--refine 0 --smoothness 0.3"), "{line}");
+        assert!(line.contains("--smoothness 0.3"), "{line}");
         assert!(!line.contains("clamp"), "{line}");
-        // Meaningful on other inputs too: it clamps them.
-        let mut d = Tuning::of(Preset::Default, &Params::default());
-        d.smoothness = Some(0.5);
-        let p = d.params(Preset::Default, &Params::default()).unwrap();
-        assert_eq!(
-            p.solver.bounded.clamp,
-            Params::default().with_smoothness(0.5).unwrap().solver.bounded.clamp
-        );
-        // Pages that predate the field still parse.
-        let mut v = serde_json::to_value(&d).unwrap();
-        v.as_object_mut().unwrap().remove("smoothness");
-        assert_eq!(serde_json::from_value::<Tuning>(v).unwrap().smoothness, None);
+        // The panel's boxes replace the base's smoothness.
+        let mut base = Overrides::default();
+        base.smoothness = Some(0.5);
+        let mut margin = Tuning::preset(Preset::VoxelArt);
+        margin.overrides.clamp = Some(Clamp::Margin(0.2));
+        let p = margin.params(Preset::VoxelArt, &base).unwrap();
+        assert_eq!(p.solver.bounded.clamp, Some(0.2));
     }
 
     #[test]
-    fn the_command_line_names_every_panel_value() {
-        let mut t = Tuning::of(Preset::VoxelArt, &Params::voxel_art());
-        t.texture_aware = true;
+    fn the_command_line_names_every_given_option() {
+        let mut t = Tuning::preset(Preset::VoxelArt);
+        t.overrides.texture_aware = Some(true);
         assert_eq!(
             t.command_line("my model.vox", "out.glb"),
             "voxreg regularize 'my model.vox' -o out.glb --preset voxel-art --normals ii --alpha 0.01 \
-             --beta 1 --gamma 1 --refine 0 --clamp 0.01 --texture-aware"
+             --beta 1 --gamma 1 --clamp 0.01 --refine 0 --texture-aware"
         );
-        t.clamp = None;
-        assert!(t.command_line("a.vox", "a.glb").ends_with("--no-clamp --texture-aware"));
+        t.overrides.clamp = Some(Clamp::Off);
+        t.overrides.preserve_size = Some(false);
+        assert!(t
+            .command_line("a.vox", "a.glb")
+            .ends_with("--no-clamp --refine 0 --no-preserve-size --texture-aware"));
     }
 }

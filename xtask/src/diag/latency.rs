@@ -20,7 +20,7 @@ use std::time::{Duration, Instant};
 use anyhow::{bail, ensure, Result};
 use glam::DVec3;
 use voxreg_geodesic::{exact_distances, GeodesicMesh, HeatParams, HeatSolver};
-use voxreg_regularize::{regularize, Event, Interrupt, Params, RegularizeError, Regularizer, Stage};
+use voxreg_regularize::{regularize, Event, Interrupt, Params, RegularizeError, Regularizer, Run, Stage};
 
 use super::env_or;
 
@@ -41,12 +41,12 @@ pub(super) fn interrupt_latency() -> Result<()> {
     let mut r = Regularizer::from_volume(&v.volume, &params.regions)?;
     // Each round's last iterate, the warm starts the worker keeps.
     let mut warm: Vec<Vec<DVec3>> = Vec::new();
-    r.run_warm(&params, None, &[], &mut |e| {
+    r.run(Run::new(&params).progress(&mut |e| {
         if let (Stage::Solve { round }, Some(x)) = (e.stage, e.iterate()) {
             warm.resize(warm.len().max(round + 1), Vec::new());
             warm[round] = x;
         }
-    })?;
+    }))?;
     // The stage under way, finer than the events' stages: a solve's setup (before its
     // first iterate) apart from its iterations.
     let label = |e: &Event, params: &Params| match (e.stage, e.iteration) {
@@ -70,14 +70,14 @@ pub(super) fn interrupt_latency() -> Result<()> {
                 s.1 = None;
                 interrupt.raise();
             });
-            r.run_warm(params, None, &warm, &mut |e| {
+            r.run(Run::new(params).warm(&warm).progress(&mut |e| {
                 let mut s = stage.lock().unwrap();
                 let now = Instant::now();
                 if raised.lock().unwrap().is_some() && s.1.is_none() {
                     s.1 = Some(now);
                 }
                 s.0 = label(e, params);
-            })
+            }))
         });
         let end = Instant::now();
         let (when, under_way) = raised.lock().unwrap().take().expect("the raise ran");

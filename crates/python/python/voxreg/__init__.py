@@ -119,6 +119,9 @@ def regularize(
     clamp: Union[None, bool, float] = None,
     smoothness: Optional[float] = None,
     tolerance: Optional[float] = None,
+    sharpen: Optional[int] = None,
+    sharpen_threshold: Optional[float] = None,
+    intermediate_tolerance: Optional[float] = None,
     threads: int = 0,
     progress: Optional[Callable[[str, float], Any]] = None,
     palette: Any = None,
@@ -181,7 +184,8 @@ def regularize(
         per-vertex boxes (the only one that clamps; "gd" is its former name).
     clamp : bool or float, default None (preset: off; voxel_art 0.01)
         Keep every vertex within (1 - eps) voxel of its input, which rules out
-        self-intersections. A float is eps in voxels, in (0, 1); True is 0.01; False
+        self-intersections. A float is eps in voxels, in (0, 1); True is the preset's
+        margin (0.01); False
         turns the preset's clamping off. Implies solver="bounded".
     smoothness : float in (0, 1], default None (off)
         Voxel art: how rounded, from blocky (near 0: edges only softened) to rounded (1):
@@ -191,7 +195,14 @@ def regularize(
     tolerance : float > 0, default None (preset: 1e-3)
         Iterative solvers stop when every vertex is estimated within this many voxels of
         the exact minimizer.
-    threads : int >= 0, default 0
+    sharpen : int >= 0, default None (preset: 10)
+        With normals="at": most alternations of the sharpening stage (0 turns it off).
+    sharpen_threshold : float > 0, default None (preset: 0.4)
+        With normals="at": the sharpening stage's threshold on the feature field.
+    intermediate_tolerance : float >= 1, default None (preset: 2)
+        The solves before the last refinement round stop at this factor times
+        ``tolerance``.
+    threads : int, 0 to 1024, default 0
         Threads of the private thread pool the run uses (0: every core, or
         RAYON_NUM_THREADS). The GIL is released during the computation.
     progress : callable(stage: str, fraction: float), default None
@@ -232,12 +243,17 @@ def regularize(
         Over the memory budget (``max_memory``), or the computation failed.
     """
     colors, materials, names = _palette(palette)
+    # The library's options (its `Overrides`, the CLI's flags), by name; None is not given.
+    options = dict(
+        regions=regions, normals=normals, radius=radius, alpha=alpha, beta=beta, gamma=gamma,
+        refine=refine, preserve_size=preserve_size, texture_aware=texture_aware, solver=solver,
+        clamp=clamp, smoothness=smoothness, tolerance=tolerance, sharpen=sharpen,
+        sharpen_threshold=sharpen_threshold, intermediate_tolerance=intermediate_tolerance,
+    )
     d = _voxreg.regularize(
         _labels(labels), _triple("spacing", spacing), _triple("origin", origin),
-        label_argument("background", background), regions,
-        preset, normals, radius, alpha, beta, gamma, refine, preserve_size, texture_aware,
-        solver, clamp, smoothness, tolerance, threads, progress, colors, materials, max_memory,
-        palette_names=names,
+        label_argument("background", background),
+        preset, options, threads, progress, colors, materials, max_memory, palette_names=names,
     )
     return Mesh._from_core(d, _report(d), d["surface"], None, d["summary"])
 

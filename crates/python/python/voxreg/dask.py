@@ -42,10 +42,9 @@ from ._mesh import Mesh
 #: preservation.
 DEFAULT_HALO = 64
 
-_PARAMS = (
-    "regions", "preset", "normals", "radius", "alpha", "beta", "gamma", "refine",
-    "preserve_size", "texture_aware", "solver", "clamp", "tolerance",
-)
+#: The keyword arguments of a chunk: the preset and the library's options (those of
+#: ``voxreg.regularize``).
+_PARAMS = ("preset",) + tuple(_voxreg.option_names())
 
 
 def _open(array: Any) -> Any:
@@ -92,8 +91,7 @@ def regularize_chunk(labels: Any, start: Sequence[int], owned: Sequence[Sequence
     unknown = set(params) - set(_PARAMS)
     if unknown:
         raise ParameterError(f"unknown parameters: {', '.join(sorted(unknown))}")
-    p = {k: params.get(k) for k in _PARAMS}
-    p["preset"] = p["preset"] or "default"
+    preset = params.pop("preset", None) or "default"
     sp = np.asarray(spacing, dtype=np.float64)
     chunk_origin = np.asarray(origin, dtype=np.float64) + np.asarray(start) * sp
     labels = np.asarray(labels)
@@ -101,9 +99,7 @@ def regularize_chunk(labels: Any, start: Sequence[int], owned: Sequence[Sequence
         labels, tuple(sp), tuple(chunk_origin), label_argument("background", background),
         tuple(int(s) for s in start),
         tuple(tuple(int(x) for x in o) for o in owned), tuple(int(n) for n in global_dims),
-        p["regions"], p["preset"], p["normals"], p["radius"], p["alpha"], p["beta"], p["gamma"],
-        p["refine"], p["preserve_size"], p["texture_aware"], p["solver"], p["clamp"],
-        p["tolerance"], threads,
+        preset, params, threads,
     )
 
 
