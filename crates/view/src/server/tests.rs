@@ -561,6 +561,9 @@ fn a_re_solve_of_the_same_surface_starts_from_the_last_result() {
     // The panel's smoothness reaches the solver (bounded, clamped) and the command line.
     tuning["smoothness"] = serde_json::json!(0.5);
     tuning["clamp"] = serde_json::Value::Null;
+    // As the page sends it: the panel has no solver field (the command line's `cg` stays
+    // in the base options, and the panel's boxes drop it).
+    tuning["solver"] = serde_json::Value::Null;
     assert_eq!(post(&r, "/api/solve", tuning.to_string().as_bytes()).0, 202);
     let frame = again["frame"].as_u64().unwrap();
     let clamped =
