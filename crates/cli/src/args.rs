@@ -236,7 +236,7 @@ pub(crate) struct RegularizeArgs {
     #[command(flatten)]
     pub(crate) input: InputArgs,
     #[command(flatten)]
-    pub(crate) simplify: crate::simplify::SimplifyArgs,
+    pub(crate) simplify: SimplifyArgs,
     /// Output mesh: .obj (quads, one group per interface, with an .mtl for coloured
     /// inputs), .ply (binary quads, face labels and colours), .glb or .gltf (glTF 2.0,
     /// triangulated, one material per colour), .stl (binary, triangles only) or .vtp
@@ -533,5 +533,32 @@ fn positive_named(option: &'static str) -> impl Fn(&str) -> std::result::Result<
     move |s: &str| match s.parse::<f64>() {
         Ok(x) if x.is_finite() && x > 0.0 => Ok(x),
         _ => Err(format!("{option} must be finite and positive, got '{s}'")),
+    }
+}
+
+/// Simplification options of `voxreg regularize`.
+#[derive(Args, Debug, Clone, Default)]
+pub(crate) struct SimplifyArgs {
+    /// Simplify the mesh to about RATIO of its faces (0 < RATIO <= 1), keeping the
+    /// partition: each interface simplified once, junction lines shared, their corners
+    /// kept, every region closed; within --max-error of the full surface.
+    #[arg(long, value_name = "RATIO")]
+    pub(crate) simplify: Option<f64>,
+    /// The largest distance, in voxels (of the smallest spacing), of any vertex of the
+    /// full surface to the simplified one. Default with --simplify or --lod: 0.5. Alone:
+    /// simplify as far as this distance allows.
+    #[arg(long, value_name = "E")]
+    pub(crate) max_error: Option<f64>,
+    /// Write N levels of detail, OUTPUT's name with .lod0 ... .lod{N-1} before its
+    /// extension: level 0 the full mesh, each next one about 1/4 of the previous one's
+    /// faces within --max-error times 2^(k-1) (nested bounds).
+    #[arg(long, value_name = "N")]
+    pub(crate) lod: Option<usize>,
+}
+
+impl SimplifyArgs {
+    /// Whether any of the options is given.
+    pub(crate) fn active(&self) -> bool {
+        self.simplify.is_some() || self.max_error.is_some() || self.lod.is_some()
     }
 }

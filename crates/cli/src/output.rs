@@ -50,7 +50,7 @@ pub(crate) fn check_outputs(args: &RegularizeArgs, product: Product<'_>) -> Resu
     if crate::input::voxel_art(&args.input) {
         check_library(args, product, true)?;
     }
-    crate::simplify::check(args, product)?;
+    crate::simplify::check(args, product == Product::Mesh)?;
     if let Some(path) = &args.features {
         if product != Product::Mesh {
             bail!("--features {}: only voxreg regularize writes the feature field", path.display());

@@ -4,46 +4,19 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
-use clap::Args;
 use voxreg_io::{write_mesh, Outputs, QuadMesh};
 use voxreg_simplify::{pyramid_targets, simplify_levels, Options, Target};
 
 use crate::args::{RegularizeArgs, Split};
-use crate::output::Product;
 
-/// Simplification options of `voxreg regularize`.
-#[derive(Args, Debug, Clone, Default)]
-pub(crate) struct SimplifyArgs {
-    /// Simplify the mesh to about RATIO of its faces (0 < RATIO <= 1), keeping the
-    /// partition: each interface simplified once, junction lines shared, their corners
-    /// kept, every region closed; within --max-error of the full surface.
-    #[arg(long, value_name = "RATIO")]
-    pub(crate) simplify: Option<f64>,
-    /// The largest distance, in voxels (of the smallest spacing), of any vertex of the
-    /// full surface to the simplified one. Default with --simplify or --lod: 0.5. Alone:
-    /// simplify as far as this distance allows.
-    #[arg(long, value_name = "E")]
-    pub(crate) max_error: Option<f64>,
-    /// Write N levels of detail, OUTPUT's name with .lod0 ... .lod{N-1} before its
-    /// extension: level 0 the full mesh, each next one about 1/4 of the previous one's
-    /// faces within --max-error times 2^(k-1) (nested bounds).
-    #[arg(long, value_name = "N")]
-    pub(crate) lod: Option<usize>,
-}
-
-impl SimplifyArgs {
-    fn active(&self) -> bool {
-        self.simplify.is_some() || self.max_error.is_some() || self.lod.is_some()
-    }
-}
-
-/// Refuses simplification options that do not apply, before any work.
-pub(crate) fn check(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
+/// Refuses simplification options that do not apply, before any work (`writes_mesh`:
+/// the command writes `voxreg regularize`'s mesh).
+pub(crate) fn check(args: &RegularizeArgs, writes_mesh: bool) -> Result<()> {
     let s = &args.simplify;
     if !s.active() {
         return Ok(());
     }
-    if product != Product::Mesh {
+    if !writes_mesh {
         bail!("--simplify, --max-error and --lod apply to voxreg regularize's mesh");
     }
     if args.split != Split::None {

@@ -3,7 +3,7 @@
 use std::io::Read;
 use std::path::{Path, PathBuf};
 
-use crate::volume::lowercase_extension;
+use crate::files::lowercase_extension;
 
 /// The most bytes of a NRRD file read to find its `data file` field.
 const NRRD_HEADER_BYTES: u64 = 1 << 20;

@@ -101,6 +101,7 @@
 
 mod commit;
 mod error;
+mod files;
 mod gltf;
 mod grey;
 pub mod inflight;
@@ -150,6 +151,7 @@ pub use mesh::{
 pub use mrc::{read_mrc, read_mrc_bytes};
 pub use nifti::{read_nifti, read_nifti_bytes};
 pub use npy::{read_npy, read_npy_bytes};
+pub(crate) use nrrd::read_nrrd_in_memory;
 pub use nrrd::{read_nrrd, read_nrrd_bytes};
 pub use obj::write_obj;
 pub use orient::{check_coordinates, COORDINATE_RANGE};
@@ -161,9 +163,10 @@ pub use samples::{DataType, Endian};
 pub use stl::write_stl;
 pub use tiff::{read_tiff, read_tiff_bytes, read_tiff_slices, tiff_slices};
 pub use vol::{read_vol, read_vol_bytes};
+pub use files::{read_input_file, MAX_VOXELS};
 pub use volume::{
-    is_voxel_art, read_input_file, read_volume, read_voxels, read_voxels_bytes, read_voxels_with,
-    LoadedVolume, LoadedVoxels, ReadOptions, MAX_VOXELS,
+    is_voxel_art, read_volume, read_voxels, read_voxels_bytes, read_voxels_with, LoadedVolume, LoadedVoxels,
+    ReadOptions,
 };
 pub use vox::{
     read_vox, read_vox_bytes, read_vox_bytes_with, vox_model_sizes, VoxOptions, VOX_MAX_INSTANCES,

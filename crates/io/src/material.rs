@@ -116,7 +116,7 @@ impl Palette {
     /// [`material_name`] makes it, with `_{label}` appended when a material (this
     /// label's unnamed one included) has that name already: material names stay unique.
     pub fn set_name(&mut self, label: u32, name: &str) {
-        let name = crate::volume::printable(name.trim());
+        let name = crate::files::printable(name.trim());
         let name = name.as_str();
         let index = label as usize;
         if index >= self.materials.len() {

@@ -6,7 +6,7 @@ use std::path::Path;
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, InterfaceId, Patch, RegionId};
 
-use crate::volume::lowercase_extension;
+use crate::files::lowercase_extension;
 use crate::{write_gltf, write_obj, write_ply, write_stl, write_vtp, IoError, Material, NamedLabel, Palette};
 
 /// A mesh of quads with two labels per face and named groups of faces: what the

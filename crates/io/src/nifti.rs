@@ -12,7 +12,7 @@ use glam::{DMat3, DVec3};
 
 use crate::orient::place;
 use crate::samples::{check_data_len, data_len, decode, Layout, Order};
-use crate::volume::{checked_voxel_count, read_file};
+use crate::files::{checked_voxel_count, read_file};
 use crate::{DataType, Endian, IoError, Voxels};
 
 /// Size of a NIfTI-1 header.

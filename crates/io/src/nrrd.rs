@@ -11,7 +11,7 @@ use glam::{DMat3, DVec3};
 
 use crate::orient::place;
 use crate::samples::{decode, Layout, Order};
-use crate::volume::{checked_voxel_count, read_file};
+use crate::files::{checked_voxel_count, read_file};
 use crate::{DataType, Endian, IoError, LoadedVoxels, Palette};
 
 /// The largest label value a `.seg.nrrd` segment may name (the palette is indexed by
@@ -138,7 +138,7 @@ fn detached_data_file(header: &Path, file: &Path) -> Result<PathBuf, IoError> {
     if !real.starts_with(&real_dir) {
         return Err(outside());
     }
-    crate::volume::regular_file_len(&data_path)?;
+    crate::files::regular_file_len(&data_path)?;
     Ok(data_path)
 }
 
@@ -329,7 +329,7 @@ impl Header {
                 let mut units: Vec<&str> = u.split_whitespace().map(|w| w.trim_matches('"')).collect();
                 units.dedup();
                 match units[..] {
-                    [u] => Some(crate::volume::printable(u)),
+                    [u] => Some(crate::files::printable(u)),
                     _ => {
                         return Err(IoError::unsupported(
                             path,

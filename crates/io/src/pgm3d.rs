@@ -11,7 +11,7 @@ use std::path::Path;
 
 use voxreg_digisurf::LabelVolume;
 
-use crate::volume::{checked_voxel_count, read_file};
+use crate::files::{checked_voxel_count, read_file};
 use crate::IoError;
 
 /// Reads a DGtal `.pgm3d` file (`P3D` binary or `P2-3D` ASCII) as a labeled volume.

@@ -4,7 +4,7 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use crate::volume::lowercase_extension;
+use crate::files::lowercase_extension;
 use crate::{FaceGroup, IoError, QuadMesh};
 
 /// Reads the positions and faces of an OBJ or PLY mesh (by extension, case insensitive)

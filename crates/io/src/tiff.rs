@@ -9,7 +9,7 @@ use tiff::tags::Tag;
 use tiff::ColorType;
 
 use crate::samples::{decode, Layout, Order};
-use crate::volume::{checked_voxel_count, read_file};
+use crate::files::{checked_voxel_count, read_file};
 use crate::{DataType, Endian, IoError, LoadedVoxels};
 
 /// Reads a TIFF stack: a multi-page `.tif`/`.tiff` file, see [`read_tiff_bytes`].
@@ -187,7 +187,7 @@ impl<'a> Stack<'a> {
         let voxels = decode(self.path, &self.data, layout, None)?
             .with_spacing(self.spacing)
             .map_err(|e| IoError::format(self.path, format!("spacing {}: {e}", self.spacing)))?;
-        let units = self.units.as_deref().map(crate::volume::printable);
+        let units = self.units.as_deref().map(crate::files::printable);
         Ok(LoadedVoxels { voxels, palette: None, units })
     }
 }

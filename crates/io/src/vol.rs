@@ -10,7 +10,7 @@ use std::path::Path;
 use flate2::read::ZlibDecoder;
 use voxreg_digisurf::LabelVolume;
 
-use crate::volume::{checked_voxel_count, read_file};
+use crate::files::{checked_voxel_count, read_file};
 use crate::IoError;
 
 /// At most this many header lines before the `.` line (as DGtal).

@@ -16,7 +16,7 @@ use roxmltree::{Document, Node};
 
 use crate::orient::place;
 use crate::samples::{decode, Layout, Order};
-use crate::volume::{checked_voxel_count, read_file};
+use crate::files::{checked_voxel_count, read_file};
 use crate::{DataType, Endian, IoError, Voxels};
 
 mod binary;

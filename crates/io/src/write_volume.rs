@@ -7,7 +7,7 @@ use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxe
 use voxreg_digisurf::LabelVolume;
 
 use crate::mesh::write_file_atomically;
-use crate::volume::lowercase_extension;
+use crate::files::lowercase_extension;
 use crate::{IoError, Palette};
 
 /// The largest model MagicaVoxel opens, per axis.

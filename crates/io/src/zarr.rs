@@ -19,7 +19,7 @@ use zarrs::storage::{
 };
 
 use crate::samples::{decode, Layout, Order};
-use crate::volume::checked_voxel_count;
+use crate::files::checked_voxel_count;
 use crate::{DataType, Endian, IoError, LoadedVoxels};
 
 /// Whether the directory `path` is a Zarr node: it holds `zarr.json` (v3), `.zarray` or
@@ -293,7 +293,7 @@ fn confine_store(root: &Path) -> Result<(), IoError> {
                     continue;
                 }
             }
-            crate::volume::regular_file_len(&entry_path)?;
+            crate::files::regular_file_len(&entry_path)?;
         }
     }
     Ok(())
@@ -519,7 +519,7 @@ fn unit(name: &str) -> String {
         "centimeter" => "cm",
         "meter" => "m",
         "angstrom" => "Å",
-        other => return crate::volume::printable(other),
+        other => return crate::files::printable(other),
     }
     .to_string()
 }

@@ -461,6 +461,8 @@ fn fuzz_corpora_replay_without_panic() {
                 }
                 // The front door's target; its seeds are replayed by voxreg-regularize's tests.
                 "pipeline" => {}
+                // The viewer's requests; replayed by voxreg-view's tests (`fuzz_requests.rs`).
+                "request" => {}
                 reader => {
                     let (_, read) = readers
                         .iter()

@@ -356,7 +356,7 @@ mod tests {
             }
         });
         let params = Params::default();
-        let whole = crate::regularize(&volume, &params).unwrap();
+        let whole = crate::regularizer::regularize(&volume, &params).unwrap();
         let mut expected: BTreeMap<u64, DVec3> = BTreeMap::new();
         for s in whole.surface.surfels() {
             for v in s.vertices {
@@ -409,7 +409,7 @@ mod tests {
         let volume = volume();
         let dims = volume.dims();
         let params = Params::default();
-        let whole = crate::regularize(&volume, &params).unwrap();
+        let whole = crate::regularizer::regularize(&volume, &params).unwrap();
         let block = Block { global_dims: dims, start: [0; 3], owned: dims.map(|n| [0, n]) };
         let part = regularize_block(&volume, &block, &params).unwrap();
         let expected = owned_part(&whole.surface, whole.positions.as_slice(), &block, None);

@@ -8,8 +8,8 @@ use voxreg_digisurf::DigitalSurface;
 
 use crate::energy::Energy;
 use crate::error::RegularizeError;
-use crate::info::CgInfo;
-use crate::iterative::{Preconditioner, Setup};
+use crate::info::{CgInfo, Preconditioner};
+use crate::iterative::Setup;
 use crate::multigrid::MultigridParams;
 use crate::progress::Progress;
 use crate::stencil::MatrixFreeOperator;

@@ -8,41 +8,12 @@ use rayon::prelude::*;
 
 use crate::energy::Energy;
 use crate::error::RegularizeError;
-use crate::info::SolveTimings;
+use crate::info::{Preconditioner, SolveTimings};
 use crate::multigrid::{Hierarchy, MultigridParams, Vcycle};
 use crate::stencil::{Coefficients, MatrixFreeOperator, Stencil, CHUNK};
 use crate::vecops::{sym_inverse, sym_mul};
 use crate::weights::FairnessMask;
 use voxreg_normals::Interrupt;
-
-/// The preconditioner of the iterative solvers ([`crate::CgSolver`],
-/// [`crate::BoundedSolver`]).
-#[derive(Copy, Clone, Debug, PartialEq, Eq, Default, serde::Serialize)]
-#[serde(rename_all = "kebab-case")]
-pub enum Preconditioner {
-    /// None: plain conjugate gradient or steepest descent.
-    Identity,
-    /// The scalar diagonal of `H`.
-    Jacobi,
-    /// The 3x3 diagonal blocks of `H` (couples the coordinates through the normals).
-    BlockJacobi,
-    /// One symmetric V-cycle of aggregation multigrid over the voxel hierarchy (see
-    /// [`MultigridParams`]): several times fewer iterations than the others.
-    #[default]
-    Multigrid,
-}
-
-impl Preconditioner {
-    /// A short name for reports: `"identity"`, `"jacobi"`, `"block-jacobi"`, `"multigrid"`.
-    pub fn name(&self) -> &'static str {
-        match self {
-            Preconditioner::Identity => "identity",
-            Preconditioner::Jacobi => "jacobi",
-            Preconditioner::BlockJacobi => "block-jacobi",
-            Preconditioner::Multigrid => "multigrid",
-        }
-    }
-}
 
 /// The structure an iterative solver keeps across solves on one surface.
 #[derive(Debug)]
