@@ -8,8 +8,8 @@ use glam::{DVec3, Vec3};
 use gltf::json::{self as gj, validation::Checked, validation::USize64, Index};
 use rayon::prelude::*;
 
-use crate::mesh::write_atomically;
 use crate::files::lowercase_extension;
+use crate::mesh::write_atomically;
 use crate::{IoError, Material, QuadMesh};
 
 /// Writes `mesh` to `path` as glTF 2.0: binary `.glb`, or `.gltf` JSON with the buffer

@@ -134,6 +134,7 @@ mod zarr;
 
 pub use commit::Outputs;
 pub use error::IoError;
+pub use files::{read_input_file, MAX_VOXELS};
 pub use gltf::write_gltf;
 pub use grey::{GreyVolume, NotALabel, Voxels};
 pub use input::{read_input, read_input_bytes, Background, Input, InputError, InputOptions};
@@ -163,7 +164,6 @@ pub use samples::{DataType, Endian};
 pub use stl::write_stl;
 pub use tiff::{read_tiff, read_tiff_bytes, read_tiff_slices, tiff_slices};
 pub use vol::{read_vol, read_vol_bytes};
-pub use files::{read_input_file, MAX_VOXELS};
 pub use volume::{
     is_voxel_art, read_volume, read_voxels, read_voxels_bytes, read_voxels_with, LoadedVolume, LoadedVoxels,
     ReadOptions,

@@ -7,9 +7,9 @@
 
 use std::path::Path;
 
+use crate::files::{checked_voxel_count, read_file};
 use crate::samples::{check_data_len, data_len, decode, Layout, Order};
 use crate::vol::{inflate_at_most, parse_header};
-use crate::files::{checked_voxel_count, read_file};
 use crate::{DataType, Endian, IoError, Voxels};
 
 /// Reads a DGtal `.longvol` file (versions 2 and 3). See [`read_longvol_bytes`].

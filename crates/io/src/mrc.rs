@@ -7,9 +7,9 @@ use std::path::Path;
 
 use glam::{DMat3, DVec3};
 
+use crate::files::{checked_voxel_count, read_file};
 use crate::orient::place;
 use crate::samples::{check_data_len, data_len, decode, Layout, Order};
-use crate::files::{checked_voxel_count, read_file};
 use crate::{DataType, Endian, IoError, LoadedVoxels};
 
 /// The fixed header's length.

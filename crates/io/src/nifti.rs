@@ -10,9 +10,9 @@ use std::path::Path;
 use flate2::read::MultiGzDecoder;
 use glam::{DMat3, DVec3};
 
+use crate::files::{checked_voxel_count, read_file};
 use crate::orient::place;
 use crate::samples::{check_data_len, data_len, decode, Layout, Order};
-use crate::files::{checked_voxel_count, read_file};
 use crate::{DataType, Endian, IoError, Voxels};
 
 /// Size of a NIfTI-1 header.

@@ -6,8 +6,8 @@
 
 use std::path::Path;
 
-use crate::samples::{check_data_len, data_len, decode, Layout, Order};
 use crate::files::{checked_voxel_count, read_file};
+use crate::samples::{check_data_len, data_len, decode, Layout, Order};
 use crate::{DataType, Endian, IoError, Voxels};
 
 const MAGIC: &[u8] = b"\x93NUMPY";

@@ -9,9 +9,9 @@ use std::path::{Path, PathBuf};
 use flate2::read::MultiGzDecoder;
 use glam::{DMat3, DVec3};
 
+use crate::files::{checked_voxel_count, read_file};
 use crate::orient::place;
 use crate::samples::{decode, Layout, Order};
-use crate::files::{checked_voxel_count, read_file};
 use crate::{DataType, Endian, IoError, LoadedVoxels, Palette};
 
 /// The largest label value a `.seg.nrrd` segment may name (the palette is indexed by

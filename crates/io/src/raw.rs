@@ -4,8 +4,8 @@ use std::path::Path;
 
 use glam::DVec3;
 
-use crate::samples::{check_data_len, data_len, decode, Layout, Order};
 use crate::files::{checked_voxel_count, read_file};
+use crate::samples::{check_data_len, data_len, decode, Layout, Order};
 use crate::{DataType, Endian, IoError, Voxels};
 
 /// The layout of a raw file, which has none of its own.

@@ -8,8 +8,8 @@ use tiff::decoder::{Decoder, DecodingResult, Limits};
 use tiff::tags::Tag;
 use tiff::ColorType;
 
-use crate::samples::{decode, Layout, Order};
 use crate::files::{checked_voxel_count, read_file};
+use crate::samples::{decode, Layout, Order};
 use crate::{DataType, Endian, IoError, LoadedVoxels};
 
 /// Reads a TIFF stack: a multi-page `.tif`/`.tiff` file, see [`read_tiff_bytes`].

@@ -9,7 +9,6 @@ use crate::files::checked_voxel_count;
 use crate::files::{lowercase_extension, read_file};
 use crate::{read_longvol, read_nifti, read_npy, read_pgm3d, read_vol, read_vti, IoError, Palette, Voxels};
 
-
 /// A volume read from a file, with what the file says about its labels.
 #[derive(Clone, Debug, PartialEq)]
 pub struct LoadedVolume {

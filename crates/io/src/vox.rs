@@ -6,8 +6,8 @@ use dot_vox::{DotVoxData, Model, SceneNode};
 use glam::DVec3;
 use voxreg_digisurf::LabelVolume;
 
-use crate::material::apply_vox_material;
 use crate::files::{checked_voxel_count, read_file};
+use crate::material::apply_vox_material;
 use crate::{IoError, LoadedVolume, Palette};
 
 /// Scene graphs nested deeper than this are refused (they are malformed or cyclic).

@@ -14,9 +14,9 @@ use std::path::Path;
 use glam::{DMat3, DVec3};
 use roxmltree::{Document, Node};
 
+use crate::files::{checked_voxel_count, read_file};
 use crate::orient::place;
 use crate::samples::{decode, Layout, Order};
-use crate::files::{checked_voxel_count, read_file};
 use crate::{DataType, Endian, IoError, Voxels};
 
 mod binary;

@@ -6,8 +6,8 @@ use std::path::Path;
 use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
 use voxreg_digisurf::LabelVolume;
 
-use crate::mesh::write_file_atomically;
 use crate::files::lowercase_extension;
+use crate::mesh::write_file_atomically;
 use crate::{IoError, Palette};
 
 /// The largest model MagicaVoxel opens, per axis.

@@ -18,8 +18,8 @@ use zarrs::storage::{
     MaybeBytes, MaybeBytesIterator, ReadableStorageTraits, StorageError, StoreKey, WritableStorageTraits,
 };
 
-use crate::samples::{decode, Layout, Order};
 use crate::files::checked_voxel_count;
+use crate::samples::{decode, Layout, Order};
 use crate::{DataType, Endian, IoError, LoadedVoxels};
 
 /// Whether the directory `path` is a Zarr node: it holds `zarr.json` (v3), `.zarray` or
