@@ -1,0 +1,243 @@
+//! The V-cycle itself: one energy's preconditioner and its application, on the whole
+//! operator or restricted to a face.
+
+use std::sync::Arc;
+
+use glam::{DVec3, Vec3A};
+use rayon::prelude::*;
+
+use super::coarse::{Coarsest, Level, Work};
+use super::fine::{fine_majorant, inverse_blocks, masked, FineNumbers};
+use super::parts::{block_mul, Aggregation, Block, Rows, FACE};
+use crate::stencil::{Coefficients, Stencil, CHUNK};
+
+/// The coarse levels of a face's operator ([`Vcycle::set_face`]).
+#[derive(Debug)]
+pub(super) struct FaceLevels {
+    pub(super) levels: Vec<Level>,
+    pub(super) coarsest: Option<Coarsest>,
+    /// Every coarse level's rows (the first coarse level's first), and the face they
+    /// were built for, to update them for the next face
+    /// ([`Vcycle::updated_face_hierarchy`]).
+    pub(super) rows: Vec<Rows<FACE>>,
+    pub(super) face: Vec<Vec3A>,
+}
+
+/// One energy's multigrid preconditioner: `z = V(r)`.
+#[derive(Debug)]
+pub(crate) struct Vcycle {
+    pub(super) fine: FineNumbers,
+    pub(super) fine_smoother: Vec<Block>,
+    /// The smoother of the face operator ([`Vcycle::set_face`]).
+    pub(super) face_smoother: Vec<Block>,
+    /// The face operator's own coarse levels ([`Vcycle::set_face`]).
+    pub(super) face_levels: Option<FaceLevels>,
+    /// The fine majorant's blocks, for the face smoothers: computed by the first
+    /// [`Vcycle::set_face`] (48 bytes a vertex that unconstrained solves never hold).
+    pub(super) majorant: Vec<[f64; 6]>,
+    pub(super) damping: f64,
+    pub(super) levels: Vec<Level>,
+    pub(super) aggregations: Arc<[Aggregation]>,
+    pub(super) coarsest: Option<Coarsest>,
+    pub(super) works: Vec<Work>,
+    pub(super) steps: usize,
+    pub(super) coarse_steps: usize,
+    /// Seconds spent factoring the coarsest level.
+    pub(crate) factor_seconds: f64,
+}
+
+/// `x = m r` (or `x += m r` with `add`), masked by `face` when given.
+fn smooth(m: &[Block], r: &[Vec3A], x: &mut [Vec3A], add: bool, face: Option<&[Vec3A]>) {
+    x.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(m.par_chunks(CHUNK)).enumerate().for_each(
+        |(k, ((x, r), m))| {
+            for i in 0..x.len() {
+                let d = block_mul(&m[i], r[i]);
+                x[i] = masked(face, k * CHUNK + i, if add { x[i] + d } else { d });
+            }
+        },
+    );
+}
+
+fn restrict(agg: &Aggregation, fine: &[Vec3A], coarse: &mut [Vec3A]) {
+    coarse.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
+        for (o, c) in out.iter_mut().enumerate() {
+            *c = agg.members(k * CHUNK + o).iter().map(|&i| fine[i as usize]).sum();
+        }
+    });
+}
+
+/// `fine += P coarse`, masked by `face` when given.
+fn prolong_add(parent: &[u32], coarse: &[Vec3A], fine: &mut [Vec3A], face: Option<&[Vec3A]>) {
+    fine.par_chunks_mut(CHUNK).zip(parent.par_chunks(CHUNK)).enumerate().for_each(|(k, (f, p))| {
+        for i in 0..f.len() {
+            f[i] = masked(face, k * CHUNK + i, f[i] + coarse[p[i] as usize]);
+        }
+    });
+}
+
+impl Vcycle {
+    /// Bytes of the coarse levels, smoothers and work vectors.
+    pub(crate) fn memory_bytes(&self) -> usize {
+        let agg: usize =
+            self.aggregations.iter().map(|a| 4 * (a.parent.len() + a.members.len() + a.offsets.len())).sum();
+        let levels: usize = self.levels.iter().map(|l| l.matrix.bytes() + 24 * l.n).sum();
+        let works: usize = self.works.iter().map(|w| 16 * (w.r.len() + w.x.len() + w.t.len())).sum();
+        let coarsest = self.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len());
+        let face = self.face_levels.as_ref().map_or(0, |f| {
+            let levels: usize = f.levels.iter().map(|l| l.matrix.bytes() + 24 * l.n).sum();
+            levels
+                + f.coarsest.as_ref().map_or(0, |c| 8 * c.factor.len())
+                + f.rows.iter().map(Rows::bytes).sum::<usize>()
+                + 16 * f.face.len()
+        });
+        face + 24 * (self.fine_smoother.len() + self.face_smoother.len())
+            + 48 * self.majorant.len()
+            + self.fine.bytes()
+            + agg
+            + levels
+            + works
+            + coarsest
+    }
+
+    /// Puts the fine level on the operator of `coef` (its numbers, majorant and smoother)
+    /// and keeps the coarse levels, which stay those of the energy the cycle was built
+    /// for: the cycle of a quick start ([`crate::iterative::Setup::prepare`]), O(n) instead
+    /// of a setup. Still a fixed symmetric positive definite preconditioner of the new
+    /// operator `A`: with the smoother `S = damping M^-1`, `M >= A` and damping below 2,
+    /// the cycle is `2S - SAS + (I - SA) P C P^T (I - AS)`, where `2S - SAS` is positive
+    /// definite and `C` (the old levels' own symmetric cycle) positive semi-definite; how
+    /// close the old levels are to the new operator's only sets the rate.
+    pub(crate) fn refresh_fine(&mut self, stencil: &Stencil, coef: &Coefficients<'_>) {
+        self.fine_smoother = inverse_blocks(
+            &fine_majorant(stencil, coef),
+            self.damping,
+            std::mem::take(&mut self.fine_smoother),
+        );
+        self.fine = FineNumbers::new(stencil, coef, std::mem::take(&mut self.fine));
+        self.forget_face();
+    }
+
+    /// Drops the face's levels, smoother and majorant ([`Vcycle::set_face`]): once the
+    /// active-set rounds are over, or the operator's numbers changed.
+    pub(crate) fn forget_face(&mut self) {
+        self.face_levels = None;
+        self.face_smoother = Vec::new();
+        self.majorant = Vec::new();
+    }
+
+    /// Bytes moved by one cycle (`connectivity`: bytes of the stencil's connectivity).
+    pub(crate) fn traffic(&self, connectivity: usize, n: usize) -> usize {
+        let (s, cs) = (self.steps, self.coarse_steps);
+        // Fine, in f32: products (connectivity, numbers, 5 vectors), smoothing (r, M, z),
+        // residual updates, conversions in and out, restriction, prolongation.
+        let product = connectivity + self.fine.bytes() + 5 * 16 * n;
+        let fine = 2 * s * product + 2 * s * 56 * n + 2 * s * 48 * n + 2 * 40 * n + 40 * n;
+        let coarse: usize =
+            self.levels.iter().map(|l| 2 * cs * (l.matrix.bytes() + 3 * 16 * l.n) + 10 * 16 * l.n).sum();
+        let coarsest = self.coarsest.as_ref().map_or(0, |c| 2 * 8 * c.factor.len());
+        fine + coarse + coarsest
+    }
+
+    /// `z = V(r)`: one symmetric V-cycle, in `f32`.
+    pub(crate) fn apply(&mut self, stencil: &Stencil, r: &[DVec3], z: &mut [DVec3]) {
+        self.apply_on_face(stencil, r, z, None);
+    }
+
+    /// [`Vcycle::apply`] for the operator restricted to a face (the coordinates where
+    /// `face` is 1; it is 0 on the others, held fixed): every fine-level smoothing,
+    /// residual, restriction and prolongation is masked, so the fine level smooths the
+    /// face's own operator `D H D` (`D = diag(face)`) and the coarse correction only moves
+    /// free coordinates. Symmetric positive definite on the face, like the V-cycle; a much
+    /// better preconditioner there than the whole operator's cycle masked afterwards,
+    /// whose smoother moves held coordinates that the mask then discards.
+    pub(crate) fn apply_on_face(
+        &mut self,
+        stencil: &Stencil,
+        r: &[DVec3],
+        z: &mut [DVec3],
+        face: Option<&[Vec3A]>,
+    ) {
+        let steps = self.steps;
+        let mut works = std::mem::take(&mut self.works);
+        let (fine, rest) = works.split_at_mut(1);
+        let w = &mut fine[0];
+        let face_smoother = std::mem::take(&mut self.face_smoother);
+        let smoother = if face.is_some() && face_smoother.len() == w.x.len() {
+            &face_smoother
+        } else {
+            &self.fine_smoother
+        };
+        // Fine level: the right-hand side in `f32`, read from `r` where used (not stored),
+        // and the pre-smoothing from zero, then the residual restricted.
+        let b = |i: usize| masked(face, i, r[i].as_vec3a());
+        w.x.par_chunks_mut(CHUNK).zip(smoother.par_chunks(CHUNK)).enumerate().for_each(|(k, (x, m))| {
+            for i in 0..x.len() {
+                let j = k * CHUNK + i;
+                x[i] = masked(face, j, block_mul(&m[i], b(j)));
+            }
+        });
+        if self.levels.is_empty() {
+            z.par_chunks_mut(CHUNK).zip(w.x.par_chunks(CHUNK)).for_each(|(z, x)| {
+                for (z, x) in z.iter_mut().zip(x) {
+                    *z = x.as_dvec3();
+                }
+            });
+        } else {
+            for s in 0..steps {
+                self.fine.residual(stencil, &w.x, &b, &mut w.r, &mut w.t, face);
+                if s + 1 < steps {
+                    smooth(smoother, &w.r, &mut w.x, true, face);
+                }
+            }
+            restrict(&self.aggregations[0], &w.r, &mut rest[0].r);
+            match (face, &self.face_levels) {
+                (Some(_), Some(f)) => self.coarse_cycle(&f.levels, f.coarsest.as_ref(), 0, rest),
+                _ => self.coarse_cycle(&self.levels, self.coarsest.as_ref(), 0, rest),
+            }
+            prolong_add(&self.aggregations[0].parent, &rest[0].x, &mut w.x, face);
+            for _ in 1..steps {
+                self.fine.residual(stencil, &w.x, &b, &mut w.r, &mut w.t, face);
+                smooth(smoother, &w.r, &mut w.x, true, face);
+            }
+            // The last post-smoothing step and the output in `f64`, in the residual's pass.
+            let Work { x, t, .. } = w;
+            let x = &*x;
+            self.fine.residual_map(stencil, x, &b, z, t, face, |i, r| {
+                masked(face, i, x[i] + block_mul(&smoother[i], r)).as_dvec3()
+            });
+        }
+        self.face_smoother = face_smoother;
+        self.works = works;
+    }
+
+    /// Solves approximately on coarse level `l + 1` (`works[l]`): `x = V(r)`.
+    fn coarse_cycle(&self, levels: &[Level], coarsest: Option<&Coarsest>, l: usize, works: &mut [Work]) {
+        let last = l + 1 == levels.len();
+        if last {
+            let w = &mut works[0];
+            coarsest.expect("factored").solve(&w.r, &mut w.x);
+            return;
+        }
+        let steps = self.coarse_steps;
+        let (here, rest) = works.split_at_mut(1);
+        let w = &mut here[0];
+        let level = &levels[l];
+        smooth(&level.smoother, &w.r, &mut w.x, false, None);
+        for s in 0..steps {
+            level.matrix.residual(&w.x, &w.r, &mut w.t);
+            if s + 1 < steps {
+                smooth(&level.smoother, &w.t, &mut w.x, true, None);
+            }
+        }
+        restrict(&self.aggregations[l + 1], &w.t, &mut rest[0].r);
+        self.coarse_cycle(levels, coarsest, l + 1, rest);
+        let level = &levels[l];
+        let (here, rest) = works.split_at_mut(1);
+        let w = &mut here[0];
+        prolong_add(&self.aggregations[l + 1].parent, &rest[0].x, &mut w.x, None);
+        for _ in 0..steps {
+            level.matrix.residual(&w.x, &w.r, &mut w.t);
+            smooth(&level.smoother, &w.t, &mut w.x, true, None);
+        }
+    }
+}
