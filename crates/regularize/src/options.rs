@@ -444,6 +444,8 @@ impl Overrides {
 }
 
 #[cfg(test)]
+// The tests set one field after another, as a front end fills its overrides.
+#[allow(clippy::field_reassign_with_default)]
 mod tests {
     use super::*;
 
