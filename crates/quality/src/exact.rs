@@ -204,7 +204,7 @@ fn far_side_meets(p: DVec3, far: &[DVec3], t_others: &[DVec3]) -> bool {
 ///   plane on the same side of `p q`, or, both flat along the line `p q`, both reach past
 ///   the same end.
 /// - Three: the same triangle, reported unless it is flat (then it is the segments).
-pub(crate) fn triangles_meet_off_shared(s: [(u32, DVec3); 3], t: [(u32, DVec3); 3]) -> bool {
+pub fn triangles_meet_off_shared(s: [(u32, DVec3); 3], t: [(u32, DVec3); 3]) -> bool {
     let distinct = |x: [(u32, DVec3); 3]| {
         let mut out: Vec<(u32, DVec3)> = Vec::with_capacity(3);
         for v in x {

@@ -48,6 +48,7 @@ mod solid;
 use glam::DVec3;
 use rayon::prelude::*;
 
+pub use exact::triangles_meet_off_shared;
 pub use intersections::{invalid_faces, self_intersections, triangles_intersect};
 pub use solid::{point_triangle_distance, solid_report, Occupancy, SolidReport};
 

@@ -7,7 +7,7 @@ use std::collections::BinaryHeap;
 use glam::DVec3;
 use rustc_hash::FxHashMap;
 use voxreg_io::QuadMesh;
-use voxreg_quality::{point_triangle_distance, triangles_intersect};
+use voxreg_quality::{point_triangle_distance, triangles_intersect, triangles_meet_off_shared};
 
 use crate::grid::Grid;
 use crate::quadric::Quadric;
@@ -545,7 +545,9 @@ impl Engine {
             }
             assigned.push((p, best.1, best.0));
         }
-        // No new intersection with a triangle that shares no vertex.
+        // No new intersection: with a triangle that shares no vertex, none at all; with one
+        // that shares vertices, none off the shared corners and edges (exactly, as
+        // `voxreg check` tests).
         if let Some(mut grid) = self.grid.take() {
             let mut hit = false;
             for (_, tri) in &modified {
@@ -556,13 +558,28 @@ impl Engine {
                         return false;
                     }
                     let st = self.tris[s as usize];
+                    let q = st.map(|x| self.pos[x as usize]);
                     if st.iter().any(|x| tri.contains(x)) {
-                        return false;
+                        let with_ids =
+                            |t: [u32; 3], p: [DVec3; 3]| [(t[0], p[0]), (t[1], p[1]), (t[2], p[2])];
+                        return triangles_meet_off_shared(with_ids(*tri, p), with_ids(st, q));
                     }
-                    triangles_intersect(&p, &st.map(|x| self.pos[x as usize]))
+                    triangles_intersect(&p, &q)
                 });
                 if hit {
                     break;
+                }
+            }
+            // The new triangles among themselves (all around `v`).
+            if !hit {
+                let with_ids = |t: [u32; 3]| t.map(|x| (x, self.pos[x as usize]));
+                'pairs: for (i, (_, a)) in modified.iter().enumerate() {
+                    for (_, b) in &modified[i + 1..] {
+                        if triangles_meet_off_shared(with_ids(*a), with_ids(*b)) {
+                            hit = true;
+                            break 'pairs;
+                        }
+                    }
                 }
             }
             self.grid = Some(grid);

@@ -60,7 +60,7 @@ fn the_seeds_get_their_answers() {
         ("page.http", 200),
         ("positions.http", 404),
         ("preset.http", 200),
-        ("solve.http", 400),
+        ("solve.http", 409), // well-formed parameters, but no input open
         ("state.http", 200),
     ];
     for (name, bytes) in seeds() {
