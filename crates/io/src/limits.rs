@@ -73,7 +73,7 @@ const CGROUP_RESERVE: u64 = 64 << 20;
 
 /// What the environment lets this process allocate, where it sets a limit (Linux): the
 /// least of the address-space limit (`RLIMIT_AS`, `ulimit -v`, from `/proc/self/limits`)
-/// less the address space already mapped and [a reserve](address_space_reserve) for
+/// less the address space already mapped and a reserve (`address_space_reserve`) for
 /// threads, and the memory limit of the process's cgroup (v2 `memory.max` or v1
 /// `memory.limit_in_bytes`, of its cgroup and every ancestor, through
 /// `/proc/self/cgroup`) less what the process already holds; at least 1 MiB. `None` when

@@ -199,7 +199,7 @@ fn far_side_meets(p: DVec3, far: &[DVec3], t_others: &[DVec3]) -> bool {
 /// the positions are) and the positions.
 ///
 /// - No shared position: whether the closed triangles meet.
-/// - One, `p`: whether they meet anywhere but at `p` (see [`meet_past`]).
+/// - One, `p`: whether they meet anywhere but at `p` (see `meet_past`).
 /// - Two, `p q`: whether they meet off the segment `p q`: they overlap in their common
 ///   plane on the same side of `p q`, or, both flat along the line `p q`, both reach past
 ///   the same end.
