@@ -94,7 +94,7 @@ def test_progress_stages_fractions_and_throttle():
 def test_docstrings_tell_units_and_defaults():
     doc = voxreg.regularize.__doc__
     for word in ["physical units", "default (1, 1, 1)", "alpha : float > 0, default None (preset: 1e-2",
-                 "threads : int >= 0, default 0", "voxels"]:
+                 "threads : int, 0 to 1024, default 0", "voxels"]:
         assert word in doc
 
 
