@@ -5,7 +5,7 @@ use anyhow::{bail, Result};
 use voxreg_io::read_mesh;
 
 use crate::args::CheckArgs;
-use crate::print_stdout;
+use crate::terminal::print_stdout;
 
 /// `voxreg check`: counts the mesh's self-intersections and folds.
 pub(crate) fn check(args: &CheckArgs) -> Result<()> {

@@ -9,7 +9,7 @@ use voxreg_regularize::{InputFacts, Preset};
 
 use crate::args::InputArgs;
 use crate::input::{read_input, surface_of, voxel_art};
-use crate::print_stdout;
+use crate::terminal::print_stdout;
 
 /// `voxreg info`: the volume's dimensions and labels, and its digital surface's cells;
 /// refused, as `regularize` is, when the regularization's estimate exceeds the budget.

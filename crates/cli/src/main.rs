@@ -13,6 +13,7 @@ mod progress;
 mod report;
 mod signals;
 mod simplify;
+mod terminal;
 mod view;
 
 use anyhow::{Context, Result};
@@ -59,7 +60,7 @@ fn main() -> std::process::ExitCode {
     match result {
         Ok(()) => std::process::ExitCode::SUCCESS,
         Err(e) => {
-            eprintln!("error: {}", one_line(&e));
+            eprintln!("error: {}", terminal::one_line(&e));
             std::process::ExitCode::FAILURE
         }
     }
@@ -90,18 +91,6 @@ fn quiet_panics() {
             *last = Some(format!("{}{at}", message.lines().next().unwrap_or("")));
         }
     }));
-}
-
-/// One line: the error and those of its causes that it does not already quote.
-pub(crate) fn one_line(e: &anyhow::Error) -> String {
-    let mut line = e.to_string();
-    for cause in e.chain().skip(1) {
-        let cause = cause.to_string();
-        if !line.contains(&cause) {
-            line = format!("{line}: {cause}");
-        }
-    }
-    line
 }
 
 /// Help and version go to standard output (exit 0); any other argument error is one line
@@ -224,14 +213,4 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         eprintln!("{}; wrote {written}", r.summary());
     }
     Ok(())
-}
-
-/// Prints `text` to standard output; a closed pipe (`voxreg info ... | head`) is not an
-/// error.
-pub(crate) fn print_stdout(text: &str) -> Result<()> {
-    use std::io::Write as _;
-    match std::io::stdout().lock().write_all(text.as_bytes()) {
-        Err(e) if e.kind() == std::io::ErrorKind::BrokenPipe => Ok(()),
-        other => Ok(other?),
-    }
 }

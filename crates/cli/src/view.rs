@@ -35,7 +35,7 @@ pub(crate) fn view(args: &ViewArgs) -> Result<()> {
         if a.preset.is_some() && input::voxel_art(&a.input) != input::voxel_art(&options.input) {
             a.preset = None;
         }
-        load(&a, Some(bytes)).map_err(|e| crate::one_line(&e))
+        load(&a, Some(bytes)).map_err(|e| crate::terminal::one_line(&e))
     };
     let viewer = Viewer::bind(args.port.unwrap_or(0), Box::new(loader))?;
     // The address with the session's token: the page and its requests need it.
