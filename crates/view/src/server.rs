@@ -369,7 +369,7 @@ impl Viewer {
                 .or_else(|| query_value(&request.query, "token"));
             if !given.is_some_and(|t| same_secret(t.as_bytes(), self.token.as_bytes())) {
                 return Err(
-                    "this session's token is missing or wrong: open the address voxreg view printed".into()
+                    "the viewer's token is missing or wrong: open the address voxreg view printed".into()
                 );
             }
         }
