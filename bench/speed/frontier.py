@@ -46,6 +46,9 @@ import time
 
 import numpy as np
 
+sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+from vs_vtk import surface_nets_filter  # noqa: E402  (the same SurfaceNets3D set-up)
+
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 WORK = os.path.join(ROOT, "target", "bench")
 
@@ -261,32 +264,8 @@ def voxreg_run(exe, vol, spacing, extra, tmp, no_background=False):
 def surface_nets(labels, spacing, origin, iterations, background=0):
     """SurfaceNets3D on `labels` (X, Y, Z): (seconds of Update(), points, triangles, boundary labels)."""
     from vtkmodules.util import numpy_support
-    from vtkmodules.vtkCommonDataModel import vtkImageData
-    from vtkmodules.vtkFiltersCore import vtkSurfaceNets3D
 
-    image = vtkImageData()
-    image.SetDimensions(*labels.shape)
-    image.SetSpacing(*[float(s) for s in spacing])
-    image.SetOrigin(*[float(o) for o in origin])
-    flat = np.ascontiguousarray(labels.ravel(order="F")).astype(np.int32)
-    image.GetPointData().SetScalars(numpy_support.numpy_to_vtk(flat, deep=1))
-    nets = vtkSurfaceNets3D()
-    nets.SetInputData(image)
-    values = np.unique(labels)
-    if background is None:
-        nets.SetBackgroundLabel(float(values.max()) + 1.0)
-        materials = values
-    else:
-        nets.SetBackgroundLabel(float(background))
-        materials = values[values != background]
-    nets.SetNumberOfLabels(len(materials))
-    for i, v in enumerate(materials):
-        nets.SetLabel(i, float(v))
-    if iterations == 0:
-        nets.SmoothingOff()
-    else:
-        nets.SmoothingOn()
-        nets.SetNumberOfIterations(iterations)
+    nets = surface_nets_filter(labels, background, iterations, spacing, origin)
     t = time.perf_counter()
     nets.Update()
     seconds = time.perf_counter() - t

@@ -81,35 +81,47 @@ def load_labels(path):
     raise SystemExit(f"{path}: unsupported input for the SurfaceNets side")
 
 
-def child(path, smooth, no_background):
-    """Runs SurfaceNets3D on `path` and prints its filter time and output size as JSON."""
+def surface_nets_filter(labels, background, iterations=None, spacing=(1, 1, 1), origin=(0, 0, 0)):
+    """vtkSurfaceNets3D set up on `labels` (an (X, Y, Z) array), not yet run: every label but
+    `background` a material (with `background` None, every label, and the background a label
+    above them); `iterations` None keeps VTK's default smoothing, 0 turns it off."""
     import numpy as np
     from vtkmodules.util.numpy_support import numpy_to_vtk
     from vtkmodules.vtkCommonDataModel import vtkImageData
     from vtkmodules.vtkFiltersCore import vtkSurfaceNets3D
 
+    image = vtkImageData()
+    image.SetDimensions(*labels.shape)
+    image.SetSpacing(*[float(s) for s in spacing])
+    image.SetOrigin(*[float(o) for o in origin])
+    flat = np.ascontiguousarray(labels.ravel(order="F")).astype(np.int32)
+    image.GetPointData().SetScalars(numpy_to_vtk(flat, deep=1))
+    nets = vtkSurfaceNets3D()
+    nets.SetInputData(image)
+    values = np.unique(labels)
+    if background is None:
+        nets.SetBackgroundLabel(float(values.max()) + 1.0)
+        materials = values
+    else:
+        nets.SetBackgroundLabel(float(background))
+        materials = values[values != background]
+    nets.SetNumberOfLabels(len(materials))
+    for i, v in enumerate(materials):
+        nets.SetLabel(i, float(v))
+    if iterations == 0:
+        nets.SmoothingOff()
+    elif iterations is not None:
+        nets.SmoothingOn()
+        nets.SetNumberOfIterations(iterations)
+    return nets
+
+
+def child(path, smooth, no_background):
+    """Runs SurfaceNets3D on `path` and prints its filter time and output size as JSON."""
     labels, background = load_labels(path)
     if no_background:
         background = None
-    values = np.unique(labels)
-    img = vtkImageData()
-    img.SetDimensions(*labels.shape)
-    flat = np.ascontiguousarray(labels.transpose(2, 1, 0)).ravel()
-    arr = numpy_to_vtk(flat.astype(np.int32), deep=1)
-    img.GetPointData().SetScalars(arr)
-    f = vtkSurfaceNets3D()
-    f.SetInputData(img)
-    if background is None:
-        f.SetBackgroundLabel(float(values.max()) + 1.0)
-        materials = values
-    else:
-        f.SetBackgroundLabel(float(background))
-        materials = values[values != background]
-    f.SetNumberOfLabels(len(materials))
-    for i, v in enumerate(materials):
-        f.SetLabel(i, float(v))
-    if not smooth:
-        f.SmoothingOff()
+    f = surface_nets_filter(labels, background, iterations=None if smooth else 0)
     t = time.perf_counter()
     f.Update()
     seconds = time.perf_counter() - t
