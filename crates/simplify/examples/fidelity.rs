@@ -95,6 +95,17 @@ fn distances(points: &[DVec3], tris: &[[DVec3; 3]]) -> Vec<f64> {
         .collect()
 }
 
+fn worst<K: Ord + Copy + std::fmt::Debug>(a: &BTreeMap<K, f64>, b: &BTreeMap<K, f64>) {
+    let mut v: Vec<(f64, K, f64, f64)> = a
+        .iter()
+        .map(|(k, x)| {
+            (((b.get(k).copied().unwrap_or(0.0) - x) / x).abs(), *k, *x, b.get(k).copied().unwrap_or(0.0))
+        })
+        .collect();
+    v.sort_by(|p, q| q.0.total_cmp(&p.0));
+    eprintln!("DEBUG worst {:?}", &v[..5.min(v.len())]);
+}
+
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(path) = args.first() else {
@@ -124,6 +135,10 @@ fn main() {
     let mean = d.iter().sum::<f64>() / d.len() as f64;
     let (v0, a0) = measures(&full);
     let (v1, a1) = measures(&s.mesh);
+    if std::env::var_os("SIMPLIFY_DEBUG").is_some() {
+        worst(&v0, &v1);
+        worst(&a0, &a1);
+    }
     let background = loaded.volume.background();
     let spacing = loaded.volume.spacing();
     println!(

@@ -13,6 +13,14 @@ use crate::grid::Grid;
 use crate::quadric::Quadric;
 use crate::{Options, Simplified, SimplifyError, Stats, Target};
 
+/// A collapse may move no region's volume (enclosed by its faces) further than this
+/// fraction of its input volume, counting every collapse before it.
+const VOLUME_TOLERANCE: f64 = 0.005;
+
+/// A collapse may move no patch's area further than this fraction of its input area,
+/// counting every collapse before it.
+const AREA_TOLERANCE: f64 = 0.01;
+
 /// No group or no material.
 pub(crate) const NONE: u32 = u32::MAX;
 
@@ -44,18 +52,42 @@ type Signature = Vec<(u32, bool)>;
 type Candidate = (u64, u32, u32, u32, u32);
 
 /// A collapse that passed every check, with what it changes.
+#[derive(Default)]
 struct Plan {
     u: u32,
     v: u32,
+    /// Where `v` goes.
+    p: DVec3,
     removed: Vec<u32>,
     modified: Vec<(u32, [u32; 3])>,
     /// Input vertices and the triangle that answers for each, with the distance.
     assigned: Vec<(u32, u32, f64)>,
+    /// Changes of patches' areas (`false`, patch) and six times regions' volumes (`true`,
+    /// region).
+    deltas: Vec<(bool, u32, f64)>,
 }
 
-pub(crate) struct Engine {
+/// Reused buffers of the collapse checks, so that a collapse allocates nothing.
+#[derive(Default)]
+struct Scratch {
+    star_u: Vec<u32>,
+    nu: Vec<u32>,
+    nv: Vec<u32>,
+    after: Vec<([u32; 3], u32, u32)>,
+    after_nbrs: Vec<u32>,
+    sig_a: Signature,
+    sig_b: Signature,
+    pool: Vec<u32>,
+    tested: Vec<([u32; 3], [DVec3; 3])>,
+    ring: Vec<u32>,
+}
+
+pub(crate) struct Engine<'m> {
     options: Options,
     pos: Vec<DVec3>,
+    /// Whether each vertex left its input position (then its input position is answered
+    /// for by a triangle, as a removed vertex's is).
+    moved: Vec<bool>,
     tris: Vec<[u32; 3]>,
     tri_key: Vec<u32>,
     tri_alive: Vec<bool>,
@@ -73,13 +105,24 @@ pub(crate) struct Engine {
     /// (hidden by the faces sharing a vertex): the input face. Such triangles never
     /// change and come out as their input face.
     frozen: Vec<u32>,
-    input: QuadMesh,
+    input: &'m QuadMesh,
     input_triangles: usize,
     error_bound: f64,
     /// Tie-break weight of the squared edge length in a collapse's cost.
     length_weight: f64,
+    /// Mean triangle area (the unit of the quadrics' weights).
+    mean_area: f64,
     max_error: f64,
     cos_normal: f64,
+    plan: Plan,
+    scratch: Scratch,
+    /// Per patch, its two regions (dense ids).
+    key_regions: Vec<[u32; 2]>,
+    /// Six times each region's input volume, and its change so far.
+    region_volume: Vec<(f64, f64)>,
+    /// Each patch's input area, and its change so far.
+    patch_area: Vec<(f64, f64)>,
+    pub(crate) refusals: [usize; 10],
 }
 
 fn tri_normal(p: [DVec3; 3]) -> DVec3 {
@@ -94,20 +137,35 @@ fn quality(p: [DVec3; 3]) -> f64 {
     2.0 * 3f64.sqrt() * tri_normal(p).length() / l
 }
 
+/// Whether the boxes of two triangles meet (closed boxes: a necessary condition for
+/// the triangles to meet, exact).
+fn boxes_meet(a: &[DVec3; 3], b: &[DVec3; 3]) -> bool {
+    let (alo, ahi) = (a[0].min(a[1]).min(a[2]), a[0].max(a[1]).max(a[2]));
+    let (blo, bhi) = (b[0].min(b[1]).min(b[2]), b[0].max(b[1]).max(b[2]));
+    !(alo.cmpgt(bhi).any() || blo.cmpgt(ahi).any())
+}
+
 fn is_feature(sig: &Signature) -> bool {
     !(sig.len() == 2 && sig[0].0 == sig[1].0 && sig[0].1 != sig[1].1)
 }
 
+/// The signature of edge `(a, w)` over `tris` (each with its key), into `sig`.
+fn signature_into<'a>(tris: impl Iterator<Item = (&'a [u32; 3], u32)>, a: u32, w: u32, sig: &mut Signature) {
+    sig.clear();
+    for (t, k) in tris {
+        if let Some(i) = t.iter().position(|&x| x == a) {
+            if t.contains(&w) {
+                sig.push((k, t[(i + 1) % 3] == w));
+            }
+        }
+    }
+    sig.sort_unstable();
+}
+
 /// The signature of edge `(a, w)` over `tris` (each with its key).
 fn signature<'a>(tris: impl Iterator<Item = (&'a [u32; 3], u32)>, a: u32, w: u32) -> Signature {
-    let mut sig: Signature = tris
-        .filter(|(t, _)| t.contains(&a) && t.contains(&w))
-        .map(|(t, k)| {
-            let i = t.iter().position(|&x| x == a).unwrap();
-            (k, t[(i + 1) % 3] == w)
-        })
-        .collect();
-    sig.sort_unstable();
+    let mut sig = Signature::new();
+    signature_into(tris, a, w, &mut sig);
     sig
 }
 
@@ -136,8 +194,8 @@ impl UnionFind {
     }
 }
 
-impl Engine {
-    pub(crate) fn new(mesh: &QuadMesh, options: &Options) -> Result<Engine, SimplifyError> {
+impl<'m> Engine<'m> {
+    pub(crate) fn new(mesh: &'m QuadMesh, options: &Options) -> Result<Engine<'m>, SimplifyError> {
         let n = mesh.positions.len();
         let bad = |s: String| Err(SimplifyError::InvalidMesh(s));
         if let Some(i) = mesh.positions.iter().position(|p| !p.is_finite()) {
@@ -226,6 +284,7 @@ impl Engine {
         let mean_edge = if nt > 0 { (edge_len / (3 * nt) as f64).max(1e-300) } else { 1.0 };
         let mut engine = Engine {
             options: *options,
+            moved: vec![false; n],
             pos,
             tri_alive: vec![true; nt],
             alive: nt,
@@ -237,10 +296,17 @@ impl Engine {
             heap: BinaryHeap::new(),
             keys,
             frozen: vec![NONE; nt],
-            input: mesh.clone(),
+            input: mesh,
             input_triangles: nt,
             error_bound: 0.0,
             length_weight: 1e-3,
+            mean_area,
+            plan: Plan::default(),
+            scratch: Scratch::default(),
+            key_regions: Vec::new(),
+            region_volume: Vec::new(),
+            patch_area: Vec::new(),
+            refusals: [0; 10],
             max_error: 0.0,
             cos_normal: options.max_normal_change_deg.to_radians().cos(),
             tris,
@@ -264,6 +330,25 @@ impl Engine {
         for v in 0..n as u32 {
             engine.classify(v, mean_edge);
         }
+        let mut region_ids: FxHashMap<u32, u32> = FxHashMap::default();
+        for k in &engine.keys {
+            let ids = k.labels.map(|l| {
+                let next = region_ids.len() as u32;
+                *region_ids.entry(l).or_insert(next)
+            });
+            engine.key_regions.push(ids);
+        }
+        engine.region_volume = vec![(0.0, 0.0); region_ids.len()];
+        engine.patch_area = vec![(0.0, 0.0); engine.keys.len()];
+        for t in 0..nt {
+            let p = engine.tris[t].map(|v| engine.pos[v as usize]);
+            let k = engine.tri_key[t] as usize;
+            let det = p[0].dot(p[1].cross(p[2]));
+            let [a, b] = engine.key_regions[k];
+            engine.region_volume[a as usize].0 += det;
+            engine.region_volume[b as usize].0 -= det;
+            engine.patch_area[k].0 += 0.5 * tri_normal(p).length();
+        }
         if options.check_intersections {
             let mut grid = Grid::new(2.0 * mean_edge, nt);
             for t in 0..nt {
@@ -277,11 +362,11 @@ impl Engine {
                 let mut hits = Vec::new();
                 grid.any(lo, hi, |s| {
                     let st = engine.tris[s as usize];
-                    if s as usize > t
-                        && !st.iter().any(|x| tri.contains(x))
-                        && triangles_intersect(&p, &st.map(|x| engine.pos[x as usize]))
-                    {
-                        hits.push(s as usize);
+                    if s as usize > t && !st.iter().any(|x| tri.contains(x)) {
+                        let q = st.map(|x| engine.pos[x as usize]);
+                        if boxes_meet(&p, &q) && triangles_intersect(&p, &q) {
+                            hits.push(s as usize);
+                        }
                     }
                     false
                 });
@@ -311,11 +396,19 @@ impl Engine {
     }
 
     fn neighbours(&self, v: u32) -> Vec<u32> {
-        let mut n: Vec<u32> =
-            self.vtris[v as usize].iter().flat_map(|&t| self.tris[t as usize]).filter(|&w| w != v).collect();
+        let mut n = Vec::new();
+        self.neighbours_into(v, &mut n);
+        n
+    }
+
+    /// The vertices sharing a triangle with `v`, sorted, into `n`.
+    fn neighbours_into(&self, v: u32, n: &mut Vec<u32>) {
+        n.clear();
+        for &t in &self.vtris[v as usize] {
+            n.extend(self.tris[t as usize].iter().copied().filter(|&w| w != v));
+        }
         n.sort_unstable();
         n.dedup();
-        n
     }
 
     fn star_signature(&self, a: u32, w: u32) -> Signature {
@@ -324,6 +417,15 @@ impl Engine {
             a,
             w,
         )
+    }
+
+    fn star_signature_into(&self, a: u32, w: u32, sig: &mut Signature) {
+        signature_into(
+            self.vtris[a as usize].iter().map(|&t| (&self.tris[t as usize], self.tri_key[t as usize])),
+            a,
+            w,
+            sig,
+        );
     }
 
     /// Sets the class of `v`, and adds the line quadrics of its feature edges.
@@ -385,23 +487,98 @@ impl Engine {
         };
     }
 
-    fn cost(&self, u: u32, v: u32) -> f64 {
+    /// Where `v` goes when `u` collapses into it, and the collapse's cost.
+    ///
+    /// Two interior vertices: the point of least quadric error (plus a small pull towards
+    /// the edge's midpoint, which shapes flat areas) among those that keep the volume
+    /// under the star, hence both regions' volumes (Lindstrom and Turk's volume-preserving
+    /// placement). Otherwise `v` stays (corners and lines keep their vertices), and the
+    /// cost adds the squared volume change of each region around `u`.
+    fn place(&self, u: u32, v: u32) -> (DVec3, f64) {
         let (pu, pv) = (self.pos[u as usize], self.pos[v as usize]);
         let mut q = self.quadric[u as usize];
         q.add(&self.quadric[v as usize]);
-        q.eval(pv) + self.length_weight * pu.distance_squared(pv)
+        let tie = self.length_weight * pu.distance_squared(pv);
+        let movable = self.class[u as usize] == Class::Interior
+            && self.class[v as usize] == Class::Interior
+            && !self.vtris[v as usize].iter().any(|&t| self.frozen[t as usize] != NONE);
+        if movable {
+            // Six times the volume under the new star is g.(p - pv); under the old stars, old.
+            let (mut g, mut old) = (DVec3::ZERO, 0.0);
+            for (x, y) in [(u, v), (v, u)] {
+                for &t in &self.vtris[x as usize] {
+                    let tri = self.tris[t as usize];
+                    let shared = tri.contains(&y);
+                    if x == v && shared {
+                        continue;
+                    }
+                    let r = tri.map(|w| self.pos[w as usize] - pv);
+                    old += r[0].dot(r[1].cross(r[2]));
+                    if !shared {
+                        let i = tri.iter().position(|&w| w == x).expect("in the star");
+                        g += r[(i + 1) % 3].cross(r[(i + 2) % 3]);
+                    }
+                }
+            }
+            let len2 = pu.distance_squared(pv);
+            // Where the volume hardly changes as v stays (a flat area), v stays: exact
+            // positions are kept where they can be.
+            if old.abs() > 1e-9 * len2 * len2.sqrt() {
+                let m = 0.5 * (pu + pv);
+                if let Some(p) = q.minimize_on_plane(1e-2, m, g, old + g.dot(pv)) {
+                    if p.distance_squared(m) <= len2 {
+                        return (p, q.eval(p) + tie);
+                    }
+                }
+            } else {
+                return (pv, q.eval(pv) + tie);
+            }
+        }
+        // v stays: six times each region's volume change, relative to pv (the new
+        // triangles at v have none).
+        let mut dv: [(u32, f64); 8] = [(NONE, 0.0); 8];
+        let mut area = 0.0;
+        for &t in &self.vtris[u as usize] {
+            let r = self.tris[t as usize].map(|w| self.pos[w as usize] - pv);
+            let d = -r[0].dot(r[1].cross(r[2]));
+            area += 0.5 * (r[1] - r[0]).cross(r[2] - r[0]).length();
+            let labels = self.keys[self.tri_key[t as usize] as usize].labels;
+            for (l, sign) in [(labels[0], 1.0), (labels[1], -1.0)] {
+                if let Some(e) = dv.iter_mut().find(|e| e.0 == l || e.0 == NONE) {
+                    e.0 = l;
+                    e.1 += sign * d;
+                }
+            }
+        }
+        let volume: f64 = dv.iter().map(|e| e.1 * e.1).sum::<f64>() / 36.0;
+        let penalty = if area > 0.0 { volume / (area * self.mean_area) } else { 0.0 };
+        (pv, q.eval(pv) + tie + penalty)
     }
 
-    fn push_vertex(&mut self, x: u32) {
-        for y in self.neighbours(x) {
+    /// Queues the collapses along `x`'s edges: `x` into each neighbour, and, unless
+    /// `both` says the neighbour queues its own, each neighbour into `x`.
+    fn push_vertex(&mut self, x: u32, both: &[u32]) {
+        let mut nb = std::mem::take(&mut self.scratch.ring);
+        self.neighbours_into(x, &mut nb);
+        for &y in &nb {
+            let back = both.binary_search(&y).is_err();
             for (a, b) in [(x, y), (y, x)] {
-                if self.class[a as usize] != Class::Corner {
-                    let c = self.cost(a, b);
+                if self.class[a as usize] != Class::Corner && (a == x || back) {
+                    let c = self.place(a, b).1;
                     let entry = (c.to_bits(), a, b, self.version[a as usize], self.version[b as usize]);
                     self.heap.push(Reverse(entry));
                 }
             }
         }
+        self.scratch.ring = nb;
+    }
+
+    fn is_current(&self, c: &Candidate) -> bool {
+        let (_, u, v, su, sv) = *c;
+        self.version[u as usize] == su
+            && self.version[v as usize] == sv
+            && !self.vtris[u as usize].is_empty()
+            && !self.vtris[v as usize].is_empty()
     }
 
     /// Collapses edges in order of cost until `target` is reached or no collapse passes.
@@ -415,146 +592,276 @@ impl Engine {
             return;
         }
         self.heap.clear();
+        let all: Vec<u32> = (0..self.pos.len() as u32).collect();
         for v in 0..self.pos.len() as u32 {
             if self.class[v as usize] != Class::Corner && !self.vtris[v as usize].is_empty() {
-                // Pushing each non-corner vertex's edges covers both directions of them.
-                self.push_vertex(v);
+                // Every vertex queues its own collapses; a corner's neighbours queue
+                // theirs into it.
+                self.push_vertex(v, &all);
             }
         }
+        drop(all);
+        let mut limit = 2 * self.heap.len() + 1024;
         while self.alive > goal {
-            let Some(Reverse((_, u, v, su, sv))) = self.heap.pop() else { break };
-            if self.version[u as usize] != su
-                || self.version[v as usize] != sv
-                || self.vtris[u as usize].is_empty()
-                || self.vtris[v as usize].is_empty()
-            {
+            if self.heap.len() > limit {
+                let heap = std::mem::take(&mut self.heap);
+                let mut kept: Vec<Reverse<Candidate>> = heap.into_vec();
+                kept.retain(|c| self.is_current(&c.0));
+                self.heap = BinaryHeap::from(kept);
+                limit = 2 * self.heap.len() + 1024;
+            }
+            let Some(Reverse(c)) = self.heap.pop() else { break };
+            if !self.is_current(&c) {
                 continue;
             }
-            if let Some(plan) = self.plan(u, v) {
-                self.apply(plan);
+            if self.plan(c.1, c.2) {
+                self.apply();
+                self.refusals[9] += 1;
             }
+        }
+        if std::env::var_os("SIMPLIFY_DEBUG").is_some() {
+            eprintln!("DEBUG alive {} refusals [corner, frozen, norem, link, sig, normal, quality, dist, isect, applied] {:?}", self.alive, self.refusals);
         }
     }
 
-    /// The collapse of `u` into `v`, if every check passes.
-    fn plan(&mut self, u: u32, v: u32) -> Option<Plan> {
+    /// Plans the collapse of `u` into `v` in `self.plan`; whether every check passes.
+    fn plan(&mut self, u: u32, v: u32) -> bool {
+        let mut plan = std::mem::take(&mut self.plan);
+        let mut scratch = std::mem::take(&mut self.scratch);
+        let ok = self.plan_with(u, v, &mut plan, &mut scratch);
+        self.plan = plan;
+        self.scratch = scratch;
+        ok
+    }
+
+    fn plan_with(&mut self, u: u32, v: u32, plan: &mut Plan, sc: &mut Scratch) -> bool {
         if self.class[u as usize] == Class::Corner {
-            return None;
-        }
-        let star_u = self.vtris[u as usize].clone();
-        if star_u.iter().any(|&t| self.frozen[t as usize] != NONE) {
-            return None;
-        }
-        let mut removed = Vec::new();
-        let mut modified = Vec::new();
-        for &t in &star_u {
-            let tri = self.tris[t as usize];
-            if tri.contains(&v) {
-                removed.push(t);
-            } else {
-                modified.push((t, tri.map(|x| if x == u { v } else { x })));
+            {
+                self.refusals[0] += 1;
+                return false;
             }
         }
-        if removed.is_empty() {
-            return None;
+        sc.star_u.clear();
+        sc.star_u.extend_from_slice(&self.vtris[u as usize]);
+        let star_u = &sc.star_u;
+        if star_u.iter().any(|&t| self.frozen[t as usize] != NONE) {
+            {
+                self.refusals[1] += 1;
+                return false;
+            }
+        }
+        plan.u = u;
+        plan.v = v;
+        plan.removed.clear();
+        plan.modified.clear();
+        plan.assigned.clear();
+        for &t in star_u {
+            let tri = self.tris[t as usize];
+            if tri.contains(&v) {
+                plan.removed.push(t);
+            } else {
+                plan.modified.push((t, tri.map(|x| if x == u { v } else { x })));
+            }
+        }
+        if plan.removed.is_empty() {
+            {
+                self.refusals[2] += 1;
+                return false;
+            }
         }
         // The feature rule: an interior vertex collapses along an interior edge, a line
         // vertex along its line.
-        let uv = self.star_signature(u, v);
+        self.star_signature_into(u, v, &mut sc.sig_a);
         match self.class[u as usize] {
-            Class::Interior if is_feature(&uv) => return None,
-            Class::Line if !is_feature(&uv) => return None,
+            Class::Interior if is_feature(&sc.sig_a) => return false,
+            Class::Line if !is_feature(&sc.sig_a) => return false,
             _ => {}
         }
         // The link condition on the whole complex.
-        let nu = self.neighbours(u);
-        let nv = self.neighbours(v);
-        for &w in &nu {
+        self.neighbours_into(u, &mut sc.nu);
+        self.neighbours_into(v, &mut sc.nv);
+        let (nu, nv) = (&sc.nu, &sc.nv);
+        for &w in nu {
             if w != v
                 && nv.binary_search(&w).is_ok()
-                && !removed.iter().any(|&t| self.tris[t as usize].contains(&w))
+                && !plan.removed.iter().any(|&t| self.tris[t as usize].contains(&w))
             {
-                return None;
+                {
+                    self.refusals[3] += 1;
+                    return false;
+                }
             }
         }
-        for (t, _) in &modified {
+        for (t, _) in &plan.modified {
             let tri = self.tris[*t as usize];
-            let others: Vec<u32> = tri.iter().copied().filter(|&x| x != u).collect();
-            if others.iter().all(|w| nv.binary_search(w).is_ok())
+            let mut others = tri.iter().copied().filter(|&x| x != u);
+            let (o0, o1) = (others.next().expect("two"), others.next().expect("two"));
+            if nv.binary_search(&o0).is_ok()
+                && nv.binary_search(&o1).is_ok()
                 && self.vtris[v as usize].iter().any(|&s| {
                     let st = &self.tris[s as usize];
-                    st.contains(&others[0]) && st.contains(&others[1])
+                    st.contains(&o0) && st.contains(&o1)
                 })
             {
-                return None;
+                {
+                    self.refusals[3] += 1;
+                    return false;
+                }
             }
         }
         // Every edge at v keeps its incident patches and their orientations.
-        let after: Vec<([u32; 3], u32, u32)> = self.vtris[v as usize]
-            .iter()
-            .filter(|t| !removed.contains(t))
-            .map(|&t| (self.tris[t as usize], self.tri_key[t as usize], t))
-            .chain(modified.iter().map(|&(t, tri)| (tri, self.tri_key[t as usize], t)))
-            .collect();
-        let mut after_nbrs: Vec<u32> = after.iter().flat_map(|x| x.0).filter(|&w| w != v).collect();
-        after_nbrs.sort_unstable();
-        after_nbrs.dedup();
-        for &w in &after_nbrs {
-            let sig_after = signature(after.iter().map(|x| (&x.0, x.1)), v, w);
-            let sig_before = if nv.binary_search(&w).is_ok() {
-                self.star_signature(v, w)
-            } else {
-                self.star_signature(u, w)
-            };
-            if sig_after != sig_before {
-                return None;
+        sc.after.clear();
+        for &t in &self.vtris[v as usize] {
+            if !plan.removed.contains(&t) {
+                sc.after.push((self.tris[t as usize], self.tri_key[t as usize], t));
             }
         }
+        let first_modified = sc.after.len();
+        sc.after.extend(plan.modified.iter().map(|&(t, tri)| (tri, self.tri_key[t as usize], t)));
+        sc.after_nbrs.clear();
+        sc.after_nbrs.extend(sc.after.iter().flat_map(|x| x.0).filter(|&w| w != v));
+        sc.after_nbrs.sort_unstable();
+        sc.after_nbrs.dedup();
+        for &w in &sc.after_nbrs {
+            signature_into(sc.after.iter().map(|x| (&x.0, x.1)), v, w, &mut sc.sig_a);
+            if nv.binary_search(&w).is_ok() {
+                self.star_signature_into(v, w, &mut sc.sig_b);
+            } else {
+                self.star_signature_into(u, w, &mut sc.sig_b);
+            }
+            if sc.sig_a != sc.sig_b {
+                {
+                    self.refusals[4] += 1;
+                    return false;
+                }
+            }
+        }
+        // Where v goes.
+        let (p, _) = self.place(u, v);
+        let moves = p != self.pos[v as usize];
+        plan.p = p;
+        let at = |x: u32| if x == v { p } else { self.pos[x as usize] };
         // Geometry: no normal turns too far, no sliver.
         let min_q = self.options.min_triangle_quality;
-        for (t, tri) in &modified {
+        let changed = if moves { 0 } else { first_modified };
+        for (tri, _, t) in &sc.after[changed..] {
             let old = self.tris[*t as usize].map(|x| self.pos[x as usize]);
-            let new = tri.map(|x| self.pos[x as usize]);
+            let new = tri.map(at);
             let (n0, n1) = (tri_normal(old), tri_normal(new));
             if n1.length_squared() <= 0.0 || n0.length_squared() <= 0.0 {
-                return None;
+                {
+                    self.refusals[5] += 1;
+                    return false;
+                }
             }
             if n0.normalize().dot(n1.normalize()) < self.cos_normal {
-                return None;
+                {
+                    self.refusals[5] += 1;
+                    return false;
+                }
             }
             if quality(new) < min_q.min(quality(old)) {
-                return None;
+                {
+                    self.refusals[6] += 1;
+                    return false;
+                }
             }
         }
-        // The distance budget: every input vertex u and u's triangles answer for goes
-        // to the nearest triangle of v's new star.
-        let mut assigned = Vec::new();
-        let pts =
-            std::iter::once(u).chain(star_u.iter().flat_map(|&t| self.points[t as usize].iter().copied()));
-        for p in pts {
-            let pp = self.pos[p as usize];
+        // Each patch's area and each region's volume within their tolerances: the
+        // changes of the triangles that change, volumes relative to pv.
+        plan.deltas.clear();
+        {
+            let pv = self.pos[v as usize];
+            let mut add = |key: u32, tri: [DVec3; 3], sign: f64| {
+                let area = 0.5 * tri_normal(tri).length();
+                let r = tri.map(|x| x - pv);
+                let det = sign * r[0].dot(r[1].cross(r[2]));
+                let [a, b] = self.key_regions[key as usize];
+                for (kind, id, d) in [(false, key, sign * area), (true, a, det), (true, b, -det)] {
+                    match plan.deltas.iter_mut().find(|e| e.0 == kind && e.1 == id) {
+                        Some(e) => e.2 += d,
+                        None => plan.deltas.push((kind, id, d)),
+                    }
+                }
+            };
+            for &t in star_u {
+                add(self.tri_key[t as usize], self.tris[t as usize].map(|x| self.pos[x as usize]), -1.0);
+            }
+            if moves {
+                for &t in &self.vtris[v as usize] {
+                    if !plan.removed.contains(&t) {
+                        add(
+                            self.tri_key[t as usize],
+                            self.tris[t as usize].map(|x| self.pos[x as usize]),
+                            -1.0,
+                        );
+                    }
+                }
+            }
+            for (tri, key, _) in &sc.after[changed..] {
+                add(*key, tri.map(at), 1.0);
+            }
+        }
+        for &(kind, id, d) in &plan.deltas {
+            let (total, so_far) =
+                if kind { self.region_volume[id as usize] } else { self.patch_area[id as usize] };
+            let tolerance = if kind { VOLUME_TOLERANCE } else { AREA_TOLERANCE };
+            if (so_far + d).abs() > tolerance * total.abs() {
+                {
+                    self.refusals[2] += 1;
+                    return false;
+                }
+            }
+        }
+        // The distance budget: every input vertex that u's triangles (and v's, if v
+        // moves) answer for, u itself and v if it leaves its input position, goes to the
+        // nearest triangle of v's new star.
+        sc.pool.clear();
+        if !self.moved[u as usize] {
+            sc.pool.push(u);
+        }
+        for &t in star_u {
+            sc.pool.extend_from_slice(&self.points[t as usize]);
+        }
+        if moves {
+            if !self.moved[v as usize] {
+                sc.pool.push(v);
+            }
+            for &t in &self.vtris[v as usize] {
+                if !plan.removed.contains(&t) {
+                    sc.pool.extend_from_slice(&self.points[t as usize]);
+                }
+            }
+        }
+        for &x in &sc.pool {
+            let pp = self.input.positions[x as usize];
             let mut best = (f64::INFINITY, NONE);
-            for (tri, _, t) in &after {
-                let d = point_triangle_distance(pp, tri.map(|x| self.pos[x as usize]));
+            for (tri, _, t) in &sc.after {
+                let d = point_triangle_distance(pp, tri.map(at));
                 if d < best.0 {
                     best = (d, *t);
                 }
             }
             if best.0.is_nan() || best.0 > self.max_error {
-                return None;
+                {
+                    self.refusals[7] += 1;
+                    return false;
+                }
             }
-            assigned.push((p, best.1, best.0));
+            plan.assigned.push((x, best.1, best.0));
         }
         // No new intersection: with a triangle that shares no vertex, none at all; with one
         // that shares vertices, none off the shared corners and edges (exactly, as
         // `voxreg check` tests).
         if let Some(mut grid) = self.grid.take() {
+            sc.tested.clear();
+            sc.tested.extend(sc.after[changed..].iter().map(|(tri, _, _)| (*tri, tri.map(at))));
+            let star_v = &self.vtris[v as usize];
             let mut hit = false;
-            for (_, tri) in &modified {
-                let p = tri.map(|x| self.pos[x as usize]);
-                let (lo, hi) = (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
+            for (tri, p3) in &sc.tested {
+                let (lo, hi) = (p3[0].min(p3[1]).min(p3[2]), p3[0].max(p3[1]).max(p3[2]));
                 hit = grid.any(lo, hi, |s| {
-                    if !self.tri_alive[s as usize] || star_u.contains(&s) {
+                    if !self.tri_alive[s as usize] || star_u.contains(&s) || (moves && star_v.contains(&s)) {
                         return false;
                     }
                     let st = self.tris[s as usize];
@@ -562,20 +869,20 @@ impl Engine {
                     if st.iter().any(|x| tri.contains(x)) {
                         let with_ids =
                             |t: [u32; 3], p: [DVec3; 3]| [(t[0], p[0]), (t[1], p[1]), (t[2], p[2])];
-                        return triangles_meet_off_shared(with_ids(*tri, p), with_ids(st, q));
+                        return triangles_meet_off_shared(with_ids(*tri, *p3), with_ids(st, q));
                     }
-                    triangles_intersect(&p, &q)
+                    boxes_meet(p3, &q) && triangles_intersect(p3, &q)
                 });
                 if hit {
                     break;
                 }
             }
-            // The new triangles among themselves (all around `v`).
+            // The changed triangles among themselves (all around `v`).
             if !hit {
-                let with_ids = |t: [u32; 3]| t.map(|x| (x, self.pos[x as usize]));
-                'pairs: for (i, (_, a)) in modified.iter().enumerate() {
-                    for (_, b) in &modified[i + 1..] {
-                        if triangles_meet_off_shared(with_ids(*a), with_ids(*b)) {
+                let with_ids = |t: [u32; 3], p: [DVec3; 3]| [(t[0], p[0]), (t[1], p[1]), (t[2], p[2])];
+                'pairs: for (i, (a, pa)) in sc.tested.iter().enumerate() {
+                    for (b, pb) in &sc.tested[i + 1..] {
+                        if triangles_meet_off_shared(with_ids(*a, *pa), with_ids(*b, *pb)) {
                             hit = true;
                             break 'pairs;
                         }
@@ -584,15 +891,19 @@ impl Engine {
             }
             self.grid = Some(grid);
             if hit {
-                return None;
+                {
+                    self.refusals[8] += 1;
+                    return false;
+                }
             }
         }
-        Some(Plan { u, v, removed, modified, assigned })
+        true
     }
 
-    fn apply(&mut self, plan: Plan) {
-        let Plan { u, v, removed, modified, assigned } = plan;
-        for &t in &removed {
+    fn apply(&mut self) {
+        let plan = std::mem::take(&mut self.plan);
+        let Plan { u, v, p, ref removed, ref modified, ref assigned, ref deltas } = plan;
+        for &t in removed {
             self.tri_alive[t as usize] = false;
             self.alive -= 1;
             for x in self.tris[t as usize] {
@@ -602,32 +913,62 @@ impl Engine {
             }
             self.points[t as usize].clear();
         }
-        for &(t, tri) in &modified {
+        let moves = p != self.pos[v as usize];
+        for &(t, tri) in modified {
             self.tris[t as usize] = tri;
             self.points[t as usize].clear();
             self.vtris[v as usize].push(t);
-            if let Some(grid) = self.grid.as_mut() {
-                let p = tri.map(|x| self.pos[x as usize]);
-                grid.insert(t, p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]));
-            }
         }
         self.vtris[u as usize].clear();
-        for (p, t, d) in assigned {
-            self.points[t as usize].push(p);
+        if moves {
+            self.pos[v as usize] = p;
+            self.moved[v as usize] = true;
+            for &t in &self.vtris[v as usize] {
+                self.points[t as usize].clear();
+            }
+        }
+        if let Some(grid) = self.grid.as_mut() {
+            let changed: &[u32] = &self.vtris[v as usize];
+            for &t in changed {
+                if moves || modified.iter().any(|m| m.0 == t) {
+                    let q = self.tris[t as usize].map(|x| self.pos[x as usize]);
+                    grid.insert(t, q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
+                }
+            }
+        }
+        for &(kind, id, d) in deltas {
+            if kind {
+                self.region_volume[id as usize].1 += d;
+            } else {
+                self.patch_area[id as usize].1 += d;
+            }
+        }
+        for &(x, t, d) in assigned {
+            self.points[t as usize].push(x);
             self.error_bound = self.error_bound.max(d);
         }
         let qu = self.quadric[u as usize];
         self.quadric[v as usize].add(&qu);
-        let ring = self.neighbours(v);
+        let mut ring = std::mem::take(&mut self.scratch.nv);
+        self.neighbours_into(v, &mut ring);
         self.version[u as usize] += 1;
         self.version[v as usize] += 1;
         for &x in &ring {
             self.version[x as usize] += 1;
         }
-        self.push_vertex(v);
-        for &x in &ring {
-            self.push_vertex(x);
+        // The ring and v, sorted, queue the collapses along their edges once.
+        let mut both = std::mem::take(&mut self.scratch.nu);
+        both.clear();
+        both.extend_from_slice(&ring);
+        if let Err(i) = both.binary_search(&v) {
+            both.insert(i, v);
         }
+        for &x in &both {
+            self.push_vertex(x, &both);
+        }
+        self.scratch.nv = ring;
+        self.scratch.nu = both;
+        self.plan = plan;
     }
 
     /// The mesh as it is now: triangles paired into quads, vertices renumbered in input

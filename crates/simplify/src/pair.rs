@@ -78,20 +78,114 @@ pub(crate) fn pair(
         i = j;
     }
     candidates.sort_unstable();
-    for (_, t1, t2, q) in candidates {
-        if !taken[t1 as usize] && !taken[t2 as usize] {
-            taken[t1 as usize] = true;
-            taken[t2 as usize] = true;
-            faces.push((t1, Face::Quad(q, t1)));
+    // Greedy, best quads first; then augmenting paths, so that a triangle left alone by
+    // the greedy pass is paired by re-pairing a chain of its neighbours.
+    let mut mate = vec![NO_MATE; tris.len()];
+    for (c, &(_, t1, t2, _)) in candidates.iter().enumerate() {
+        if !taken[t1 as usize]
+            && !taken[t2 as usize]
+            && mate[t1 as usize] == NO_MATE
+            && mate[t2 as usize] == NO_MATE
+        {
+            mate[t1 as usize] = c as u32;
+            mate[t2 as usize] = c as u32;
         }
     }
-    for (t, &done) in taken.iter().enumerate() {
-        if !done {
+    augment(&candidates, &mut mate, &taken);
+    for (t, &m) in mate.iter().enumerate() {
+        if m != NO_MATE {
+            let (_, t1, _, q) = candidates[m as usize];
+            if t1 as usize == t {
+                taken[t] = true;
+                faces.push((t1, Face::Quad(q, t1)));
+            }
+        } else if !taken[t] {
             faces.push((t as u32, Face::Tri(t as u32)));
         }
     }
     faces.sort_unstable_by_key(|f| f.0);
     faces.into_iter().map(|f| f.1).collect()
+}
+
+/// No pair.
+const NO_MATE: u32 = u32::MAX;
+
+/// How many triangles one augmenting-path search visits at most (keeps the pass linear).
+const MAX_SEARCH: usize = 256;
+
+/// Grows the matching `mate` (per triangle, the index of its pair in `candidates`) by
+/// augmenting paths: from each triangle left alone, a breadth-first search along
+/// alternating paths (a candidate pair, then a matched pair) to another triangle left
+/// alone; the path's pairs then swap. Searches are bounded and ignore odd cycles, so
+/// the matching grows but need not become maximum; every pair stays a candidate.
+fn augment(candidates: &[(u64, u32, u32, [u32; 4])], mate: &mut [u32], frozen: &[bool]) {
+    let n = mate.len();
+    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); n];
+    for (c, &(_, t1, t2, _)) in candidates.iter().enumerate() {
+        if !frozen[t1 as usize] && !frozen[t2 as usize] {
+            adj[t1 as usize].push(c as u32);
+            adj[t2 as usize].push(c as u32);
+        }
+    }
+    let other = |c: u32, t: u32| {
+        let (_, a, b, _) = candidates[c as usize];
+        if a == t {
+            b
+        } else {
+            a
+        }
+    };
+    // Per triangle reached: the candidate that reached it from the even side, and a stamp.
+    let mut via = vec![NO_MATE; n];
+    let mut stamp = vec![0u32; n];
+    let mut queue: Vec<u32> = Vec::new();
+    for (root, round) in (0..n).zip(1u32..) {
+        if mate[root] != NO_MATE || frozen[root] || adj[root].is_empty() {
+            continue;
+        }
+        queue.clear();
+        queue.push(root as u32);
+        stamp[root] = round;
+        let mut head = 0;
+        let mut end = None;
+        'search: while head < queue.len() && queue.len() < MAX_SEARCH {
+            let t = queue[head];
+            head += 1;
+            for &c in &adj[t as usize] {
+                let s = other(c, t);
+                if stamp[s as usize] == round {
+                    continue;
+                }
+                stamp[s as usize] = round;
+                via[s as usize] = c;
+                if mate[s as usize] == NO_MATE {
+                    end = Some(s);
+                    break 'search;
+                }
+                // Go on from s's partner.
+                let r = other(mate[s as usize], s);
+                if stamp[r as usize] == round {
+                    continue;
+                }
+                stamp[r as usize] = round;
+                queue.push(r);
+            }
+        }
+        // Swap along the path: s takes its via pair, its old partner r goes on back.
+        let Some(mut s) = end else { continue };
+        loop {
+            let c = via[s as usize];
+            let t = other(c, s);
+            let prev = mate[t as usize];
+            mate[s as usize] = c;
+            mate[t as usize] = c;
+            if t as usize == root {
+                break;
+            }
+            s = other(prev, t);
+            let _ = prev;
+        }
+    }
 }
 
 /// The score of the quad `[a, y, b, x]` (lower is better), if it is acceptable.

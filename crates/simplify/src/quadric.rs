@@ -1,6 +1,6 @@
 //! Quadrics: sums of squared distances to planes and lines, `p^T A p - 2 b.p + c`.
 
-use glam::DVec3;
+use glam::{DMat3, DVec3};
 
 /// A symmetric quadratic form in the position.
 #[derive(Clone, Copy, Debug, Default)]
@@ -44,6 +44,29 @@ impl Quadric {
         (p.dot(ap) - 2.0 * self.b.dot(p) + self.c).max(0.0)
     }
 
+    /// The minimizer of the form plus `eps` times the trace over three times
+    /// `|p - m|^2` (a pull towards `m` where the form is flat) on the plane `g.p = h`,
+    /// or on all space where `g` is zero; `None` if the system is singular.
+    pub(crate) fn minimize_on_plane(&self, eps: f64, m: DVec3, g: DVec3, h: f64) -> Option<DVec3> {
+        let a = &self.a;
+        let e = eps * (a[0] + a[3] + a[5]) / 3.0 + 1e-300;
+        let mat = DMat3::from_cols(
+            DVec3::new(a[0] + e, a[1], a[2]),
+            DVec3::new(a[1], a[3] + e, a[4]),
+            DVec3::new(a[2], a[4], a[5] + e),
+        );
+        let det = mat.determinant();
+        if !det.is_normal() {
+            return None;
+        }
+        let inv = mat.inverse();
+        let p0 = inv * (self.b + e * m);
+        let ig = inv * g;
+        let d = g.dot(ig);
+        let p = if d.is_normal() { p0 - (g.dot(p0) - h) / d * ig } else { p0 };
+        p.is_finite().then_some(p)
+    }
+
     pub(crate) fn add(&mut self, o: &Quadric) {
         for k in 0..6 {
             self.a[k] += o.a[k];
@@ -66,5 +89,18 @@ mod tests {
         let mut s = q;
         s.add(&l);
         assert!((s.eval(DVec3::new(1.0, 4.0, 1.0)) - 9.0).abs() < 1e-12);
+    }
+
+    #[test]
+    fn constrained_minimum() {
+        // Two planes z = 1 and y = 2: the minimizers form the line x free; the plane
+        // x = 3 picks one point of it.
+        let mut q = Quadric::plane(DVec3::new(0.0, 0.0, 1.0), DVec3::Z, 1.0);
+        q.add(&Quadric::plane(DVec3::new(0.0, 2.0, 0.0), DVec3::Y, 1.0));
+        let p = q.minimize_on_plane(1e-6, DVec3::ZERO, DVec3::X, 3.0).unwrap();
+        assert!((p - DVec3::new(3.0, 2.0, 1.0)).length() < 1e-5, "{p}");
+        // Without a constraint, the pull picks the point of the line nearest m.
+        let p = q.minimize_on_plane(1e-6, DVec3::new(-1.0, 0.0, 0.0), DVec3::ZERO, 0.0).unwrap();
+        assert!((p - DVec3::new(-1.0, 2.0, 1.0)).length() < 1e-5, "{p}");
     }
 }
