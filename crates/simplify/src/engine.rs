@@ -116,6 +116,8 @@ pub(crate) struct Engine<'m> {
     cos_normal: f64,
     plan: Plan,
     scratch: Scratch,
+    /// Vertices with a refused collapse since they last queued theirs.
+    retry: Vec<bool>,
     /// Per patch, its two regions (dense ids).
     key_regions: Vec<[u32; 2]>,
     /// Six times each region's input volume, and its change so far.
@@ -143,6 +145,33 @@ fn boxes_meet(a: &[DVec3; 3], b: &[DVec3; 3]) -> bool {
     let (alo, ahi) = (a[0].min(a[1]).min(a[2]), a[0].max(a[1]).max(a[2]));
     let (blo, bhi) = (b[0].min(b[1]).min(b[2]), b[0].max(b[1]).max(b[2]));
     !(alo.cmpgt(bhi).any() || blo.cmpgt(ahi).any())
+}
+
+/// Whether the points `q` lie all strictly on one side of the plane of `t`, decided by
+/// floating-point orientations whose sign is certain (Shewchuk's error bound for the
+/// orientation determinant, with a margin): `false` when in doubt. Then the closed
+/// triangle `t` meets the hull of `q` nowhere, and the hull of `q` together with
+/// points of `t` meets `t` only in the hull of those points: a filter in front of the
+/// exact tests.
+fn strictly_one_side(t: &[DVec3; 3], q: &[DVec3]) -> bool {
+    let (d1, d2) = (t[1] - t[0], t[2] - t[0]);
+    let c = d1.cross(d2);
+    let ca = DVec3::new(
+        (d1.y * d2.z).abs() + (d1.z * d2.y).abs(),
+        (d1.z * d2.x).abs() + (d1.x * d2.z).abs(),
+        (d1.x * d2.y).abs() + (d1.y * d2.x).abs(),
+    );
+    let mut side = 0.0;
+    for &x in q {
+        let d = x - t[0];
+        let det = d.dot(c);
+        let permanent = d.abs().dot(ca);
+        if !(det.abs() > 1e-14 * permanent) || det * side < 0.0 {
+            return false;
+        }
+        side = det;
+    }
+    true
 }
 
 fn is_feature(sig: &Signature) -> bool {
@@ -303,6 +332,7 @@ impl<'m> Engine<'m> {
             mean_area,
             plan: Plan::default(),
             scratch: Scratch::default(),
+            retry: vec![false; n],
             key_regions: Vec::new(),
             region_volume: Vec::new(),
             patch_area: Vec::new(),
@@ -364,7 +394,11 @@ impl<'m> Engine<'m> {
                     let st = engine.tris[s as usize];
                     if s as usize > t && !st.iter().any(|x| tri.contains(x)) {
                         let q = st.map(|x| engine.pos[x as usize]);
-                        if boxes_meet(&p, &q) && triangles_intersect(&p, &q) {
+                        if boxes_meet(&p, &q)
+                            && !strictly_one_side(&p, &q)
+                            && !strictly_one_side(&q, &p)
+                            && triangles_intersect(&p, &q)
+                        {
                             hits.push(s as usize);
                         }
                     }
@@ -555,8 +589,8 @@ impl<'m> Engine<'m> {
         (pv, q.eval(pv) + tie + penalty)
     }
 
-    /// Queues the collapses along `x`'s edges: `x` into each neighbour, and, unless
-    /// `both` says the neighbour queues its own, each neighbour into `x`.
+    /// Queues the collapses along `x`'s edges: `x` into each neighbour, and each
+    /// neighbour not in `both` (sorted) into `x`.
     fn push_vertex(&mut self, x: u32, both: &[u32]) {
         let mut nb = std::mem::take(&mut self.scratch.ring);
         self.neighbours_into(x, &mut nb);
@@ -614,7 +648,9 @@ impl<'m> Engine<'m> {
             if !self.is_current(&c) {
                 continue;
             }
-            if self.plan(c.1, c.2) {
+            if !self.plan(c.1, c.2) {
+                self.retry[c.1 as usize] = true;
+            } else {
                 self.apply();
                 self.refusals[9] += 1;
             }
@@ -867,11 +903,27 @@ impl<'m> Engine<'m> {
                     let st = self.tris[s as usize];
                     let q = st.map(|x| self.pos[x as usize]);
                     if st.iter().any(|x| tri.contains(x)) {
+                        // Shared corners: the others strictly on one side of the plane
+                        // meet it only at the shared ones.
+                        let mut others = [DVec3::ZERO; 3];
+                        let mut n = 0;
+                        for (k, x) in st.iter().enumerate() {
+                            if !tri.contains(x) {
+                                others[n] = q[k];
+                                n += 1;
+                            }
+                        }
+                        if n > 0 && strictly_one_side(p3, &others[..n]) {
+                            return false;
+                        }
                         let with_ids =
                             |t: [u32; 3], p: [DVec3; 3]| [(t[0], p[0]), (t[1], p[1]), (t[2], p[2])];
                         return triangles_meet_off_shared(with_ids(*tri, *p3), with_ids(st, q));
                     }
-                    boxes_meet(p3, &q) && triangles_intersect(p3, &q)
+                    boxes_meet(p3, &q)
+                        && !strictly_one_side(p3, &q)
+                        && !strictly_one_side(&q, p3)
+                        && triangles_intersect(p3, &q)
                 });
                 if hit {
                     break;
@@ -882,6 +934,17 @@ impl<'m> Engine<'m> {
                 let with_ids = |t: [u32; 3], p: [DVec3; 3]| [(t[0], p[0]), (t[1], p[1]), (t[2], p[2])];
                 'pairs: for (i, (a, pa)) in sc.tested.iter().enumerate() {
                     for (b, pb) in &sc.tested[i + 1..] {
+                        let mut others = [DVec3::ZERO; 3];
+                        let mut n = 0;
+                        for (k, x) in b.iter().enumerate() {
+                            if !a.contains(x) {
+                                others[n] = pb[k];
+                                n += 1;
+                            }
+                        }
+                        if n > 0 && strictly_one_side(pa, &others[..n]) {
+                            continue;
+                        }
                         if triangles_meet_off_shared(with_ids(*a, *pa), with_ids(*b, *pb)) {
                             hit = true;
                             break 'pairs;
@@ -949,25 +1012,22 @@ impl<'m> Engine<'m> {
         }
         let qu = self.quadric[u as usize];
         self.quadric[v as usize].add(&qu);
-        let mut ring = std::mem::take(&mut self.scratch.nv);
-        self.neighbours_into(v, &mut ring);
         self.version[u as usize] += 1;
         self.version[v as usize] += 1;
+        // v's collapses are queued anew; those of its neighbours keep their queued costs
+        // (only the order depends on them: every check is made again when one is tried),
+        // and a neighbour whose collapse was refused queues its own again, as the change
+        // may let it pass now.
+        self.push_vertex(v, &[]);
+        let mut ring = std::mem::take(&mut self.scratch.nv);
+        self.neighbours_into(v, &mut ring);
         for &x in &ring {
-            self.version[x as usize] += 1;
-        }
-        // The ring and v, sorted, queue the collapses along their edges once.
-        let mut both = std::mem::take(&mut self.scratch.nu);
-        both.clear();
-        both.extend_from_slice(&ring);
-        if let Err(i) = both.binary_search(&v) {
-            both.insert(i, v);
-        }
-        for &x in &both {
-            self.push_vertex(x, &both);
+            if self.retry[x as usize] {
+                self.retry[x as usize] = false;
+                self.push_vertex(x, &ring);
+            }
         }
         self.scratch.nv = ring;
-        self.scratch.nu = both;
         self.plan = plan;
     }
 

@@ -71,7 +71,7 @@ impl Default for Options {
             min_triangle_quality: 0.1,
             check_intersections: true,
             quads: true,
-            max_quad_dihedral_deg: 30.0,
+            max_quad_dihedral_deg: 45.0,
         }
     }
 }
