@@ -1,11 +1,15 @@
 //! Fidelity of simplification on a volume: regularize it through the front door,
 //! simplify to a ratio, and measure what the full surface loses.
 //!
-//! `cargo run -p voxreg-simplify --release --example fidelity -- VOLUME [RATIO] [MAX_ERROR]`
-//! (defaults 0.1 and 0.5). Prints, as one JSON object: faces before and after, the
+//! `cargo run -p voxreg-simplify --release --example fidelity -- VOLUME [RATIO] [MAX_ERROR] [LEVELS]`
+//! (defaults 0.1, 0.5 and 0). Prints, as one JSON object: faces before and after, the
 //! quad fraction, the largest and mean distance of the full surface's vertices to the
 //! simplified surface (brute force over a grid of the output's triangles), the largest
-//! relative change of a region's volume and of an interface's area, and the times.
+//! relative change of a region's volume and of an interface's area, a hash of the
+//! simplified mesh (to compare runs at different thread counts), and the times. With
+//! `LEVELS` above 0, also a pyramid of that many levels (`pyramid_targets(LEVELS, 4,
+//! MAX_ERROR)`) made once more from the full surface: its time, and per level the faces,
+//! the quad fraction and the distance bound.
 
 use std::collections::BTreeMap;
 use std::time::Instant;
@@ -13,7 +17,7 @@ use std::time::Instant;
 use glam::DVec3;
 use voxreg_io::QuadMesh;
 use voxreg_quality::point_triangle_distance;
-use voxreg_simplify::{simplify, Options, Target};
+use voxreg_simplify::{pyramid_targets, simplify, simplify_levels, Options, Target};
 
 fn triangles(mesh: &QuadMesh) -> Vec<([DVec3; 3], [u32; 2])> {
     let mut t = Vec::new();
@@ -95,25 +99,15 @@ fn distances(points: &[DVec3], tris: &[[DVec3; 3]]) -> Vec<f64> {
         .collect()
 }
 
-fn worst<K: Ord + Copy + std::fmt::Debug>(a: &BTreeMap<K, f64>, b: &BTreeMap<K, f64>) {
-    let mut v: Vec<(f64, K, f64, f64)> = a
-        .iter()
-        .map(|(k, x)| {
-            (((b.get(k).copied().unwrap_or(0.0) - x) / x).abs(), *k, *x, b.get(k).copied().unwrap_or(0.0))
-        })
-        .collect();
-    v.sort_by(|p, q| q.0.total_cmp(&p.0));
-    eprintln!("DEBUG worst {:?}", &v[..5.min(v.len())]);
-}
-
 fn main() {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let Some(path) = args.first() else {
-        eprintln!("usage: fidelity VOLUME [RATIO] [MAX_ERROR]");
+        eprintln!("usage: fidelity VOLUME [RATIO] [MAX_ERROR] [LEVELS]");
         std::process::exit(1);
     };
     let ratio: f64 = args.get(1).map_or(0.1, |s| s.parse().expect("RATIO"));
     let max_error: f64 = args.get(2).map_or(0.5, |s| s.parse().expect("MAX_ERROR"));
+    let levels: usize = args.get(3).map_or(0, |s| s.parse().expect("LEVELS"));
     let loaded = voxreg_io::read_volume(std::path::Path::new(path)).unwrap_or_else(|e| {
         eprintln!("{path}: {e}");
         std::process::exit(1);
@@ -135,10 +129,34 @@ fn main() {
     let mean = d.iter().sum::<f64>() / d.len() as f64;
     let (v0, a0) = measures(&full);
     let (v1, a1) = measures(&s.mesh);
-    if std::env::var_os("SIMPLIFY_DEBUG").is_some() {
-        worst(&v0, &v1);
-        worst(&a0, &a1);
-    }
+    let hash = {
+        use std::hash::{Hash, Hasher};
+        let mut h = std::collections::hash_map::DefaultHasher::new();
+        s.mesh.quads.hash(&mut h);
+        s.mesh.face_labels.hash(&mut h);
+        for p in &s.mesh.positions {
+            p.to_array().map(f64::to_bits).hash(&mut h);
+        }
+        h.finish()
+    };
+    let pyramid = if levels > 0 {
+        let t2 = Instant::now();
+        let l = simplify_levels(&full, &pyramid_targets(levels, 4.0, max_error), &Options::default())
+            .expect("pyramid");
+        let secs = t2.elapsed().as_secs_f64();
+        let faces: Vec<String> = l.iter().map(|x| x.stats.faces.to_string()).collect();
+        let quads: Vec<String> =
+            l.iter().map(|x| format!("{:.3}", x.stats.quads as f64 / x.stats.faces as f64)).collect();
+        let bounds: Vec<String> = l.iter().map(|x| format!("{:.3}", x.stats.error_bound)).collect();
+        format!(
+            ", \"pyramid_s\": {secs:.2}, \"level_faces\": [{}], \"level_quads\": [{}], \"level_bounds\": [{}]",
+            faces.join(", "),
+            quads.join(", "),
+            bounds.join(", ")
+        )
+    } else {
+        String::new()
+    };
     let background = loaded.volume.background();
     let spacing = loaded.volume.spacing();
     println!(
@@ -146,7 +164,7 @@ fn main() {
          \"faces_in\": {}, \"faces_out\": {}, \"face_ratio\": {:.4}, \"quad_fraction\": {:.4}, \
          \"max_distance\": {max:.4}, \"mean_distance\": {mean:.5}, \"error_bound\": {:.4}, \
          \"max_region_volume_change\": {:.5}, \"max_interface_area_change\": {:.5}, \
-         \"regularize_s\": {regularize_s:.2}, \"simplify_s\": {simplify_s:.2}}}",
+         \"hash\": \"{hash:016x}\", \"regularize_s\": {regularize_s:.2}, \"simplify_s\": {simplify_s:.2}{pyramid}}}",
         spacing.x,
         spacing.y,
         spacing.z,

@@ -116,6 +116,8 @@ pub(crate) struct Engine<'m> {
     cos_normal: f64,
     plan: Plan,
     scratch: Scratch,
+    /// Triangles alive when the grid was last built.
+    grid_built_at: usize,
     /// Vertices with a refused collapse since they last queued theirs.
     retry: Vec<bool>,
     /// Per patch, its two regions (dense ids).
@@ -124,7 +126,6 @@ pub(crate) struct Engine<'m> {
     region_volume: Vec<(f64, f64)>,
     /// Each patch's input area, and its change so far.
     patch_area: Vec<(f64, f64)>,
-    pub(crate) refusals: [usize; 10],
 }
 
 fn tri_normal(p: [DVec3; 3]) -> DVec3 {
@@ -166,7 +167,7 @@ fn strictly_one_side(t: &[DVec3; 3], q: &[DVec3]) -> bool {
         let d = x - t[0];
         let det = d.dot(c);
         let permanent = d.abs().dot(ca);
-        if !(det.abs() > 1e-14 * permanent) || det * side < 0.0 {
+        if det.is_nan() || det.abs() <= 1e-14 * permanent || det * side < 0.0 {
             return false;
         }
         side = det;
@@ -333,10 +334,10 @@ impl<'m> Engine<'m> {
             plan: Plan::default(),
             scratch: Scratch::default(),
             retry: vec![false; n],
+            grid_built_at: nt,
             key_regions: Vec::new(),
             region_volume: Vec::new(),
             patch_area: Vec::new(),
-            refusals: [0; 10],
             max_error: 0.0,
             cos_normal: options.max_normal_change_deg.to_radians().cos(),
             tris,
@@ -637,6 +638,9 @@ impl<'m> Engine<'m> {
         drop(all);
         let mut limit = 2 * self.heap.len() + 1024;
         while self.alive > goal {
+            if self.grid.is_some() && 2 * self.alive < self.grid_built_at {
+                self.rebuild_grid();
+            }
             if self.heap.len() > limit {
                 let heap = std::mem::take(&mut self.heap);
                 let mut kept: Vec<Reverse<Candidate>> = heap.into_vec();
@@ -652,12 +656,33 @@ impl<'m> Engine<'m> {
                 self.retry[c.1 as usize] = true;
             } else {
                 self.apply();
-                self.refusals[9] += 1;
             }
         }
-        if std::env::var_os("SIMPLIFY_DEBUG").is_some() {
-            eprintln!("DEBUG alive {} refusals [corner, frozen, norem, link, sig, normal, quality, dist, isect, applied] {:?}", self.alive, self.refusals);
+    }
+
+    /// Builds the grid again from the triangles alive, with cells of twice their mean
+    /// edge: the triangles grow as they merge, and the cells would fill with the old
+    /// entries of triangles that changed.
+    fn rebuild_grid(&mut self) {
+        let (mut sum, mut count) = (0.0, 0usize);
+        for (t, tri) in self.tris.iter().enumerate() {
+            if self.tri_alive[t] {
+                for i in 0..3 {
+                    sum += self.pos[tri[i] as usize].distance(self.pos[tri[(i + 1) % 3] as usize]);
+                }
+                count += 3;
+            }
         }
+        let mean_edge = if count > 0 { (sum / count as f64).max(1e-300) } else { 1.0 };
+        let mut grid = Grid::new(2.0 * mean_edge, self.tris.len());
+        for (t, tri) in self.tris.iter().enumerate() {
+            if self.tri_alive[t] {
+                let (lo, hi) = self.tri_box(tri);
+                grid.insert(t as u32, lo, hi);
+            }
+        }
+        self.grid = Some(grid);
+        self.grid_built_at = self.alive;
     }
 
     /// Plans the collapse of `u` into `v` in `self.plan`; whether every check passes.
@@ -672,19 +697,13 @@ impl<'m> Engine<'m> {
 
     fn plan_with(&mut self, u: u32, v: u32, plan: &mut Plan, sc: &mut Scratch) -> bool {
         if self.class[u as usize] == Class::Corner {
-            {
-                self.refusals[0] += 1;
-                return false;
-            }
+            return false;
         }
         sc.star_u.clear();
         sc.star_u.extend_from_slice(&self.vtris[u as usize]);
         let star_u = &sc.star_u;
         if star_u.iter().any(|&t| self.frozen[t as usize] != NONE) {
-            {
-                self.refusals[1] += 1;
-                return false;
-            }
+            return false;
         }
         plan.u = u;
         plan.v = v;
@@ -700,10 +719,7 @@ impl<'m> Engine<'m> {
             }
         }
         if plan.removed.is_empty() {
-            {
-                self.refusals[2] += 1;
-                return false;
-            }
+            return false;
         }
         // The feature rule: an interior vertex collapses along an interior edge, a line
         // vertex along its line.
@@ -722,10 +738,7 @@ impl<'m> Engine<'m> {
                 && nv.binary_search(&w).is_ok()
                 && !plan.removed.iter().any(|&t| self.tris[t as usize].contains(&w))
             {
-                {
-                    self.refusals[3] += 1;
-                    return false;
-                }
+                return false;
             }
         }
         for (t, _) in &plan.modified {
@@ -739,10 +752,7 @@ impl<'m> Engine<'m> {
                     st.contains(&o0) && st.contains(&o1)
                 })
             {
-                {
-                    self.refusals[3] += 1;
-                    return false;
-                }
+                return false;
             }
         }
         // Every edge at v keeps its incident patches and their orientations.
@@ -766,10 +776,7 @@ impl<'m> Engine<'m> {
                 self.star_signature_into(u, w, &mut sc.sig_b);
             }
             if sc.sig_a != sc.sig_b {
-                {
-                    self.refusals[4] += 1;
-                    return false;
-                }
+                return false;
             }
         }
         // Where v goes.
@@ -785,22 +792,13 @@ impl<'m> Engine<'m> {
             let new = tri.map(at);
             let (n0, n1) = (tri_normal(old), tri_normal(new));
             if n1.length_squared() <= 0.0 || n0.length_squared() <= 0.0 {
-                {
-                    self.refusals[5] += 1;
-                    return false;
-                }
+                return false;
             }
             if n0.normalize().dot(n1.normalize()) < self.cos_normal {
-                {
-                    self.refusals[5] += 1;
-                    return false;
-                }
+                return false;
             }
             if quality(new) < min_q.min(quality(old)) {
-                {
-                    self.refusals[6] += 1;
-                    return false;
-                }
+                return false;
             }
         }
         // Each patch's area and each region's volume within their tolerances: the
@@ -843,10 +841,7 @@ impl<'m> Engine<'m> {
                 if kind { self.region_volume[id as usize] } else { self.patch_area[id as usize] };
             let tolerance = if kind { VOLUME_TOLERANCE } else { AREA_TOLERANCE };
             if (so_far + d).abs() > tolerance * total.abs() {
-                {
-                    self.refusals[2] += 1;
-                    return false;
-                }
+                return false;
             }
         }
         // The distance budget: every input vertex that u's triangles (and v's, if v
@@ -879,10 +874,7 @@ impl<'m> Engine<'m> {
                 }
             }
             if best.0.is_nan() || best.0 > self.max_error {
-                {
-                    self.refusals[7] += 1;
-                    return false;
-                }
+                return false;
             }
             plan.assigned.push((x, best.1, best.0));
         }
@@ -954,10 +946,7 @@ impl<'m> Engine<'m> {
             }
             self.grid = Some(grid);
             if hit {
-                {
-                    self.refusals[8] += 1;
-                    return false;
-                }
+                return false;
             }
         }
         true

@@ -92,39 +92,6 @@ pub(crate) fn pair(
         }
     }
     augment(&candidates, &mut mate, &taken);
-    if std::env::var_os("SIMPLIFY_DEBUG").is_some() {
-        let mut has = vec![0u8; tris.len()];
-        for &(_, a, b, _) in &candidates {
-            has[a as usize] += 1;
-            has[b as usize] += 1;
-        }
-        // edges per triangle that are interior to one patch (2 tris same key opposite)
-        let mut inner = vec![0u8; tris.len()];
-        let mut i = 0;
-        while i < edges.len() {
-            let mut j = i + 1;
-            while j < edges.len() && edges[j].0 == edges[i].0 && edges[j].1 == edges[i].1 {
-                j += 1;
-            }
-            if j - i == 2 && keys[edges[i].2 as usize] == keys[edges[i + 1].2 as usize] {
-                inner[edges[i].2 as usize] += 1;
-                inner[edges[i + 1].2 as usize] += 1;
-            }
-            i = j;
-        }
-        let un: Vec<usize> = (0..tris.len()).filter(|&t| mate[t] == NO_MATE && !taken[t]).collect();
-        let mut hist = [[0usize; 4]; 4];
-        for &t in &un {
-            hist[inner[t].min(3) as usize][has[t].min(3) as usize] += 1;
-        }
-        eprintln!(
-            "DEBUG {:?} pair: tris {} unmatched {} [inner edges][candidates] {:?}",
-            DBG,
-            tris.len(),
-            un.len(),
-            hist
-        );
-    }
     for (t, &m) in mate.iter().enumerate() {
         if m != NO_MATE {
             let (_, t1, _, q) = candidates[m as usize];
@@ -140,8 +107,6 @@ pub(crate) fn pair(
     faces.into_iter().map(|f| f.1).collect()
 }
 
-static DBG: [std::sync::atomic::AtomicUsize; 2] =
-    [std::sync::atomic::AtomicUsize::new(0), std::sync::atomic::AtomicUsize::new(0)];
 /// No pair.
 const NO_MATE: u32 = u32::MAX;
 
@@ -233,13 +198,11 @@ fn score(pos: &[DVec3], a: u32, b: u32, x: u32, y: u32, max_dihedral_deg: f64) -
     }
     let dihedral = angle(n1, n2);
     if dihedral.is_nan() || dihedral > max_dihedral_deg {
-        DBG[0].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         return None;
     }
     let at_a = angle(pb - pa, px - pa) + angle(pb - pa, py - pa);
     let at_b = angle(pa - pb, px - pb) + angle(pa - pb, py - pb);
     if at_a.is_nan() || at_b.is_nan() || at_a >= 170.0 || at_b >= 170.0 {
-        DBG[1].fetch_add(1, std::sync::atomic::Ordering::Relaxed);
         return None;
     }
     let at_x = angle(pa - px, pb - px);

@@ -1,7 +1,8 @@
 //! The partition invariants of simplification, checked against independent computations
 //! on the meshes (never the simplifier's own bookkeeping): regions closed, Euler
 //! characteristics of regions and interfaces unchanged, junction lines with the same
-//! end points, no intersection added, every input vertex within the distance budget.
+//! end points, no intersection added, every input vertex within the distance budget,
+//! each region's volume within 1% and each interface's area within 2%.
 
 use std::collections::{BTreeMap, BTreeSet, HashMap};
 
@@ -146,6 +147,23 @@ fn triangles(mesh: &QuadMesh) -> Vec<[DVec3; 3]> {
     t
 }
 
+/// Signed volume enclosed per label (faces oriented from their first label to their
+/// second) and area per label pair.
+fn measures(mesh: &QuadMesh) -> (BTreeMap<u32, f64>, BTreeMap<[u32; 2], f64>) {
+    let (mut vol, mut area) = (BTreeMap::new(), BTreeMap::new());
+    for (q, l) in mesh.quads.iter().zip(&mesh.face_labels) {
+        let p = q.map(|v| mesh.positions[v as usize]);
+        for t in [[p[0], p[1], p[2]], [p[0], p[2], p[3]]] {
+            let v = t[0].dot(t[1].cross(t[2])) / 6.0;
+            *vol.entry(l[0]).or_insert(0.0) += v;
+            *vol.entry(l[1]).or_insert(0.0) -= v;
+            let a = 0.5 * (t[1] - t[0]).cross(t[2] - t[0]).length();
+            *area.entry([l[0].min(l[1]), l[0].max(l[1])]).or_insert(0.0) += a;
+        }
+    }
+    (vol, area)
+}
+
 /// Every invariant of `out`, simplified from `input` within `max_error`.
 fn check(input: &QuadMesh, out: &Simplified, max_error: f64) -> Result<(), TestCaseError> {
     let mesh = &out.mesh;
@@ -175,6 +193,17 @@ fn check(input: &QuadMesh, out: &Simplified, max_error: f64) -> Result<(), TestC
     prop_assert_eq!(lines_in, lines_out, "junction lines");
     if self_intersections(&input.positions, &input.quads).is_empty() {
         prop_assert!(self_intersections(&mesh.positions, &mesh.quads).is_empty(), "intersection added");
+    }
+    // Each region's volume within 1% and each interface's area within 2% of the input's.
+    let (v_in, a_in) = measures(input);
+    let (v_out, a_out) = measures(mesh);
+    for (r, v) in &v_in {
+        let change = (v_out[r] - v).abs();
+        prop_assert!(change <= 0.01 * v.abs() + 1e-9, "region {} volume {} -> {}", r, v, v_out[r]);
+    }
+    for (p, a) in &a_in {
+        let change = (a_out[p] - a).abs();
+        prop_assert!(change <= 0.02 * a + 1e-9, "interface {:?} area {} -> {}", p, a, a_out[p]);
     }
     let tris = triangles(mesh);
     let mut worst: f64 = 0.0;
