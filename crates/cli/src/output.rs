@@ -8,6 +8,7 @@ use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, Reg
 use voxreg_io::{named_interface_name, named_region_name, MeshBatch, Outputs, Palette, QuadMesh};
 
 use crate::args::{GeodesicOptions, RegularizeArgs, Split};
+use crate::input::Source;
 
 /// What `regularize` makes of the regularized surface.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -255,7 +256,7 @@ fn writable_dir(dir: &Path, option: &str) -> Result<()> {
 /// Checks, once the volume is read and before the regularization, what the output
 /// needs of it: labels PLY can hold, and for `upscale` a fine volume within the memory
 /// budget.
-pub(crate) fn check_volume(args: &RegularizeArgs, product: Product<'_>, volume: &LabelVolume) -> Result<()> {
+pub(crate) fn check_volume(args: &RegularizeArgs, product: Product<'_>, volume: &Source) -> Result<()> {
     let input = &args.input.input;
     let ply = match product {
         Product::Mesh if args.split == Split::None => {
