@@ -403,7 +403,9 @@ fn untangled<'a>(
     let corners = surface.positions();
     let mut x = positions.to_vec();
     let mut keep = vec![1.0f64; x.len()];
-    for round in 0.. {
+    // Each round from the eighth sets at least one more vertex back: at most one per
+    // vertex, plus eight, end it (a bound against a patch faulty at its voxel corners).
+    for round in 0..x.len() + 8 {
         let mut faulty: Vec<usize> = Vec::new();
         for patch in patches.clone() {
             let local: Vec<DVec3> = patch.vertices.iter().map(|v| x[v.index()]).collect();
