@@ -255,7 +255,8 @@ pub(crate) struct RegularizeArgs {
     #[arg(long, value_enum, value_name = "EXT", default_value_t = SplitFormat::Ply)]
     pub(crate) split_format: SplitFormat,
     /// With --split: duplicate pinched edges and vertices (two voxels of a region touching
-    /// only along an edge or at a corner) so each file is a 2-manifold mesh.
+    /// only along an edge or at a corner) so each file is a 2-manifold mesh; faces that
+    /// cross or fold in a file are moved back towards their voxel corners until none does.
     #[arg(long)]
     pub(crate) manifold: bool,
     /// The parameters every other option starts from [default: voxel-art for .vox input,

@@ -2,20 +2,20 @@
 
 use std::fmt::Write as _;
 
-use anyhow::{Context, Result};
+use anyhow::Result;
 use voxreg_io::vox_model_sizes;
 
 use voxreg_regularize::{InputFacts, Preset};
 
 use crate::args::InputArgs;
-use crate::input::{read_input, surface_of, voxel_art};
+use crate::input::{read_source, voxel_art};
 use crate::terminal::print_stdout;
 
 /// `voxreg info`: the volume's dimensions and labels, and its digital surface's cells;
 /// refused, as `regularize` is, when the regularization's estimate exceeds the budget.
 pub(crate) fn info(args: &InputArgs) -> Result<()> {
     let mut out = String::new();
-    let (volume, palette, units) = read_input(args)?;
+    let (volume, palette, units) = read_source(args)?;
     let preset = Preset::for_input(&InputFacts::voxel_art(voxel_art(args)));
     let map = args.region_map()?.unwrap_or_else(|| preset.params().regions);
     let [x, y, z] = volume.dims();
@@ -51,11 +51,10 @@ pub(crate) fn info(args: &InputArgs) -> Result<()> {
     // input that `regularize` refuses fails the same way, before the same work.
     let mut params = preset.params();
     params.regions = map.clone();
-    let (surfels, bytes) = voxreg_regularize::Regularizer::estimated_bytes_of(&volume, &params)
-        .with_context(|| format!("{}: no surface to regularize", args.input.display()))?;
+    let (surfels, bytes) = volume.estimated_bytes(args, &params)?;
     let what = format!("the regularization of its {surfels} surfels");
     voxreg_io::check_memory(&args.input, &what, u128::from(bytes))?;
-    let surface = surface_of(args, &volume, &map)?;
+    let surface = volume.surface(args, &map)?;
     let c = surface.counts();
     writeln!(out, "regions: {}", surface.regions().len()).ok();
     writeln!(out, "surfels: {}", c.surfels).ok();

@@ -1,8 +1,10 @@
 //! Reading the input volume as the options say.
 
-use anyhow::{bail, Context, Result};
-use voxreg_digisurf::{DigitalSurface, LabelVolume, RegionMap};
+use anyhow::{Context, Result};
+use glam::DVec3;
+use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelVolume, RegionMap};
 use voxreg_io::{is_voxel_art, Background, InputError, InputOptions, Palette};
+use voxreg_regularize::{Params, Regularizer};
 
 use crate::args::InputArgs;
 
@@ -14,13 +16,9 @@ pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palett
     read_input_from(args, None)
 }
 
-/// [`read_input`] of INPUT's contents held in memory (a file dropped on the viewer's
-/// page): nothing else is read (`voxreg_io::read_input_bytes`).
-pub(crate) fn read_input_from(
-    args: &InputArgs,
-    bytes: Option<&[u8]>,
-) -> Result<(LabelVolume, Option<Palette>, Option<String>)> {
-    let options = InputOptions {
+/// The options of `args` as `voxreg_io` takes them.
+fn options(args: &InputArgs) -> InputOptions<'_> {
+    InputOptions {
         dims: args.dims,
         dtype: args.dtype,
         endian: args.endian,
@@ -33,7 +31,16 @@ pub(crate) fn read_input_from(
             (false, Some(b)) => Background::Label(b),
             (false, None) => Background::File,
         },
-    };
+    }
+}
+
+/// [`read_input`] of INPUT's contents held in memory (a file dropped on the viewer's
+/// page): nothing else is read (`voxreg_io::read_input_bytes`).
+pub(crate) fn read_input_from(
+    args: &InputArgs,
+    bytes: Option<&[u8]>,
+) -> Result<(LabelVolume, Option<Palette>, Option<String>)> {
+    let options = options(args);
     let path = &args.input;
     let read = match bytes {
         Some(b) => voxreg_io::read_input_bytes(b, path, &options),
@@ -41,31 +48,143 @@ pub(crate) fn read_input_from(
     };
     match read {
         Ok(input) => Ok((input.volume, input.palette, input.units)),
-        Err(InputError::RawNeedsDims(_)) => {
-            bail!("{}: raw data have no header: give --dims X,Y,Z and --dtype", path.display())
+        Err(e) => Err(input_error(args, e)),
+    }
+}
+
+/// An [`InputError`] in the options' names.
+fn input_error(args: &InputArgs, e: InputError) -> anyhow::Error {
+    let path = &args.input;
+    match e {
+        InputError::RawNeedsDims(_) => {
+            anyhow::anyhow!("{}: raw data have no header: give --dims X,Y,Z and --dtype", path.display())
         }
-        Err(InputError::ModelNeedsVox(_)) => {
-            bail!("{}: --model applies to MagicaVoxel .vox files", path.display())
+        InputError::ModelNeedsVox(_) => {
+            anyhow::anyhow!("{}: --model applies to MagicaVoxel .vox files", path.display())
         }
-        Err(InputError::Spacing { source, .. }) => {
-            Err(anyhow::Error::new(source).context(format!("{}: --spacing", path.display())))
+        InputError::Spacing { source, .. } => {
+            anyhow::Error::new(source).context(format!("{}: --spacing", path.display()))
         }
-        Err(InputError::NanThreshold) => bail!("--threshold: NaN is not a threshold"),
-        Err(InputError::GreyNeedsThreshold { lo, hi, reason, .. }) => bail!(
+        InputError::NanThreshold => anyhow::anyhow!("--threshold: NaN is not a threshold"),
+        InputError::GreyNeedsThreshold { lo, hi, reason, .. } => anyhow::anyhow!(
             "{}: grey-level data needs --threshold T (values range from {lo} to {hi}; {reason})",
             path.display()
         ),
-        Err(InputError::Io(e)) => Err(e.into()),
+        InputError::Io(e) => e.into(),
+    }
+}
+
+/// What a regularization keeps per `(y, z)` line of the lattice beyond the surface: the
+/// integral-invariant normals' runs along x (an offset, a run, a region, a flag and a
+/// queue entry per line). Counted for blocks, whose lattice may hold far more lines
+/// than surfels; a dense volume holds more voxels than lines.
+const BYTES_PER_LINE: u64 = 32;
+
+/// An input volume: dense, or (a MagicaVoxel scene of models far apart) blocks in a
+/// lattice of empty space, whose surface is that of the volume made dense.
+pub(crate) enum Source {
+    /// Every voxel stored.
+    Dense(LabelVolume),
+    /// The models' own boxes (`voxreg_io::read_sparse_input`).
+    Blocks(BlockVolume),
+}
+
+/// Reads INPUT as [`read_input`] does, as blocks where it is a MagicaVoxel scene of
+/// models far apart (`voxreg_io::read_sparse_input`): the memory and time of its
+/// models' boxes, not of their bounding box.
+pub(crate) fn read_source(args: &InputArgs) -> Result<(Source, Option<Palette>, Option<String>)> {
+    match voxreg_io::read_sparse_input(&args.input, None, &options(args)) {
+        Ok(Some(scene)) => Ok((Source::Blocks(scene.volume), Some(scene.palette), None)),
+        Ok(None) => read_input(args).map(|(v, p, u)| (Source::Dense(v), p, u)),
+        Err(e) => Err(input_error(args, e)),
+    }
+}
+
+impl Source {
+    /// Number of voxels along x, y and z.
+    pub(crate) fn dims(&self) -> [usize; 3] {
+        match self {
+            Source::Dense(v) => v.dims(),
+            Source::Blocks(v) => v.dims(),
+        }
+    }
+
+    /// Number of voxels (the empty space between blocks included).
+    pub(crate) fn len(&self) -> u128 {
+        match self {
+            Source::Dense(v) => v.len() as u128,
+            Source::Blocks(v) => v.len(),
+        }
+    }
+
+    /// Physical size of a voxel.
+    pub(crate) fn spacing(&self) -> DVec3 {
+        match self {
+            Source::Dense(v) => v.spacing(),
+            Source::Blocks(v) => v.spacing(),
+        }
+    }
+
+    /// The background label, if any.
+    pub(crate) fn background(&self) -> Option<u32> {
+        match self {
+            Source::Dense(v) => v.background(),
+            Source::Blocks(v) => Some(v.background()),
+        }
+    }
+
+    /// The distinct labels with their voxel counts, sorted by label.
+    pub(crate) fn label_counts(&self) -> Vec<(u32, u64)> {
+        match self {
+            Source::Dense(v) => v.label_counts(),
+            Source::Blocks(v) => v.label_counts(),
+        }
+    }
+
+    /// The largest label.
+    pub(crate) fn max_label(&self) -> Option<u32> {
+        match self {
+            Source::Dense(v) => v.max_label(),
+            Source::Blocks(v) => Some(v.max_label()),
+        }
+    }
+
+    /// The surfels of the surface with `params.regions`, and the memory a run of
+    /// `params` on it takes (`Regularizer::estimated_bytes_of`), before it is built.
+    pub(crate) fn estimated_bytes(&self, args: &InputArgs, params: &Params) -> Result<(u64, u64)> {
+        let counted = match self {
+            Source::Dense(v) => Regularizer::estimated_bytes_of(v, params),
+            Source::Blocks(v) => DigitalSurface::count_surfels_of_blocks(v, &params.regions)
+                .map(|s| {
+                    let [_, ny, nz] = v.dims().map(|d| d as u64);
+                    let lines = ny.saturating_mul(nz).saturating_mul(BYTES_PER_LINE);
+                    (s, voxreg_regularize::estimated_bytes(s, params).saturating_add(lines))
+                })
+                .map_err(Into::into),
+        };
+        counted.with_context(|| format!("{}: no surface to regularize", args.input.display()))
+    }
+
+    /// A regularizer on the digital surface, with labels grouped into regions by `map`.
+    pub(crate) fn regularizer(&self, args: &InputArgs, map: &RegionMap) -> Result<Regularizer> {
+        match self {
+            Source::Dense(v) => Regularizer::from_volume(v, map),
+            Source::Blocks(v) => Regularizer::from_blocks(v, map),
+        }
+        .with_context(|| format!("{}: no surface to regularize", args.input.display()))
+    }
+
+    /// The digital surface, or an error naming the file.
+    pub(crate) fn surface(&self, args: &InputArgs, map: &RegionMap) -> Result<DigitalSurface> {
+        match self {
+            Source::Dense(v) => DigitalSurface::new(v, map),
+            Source::Blocks(v) => DigitalSurface::from_blocks(v, map),
+        }
+        .with_context(|| format!("{}: no surface to regularize", args.input.display()))
     }
 }
 
 /// Whether INPUT is voxel art (the voxel-art preset's input).
 pub(crate) fn voxel_art(args: &InputArgs) -> bool {
     args.dims.is_none() && is_voxel_art(&args.input)
-}
-
-/// The digital surface of `volume`, or an error naming the file.
-pub(crate) fn surface_of(args: &InputArgs, volume: &LabelVolume, map: &RegionMap) -> Result<DigitalSurface> {
-    DigitalSurface::new(volume, map)
-        .with_context(|| format!("{}: no surface to regularize", args.input.display()))
 }

@@ -19,10 +19,11 @@ mod view;
 use anyhow::{Context, Result};
 use clap::Parser as _;
 use voxreg_io::{write_ply_with_vertex_scalar, write_volume, Outputs, QuadMesh};
-use voxreg_regularize::{Regularizer, Run};
+use voxreg_regularize::Run;
 use voxreg_upscale::{upscale, UpscaleParams};
 
 use crate::args::{Cli, Command, RegularizeArgs};
+use crate::input::Source;
 use crate::output::Product;
 use crate::progress::Stages;
 use crate::report::{CliReport, IoTimes};
@@ -125,13 +126,17 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     let params = args.params(input::voxel_art(&args.input))?;
     let stages = Stages::new(args.quiet);
     let path = &args.input.input;
-    let ((volume, palette, _units), read) = stages.run("read volume", || input::read_input(&args.input))?;
-    output::check_volume(args, product, &volume)?;
+    // An upscale writes a dense volume: its input is read dense; a mesh's input, as blocks
+    // where it is a MagicaVoxel scene of models far apart.
+    let ((source, palette, _units), read) = stages.run("read volume", || match product {
+        Product::Volume { .. } => input::read_input(&args.input).map(|(v, p, u)| (Source::Dense(v), p, u)),
+        _ => input::read_source(&args.input),
+    })?;
+    output::check_volume(args, product, &source)?;
     output::check_library(args, product, palette.is_some())?;
     let (mut regularizer, _) = stages.run("digital surface", || {
         // Refused before the surface is built: the count is one pass over the voxels.
-        let (surfels, bytes) = Regularizer::estimated_bytes_of(&volume, &params)
-            .with_context(|| format!("{}: no surface to regularize", path.display()))?;
+        let (surfels, bytes) = source.estimated_bytes(&args.input, &params)?;
         let (what, bytes) = match product {
             // Exact geodesics' windows outgrow the surface: refused here too, not hours later.
             Product::Geodesic(opts) if opts.method == args::GeodesicMethod::Exact => (
@@ -141,14 +146,16 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
             _ => (format!("the regularization of its {surfels} surfels"), bytes),
         };
         voxreg_io::check_memory(path, &what, u128::from(bytes))?;
-        Regularizer::from_volume(&volume, &params.regions)
-            .with_context(|| format!("{}: no surface to regularize", path.display()))
+        source.regularizer(&args.input, &params.regions)
     })?;
     // What the run needs of the volume is in the surface now: unless the output is a
     // volume, its memory goes back before the solves (the run's peak).
     let labels =
-        args.report.as_ref().map(|_| report::named_labels(&volume, palette.as_ref())).unwrap_or_default();
-    let volume = matches!(product, Product::Volume { .. }).then_some(volume);
+        args.report.as_ref().map(|_| report::named_labels(&source, palette.as_ref())).unwrap_or_default();
+    let volume = match (product, source) {
+        (Product::Volume { .. }, Source::Dense(volume)) => Some(volume),
+        _ => None,
+    };
     // One run: the initial normals need not outlive it.
     regularizer.set_keep_normals(false);
     let out = stages.pipeline(&params, |progress| {

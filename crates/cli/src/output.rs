@@ -4,10 +4,12 @@
 use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
-use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, RegionId};
+use glam::DVec3;
+use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, Patch, PatchParams, RegionId};
 use voxreg_io::{named_interface_name, named_region_name, MeshBatch, Outputs, Palette, QuadMesh};
 
 use crate::args::{GeodesicOptions, RegularizeArgs, Split};
+use crate::input::Source;
 
 /// What `regularize` makes of the regularized surface.
 #[derive(Copy, Clone, Debug, PartialEq)]
@@ -255,7 +257,7 @@ fn writable_dir(dir: &Path, option: &str) -> Result<()> {
 /// Checks, once the volume is read and before the regularization, what the output
 /// needs of it: labels PLY can hold, and for `upscale` a fine volume within the memory
 /// budget.
-pub(crate) fn check_volume(args: &RegularizeArgs, product: Product<'_>, volume: &LabelVolume) -> Result<()> {
+pub(crate) fn check_volume(args: &RegularizeArgs, product: Product<'_>, volume: &Source) -> Result<()> {
     let input = &args.input.input;
     let ply = match product {
         Product::Mesh if args.split == Split::None => {
@@ -337,7 +339,8 @@ fn check_extension(path: &Path, product: Product<'_>) -> Result<()> {
 
 /// The meshes of `--split interfaces|regions` as `(file name, mesh)`, in interface or
 /// region order, named after the labels' names where `palette` has them; each vertex
-/// copies its position from `positions` bit for bit.
+/// copies its position from `positions` bit for bit, or with `--manifold` from
+/// [`untangled`] positions.
 fn split_meshes(
     args: &RegularizeArgs,
     surface: &DigitalSurface,
@@ -346,28 +349,85 @@ fn split_meshes(
 ) -> Vec<(String, QuadMesh)> {
     let params = PatchParams { manifold: args.manifold };
     let ext = args.split_format.extension();
-    match args.split {
+    let patches: Vec<(String, Patch)> = match args.split {
         Split::None => Vec::new(),
         Split::Interfaces => (0..surface.interfaces().len() as u32)
             .map(|i| {
                 let patch = surface.interface_patch(InterfaceId(i), &params);
-                let name = format!("{}.{ext}", named_interface_name(surface, InterfaceId(i), palette));
-                (name, QuadMesh::from_patch(surface, &patch, positions))
+                (format!("{}.{ext}", named_interface_name(surface, InterfaceId(i), palette)), patch)
             })
             .collect(),
         Split::Regions => (0..surface.regions().len() as u32)
             .map(RegionId)
             .filter(|&r| Some(r) != surface.regions().background())
             .map(|r| {
-                let patch = surface.region_patch(r, &params);
                 (
                     format!("{}.{ext}", named_region_name(surface, r, palette)),
-                    QuadMesh::from_patch(surface, &patch, positions),
+                    surface.region_patch(r, &params),
                 )
             })
-            .filter(|(_, mesh)| mesh.num_faces() > 0)
+            .filter(|(_, patch)| !patch.quads.is_empty())
             .collect(),
+    };
+    let untangled;
+    let positions = if args.manifold {
+        untangled = self::untangled(surface, patches.iter().map(|p| &p.1), positions);
+        &untangled
+    } else {
+        positions
+    };
+    patches
+        .into_iter()
+        .map(|(name, patch)| (name, QuadMesh::from_patch(surface, &patch, positions)))
+        .collect()
+}
+
+/// `positions` with the vertices of every face that `voxreg check` faults in one of
+/// `patches` (a face crossing another, folded over its diagonal or onto a neighbour)
+/// moved back towards their voxel corners, until no patch has such a face: each round
+/// halves those vertices' displacements, and from the eighth round on sets them to
+/// zero.
+///
+/// The regularization keeps one position per surface vertex, and nothing but the
+/// voxel-art preset's boxes and fold-free post-condition (which sees only edges of two
+/// quads) keeps the faces around a pinch apart: without them, coplanar quads across a
+/// pinched edge slide over one another (a checkerboard's every edge). A manifold patch
+/// at the voxel corners has no such face (its faces meet only along the edges and
+/// corners they share), and each round from the eighth sets at least one more vertex back,
+/// so this ends; a clean patch is unchanged.
+fn untangled<'a>(
+    surface: &DigitalSurface,
+    patches: impl Iterator<Item = &'a Patch> + Clone,
+    positions: &[DVec3],
+) -> Vec<DVec3> {
+    let corners = surface.positions();
+    let mut x = positions.to_vec();
+    let mut keep = vec![1.0f64; x.len()];
+    // Each round from the eighth sets at least one more vertex back: at most one per
+    // vertex, plus eight, end it (a bound against a patch faulty at its voxel corners).
+    for round in 0..x.len() + 8 {
+        let mut faulty: Vec<usize> = Vec::new();
+        for patch in patches.clone() {
+            let local: Vec<DVec3> = patch.vertices.iter().map(|v| x[v.index()]).collect();
+            let quads = &patch.quads;
+            let faces = voxreg_quality::self_intersections(&local, quads)
+                .into_iter()
+                .chain(voxreg_quality::folded_pairs(&local, quads))
+                .flat_map(|(a, b)| [a, b])
+                .chain(voxreg_quality::folded_quads(&local, quads));
+            faulty.extend(faces.flat_map(|f| patch.quads[f].map(|v| patch.vertices[v as usize].index())));
+        }
+        if faulty.is_empty() {
+            break;
+        }
+        faulty.sort_unstable();
+        faulty.dedup();
+        for v in faulty {
+            keep[v] = if round >= 7 { 0.0 } else { 0.5 * keep[v] };
+            x[v] = corners[v] + keep[v] * (positions[v] - corners[v]);
+        }
     }
+    x
 }
 
 /// Stages the regularized surface in `outputs`: one file, or with `--split` a directory

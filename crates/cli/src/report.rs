@@ -3,9 +3,9 @@
 
 use std::path::Path;
 
+use crate::input::Source;
 use anyhow::{Context, Result};
 use serde::Serialize;
-use voxreg_digisurf::LabelVolume;
 use voxreg_io::{Outputs, Palette};
 use voxreg_regularize::Report;
 
@@ -33,7 +33,7 @@ pub(crate) struct LabelEntry {
 }
 
 /// The labels of `volume` that `palette` names, in increasing order.
-pub(crate) fn named_labels(volume: &LabelVolume, palette: Option<&Palette>) -> Vec<LabelEntry> {
+pub(crate) fn named_labels(volume: &Source, palette: Option<&Palette>) -> Vec<LabelEntry> {
     let Some(palette) = palette.filter(|p| !p.names.is_empty()) else { return Vec::new() };
     palette
         .named_labels(volume.label_counts().into_iter().map(|(l, _)| l))

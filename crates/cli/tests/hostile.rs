@@ -208,7 +208,8 @@ fn split_regions_manifold_output_passes_check() {
     assert_eq!(boxes.len(), 2);
     assert!(boxes.iter().all(|(_, ok)| *ok), "{boxes:?}");
     // A checkerboard: every region pinched everywhere; the duplicated pinch vertices
-    // coincide and must not count as contacts.
+    // coincide and must not count as contacts, and the quads around them, which the
+    // default preset lets slide over one another, are moved back until none crosses.
     let inside = |v: usize| (1..5).contains(&v);
     let checker = split_and_check([6, 6, 6], |x, y, z| {
         if inside(x) && inside(y) && inside(z) {
@@ -217,14 +218,11 @@ fn split_regions_manifold_output_passes_check() {
             0
         }
     });
-    // (The exact check finds 42 real overlaps per file there: coplanar neighbours folded
-    // over their shared edge into a sliver, beside the 6 folded quads; the old check,
-    // which never tested neighbours, counted 0. Thousands would mean pinch contacts.)
     assert_eq!(checker.len(), 2);
-    let pairs = |out: &str| -> usize {
-        out.split(" faces, ").nth(1).and_then(|r| r.split(' ').next()).and_then(|n| n.parse().ok()).unwrap()
-    };
-    assert!(checker.iter().all(|(out, _)| pairs(out) < 100), "{checker:?}");
+    assert!(
+        checker.iter().all(|(out, ok)| *ok && out.contains(" 0 self-intersecting face pairs")),
+        "{checker:?}"
+    );
 }
 
 #[test]

@@ -55,36 +55,44 @@ fn a_zarr_json_declaring_a_billion_voxels_is_refused_under_ulimit() {
     assert!(!out.exists());
 }
 
-#[test]
-fn vox_models_far_apart_are_refused_under_ulimit() {
+/// A `.vox` scene: models of `sizes` (each full of colour 1, then 2, ...), placed by
+/// translations `at`.
+fn vox_scene(models: &[[u32; 3]], at: &[&str]) -> Vec<u8> {
     use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
-    let model = || Model { size: Size { x: 1, y: 1, z: 1 }, voxels: vec![Voxel { x: 0, y: 0, z: 0, i: 1 }] };
-    let transform = |child: u32, t: &str| {
+    let model = |k: usize, [x, y, z]: [u32; 3]| Model {
+        size: Size { x, y, z },
+        voxels: (0..x * y * z)
+            .map(|i| Voxel { x: (i % x) as u8, y: (i / x % y) as u8, z: (i / x / y) as u8, i: k as u8 })
+            .collect(),
+    };
+    let mut scenes = vec![SceneNode::Transform {
+        attributes: dot_vox::Dict::new(),
+        frames: vec![Frame::new(dot_vox::Dict::new())],
+        child: 1,
+        layer_id: 0,
+    }];
+    scenes.push(SceneNode::Group {
+        attributes: dot_vox::Dict::new(),
+        children: (0..at.len() as u32).map(|k| 2 + 2 * k).collect(),
+    });
+    for (k, t) in at.iter().enumerate() {
         let mut frame = dot_vox::Dict::new();
-        frame.insert("_t".into(), t.into());
-        SceneNode::Transform {
+        frame.insert("_t".into(), t.to_string());
+        scenes.push(SceneNode::Transform {
             attributes: dot_vox::Dict::new(),
             frames: vec![Frame::new(frame)],
-            child,
+            child: 3 + 2 * k as u32,
             layer_id: 0,
-        }
-    };
-    let shape = |model_id| SceneNode::Shape {
-        attributes: dot_vox::Dict::new(),
-        models: vec![ShapeModel { model_id, attributes: dot_vox::Dict::new() }],
-    };
-    let scenes = vec![
-        transform(1, "0 0 0"),
-        SceneNode::Group { attributes: dot_vox::Dict::new(), children: vec![2, 4] },
-        transform(3, "0 0 0"),
-        shape(0),
-        transform(5, "2047 1023 1023"),
-        shape(1),
-    ];
+        });
+        scenes.push(SceneNode::Shape {
+            attributes: dot_vox::Dict::new(),
+            models: vec![ShapeModel { model_id: k as u32, attributes: dot_vox::Dict::new() }],
+        });
+    }
     let data = DotVoxData {
         version: 150,
         index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
-        models: vec![model(), model()],
+        models: models.iter().enumerate().map(|(k, &m)| model(k, m)).collect(),
         palette: vec![Color { r: 1, g: 2, b: 3, a: 255 }; 256],
         materials: Vec::new(),
         scenes,
@@ -92,10 +100,44 @@ fn vox_models_far_apart_are_refused_under_ulimit() {
     };
     let mut bytes = Vec::new();
     data.write_vox(&mut bytes).unwrap();
+    bytes
+}
+
+/// The quads of an OBJ file.
+fn obj_quads(path: &Path) -> usize {
+    std::fs::read_to_string(path).unwrap().lines().filter(|l| l.starts_with("f ")).count()
+}
+
+#[test]
+fn vox_models_far_apart_are_regularized_from_their_own_boxes_under_ulimit() {
+    // One-voxel models 2047 x 1023 x 1023 apart: a 2048 x 1024 x 1024 scene (8 GiB of
+    // labels made dense), and two-voxel models 2,000 voxels apart along each axis.
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("far.vox");
-    std::fs::write(&path, bytes).unwrap();
-    refused(&["info", s(&path)], &["far.vox: a volume of 2048x1024x1024 voxels needs 8.0 GiB"]);
+    for (name, models, at, quads, dims) in [
+        ("far.vox", [[1, 1, 1]; 2], ["0 0 0", "2047 1023 1023"], 12, "2048 x 1024 x 1024"),
+        ("apart.vox", [[2, 1, 1]; 2], ["0 0 0", "2000 2000 2000"], 20, "2002 x 2001 x 2001"),
+    ] {
+        let path = dir.path().join(name);
+        std::fs::write(&path, vox_scene(&models, &at)).unwrap();
+        let start = Instant::now();
+        let out = limited(&["info", s(&path)]);
+        assert_eq!(out.status.code(), Some(0), "{name}: {}", stderr(&out));
+        let text = stdout(&out);
+        assert!(text.contains(&format!("dimensions: {dims}")), "{name}: {text}");
+        assert!(text.contains(&format!("surfels: {quads}")), "{name}: {text}");
+        let mesh = dir.path().join(format!("{name}.obj"));
+        let out = limited(&["regularize", s(&path), "-o", s(&mesh), "-q"]);
+        assert_eq!(out.status.code(), Some(0), "{name}: {}", stderr(&out));
+        assert_eq!(obj_quads(&mesh), quads, "{name}");
+        // Seconds where the dense volume took tens (and 8 GiB).
+        assert!(start.elapsed() < Duration::from_secs(20), "{name}: {:?}", start.elapsed());
+    }
+    // Under a budget smaller than the dense volume (2^31 voxels, 8 GiB) by far.
+    let far = dir.path().join("far.vox");
+    let mesh = dir.path().join("small.obj");
+    let out = limited(&["regularize", s(&far), "-o", s(&mesh), "--max-memory", "100M", "-q"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert_eq!(obj_quads(&mesh), 12);
 }
 
 #[test]
@@ -203,4 +245,42 @@ fn info_is_refused_over_the_budget_as_regularize_is() {
     }
     let ok = limited(&["info", s(&path)]);
     assert_eq!(ok.status.code(), Some(0), "{}", stderr(&ok));
+}
+
+#[test]
+fn a_sparse_scene_regularizes_as_the_same_scene_made_dense() {
+    use voxreg_regularize::{Params, Regularizer, Run};
+    // Models apart (one across a gap of 9 voxels, one far below), touching and
+    // overlapping (the later model overwrites): read as blocks, the same surface and the
+    // same positions, bit for bit, as the dense volume, with the voxel-art preset.
+    let bytes = vox_scene(
+        &[[3, 2, 2], [2, 3, 2], [2, 2, 1], [1, 4, 1]],
+        &["0 0 0", "2 1 1", "14 3 -5", "-3 -30 -20"],
+    );
+    let scene = voxreg_io::read_vox_scene_bytes(&bytes, Path::new("s.vox"), &Default::default()).unwrap();
+    assert!(scene.is_sparse() && scene.volume.blocks().len() == 3, "{:?}", scene.volume.blocks().len());
+    let dense = scene.volume.to_dense().unwrap();
+    let params = Params::voxel_art();
+    let run = |mut r: Regularizer| r.run(Run::new(&params)).unwrap();
+    let a = run(Regularizer::from_blocks(&scene.volume, &params.regions).unwrap());
+    let b = run(Regularizer::from_volume(&dense, &params.regions).unwrap());
+    assert_eq!(a.surface.surfels(), b.surface.surfels());
+    assert_eq!(a.surface.num_vertices(), b.surface.num_vertices());
+    assert_eq!(a.positions.as_slice(), b.positions.as_slice());
+    // The bundled scenes read as blocks (dense ones too): the dense reader's volume and
+    // surface.
+    for name in
+        ["axes.vox", "extended.vox", "veh_fire.vox", "chr_army1.vox", "placeholder-with-materials.vox"]
+    {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data").join(name);
+        let bytes = std::fs::read(&path).unwrap();
+        let scene = voxreg_io::read_vox_scene_bytes(&bytes, &path, &Default::default()).unwrap();
+        let dense = voxreg_io::read_vox_bytes(&bytes, &path).unwrap().volume;
+        assert_eq!(scene.volume.to_dense().unwrap(), dense, "{name}");
+        let a = voxreg_digisurf::DigitalSurface::from_blocks(&scene.volume, &params.regions).unwrap();
+        let b = voxreg_digisurf::DigitalSurface::new(&dense, &params.regions).unwrap();
+        assert_eq!(a.surfels(), b.surfels(), "{name}");
+        assert_eq!(a.positions().as_slice(), b.positions().as_slice(), "{name}");
+        assert_eq!(a.edges(), b.edges(), "{name}");
+    }
 }

@@ -50,6 +50,7 @@
 //! Building scans the voxels once, slab by slab (no per-voxel hash map); memory is
 //! the current slab plus the complex, proportional to the number of surfels.
 
+mod blocks;
 mod csr;
 mod data;
 mod error;
@@ -59,6 +60,7 @@ mod regions;
 mod surface;
 mod volume;
 
+pub use blocks::{Block, BlockVolume};
 pub use csr::Lists;
 pub use data::{EdgeData, Id, IdVec, SurfelData, VertexData};
 pub use error::SurfaceError;

@@ -12,6 +12,7 @@ use crate::{
     SurfelId, VertexId, Voxel,
 };
 
+mod blocks;
 mod scan;
 
 use scan::{outside_of, range_face_count, range_faces, RawFace, Scan};
@@ -208,7 +209,28 @@ impl DigitalSurface {
             std::mem::swap(&mut scan.corners_lo, &mut scan.corners_hi);
             scan.corners_hi.fill(NONE);
         }
-        let Scan { mut surfels, mut vertex_corners, interface_of_pair, .. } = scan;
+        let Scan { surfels, vertex_corners, interface_of_pair, .. } = scan;
+        Self::assemble(
+            [nx, ny, nz],
+            (volume.spacing(), volume.origin(), volume.open_sides()),
+            regions,
+            surfels,
+            vertex_corners,
+            interface_of_pair,
+        )
+    }
+
+    /// The surface of the surfels found by a scan (in scan order, their vertices numbered
+    /// in order of first use, their interfaces by pair in order of first use): interfaces
+    /// numbered by region pair, then edges, vertex lists and components.
+    fn assemble(
+        dims: [usize; 3],
+        (spacing, origin, open_sides): (DVec3, DVec3, [[bool; 2]; 3]),
+        regions: Regions,
+        mut surfels: Vec<Surfel>,
+        mut vertex_corners: Vec<[u32; 3]>,
+        interface_of_pair: HashMap<(u32, u32), u32>,
+    ) -> Result<Self, SurfaceError> {
         vertex_corners.shrink_to_fit();
         if surfels.is_empty() {
             return Err(SurfaceError::Empty);
@@ -235,11 +257,10 @@ impl DigitalSurface {
             interfaces[s.interface.index()].surfels.push(SurfelId(i as u32));
         }
 
-        let open_sides = volume.open_sides();
         let mut surface = DigitalSurface {
-            dims: [nx, ny, nz],
-            spacing: volume.spacing(),
-            origin: volume.origin(),
+            dims,
+            spacing,
+            origin,
             open_sides,
             regions,
             surfel_edges: Vec::new(),

@@ -6,7 +6,7 @@
 use std::path::{Path, PathBuf};
 
 use glam::DVec3;
-use voxreg_digisurf::{LabelVolume, SurfaceError};
+use voxreg_digisurf::{Block, BlockVolume, LabelVolume, SurfaceError};
 
 use crate::{
     is_voxel_art, read_raw, read_voxels_with, DataType, Endian, IoError, NotALabel, Palette, RawSpec,
@@ -184,6 +184,74 @@ fn read_input_from(
         Background::Label(b) => volume = volume.with_background(Some(b)),
     }
     Ok(Input { volume, palette, units })
+}
+
+/// A MagicaVoxel scene read as blocks with [`read_sparse_input`].
+#[derive(Clone, Debug)]
+pub struct SparseInput {
+    /// The scene's blocks, spacing, origin and background (label `0`).
+    pub volume: BlockVolume,
+    /// The file's colours and materials.
+    pub palette: Palette,
+}
+
+/// Reads `path` as [`read_input`] does, into blocks built from the models' own boxes
+/// ([`read_vox_scene_bytes`](crate::read_vox_scene_bytes)), when it is a MagicaVoxel
+/// scene whose blocks hold less than half of its bounding box (models far apart) and
+/// the options leave empty space empty: no raw dimensions, no model picked, no
+/// threshold, the file's background (label `0`). The spacing and the labels kept apply
+/// as in [`read_input`]. `Ok(None)` otherwise (any other file, a dense scene): read it
+/// with [`read_input`], whose volume's surface is the same.
+pub fn read_sparse_input(
+    path: &Path,
+    bytes: Option<&[u8]>,
+    options: &InputOptions<'_>,
+) -> Result<Option<SparseInput>, InputError> {
+    let applies = options.dims.is_none()
+        && options.vox_model.is_none()
+        && options.threshold.is_none()
+        && matches!(options.background, Background::File | Background::Label(0))
+        && is_voxel_art(path);
+    if !applies {
+        return Ok(None);
+    }
+    let owned;
+    let bytes = match bytes {
+        Some(b) => b,
+        None => {
+            owned = crate::read_input_file(path)?;
+            &owned
+        }
+    };
+    let scene = crate::read_vox_scene_bytes(bytes, path, &crate::VoxOptions::default())?;
+    if !scene.is_sparse() {
+        return Ok(None);
+    }
+    let mut volume = scene.volume;
+    if let Some(s) = options.spacing {
+        volume = volume
+            .with_spacing(s)
+            .map_err(|source| InputError::Spacing { path: path.to_path_buf(), source })?;
+    }
+    crate::orient::check_coordinates(volume.dims(), volume.spacing(), volume.origin())
+        .map_err(|m| IoError::format(path, m))?;
+    if let Some(keep) = options.keep_labels {
+        let background = volume.background();
+        let blocks = volume
+            .blocks()
+            .iter()
+            .map(|b| Block {
+                offset: b.offset,
+                labels: b.labels.mapv(|l| if keep.contains(&l) { l } else { background }),
+            })
+            .collect();
+        let (spacing, origin) = (volume.spacing(), volume.origin());
+        volume = BlockVolume::new(volume.dims(), blocks, background)
+            .and_then(|v| v.with_spacing(spacing))
+            .and_then(|v| v.with_origin(origin))
+            .map_err(|source| IoError::Volume { path: path.to_path_buf(), source })?;
+    }
+    Ok(Some(SparseInput { volume, palette: scene.palette }))
 }
 
 #[cfg(test)]

@@ -137,7 +137,9 @@ pub use error::IoError;
 pub use files::{read_input_file, MAX_VOXELS};
 pub use gltf::write_gltf;
 pub use grey::{GreyVolume, NotALabel, Voxels};
-pub use input::{read_input, read_input_bytes, Background, Input, InputError, InputOptions};
+pub use input::{
+    read_input, read_input_bytes, read_sparse_input, Background, Input, InputError, InputOptions, SparseInput,
+};
 pub use input_files::{input_files, same_output, InputFiles};
 pub use limits::{
     check_memory, default_max_memory, environment_limit, format_size, max_memory, parse_size, set_max_memory,
@@ -169,8 +171,8 @@ pub use volume::{
     ReadOptions,
 };
 pub use vox::{
-    read_vox, read_vox_bytes, read_vox_bytes_with, vox_model_sizes, VoxOptions, VOX_MAX_INSTANCES,
-    VOX_MAX_PLACED_VOXELS,
+    read_vox, read_vox_bytes, read_vox_bytes_with, read_vox_scene_bytes, vox_model_sizes, VoxOptions,
+    VoxScene, VOX_MAX_INSTANCES, VOX_MAX_PLACED_VOXELS,
 };
 pub use vti::{read_vti, read_vti_bytes};
 pub use vtp::write_vtp;

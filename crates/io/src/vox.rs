@@ -4,7 +4,8 @@ use std::path::Path;
 
 use dot_vox::{DotVoxData, Model, SceneNode};
 use glam::DVec3;
-use voxreg_digisurf::LabelVolume;
+use ndarray::{Array3, ShapeBuilder};
+use voxreg_digisurf::{Block, BlockVolume, LabelVolume};
 
 use crate::files::{checked_voxel_count, read_file};
 use crate::material::apply_vox_material;
@@ -84,8 +85,8 @@ pub fn vox_model_sizes(bytes: &[u8], path: &Path) -> Result<Vec<[u32; 3]>, IoErr
     Ok(data.models.iter().map(|m| [m.size.x, m.size.y, m.size.z]).collect())
 }
 
-/// [`read_vox_bytes`] with the choice of model of `options`.
-pub fn read_vox_bytes_with(bytes: &[u8], path: &Path, options: &VoxOptions) -> Result<LoadedVolume, IoError> {
+/// The parsed file and the model instances it places, in scene-graph order.
+fn placed(bytes: &[u8], path: &Path, options: &VoxOptions) -> Result<(DotVoxData, Vec<Instance>), IoError> {
     let data = dot_vox::load_bytes(bytes)
         .map_err(|e| IoError::format(path, format!("not a valid MagicaVoxel .vox file (dot_vox: {e})")))?;
     // MagicaVoxel models are at most 256 voxels per axis; a larger declared size is a
@@ -132,17 +133,15 @@ pub fn read_vox_bytes_with(bytes: &[u8], path: &Path, options: &VoxOptions) -> R
         (_, None) if data.scenes.is_empty() => alone(0),
         (_, None) => scene_instances(&data, path)?,
     };
+    Ok((data, instances))
+}
 
-    // The bounding box of all instances, in MagicaVoxel coordinates.
-    let mut lo = [i64::MAX; 3];
-    let mut hi = [i64::MIN; 3];
-    for inst in &instances {
-        let (a, b) = inst.placement.bounds(model_size(&data.models[inst.model]));
-        for k in 0..3 {
-            lo[k] = lo[k].min(a[k]);
-            hi[k] = hi[k].max(b[k]);
-        }
-    }
+/// [`read_vox_bytes`] with the choice of model of `options`.
+pub fn read_vox_bytes_with(bytes: &[u8], path: &Path, options: &VoxOptions) -> Result<LoadedVolume, IoError> {
+    let (data, instances) = placed(bytes, path, options)?;
+    let boxes: Vec<Bounds> =
+        instances.iter().map(|inst| inst.placement.bounds(model_size(&data.models[inst.model]))).collect();
+    let (lo, hi) = enclosing(&boxes);
     let dims = [0, 1, 2].map(|k| (hi[k] - lo[k]).max(0) as u64);
     let count = checked_voxel_count(path, dims, 4)?;
     let dims = dims.map(|d| d as usize);
@@ -150,44 +149,215 @@ pub fn read_vox_bytes_with(bytes: &[u8], path: &Path, options: &VoxOptions) -> R
     let empty = empty_voxels(bytes, data.models.len());
     let mut labels = vec![0u32; count];
     for inst in &instances {
-        let model = &data.models[inst.model];
-        let size = model_size(model);
-        let mut skip = empty.get(inst.model).map_or(&[][..], Vec::as_slice).iter().peekable();
-        for (k, v) in model.voxels.iter().enumerate() {
-            // Colour index 0 is empty space in MagicaVoxel (`dot_vox` reads it as 1).
-            if skip.next_if_eq(&&k).is_some() {
-                continue;
-            }
-            if usize::from(v.i) >= data.palette.len() {
-                return Err(IoError::format(
-                    path,
-                    format!(
-                        "model {}: colour index {} has no entry in the file's palette of {} colours",
-                        inst.model,
-                        u32::from(v.i) + 1,
-                        data.palette.len()
-                    ),
-                ));
-            }
-            let p = [v.x, v.y, v.z].map(i64::from);
-            if (0..3).any(|k| p[k] >= size[k]) {
-                return Err(IoError::format(
-                    path,
-                    format!(
-                        "model {}: voxel ({}, {}, {}) lies outside its size {}x{}x{}",
-                        inst.model, p[0], p[1], p[2], size[0], size[1], size[2]
-                    ),
-                ));
-            }
-            let w = inst.placement.voxel(p, size);
-            let q = [0, 1, 2].map(|k| (w[k] - lo[k]) as usize);
-            labels[q[0] + dims[0] * (q[1] + dims[1] * q[2])] = u32::from(v.i) + 1;
-        }
+        place(&data, path, inst, &empty, (lo, dims), &mut labels)?;
     }
     let volume = LabelVolume::from_x_fastest(dims, labels)
         .and_then(|v| v.with_origin(DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64) + 0.5))
         .map_err(|source| IoError::Volume { path: path.to_path_buf(), source })?;
     Ok(LoadedVolume { volume, palette: Some(palette(&data)), units: None })
+}
+
+/// A `.vox` scene read as blocks ([`read_vox_scene_bytes`]).
+#[derive(Clone, Debug)]
+pub struct VoxScene {
+    /// The scene's lattice (the bounding box of its models, placed as
+    /// [`read_vox_bytes`] places them), with one block per cluster of models.
+    pub volume: BlockVolume,
+    /// The palette, as [`read_vox_bytes`] returns it.
+    pub palette: Palette,
+}
+
+impl VoxScene {
+    /// Whether the blocks hold less than half of the lattice's voxels: a scene whose
+    /// dense volume would be mostly empty space.
+    pub fn is_sparse(&self) -> bool {
+        (self.volume.block_voxels() as u128) * 2 < self.volume.len()
+    }
+}
+
+/// Reads a MagicaVoxel `.vox` file held in memory as [`read_vox_bytes_with`] does, into
+/// blocks built from the models' own boxes instead of one volume over their bounding
+/// box: models far apart cost their own voxels, not the empty space between them.
+///
+/// **Blocks.** The models' boxes are grouped into clusters: two boxes closer than one
+/// empty voxel along every axis (touching or overlapping) are in one cluster, and so are
+/// two clusters whose boxes are; each cluster becomes one dense [`Block`] over its box,
+/// filled with its models in scene-graph order (a later model overwrites an earlier one
+/// where they overlap, as in [`read_vox_bytes`]). The clusters' boxes are then at least
+/// one voxel apart, as [`BlockVolume`] requires, and [`BlockVolume::to_dense`] is the
+/// volume of [`read_vox_bytes_with`].
+///
+/// Errors are those of [`read_vox_bytes_with`], except that the blocks' voxels, not the
+/// bounding box's, are held against [`MAX_VOXELS`](crate::MAX_VOXELS) and the memory
+/// budget, and that lattices of more than `2^31` voxels along an axis are
+/// [`IoError::TooLarge`].
+pub fn read_vox_scene_bytes(bytes: &[u8], path: &Path, options: &VoxOptions) -> Result<VoxScene, IoError> {
+    let (data, instances) = placed(bytes, path, options)?;
+    let boxes: Vec<Bounds> =
+        instances.iter().map(|inst| inst.placement.bounds(model_size(&data.models[inst.model]))).collect();
+    let (lo, hi) = enclosing(&boxes);
+    let dims = [0, 1, 2].map(|k| (hi[k] - lo[k]).max(0) as u64);
+    if dims.iter().any(|&d| d > 1 << 31) {
+        return Err(IoError::TooLarge { path: path.to_path_buf(), dims, limit: crate::MAX_VOXELS });
+    }
+    let (cluster_of, cluster_boxes) = clusters(&boxes);
+    let sizes: Vec<[u64; 3]> =
+        cluster_boxes.iter().map(|(a, b)| [0, 1, 2].map(|k| (b[k] - a[k]) as u64)).collect();
+    let total: u128 = sizes.iter().map(|s| s.iter().map(|&d| u128::from(d)).product::<u128>()).sum();
+    if total > u128::from(crate::MAX_VOXELS) {
+        return Err(IoError::TooLarge { path: path.to_path_buf(), dims, limit: crate::MAX_VOXELS });
+    }
+    let what = format!(
+        "{} blocks of {total} voxels in all (a scene of {}x{}x{})",
+        sizes.len(),
+        dims[0],
+        dims[1],
+        dims[2]
+    );
+    crate::check_memory(path, &what, total * 4)?;
+
+    let empty = empty_voxels(bytes, data.models.len());
+    let mut blocks = Vec::with_capacity(cluster_boxes.len());
+    for (c, &(a, _)) in cluster_boxes.iter().enumerate() {
+        let size = sizes[c].map(|d| d as usize);
+        let mut labels = vec![0u32; size.iter().product()];
+        for (inst, _) in instances.iter().zip(&cluster_of).filter(|(_, &k)| k == c) {
+            place(&data, path, inst, &empty, (a, size), &mut labels)?;
+        }
+        let labels = Array3::from_shape_vec((size[0], size[1], size[2]).f(), labels)
+            .map_err(|e| IoError::format(path, e.to_string()))?;
+        blocks.push(Block { offset: [0, 1, 2].map(|k| (a[k] - lo[k]) as usize), labels });
+    }
+    let volume = BlockVolume::new(dims.map(|d| d as usize), blocks, 0)
+        .and_then(|v| v.with_origin(DVec3::new(lo[0] as f64, lo[1] as f64, lo[2] as f64) + 0.5))
+        .map_err(|source| IoError::Volume { path: path.to_path_buf(), source })?;
+    Ok(VoxScene { volume, palette: palette(&data) })
+}
+
+/// A box of the lattice, `[lo, hi)`, in MagicaVoxel coordinates.
+type Bounds = ([i64; 3], [i64; 3]);
+
+/// The box enclosing `boxes`.
+fn enclosing(boxes: &[Bounds]) -> Bounds {
+    let mut lo = [i64::MAX; 3];
+    let mut hi = [i64::MIN; 3];
+    for (a, b) in boxes {
+        for k in 0..3 {
+            lo[k] = lo[k].min(a[k]);
+            hi[k] = hi[k].max(b[k]);
+        }
+    }
+    (lo, hi)
+}
+
+/// Whether two boxes are closer than one empty voxel along every axis (they overlap,
+/// touch, or meet at an edge or a corner).
+fn near(a: &Bounds, b: &Bounds) -> bool {
+    (0..3).all(|k| b.0[k] <= a.1[k] && a.0[k] <= b.1[k])
+}
+
+/// Groups `boxes` into clusters whose boxes are at least one voxel apart along some
+/// axis: the cluster of each box, and each cluster's box, clusters numbered by their
+/// first box.
+fn clusters(boxes: &[Bounds]) -> (Vec<usize>, Vec<Bounds>) {
+    let mut cluster_of: Vec<usize> = (0..boxes.len()).collect();
+    let mut current: Vec<Bounds> = boxes.to_vec();
+    loop {
+        // Union of the current clusters' boxes that are near, swept along x.
+        let mut parent: Vec<usize> = (0..current.len()).collect();
+        fn find(p: &mut [usize], mut x: usize) -> usize {
+            while p[x] != x {
+                p[x] = p[p[x]];
+                x = p[x];
+            }
+            x
+        }
+        let mut order: Vec<usize> = (0..current.len()).collect();
+        order.sort_unstable_by_key(|&i| current[i].0[0]);
+        let mut merged = false;
+        for (n, &i) in order.iter().enumerate() {
+            for &j in &order[n + 1..] {
+                if current[j].0[0] > current[i].1[0] {
+                    break;
+                }
+                if near(&current[i], &current[j]) {
+                    let (a, b) = (find(&mut parent, i), find(&mut parent, j));
+                    if a != b {
+                        parent[a.max(b)] = a.min(b);
+                        merged = true;
+                    }
+                }
+            }
+        }
+        // Renumber the roots by their first box, and their boxes.
+        let mut number = vec![usize::MAX; current.len()];
+        let mut next: Vec<Bounds> = Vec::new();
+        for i in 0..current.len() {
+            let r = find(&mut parent, i);
+            if number[r] == usize::MAX {
+                number[r] = next.len();
+                next.push(current[i]);
+            }
+            let (a, b) = &mut next[number[r]];
+            for k in 0..3 {
+                a[k] = a[k].min(current[i].0[k]);
+                b[k] = b[k].max(current[i].1[k]);
+            }
+        }
+        for c in &mut cluster_of {
+            *c = number[find(&mut parent, *c)];
+        }
+        current = next;
+        if !merged {
+            return (cluster_of, current);
+        }
+    }
+}
+
+/// Writes the voxels of `inst` into `labels`, the box of `dims` voxels from `lo` (`x`
+/// fastest), which holds the instance's box.
+fn place(
+    data: &DotVoxData,
+    path: &Path,
+    inst: &Instance,
+    empty: &[Vec<usize>],
+    (lo, dims): ([i64; 3], [usize; 3]),
+    labels: &mut [u32],
+) -> Result<(), IoError> {
+    let model = &data.models[inst.model];
+    let size = model_size(model);
+    let mut skip = empty.get(inst.model).map_or(&[][..], Vec::as_slice).iter().peekable();
+    for (k, v) in model.voxels.iter().enumerate() {
+        // Colour index 0 is empty space in MagicaVoxel (`dot_vox` reads it as 1).
+        if skip.next_if_eq(&&k).is_some() {
+            continue;
+        }
+        if usize::from(v.i) >= data.palette.len() {
+            return Err(IoError::format(
+                path,
+                format!(
+                    "model {}: colour index {} has no entry in the file's palette of {} colours",
+                    inst.model,
+                    u32::from(v.i) + 1,
+                    data.palette.len()
+                ),
+            ));
+        }
+        let p = [v.x, v.y, v.z].map(i64::from);
+        if (0..3).any(|k| p[k] >= size[k]) {
+            return Err(IoError::format(
+                path,
+                format!(
+                    "model {}: voxel ({}, {}, {}) lies outside its size {}x{}x{}",
+                    inst.model, p[0], p[1], p[2], size[0], size[1], size[2]
+                ),
+            ));
+        }
+        let w = inst.placement.voxel(p, size);
+        let q = [0, 1, 2].map(|k| (w[k] - lo[k]) as usize);
+        labels[q[0] + dims[0] * (q[1] + dims[1] * q[2])] = u32::from(v.i) + 1;
+    }
+    Ok(())
 }
 
 /// The number of scene-graph chunks (`nTRN`, `nGRP`, `nSHP`) among the children of the
@@ -651,6 +821,98 @@ mod tests {
         );
         let err = read_vox_bytes(&cycle, Path::new("m.vox")).unwrap_err();
         assert!(err.to_string().contains("a cycle?"), "{err}");
+    }
+
+    /// A scene of `models`, each under its own transform `(t, r)` in one group.
+    fn scene(models: Vec<Model>, placements: &[(String, Option<String>)]) -> Vec<u8> {
+        let n = placements.len() as u32;
+        let mut scenes = vec![
+            transform(1, "0 0 0", None),
+            SceneNode::Group { attributes: Dict::new(), children: (0..n).map(|k| 2 + 2 * k).collect() },
+        ];
+        for (k, (t, r)) in placements.iter().enumerate() {
+            scenes.push(transform(3 + 2 * k as u32, t, r.as_deref()));
+            scenes.push(shape(k as u32));
+        }
+        encode(models, scenes)
+    }
+
+    #[test]
+    fn scenes_read_as_blocks_are_the_dense_volume() {
+        // Random scenes of up to five models (1 to 3 voxels a side, random voxels and
+        // colours), translated within 8 or 3 voxels and rotated: apart, touching at a face, an
+        // edge or a corner, overlapping (a later model overwrites).
+        let mut x = 7u64;
+        let mut next = |n: u64| {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            (x >> 33) % n
+        };
+        let (mut sparse, mut clustered) = (0, 0);
+        for _ in 0..400 {
+            let count = 1 + next(5) as usize;
+            // Half the scenes spread over 16 voxels, half crowded into 6.
+            let spread = if next(2) == 0 { 16 } else { 6 };
+            let mut models = Vec::new();
+            let mut placements = Vec::new();
+            for _ in 0..count {
+                let size = [1 + next(3) as u32, 1 + next(3) as u32, 1 + next(3) as u32];
+                let mut voxels = Vec::new();
+                for z in 0..size[2] as u8 {
+                    for y in 0..size[1] as u8 {
+                        for x in 0..size[0] as u8 {
+                            if next(4) != 0 {
+                                voxels.push([x, y, z, next(6) as u8]);
+                            }
+                        }
+                    }
+                }
+                models.push(model(size, &voxels));
+                let mut at = || next(spread) as i64 - spread as i64 / 2;
+                let t = format!("{} {} {}", at(), at(), at());
+                let c0 = next(3) as u8;
+                let c1 = (c0 + 1 + next(2) as u8) % 3;
+                let r = (next(2) == 0).then(|| (c0 | (c1 << 2) | ((next(8) as u8) << 4)).to_string());
+                placements.push((t, r));
+            }
+            let bytes = scene(models, &placements);
+            let dense = read_vox_bytes(&bytes, Path::new("s.vox")).unwrap();
+            let blocks = read_vox_scene_bytes(&bytes, Path::new("s.vox"), &VoxOptions::default()).unwrap();
+            assert_eq!(blocks.volume.to_dense().unwrap(), dense.volume, "{placements:?}");
+            assert_eq!(blocks.palette, dense.palette.unwrap());
+            sparse += usize::from(blocks.is_sparse());
+            clustered += usize::from(blocks.volume.blocks().len() < count);
+        }
+        assert!(sparse > 100 && clustered > 100, "{sparse} sparse, {clustered} with models clustered");
+    }
+
+    #[test]
+    fn models_far_apart_make_blocks_of_their_own_boxes() {
+        // Two models 2,047 voxels apart and one overlapping the first: two blocks of 4 and
+        // 1 voxels in a 2049 x 1024 x 1024 lattice, read within a 1 MiB budget.
+        let bytes = scene(
+            vec![
+                model([3, 1, 1], &[[0, 0, 0, 4], [1, 0, 0, 4], [2, 0, 0, 4]]),
+                model([1, 1, 1], &[[0, 0, 0, 8]]),
+                model([2, 1, 1], &[[0, 0, 0, 7], [1, 0, 0, 7]]),
+            ],
+            &[("0 0 0".into(), None), ("2047 1023 1023".into(), None), ("2 0 0".into(), None)],
+        );
+        let s = crate::with_max_memory(1 << 20, || {
+            read_vox_scene_bytes(&bytes, Path::new("f.vox"), &VoxOptions::default())
+        })
+        .unwrap();
+        let v = &s.volume;
+        assert!(s.is_sparse());
+        assert_eq!(v.dims(), [2049, 1024, 1024]);
+        assert_eq!(v.blocks().len(), 2);
+        assert_eq!(v.block_voxels(), 5);
+        // Model 0 covers x = -1..2, model 2 x = 1..3: model 2 wins at x = 1.
+        assert_eq!((0..4).map(|x| v.label([x, 0, 0])).collect::<Vec<_>>(), [5, 5, 8, 8]);
+        assert_eq!(v.label([2048, 1023, 1023]), 9);
+        assert_eq!(v.origin(), DVec3::new(-0.5, 0.5, 0.5));
+        // The dense reader refuses the same file under that budget.
+        let dense = crate::with_max_memory(1 << 20, || read_vox_bytes(&bytes, Path::new("f.vox")));
+        assert!(matches!(dense, Err(IoError::OverBudget { .. } | IoError::TooLarge { .. })), "{dense:?}");
     }
 
     #[test]

@@ -4,7 +4,7 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::DVec3;
-use voxreg_digisurf::{DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
+use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
 use voxreg_normals::{anisotropic_fit_weight, FeatureField, Interrupt, NormalField, ProbeHints, Refined};
 
 use crate::energy::Energy;
@@ -259,6 +259,17 @@ impl Regularizer {
     ) -> Result<Self, RegularizeError> {
         let t = Instant::now();
         let surface = DigitalSurface::new(volume, regions)?;
+        let mut r = Regularizer::new(surface);
+        r.surface_seconds = t.elapsed().as_secs_f64();
+        Ok(r)
+    }
+
+    /// A regularizer on the digital surface of the blocks of `volume`
+    /// ([`DigitalSurface::from_blocks`]: the surface of the volume made dense, without
+    /// the empty space between the blocks), with labels grouped into regions by `regions`.
+    pub fn from_blocks(volume: &BlockVolume, regions: &RegionMap) -> Result<Self, RegularizeError> {
+        let t = Instant::now();
+        let surface = DigitalSurface::from_blocks(volume, regions)?;
         let mut r = Regularizer::new(surface);
         r.surface_seconds = t.elapsed().as_secs_f64();
         Ok(r)
