@@ -136,3 +136,14 @@ def test_dask_chunks_may_be_one_integer():
             voxreg.dask.regularize(labels, chunks=bad, scheduler="synchronous")
     with pytest.raises(voxreg.ParameterError, match="background must be"):
         voxreg.dask.regularize(labels, chunks=8, background=-1, scheduler="synchronous")
+
+
+@pytest.mark.parametrize("kwargs, message", [
+    (dict(origin=(1e30, 0, 0)), r"spacing and origin: voxel spacing 1 along x is below the precision"),
+    (dict(origin=(2e30, 0, 0)), r"spacing and origin: coordinates along x reach .* beyond 1e30"),
+    (dict(spacing=(1e-38, 1, 1)), r"spacing and origin: voxel spacing 1e-38 along x is below 1e-30"),
+])
+def test_coordinates_a_mesh_cannot_store_are_refused(kwargs, message):
+    """A flat or collapsed mesh is never returned for an embedding floats cannot resolve."""
+    with pytest.raises(voxreg.ParameterError, match=message):
+        voxreg.regularize(ball_labels(8, 3), **kwargs)

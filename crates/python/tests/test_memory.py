@@ -89,3 +89,26 @@ def test_run_over_budget_refused_as_the_cli(cli, tmp_path):
 def test_bad_budget(bad):
     with pytest.raises(voxreg.ParameterError, match="max_memory"):
         voxreg.regularize(ball_labels(), max_memory=bad)
+
+
+# A volume whose uint32 copy would not fit under a 4 GiB address-space limit, in a fresh
+# process under that limit (as batch schedulers set it).
+UNDER_ULIMIT = r"""
+import resource
+import numpy as np, voxreg
+
+resource.setrlimit(resource.RLIMIT_AS, (4 << 30, 4 << 30))
+labels = np.zeros((1200,) * 3, np.uint8)  # 1.6 GiB, its pages untouched
+labels[600, 600, 600] = 1
+try:
+    voxreg.regularize(labels)
+except voxreg.VoxregError as e:
+    print("refused:", e)
+"""
+
+
+@pytest.mark.skipif(not sys.platform.startswith("linux"), reason="RLIMIT_AS is Linux's")
+def test_a_volume_over_the_address_space_limit_is_refused_not_killed():
+    r = subprocess.run([sys.executable, "-c", UNDER_ULIMIT], capture_output=True, text=True, timeout=120)
+    assert r.returncode == 0, r.stderr
+    assert r.stdout.startswith("refused:") and "memory limit" in r.stdout, r.stdout
