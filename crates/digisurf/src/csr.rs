@@ -1,5 +1,6 @@
 //! Compressed lists: a list of small lists in two flat arrays.
 
+#[cfg(test)]
 use rayon::prelude::*;
 
 /// A list of lists stored flat (compressed sparse rows): list `i` is
@@ -30,6 +31,7 @@ impl<T: Copy + Default> Lists<T> {
     }
 }
 
+#[cfg(test)]
 impl<T: Copy + Default + Send + Sync> Lists<T> {
     /// Builds `n` lists, list `i` being what `list(i, out)` pushes onto `out` (given
     /// empty), in parallel over pieces of consecutive lists: `list` runs twice per list,
@@ -66,6 +68,7 @@ impl<T: Copy + Default + Send + Sync> Lists<T> {
 /// Lists per piece of [`Lists::par_from_fn`].
 pub(crate) const PIECE: usize = 4096;
 
+#[cfg(test)]
 /// `slice` cut into consecutive parts of the given lengths (for filling them in parallel).
 pub(crate) fn split_lengths<T>(
     mut slice: &mut [T],

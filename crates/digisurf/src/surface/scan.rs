@@ -1,9 +1,12 @@
 //! The parallel pass of the surface's construction: the faces between voxels of
-//! different regions, found over ranges of z-slabs (read up to `LAYER_BATCH` layers at a
-//! time where the volume is stored `z` fastest), and the sequential numbering of their
+//! different regions, found over ranges of z-slabs through rolling layers, or, where the
+//! volume is stored `z` fastest, over ranges of `y` rows reading each `(x, y)` column of
+//! labels once, in memory order (`all_faces`); and the sequential numbering of their
 //! vertices through two rolling corner layers (`Scan`).
 
 use std::collections::HashMap;
+
+use rayon::prelude::*;
 
 use super::{Surfel, NONE};
 use crate::{InterfaceId, LabelView, RegionId, Regions, SurfaceError, VertexId};
@@ -334,4 +337,153 @@ impl Scan {
         });
         Ok(())
     }
+}
+
+/// The faces of every slab `k` in `0..=nz`, in scan order (see [`slab_faces`]), each slab's
+/// as a list of pieces to be read in turn.
+pub(super) type SlabFaces = Vec<Vec<Vec<RawFace>>>;
+
+/// The faces of all slabs, found in parallel: over ranges of slabs through rolling layers
+/// ([`range_faces`]), or, for a volume stored `z` fastest, over ranges of `y` rows, each
+/// `(x, y)` column of labels read once as one contiguous run ([`rows_faces`]).
+pub(super) fn all_faces(
+    volume: &LabelView<'_>,
+    regions: &Regions,
+    outside: &Outside,
+    tasks: usize,
+) -> Result<SlabFaces, SurfaceError> {
+    let [_, ny, nz] = volume.dims();
+    if let Some(all) = z_fastest(volume) {
+        let per_task = ny.div_ceil(tasks).max(1);
+        let mut found: Vec<[Vec<Vec<RawFace>>; 3]> = (0..ny.div_ceil(per_task))
+            .into_par_iter()
+            .map(|t| rows_faces(volume, all, regions, outside, t * per_task..((t + 1) * per_task).min(ny)))
+            .collect::<Result<_, _>>()?;
+        // Slab `k`: its z faces row range after row range, then its x faces, then its y faces.
+        let mut slabs: SlabFaces = (0..=nz).map(|_| Vec::with_capacity(3 * found.len())).collect();
+        for axis in [2, 0, 1] {
+            for part in &mut found {
+                for (k, faces) in part[axis].iter_mut().enumerate() {
+                    slabs[k].push(std::mem::take(faces));
+                }
+            }
+        }
+        return Ok(slabs);
+    }
+    let per_task = (nz + 1).div_ceil(tasks);
+    let found: Vec<Vec<Vec<RawFace>>> = (0..tasks)
+        .into_par_iter()
+        .map(|t| {
+            range_faces(
+                volume,
+                regions,
+                outside,
+                (t * per_task).min(nz + 1)..((t + 1) * per_task).min(nz + 1),
+            )
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(found.into_iter().flatten().map(|faces| vec![faces]).collect())
+}
+
+/// The faces of rows `ys` of a volume stored `z` fastest (`all`, indexed
+/// `(x * ny + y) * nz + z`), `[x, y, z]` faces by axis and slab: the faces perpendicular to
+/// `z` between `(x, y)` columns' voxels, and those perpendicular to `x` and `y` between
+/// neighbouring columns, with cell `y` in `ys` (and `y = ny` for the last rows). Each
+/// slab's list is in the order of [`slab_faces`] restricted to these rows.
+pub(super) fn rows_faces(
+    volume: &LabelView<'_>,
+    all: &[u32],
+    regions: &Regions,
+    outside: &Outside,
+    ys: std::ops::Range<usize>,
+) -> Result<[Vec<Vec<RawFace>>; 3], SurfaceError> {
+    let [nx, ny, nz] = volume.dims();
+    let mut out: [Vec<Vec<RawFace>>; 3] = [0, 1, 2].map(|_| (0..=nz).map(|_| Vec::new()).collect());
+    let label = |x: usize, y: usize, z: usize| all[(x * ny + y) * nz + z];
+    // The regions of row `y`'s voxels, `x * nz + z`.
+    let row = |y: usize, rs: &mut Vec<u32>| -> Result<(), SurfaceError> {
+        rs.clear();
+        let labels = &all[y * nz..];
+        for x in 0..nx {
+            let column = &labels[x * ny * nz..x * ny * nz + nz];
+            for &l in column {
+                let r = regions.region_of(l).map_or(NONE, |id| id.0);
+                if r == NONE {
+                    return Err(SurfaceError::InvalidRegions(format!("label {l} has no region")));
+                }
+                rs.push(r);
+            }
+        }
+        Ok(())
+    };
+    let (mut prev, mut cur) = (Vec::with_capacity(nx * nz), Vec::with_capacity(nx * nz));
+    if ys.start > 0 {
+        row(ys.start - 1, &mut prev)?;
+    }
+    let last = if ys.end == ny { ny + 1 } else { ys.end };
+    for y in ys.start..last {
+        let yy = y as u32;
+        if y < ny {
+            row(y, &mut cur)?;
+            // Faces perpendicular to z.
+            let (lo, hi) = (outside[2][0], outside[2][1]);
+            for x in 0..nx {
+                let col = &cur[x * nz..(x + 1) * nz];
+                let xx = x as u32;
+                let mut a = lo;
+                for z in 0..=nz {
+                    let b = if z < nz { (col[z], NONE) } else { hi };
+                    if a.0 != b.0 && a.0 != NONE && b.0 != NONE {
+                        let la = if z > 0 { label(x, y, z - 1) } else { lo.1 };
+                        let lb = if z < nz { label(x, y, z) } else { hi.1 };
+                        out[2][z].push(RawFace {
+                            cell: [xx, yy, z as u32],
+                            axis: 2,
+                            regions: [a.0, b.0],
+                            labels: [la, lb],
+                        });
+                    }
+                    a = b;
+                }
+            }
+            // Faces perpendicular to x.
+            for x in 0..=nx {
+                let xx = x as u32;
+                for z in 0..nz {
+                    let (a, la) = if x > 0 { (cur[(x - 1) * nz + z], NONE) } else { outside[0][0] };
+                    let (b, lb) = if x < nx { (cur[x * nz + z], NONE) } else { outside[0][1] };
+                    if a != b && a != NONE && b != NONE {
+                        let la = if x > 0 { label(x - 1, y, z) } else { la };
+                        let lb = if x < nx { label(x, y, z) } else { lb };
+                        out[0][z].push(RawFace {
+                            cell: [xx, yy, z as u32],
+                            axis: 0,
+                            regions: [a, b],
+                            labels: [la, lb],
+                        });
+                    }
+                }
+            }
+        }
+        // Faces perpendicular to y, between rows `y - 1` and `y`.
+        for x in 0..nx {
+            let xx = x as u32;
+            for z in 0..nz {
+                let (a, la) = if y > 0 { (prev[x * nz + z], NONE) } else { outside[1][0] };
+                let (b, lb) = if y < ny { (cur[x * nz + z], NONE) } else { outside[1][1] };
+                if a != b && a != NONE && b != NONE {
+                    let la = if y > 0 { label(x, y - 1, z) } else { la };
+                    let lb = if y < ny { label(x, y, z) } else { lb };
+                    out[1][z].push(RawFace {
+                        cell: [xx, yy, z as u32],
+                        axis: 1,
+                        regions: [a, b],
+                        labels: [la, lb],
+                    });
+                }
+            }
+        }
+        std::mem::swap(&mut prev, &mut cur);
+    }
+    Ok(out)
 }
