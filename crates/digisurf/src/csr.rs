@@ -13,6 +13,7 @@ pub struct Lists<T> {
 }
 
 impl<T: Copy + Default> Lists<T> {
+    #[cfg(test)]
     /// Builds `n` lists from `(list, item)` pairs, keeping the pairs' order within a list.
     /// Two passes (count, then fill): linear, no sorting.
     pub(crate) fn from_pairs(n: usize, pairs: impl Fn(&mut dyn FnMut(usize, T))) -> Self {

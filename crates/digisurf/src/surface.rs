@@ -293,16 +293,65 @@ impl DigitalSurface {
             .try_reduce(|| 0, |a, b| Ok(a + b))
     }
 
-    /// Each vertex's surfels, in increasing order.
+    /// Each vertex's surfels, in increasing order: the surfels cut into one chunk per
+    /// thread, each counting its surfels' corners per vertex and then writing them at its
+    /// own cursor within each vertex's list (so no two chunks write the same slot).
     fn build_vertex_surfels(&mut self) {
+        use std::sync::atomic::{AtomicU32, Ordering};
+        let (nv, nf) = (self.vertex_corners.len(), self.surfels.len());
+        let per = nf.div_ceil(rayon::current_num_threads().clamp(1, 8)).max(1);
         let surfels = &self.surfels;
-        self.vertex_surfels = Lists::from_pairs(self.vertex_corners.len(), |f| {
+        let chunk = |c: usize| (c * per..((c + 1) * per).min(nf)).zip(&surfels[c * per..]);
+        // `counts[c][v]`: vertex `v`'s corners among chunk `c`'s surfels.
+        let mut counts: Vec<Vec<u32>> = (0..nf.div_ceil(per))
+            .into_par_iter()
+            .map(|c| {
+                let mut n = vec![0u32; nv];
+                for (_, f) in chunk(c) {
+                    for v in f.vertices {
+                        n[v.index()] += 1;
+                    }
+                }
+                n
+            })
+            .collect();
+        // The lists' offsets, and each chunk's cursor: where its first surfel at `v` goes.
+        let mut offsets = vec![0u32; nv + 1];
+        let mut at = 0u32;
+        for (v, offset) in offsets[..nv].iter_mut().enumerate() {
+            *offset = at;
+            for n in counts.iter_mut() {
+                let k = n[v];
+                n[v] = at;
+                at += k;
+            }
+        }
+        offsets[nv] = at;
+        let items: Vec<AtomicU32> = (0..at).map(|_| AtomicU32::new(0)).collect();
+        counts.into_par_iter().enumerate().for_each(|(c, mut cursor)| {
+            for (s, f) in chunk(c) {
+                for v in f.vertices {
+                    items[cursor[v.index()] as usize].store(s as u32, Ordering::Relaxed);
+                    cursor[v.index()] += 1;
+                }
+            }
+        });
+        let items = items.into_iter().map(|a| SurfelId(a.into_inner())).collect();
+        self.vertex_surfels = Lists::from_parts(offsets, items);
+    }
+
+    /// [`DigitalSurface::build_vertex_surfels`] in one thread, counting then filling: the
+    /// reference it is tested against.
+    #[cfg(test)]
+    fn vertex_surfels_in_one_pass(&self) -> Lists<SurfelId> {
+        let surfels = &self.surfels;
+        Lists::from_pairs(self.vertex_corners.len(), |f| {
             for (s, surfel) in surfels.iter().enumerate() {
                 for v in surfel.vertices {
                     f(v.index(), SurfelId(s as u32));
                 }
             }
-        });
+        })
     }
 
     /// The edges (numbered by their end points `(a, b)`, `a < b`, each listing its surfels
@@ -901,6 +950,7 @@ mod tests {
         assert_eq!(s.edge_surfels, edge_surfels);
         assert_eq!(s.surfel_edges, surfel_edges);
         assert_eq!(s.vertex_neighbours, neighbours);
+        assert_eq!(s.vertex_surfels_in_one_pass(), s.vertex_surfels);
         assert_eq!(s.components_by_search(), (s.surfel_component.clone(), s.component_closed.clone()));
         // The cells as the separate passes built them.
         let mut r = s.clone();
