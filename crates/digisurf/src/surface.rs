@@ -365,12 +365,14 @@ impl DigitalSurface {
         const PIECE: usize = crate::csr::PIECE;
         let nv = self.vertex_corners.len();
         let this = &*self;
+        // The surfels' corners alone, a quarter of their records' bytes: read at random.
+        let corners: Vec<[VertexId; 4]> = self.surfels.par_iter().map(|f| f.vertices).collect();
         let pieces: Vec<VertexPass> = (0..nv.div_ceil(PIECE))
             .into_par_iter()
             .map_init(Vec::new, |sides, p| {
                 let mut out = VertexPass::default();
                 for a in p * PIECE..((p + 1) * PIECE).min(nv) {
-                    this.vertex_pass(a, sides, &mut out);
+                    this.vertex_pass(a, &corners, sides, &mut out);
                 }
                 out
             })
@@ -428,16 +430,23 @@ impl DigitalSurface {
         self.pinched_vertex = flags.iter().map(|f| f.1).collect();
     }
 
-    /// Vertex `a`'s part of [`DigitalSurface::build_cells`], appended to `out`: its sides
+    /// Vertex `a`'s part of [`DigitalSurface::build_cells`] (`corners`: each surfel's
+    /// vertices), appended to `out`: its sides
     /// `(other end, slot, index among a's surfels)` sorted (slot `4s + j` is side `j` of
     /// surfel `s`, from its corner `j` to corner `j + 1`); its neighbours, the distinct other
     /// ends; its edges, those to higher vertices (a side belongs to its lower end); its fans,
     /// its surfels joined where two share a side.
-    fn vertex_pass(&self, a: usize, sides: &mut Vec<(u32, u32, u32)>, out: &mut VertexPass) {
+    fn vertex_pass(
+        &self,
+        a: usize,
+        corners: &[[VertexId; 4]],
+        sides: &mut Vec<(u32, u32, u32)>,
+        out: &mut VertexPass,
+    ) {
         sides.clear();
         let around = self.vertex_surfels.get(a);
         for (k, &s) in around.iter().enumerate() {
-            let vs = self.surfels[s.index()].vertices;
+            let vs = corners[s.index()];
             let i = vs.iter().position(|v| v.index() == a).unwrap_or(0);
             sides.push((vs[(i + 1) % 4].0, 4 * s.0 + i as u32, k as u32));
             sides.push((vs[(i + 3) % 4].0, 4 * s.0 + ((i + 3) % 4) as u32, k as u32));
