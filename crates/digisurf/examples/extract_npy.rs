@@ -1,6 +1,6 @@
 //! Extracts the digital surface of a `.npy` label volume (C or Fortran order, `u8`, `u16` or
 //! `u32` little-endian, as `cargo xtask synth-labels` writes it; background `0`, none
-//! with `NO_BACKGROUND` set), `REPEAT` times (default 1), and
+//! with `NO_BACKGROUND` set), `REPEAT` times (default 1; 0: only read it), and
 //! prints the surfels and the best time: for profiling the extraction alone
 //! (`cargo run --release -p voxreg-digisurf --example extract_npy -- FILE.npy [REPEAT]`).
 use std::time::Instant;
@@ -51,6 +51,11 @@ fn main() {
     };
     let background = if std::env::var_os("NO_BACKGROUND").is_some() { None } else { Some(0) };
     let volume = LabelVolume::new(array.expect("shape")).with_background(background);
+    if repeat == 0 {
+        // Only the reading, for instruction counts of the extraction by difference.
+        println!("{} voxels read", volume.len());
+        return;
+    }
     let (mut best, mut best_cpu) = (f64::INFINITY, f64::INFINITY);
     let mut last = None;
     for _ in 0..repeat {

@@ -420,70 +420,95 @@ pub(super) fn rows_faces(
     if ys.start > 0 {
         row(ys.start - 1, &mut prev)?;
     }
+    // A column of the outside beyond each side, `[axis][low, high]`.
+    let beyond: [[Vec<u32>; 2]; 3] = outside.map(|sides| sides.map(|(r, _)| vec![r; nz]));
     let last = if ys.end == ny { ny + 1 } else { ys.end };
     for y in ys.start..last {
         let yy = y as u32;
         if y < ny {
             row(y, &mut cur)?;
-            // Faces perpendicular to z.
-            let (lo, hi) = (outside[2][0], outside[2][1]);
+            // Faces perpendicular to z (each slab's list gets one face per column at most).
             for x in 0..nx {
                 let col = &cur[x * nz..(x + 1) * nz];
-                let xx = x as u32;
-                let mut a = lo;
-                for z in 0..=nz {
-                    let b = if z < nz { (col[z], NONE) } else { hi };
-                    if a.0 != b.0 && a.0 != NONE && b.0 != NONE {
-                        let la = if z > 0 { label(x, y, z - 1) } else { lo.1 };
-                        let lb = if z < nz { label(x, y, z) } else { hi.1 };
-                        out[2][z].push(RawFace {
-                            cell: [xx, yy, z as u32],
-                            axis: 2,
-                            regions: [a.0, b.0],
-                            labels: [la, lb],
-                        });
-                    }
-                    a = b;
+                let cell = |z: usize| [x as u32, yy, z as u32];
+                let label_at = |z: usize| label(x, y, z);
+                let (lo, hi) = (outside[2][0], outside[2][1]);
+                if col[0] != lo.0 && lo.0 != NONE {
+                    out[2][0].push(RawFace {
+                        cell: cell(0),
+                        axis: 2,
+                        regions: [lo.0, col[0]],
+                        labels: [lo.1, label_at(0)],
+                    });
+                }
+                for_differences(&col[..nz - 1], &col[1..], |j, a, b| {
+                    let z = j + 1;
+                    out[2][z].push(RawFace {
+                        cell: cell(z),
+                        axis: 2,
+                        regions: [a, b],
+                        labels: [label_at(z - 1), label_at(z)],
+                    });
+                });
+                if col[nz - 1] != hi.0 && hi.0 != NONE {
+                    let face = RawFace {
+                        cell: cell(nz),
+                        axis: 2,
+                        regions: [col[nz - 1], hi.0],
+                        labels: [label_at(nz - 1), hi.1],
+                    };
+                    out[2][nz].push(face);
                 }
             }
             // Faces perpendicular to x.
             for x in 0..=nx {
-                let xx = x as u32;
-                for z in 0..nz {
-                    let (a, la) = if x > 0 { (cur[(x - 1) * nz + z], NONE) } else { outside[0][0] };
-                    let (b, lb) = if x < nx { (cur[x * nz + z], NONE) } else { outside[0][1] };
-                    if a != b && a != NONE && b != NONE {
-                        let la = if x > 0 { label(x - 1, y, z) } else { la };
-                        let lb = if x < nx { label(x, y, z) } else { lb };
-                        out[0][z].push(RawFace {
-                            cell: [xx, yy, z as u32],
-                            axis: 0,
-                            regions: [a, b],
-                            labels: [la, lb],
-                        });
-                    }
-                }
+                let a = if x > 0 { &cur[(x - 1) * nz..x * nz] } else { &beyond[0][0][..] };
+                let b = if x < nx { &cur[x * nz..(x + 1) * nz] } else { &beyond[0][1][..] };
+                for_differences(a, b, |z, ra, rb| {
+                    let la = if x > 0 { label(x - 1, y, z) } else { outside[0][0].1 };
+                    let lb = if x < nx { label(x, y, z) } else { outside[0][1].1 };
+                    out[0][z].push(RawFace {
+                        cell: [x as u32, yy, z as u32],
+                        axis: 0,
+                        regions: [ra, rb],
+                        labels: [la, lb],
+                    });
+                });
             }
         }
         // Faces perpendicular to y, between rows `y - 1` and `y`.
         for x in 0..nx {
-            let xx = x as u32;
-            for z in 0..nz {
-                let (a, la) = if y > 0 { (prev[x * nz + z], NONE) } else { outside[1][0] };
-                let (b, lb) = if y < ny { (cur[x * nz + z], NONE) } else { outside[1][1] };
-                if a != b && a != NONE && b != NONE {
-                    let la = if y > 0 { label(x, y - 1, z) } else { la };
-                    let lb = if y < ny { label(x, y, z) } else { lb };
-                    out[1][z].push(RawFace {
-                        cell: [xx, yy, z as u32],
-                        axis: 1,
-                        regions: [a, b],
-                        labels: [la, lb],
-                    });
-                }
-            }
+            let a = if y > 0 { &prev[x * nz..(x + 1) * nz] } else { &beyond[1][0][..] };
+            let b = if y < ny { &cur[x * nz..(x + 1) * nz] } else { &beyond[1][1][..] };
+            for_differences(a, b, |z, ra, rb| {
+                let la = if y > 0 { label(x, y - 1, z) } else { outside[1][0].1 };
+                let lb = if y < ny { label(x, y, z) } else { outside[1][1].1 };
+                out[1][z].push(RawFace {
+                    cell: [x as u32, yy, z as u32],
+                    axis: 1,
+                    regions: [ra, rb],
+                    labels: [la, lb],
+                });
+            });
         }
         std::mem::swap(&mut prev, &mut cur);
     }
     Ok(out)
+}
+
+/// Calls `f(i, a[i], b[i])` for each `i` where the two regions differ and both are regions
+/// (not [`NONE`]: an open side), in increasing `i`: the common case, equal runs, is a
+/// plain comparison of the two slices.
+fn for_differences(a: &[u32], b: &[u32], mut f: impl FnMut(usize, u32, u32)) {
+    const BLOCK: usize = 16;
+    for (k, (ca, cb)) in a.chunks(BLOCK).zip(b.chunks(BLOCK)).enumerate() {
+        if ca == cb {
+            continue;
+        }
+        for (j, (&ra, &rb)) in ca.iter().zip(cb).enumerate() {
+            if ra != rb && ra != NONE && rb != NONE {
+                f(k * BLOCK + j, ra, rb);
+            }
+        }
+    }
 }
