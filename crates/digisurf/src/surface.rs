@@ -28,8 +28,6 @@ struct VertexPass {
     /// Each edge's surfels, and where each edge's end (exclusive) in `items`.
     items: Vec<SurfelId>,
     item_ends: Vec<u32>,
-    /// `(slot, edge)`: surfel side `slot` lies on the piece's edge `edge`.
-    sides: Vec<(u32, u32)>,
     neighbours: Vec<VertexId>,
     neighbour_ends: Vec<u32>,
     /// Per vertex: on a rim, pinched.
@@ -367,12 +365,14 @@ impl DigitalSurface {
         let this = &*self;
         // The surfels' corners alone, a quarter of their records' bytes: read at random.
         let corners: Vec<[VertexId; 4]> = self.surfels.par_iter().map(|f| f.vertices).collect();
+        // Each side's edge, numbered within the piece of the side's lower end first.
+        let surfel_edges: Vec<AtomicU32> = (0..4 * self.surfels.len()).map(|_| AtomicU32::new(0)).collect();
         let pieces: Vec<VertexPass> = (0..nv.div_ceil(PIECE))
             .into_par_iter()
             .map_init(Vec::new, |sides, p| {
                 let mut out = VertexPass::default();
                 for a in p * PIECE..((p + 1) * PIECE).min(nv) {
-                    this.vertex_pass(a, &corners, sides, &mut out);
+                    this.vertex_pass(a, &corners, sides, &mut out, &surfel_edges);
                 }
                 out
             })
@@ -387,7 +387,7 @@ impl DigitalSurface {
         let mut nbr_offsets = vec![0u32; nv + 1];
         let mut nbrs = vec![VertexId(0); num_nbrs];
         let mut flags = vec![(false, false); nv];
-        let surfel_edges: Vec<AtomicU32> = (0..4 * self.surfels.len()).map(|_| AtomicU32::new(0)).collect();
+        let mut edge_bases = Vec::with_capacity(pieces.len());
         // Each piece's slices of the outputs, and where its edges, items and neighbours start.
         let (mut e_rest, mut o_rest, mut i_rest) = (&mut edges[..], &mut offsets[1..], &mut items[..]);
         let (mut no_rest, mut n_rest, mut f_rest) = (&mut nbr_offsets[1..], &mut nbrs[..], &mut flags[..]);
@@ -402,6 +402,7 @@ impl DigitalSurface {
             (n, n_rest) = std::mem::take(&mut n_rest).split_at_mut(p.neighbours.len());
             (f, f_rest) = std::mem::take(&mut f_rest).split_at_mut(p.flags.len());
             parts.push((at, e, o, i, no, n, f));
+            edge_bases.push(at[0] as u32);
             at = [at[0] + p.edges.len(), at[1] + p.items.len(), at[2] + p.neighbours.len()];
         }
         parts.into_par_iter().zip(pieces).for_each(|((at, e, o, i, no, n, f), p)| {
@@ -415,13 +416,16 @@ impl DigitalSurface {
             for (dst, &end) in no.iter_mut().zip(&p.neighbour_ends) {
                 *dst = (at[2] + end as usize) as u32;
             }
-            for &(slot, edge) in &p.sides {
-                surfel_edges[slot as usize].store((at[0] + edge as usize) as u32, Ordering::Relaxed);
-            }
         });
         self.surfel_edges = surfel_edges
             .par_chunks(4)
-            .map(|c| [0, 1, 2, 3].map(|j| EdgeId(c[j].load(Ordering::Relaxed))))
+            .zip(&corners)
+            .map(|(c, vs)| {
+                [0, 1, 2, 3].map(|j| {
+                    let owner = vs[j].min(vs[(j + 1) % 4]).index();
+                    EdgeId(c[j].load(Ordering::Relaxed) + edge_bases[owner / PIECE])
+                })
+            })
             .collect();
         self.edges = edges;
         self.edge_surfels = Lists::from_parts(offsets, items);
@@ -434,14 +438,16 @@ impl DigitalSurface {
     /// vertices), appended to `out`: its sides
     /// `(other end, slot, index among a's surfels)` sorted (slot `4s + j` is side `j` of
     /// surfel `s`, from its corner `j` to corner `j + 1`); its neighbours, the distinct other
-    /// ends; its edges, those to higher vertices (a side belongs to its lower end); its fans,
-    /// its surfels joined where two share a side.
+    /// ends; its edges, those to higher vertices (a side belongs to its lower end), each
+    /// side's edge numbered within the piece in `surfel_edges`; its fans, its surfels joined
+    /// where two share a side.
     fn vertex_pass(
         &self,
         a: usize,
         corners: &[[VertexId; 4]],
         sides: &mut Vec<(u32, u32, u32)>,
         out: &mut VertexPass,
+        surfel_edges: &[std::sync::atomic::AtomicU32],
     ) {
         sides.clear();
         let around = self.vertex_surfels.get(a);
@@ -486,7 +492,7 @@ impl DigitalSurface {
             let e = out.edges.len() as u32;
             for &(_, slot, _) in group {
                 out.items.push(SurfelId(slot / 4));
-                out.sides.push((slot, e));
+                surfel_edges[slot as usize].store(e, std::sync::atomic::Ordering::Relaxed);
             }
             out.item_ends.push(out.items.len() as u32);
             let kind = self.edge_kind(ca.min(cb), axis, &out.items[first..]);
