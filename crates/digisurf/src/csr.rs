@@ -1,5 +1,6 @@
 //! Compressed lists: a list of small lists in two flat arrays.
 
+#[cfg(test)]
 use rayon::prelude::*;
 
 /// A list of lists stored flat (compressed sparse rows): list `i` is
@@ -12,6 +13,7 @@ pub struct Lists<T> {
 }
 
 impl<T: Copy + Default> Lists<T> {
+    #[cfg(test)]
     /// Builds `n` lists from `(list, item)` pairs, keeping the pairs' order within a list.
     /// Two passes (count, then fill): linear, no sorting.
     pub(crate) fn from_pairs(n: usize, pairs: impl Fn(&mut dyn FnMut(usize, T))) -> Self {
@@ -30,6 +32,7 @@ impl<T: Copy + Default> Lists<T> {
     }
 }
 
+#[cfg(test)]
 impl<T: Copy + Default + Send + Sync> Lists<T> {
     /// Builds `n` lists, list `i` being what `list(i, out)` pushes onto `out` (given
     /// empty), in parallel over pieces of consecutive lists: `list` runs twice per list,
@@ -66,6 +69,7 @@ impl<T: Copy + Default + Send + Sync> Lists<T> {
 /// Lists per piece of [`Lists::par_from_fn`].
 pub(crate) const PIECE: usize = 4096;
 
+#[cfg(test)]
 /// `slice` cut into consecutive parts of the given lengths (for filling them in parallel).
 pub(crate) fn split_lengths<T>(
     mut slice: &mut [T],

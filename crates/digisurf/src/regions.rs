@@ -120,7 +120,7 @@ impl RegionMap {
     }
 }
 
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 enum Lookup {
     Dense(Vec<u32>),
     Sorted(Vec<(u32, u32)>),
@@ -130,7 +130,7 @@ enum Lookup {
 ///
 /// Regions are ordered by their smallest label, except that the region holding the
 /// background label comes last.
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq, Eq)]
 pub struct Regions {
     labels: Vec<Vec<u32>>,
     background: Option<RegionId>,

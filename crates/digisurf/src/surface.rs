@@ -5,7 +5,9 @@ use std::collections::HashMap;
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::csr::{split_lengths, Lists};
+#[cfg(test)]
+use crate::csr::split_lengths;
+use crate::csr::Lists;
 use crate::data::VertexData;
 use crate::{
     EdgeId, InterfaceId, LabelStorage, LabelView, LabelVolume, RegionId, RegionMap, Regions, SurfaceError,
@@ -15,9 +17,23 @@ use crate::{
 mod blocks;
 mod scan;
 
-use scan::{outside_of, range_face_count, range_faces, RawFace, Scan};
+use scan::{all_faces, outside_of, range_face_count, Scan};
 
 const NONE: u32 = u32::MAX;
+
+/// One piece of vertices' part of the surface's cells ([`DigitalSurface::build_cells`]),
+/// numbered within the piece.
+#[derive(Default)]
+struct VertexPass {
+    edges: Vec<Edge>,
+    /// Each edge's surfels, and where each edge's end (exclusive) in `items`.
+    items: Vec<SurfelId>,
+    item_ends: Vec<u32>,
+    neighbours: Vec<VertexId>,
+    neighbour_ends: Vec<u32>,
+    /// Per vertex: on a rim, pinched.
+    flags: Vec<(bool, bool)>,
+}
 
 /// A surfel: the square face between two face-adjacent voxels of different regions.
 ///
@@ -130,7 +146,7 @@ pub struct SurfaceCounts {
 /// It holds structure only (ids and incidences) plus the embedding of the lattice;
 /// per-element quantities (normals, positions, weights) live in plain arrays indexed
 /// by the ids. Build it with [`DigitalSurface::new`].
-#[derive(Clone, Debug)]
+#[derive(Clone, Debug, PartialEq)]
 pub struct DigitalSurface {
     dims: [usize; 3],
     spacing: DVec3,
@@ -185,25 +201,13 @@ impl DigitalSurface {
             interface_of_pair: HashMap::new(),
             last_pair: ((NONE, NONE), NONE),
         };
-        // Faces are found in parallel over ranges of slabs (voxel-proportional work), then
-        // numbered sequentially in slab order (surfel-proportional work).
-        let tasks = rayon::current_num_threads().max(1);
-        let per_task = (nz + 1).div_ceil(tasks);
-        let found: Vec<Vec<Vec<RawFace>>> = (0..tasks)
-            .into_par_iter()
-            .map(|t| {
-                range_faces(
-                    volume,
-                    &regions,
-                    &outside,
-                    (t * per_task).min(nz + 1)..((t + 1) * per_task).min(nz + 1),
-                )
-            })
-            .collect::<Result<_, _>>()?;
+        // Faces are found in parallel (voxel-proportional work), then numbered sequentially
+        // in slab order (surfel-proportional work).
+        let found = all_faces(volume, &regions, &outside, rayon::current_num_threads().max(1))?;
         // The surfels' array sized once (a grown one holds up to twice its surfels).
         scan.surfels.reserve_exact(found.iter().flatten().map(Vec::len).sum());
-        for (k, faces) in found.into_iter().flatten().enumerate() {
-            for f in faces {
+        for (k, pieces) in found.into_iter().enumerate() {
+            for f in pieces.into_iter().flatten() {
                 scan.face(f.cell, f.axis as usize, f.regions[0], f.regions[1], f.labels[0], f.labels[1], k)?;
             }
             std::mem::swap(&mut scan.corners_lo, &mut scan.corners_hi);
@@ -277,8 +281,7 @@ impl DigitalSurface {
             surfels,
         };
         surface.build_vertex_surfels();
-        surface.build_edges();
-        surface.build_vertex_lists();
+        surface.build_cells();
         surface.build_components();
         Ok(surface)
     }
@@ -309,18 +312,230 @@ impl DigitalSurface {
             .try_reduce(|| 0, |a, b| Ok(a + b))
     }
 
-    /// Each vertex's surfels, in increasing order.
+    /// Each vertex's surfels, in increasing order: the surfels cut into one chunk per
+    /// thread, each counting its surfels' corners per vertex and then writing them at its
+    /// own cursor within each vertex's list (so no two chunks write the same slot).
     fn build_vertex_surfels(&mut self) {
+        use std::sync::atomic::{AtomicU32, Ordering};
+        let (nv, nf) = (self.vertex_corners.len(), self.surfels.len());
+        let per = nf.div_ceil(rayon::current_num_threads().clamp(1, 8)).max(1);
         let surfels = &self.surfels;
-        self.vertex_surfels = Lists::from_pairs(self.vertex_corners.len(), |f| {
+        let chunk = |c: usize| (c * per..((c + 1) * per).min(nf)).zip(&surfels[c * per..]);
+        // `counts[c][v]`: vertex `v`'s corners among chunk `c`'s surfels.
+        let mut counts: Vec<Vec<u32>> = (0..nf.div_ceil(per))
+            .into_par_iter()
+            .map(|c| {
+                let mut n = vec![0u32; nv];
+                for (_, f) in chunk(c) {
+                    for v in f.vertices {
+                        n[v.index()] += 1;
+                    }
+                }
+                n
+            })
+            .collect();
+        // The lists' offsets, and each chunk's cursor: where its first surfel at `v` goes.
+        let mut offsets = vec![0u32; nv + 1];
+        let mut at = 0u32;
+        for (v, offset) in offsets[..nv].iter_mut().enumerate() {
+            *offset = at;
+            for n in counts.iter_mut() {
+                let k = n[v];
+                n[v] = at;
+                at += k;
+            }
+        }
+        offsets[nv] = at;
+        let items: Vec<AtomicU32> = (0..at).map(|_| AtomicU32::new(0)).collect();
+        counts.into_par_iter().enumerate().for_each(|(c, mut cursor)| {
+            for (s, f) in chunk(c) {
+                for v in f.vertices {
+                    items[cursor[v.index()] as usize].store(s as u32, Ordering::Relaxed);
+                    cursor[v.index()] += 1;
+                }
+            }
+        });
+        let items = items.into_iter().map(|a| SurfelId(a.into_inner())).collect();
+        self.vertex_surfels = Lists::from_parts(offsets, items);
+    }
+
+    /// [`DigitalSurface::build_vertex_surfels`] in one thread, counting then filling: the
+    /// reference it is tested against.
+    #[cfg(test)]
+    fn vertex_surfels_in_one_pass(&self) -> Lists<SurfelId> {
+        let surfels = &self.surfels;
+        Lists::from_pairs(self.vertex_corners.len(), |f| {
             for (s, surfel) in surfels.iter().enumerate() {
                 for v in surfel.vertices {
                     f(v.index(), SurfelId(s as u32));
                 }
             }
-        });
+        })
     }
 
+    /// The edges (numbered by their end points `(a, b)`, `a < b`, each listing its surfels
+    /// in increasing order), each surfel's four edges, each vertex's neighbours (sorted),
+    /// whether it is on a rim and whether it is pinched: one pass over the vertices in
+    /// parallel pieces, each vertex sorting the sides of its surfels at it once
+    /// ([`DigitalSurface::vertex_pass`]), then a parallel copy of the pieces into the
+    /// surface's arrays. Linear in the surfels, no sort of all `4 F` sides.
+    fn build_cells(&mut self) {
+        use std::sync::atomic::{AtomicU32, Ordering};
+        const PIECE: usize = crate::csr::PIECE;
+        let nv = self.vertex_corners.len();
+        let this = &*self;
+        // The surfels' corners alone, a quarter of their records' bytes: read at random.
+        let corners: Vec<[VertexId; 4]> = self.surfels.par_iter().map(|f| f.vertices).collect();
+        // Each side's edge, numbered within the piece of the side's lower end first.
+        let surfel_edges: Vec<AtomicU32> = (0..4 * self.surfels.len()).map(|_| AtomicU32::new(0)).collect();
+        let pieces: Vec<VertexPass> = (0..nv.div_ceil(PIECE))
+            .into_par_iter()
+            .map_init(Vec::new, |sides, p| {
+                let mut out = VertexPass::default();
+                for a in p * PIECE..((p + 1) * PIECE).min(nv) {
+                    this.vertex_pass(a, &corners, sides, &mut out, &surfel_edges);
+                }
+                out
+            })
+            .collect();
+        let num_edges: usize = pieces.iter().map(|p| p.edges.len()).sum();
+        let num_items: usize = pieces.iter().map(|p| p.items.len()).sum();
+        let num_nbrs: usize = pieces.iter().map(|p| p.neighbours.len()).sum();
+        let blank = Edge { vertices: [VertexId(0); 2], axis: 0, kind: EdgeKind::Regular };
+        let mut edges = vec![blank; num_edges];
+        let mut offsets = vec![0u32; num_edges + 1];
+        let mut items = vec![SurfelId(0); num_items];
+        let mut nbr_offsets = vec![0u32; nv + 1];
+        let mut nbrs = vec![VertexId(0); num_nbrs];
+        let mut flags = vec![(false, false); nv];
+        let mut edge_bases = Vec::with_capacity(pieces.len());
+        // Each piece's slices of the outputs, and where its edges, items and neighbours start.
+        let (mut e_rest, mut o_rest, mut i_rest) = (&mut edges[..], &mut offsets[1..], &mut items[..]);
+        let (mut no_rest, mut n_rest, mut f_rest) = (&mut nbr_offsets[1..], &mut nbrs[..], &mut flags[..]);
+        let mut at = [0usize; 3];
+        let mut parts = Vec::with_capacity(pieces.len());
+        for p in &pieces {
+            let (e, o, i, no, n, f);
+            (e, e_rest) = std::mem::take(&mut e_rest).split_at_mut(p.edges.len());
+            (o, o_rest) = std::mem::take(&mut o_rest).split_at_mut(p.edges.len());
+            (i, i_rest) = std::mem::take(&mut i_rest).split_at_mut(p.items.len());
+            (no, no_rest) = std::mem::take(&mut no_rest).split_at_mut(p.flags.len());
+            (n, n_rest) = std::mem::take(&mut n_rest).split_at_mut(p.neighbours.len());
+            (f, f_rest) = std::mem::take(&mut f_rest).split_at_mut(p.flags.len());
+            parts.push((at, e, o, i, no, n, f));
+            edge_bases.push(at[0] as u32);
+            at = [at[0] + p.edges.len(), at[1] + p.items.len(), at[2] + p.neighbours.len()];
+        }
+        parts.into_par_iter().zip(pieces).for_each(|((at, e, o, i, no, n, f), p)| {
+            e.copy_from_slice(&p.edges);
+            i.copy_from_slice(&p.items);
+            n.copy_from_slice(&p.neighbours);
+            f.copy_from_slice(&p.flags);
+            for (dst, &end) in o.iter_mut().zip(&p.item_ends) {
+                *dst = (at[1] + end as usize) as u32;
+            }
+            for (dst, &end) in no.iter_mut().zip(&p.neighbour_ends) {
+                *dst = (at[2] + end as usize) as u32;
+            }
+        });
+        self.surfel_edges = surfel_edges
+            .par_chunks(4)
+            .zip(&corners)
+            .map(|(c, vs)| {
+                [0, 1, 2, 3].map(|j| {
+                    let owner = vs[j].min(vs[(j + 1) % 4]).index();
+                    EdgeId(c[j].load(Ordering::Relaxed) + edge_bases[owner / PIECE])
+                })
+            })
+            .collect();
+        self.edges = edges;
+        self.edge_surfels = Lists::from_parts(offsets, items);
+        self.vertex_neighbours = Lists::from_parts(nbr_offsets, nbrs);
+        self.boundary_vertex = flags.iter().map(|f| f.0).collect();
+        self.pinched_vertex = flags.iter().map(|f| f.1).collect();
+    }
+
+    /// Vertex `a`'s part of [`DigitalSurface::build_cells`] (`corners`: each surfel's
+    /// vertices), appended to `out`: its sides
+    /// `(other end, slot, index among a's surfels)` sorted (slot `4s + j` is side `j` of
+    /// surfel `s`, from its corner `j` to corner `j + 1`); its neighbours, the distinct other
+    /// ends; its edges, those to higher vertices (a side belongs to its lower end), each
+    /// side's edge numbered within the piece in `surfel_edges`; its fans, its surfels joined
+    /// where two share a side.
+    fn vertex_pass(
+        &self,
+        a: usize,
+        corners: &[[VertexId; 4]],
+        sides: &mut Vec<(u32, u32, u32)>,
+        out: &mut VertexPass,
+        surfel_edges: &[std::sync::atomic::AtomicU32],
+    ) {
+        sides.clear();
+        let around = self.vertex_surfels.get(a);
+        for (k, &s) in around.iter().enumerate() {
+            let vs = corners[s.index()];
+            let i = vs.iter().position(|v| v.index() == a).unwrap_or(0);
+            sides.push((vs[(i + 1) % 4].0, 4 * s.0 + i as u32, k as u32));
+            sides.push((vs[(i + 3) % 4].0, 4 * s.0 + ((i + 3) % 4) as u32, k as u32));
+        }
+        sides.sort_unstable();
+        let ca = self.vertex_corners[a];
+        let open = self.has_open_border();
+        // A lattice corner has 12 faces.
+        let (mut boundary, mut parent) = (false, [0u8; 12]);
+        debug_assert!(around.len() <= parent.len());
+        for (k, p) in parent.iter_mut().enumerate() {
+            *p = k as u8;
+        }
+        fn find(p: &mut [u8], mut x: u8) -> u8 {
+            while p[x as usize] != x {
+                x = p[x as usize];
+            }
+            x
+        }
+        for group in sides.chunk_by(|x, y| x.0 == y.0) {
+            let b = group[0].0;
+            out.neighbours.push(VertexId(b));
+            for w in group.windows(2) {
+                let (r, t) = (find(&mut parent, w[0].2 as u8), find(&mut parent, w[1].2 as u8));
+                parent[r.max(t) as usize] = r.min(t);
+            }
+            let cb = self.vertex_corners[b as usize];
+            if (b as usize) < a && !open {
+                continue;
+            }
+            let axis = (0..3).find(|&k| ca[k] != cb[k]).unwrap_or(0);
+            if (b as usize) < a {
+                boundary |= self.on_open_side(ca.min(cb), axis);
+                continue;
+            }
+            let first = out.items.len();
+            let e = out.edges.len() as u32;
+            for &(_, slot, _) in group {
+                out.items.push(SurfelId(slot / 4));
+                surfel_edges[slot as usize].store(e, std::sync::atomic::Ordering::Relaxed);
+            }
+            out.item_ends.push(out.items.len() as u32);
+            let kind = self.edge_kind(ca.min(cb), axis, &out.items[first..]);
+            boundary |= kind == EdgeKind::Boundary;
+            out.edges.push(Edge { vertices: [VertexId(a as u32), VertexId(b)], axis: axis as u8, kind });
+        }
+        out.neighbour_ends.push(out.neighbours.len() as u32);
+        let pinched = (0..around.len() as u8).filter(|&k| find(&mut parent, k) == k).count() > 1;
+        out.flags.push((boundary, pinched));
+    }
+
+    /// Whether the lattice edge from `corner` along `axis` lies on an open side of the
+    /// domain (a rim edge).
+    fn on_open_side(&self, corner: [u32; 3], axis: usize) -> bool {
+        let open = &self.open_sides;
+        (0..3).any(|u| {
+            u != axis
+                && ((open[u][0] && corner[u] == 0) || (open[u][1] && corner[u] as usize == self.dims[u]))
+        })
+    }
+
+    #[cfg(test)]
     /// Vertex `a`'s sides `(b, slot)` with `b > a`, sorted: the sides of its surfels that
     /// it owns (a side belongs to its lower end). Slot `4s + j` is side `j` of surfel `s`,
     /// from its corner `j` to corner `j + 1`.
@@ -340,6 +555,7 @@ impl DigitalSurface {
         out.sort_unstable();
     }
 
+    #[cfg(test)]
     /// The edges, numbered by their end points `(a, b)`, `a < b`, each listing its surfels
     /// in increasing order, and each surfel's four: built per vertex from its own sides
     /// ([`DigitalSurface::owned_sides`]) in parallel over pieces of vertices, in time
@@ -416,12 +632,7 @@ impl DigitalSurface {
     }
 
     fn edge_kind(&self, corner: [u32; 3], axis: usize, incident: &[SurfelId]) -> EdgeKind {
-        let open = &self.open_sides;
-        let on_open_side = (0..3).any(|u| {
-            u != axis
-                && ((open[u][0] && corner[u] == 0) || (open[u][1] && corner[u] as usize == self.dims[u]))
-        });
-        if on_open_side {
+        if self.on_open_side(corner, axis) {
             return EdgeKind::Boundary;
         }
         match incident.len() {
@@ -441,6 +652,7 @@ impl DigitalSurface {
         }
     }
 
+    #[cfg(test)]
     fn build_vertex_lists(&mut self) {
         let nv = self.vertex_corners.len();
         // A vertex's neighbours: the other ends of its surfels' sides at it, sorted.
@@ -467,6 +679,7 @@ impl DigitalSurface {
             (0..nv).into_par_iter().map(|v| self.fan_count(VertexId(v as u32)) > 1).collect();
     }
 
+    #[cfg(test)]
     /// Number of fans around `v`: groups of incident surfels connected through
     /// edges incident to `v`.
     fn fan_count(&self, v: VertexId) -> usize {
@@ -498,7 +711,59 @@ impl DigitalSurface {
         (0..around.len()).filter(|&i| find(&mut parent, i) == i).count()
     }
 
+    /// The edge-connected components of the surfels, numbered in the order of their
+    /// first surfels, and whether each is closed: a union-find over the edges in id order
+    /// (each edge's surfels are neighbours in the scan, so the parents read stay close),
+    /// then one pass over the surfels.
     fn build_components(&mut self) {
+        let n = self.surfels.len();
+        // `parent[s] <= s`: each tree's root is its smallest surfel.
+        let mut parent: Vec<u32> = (0..n as u32).collect();
+        fn root(parent: &mut [u32], mut x: u32) -> u32 {
+            while parent[x as usize] != x {
+                let up = parent[parent[x as usize] as usize];
+                parent[x as usize] = up;
+                x = up;
+            }
+            x
+        }
+        for e in 0..self.edges.len() {
+            let incident = self.edge_surfels.get(e);
+            let mut a = root(&mut parent, incident[0].0);
+            for t in &incident[1..] {
+                let b = root(&mut parent, t.0);
+                if a != b {
+                    let (lo, hi) = (a.min(b), a.max(b));
+                    parent[hi as usize] = lo;
+                    a = lo;
+                }
+            }
+        }
+        // Roots come first in their trees, so one pass numbers components in order.
+        let mut closed = Vec::new();
+        for s in 0..n {
+            let p = parent[s];
+            parent[s] = if p as usize == s {
+                closed.push(true);
+                (closed.len() - 1) as u32
+            } else {
+                // The parent's component is already numbered; compress through it.
+                parent[p as usize]
+            };
+        }
+        for (e, edge) in self.edges.iter().enumerate() {
+            if edge.kind == EdgeKind::Boundary {
+                closed[parent[self.edge_surfels.get(e)[0].index()] as usize] = false;
+            }
+        }
+        self.surfel_component = parent;
+        self.component_closed = closed;
+    }
+
+    /// [`DigitalSurface::build_components`] by a depth-first search from each surfel in
+    /// turn, as it was built before: the reference the union-find is tested against.
+    #[cfg(test)]
+    fn components_by_search(&self) -> (Vec<u32>, Vec<bool>) {
         let n = self.surfels.len();
         let mut comp = vec![NONE; n];
         let mut closed = Vec::new();
@@ -526,8 +791,7 @@ impl DigitalSurface {
             }
             closed.push(is_closed);
         }
-        self.surfel_component = comp;
-        self.component_closed = closed;
+        (comp, closed)
     }
 
     // ---- queries ------------------------------------------------------------------
@@ -722,6 +986,17 @@ mod tests {
         assert_eq!(s.edge_surfels, edge_surfels);
         assert_eq!(s.surfel_edges, surfel_edges);
         assert_eq!(s.vertex_neighbours, neighbours);
+        assert_eq!(s.vertex_surfels_in_one_pass(), s.vertex_surfels);
+        assert_eq!(s.components_by_search(), (s.surfel_component.clone(), s.component_closed.clone()));
+        // The cells as the separate passes built them.
+        let mut r = s.clone();
+        r.build_edges();
+        r.build_vertex_lists();
+        assert_eq!(
+            (&r.edges, &r.edge_surfels, &r.surfel_edges, &r.vertex_neighbours),
+            (&s.edges, &s.edge_surfels, &s.surfel_edges, &s.vertex_neighbours)
+        );
+        assert_eq!((&r.boundary_vertex, &r.pinched_vertex), (&s.boundary_vertex, &s.pinched_vertex));
     }
 
     /// Many pieces of vertices: a random 30^3 volume of three labels, closed and open.
@@ -741,7 +1016,57 @@ mod tests {
         agrees_with_sorting(&vol.with_background(None));
     }
 
+    /// The column scan cut into many ranges of rows finds the faces a single range finds, in
+    /// the same order.
+    #[test]
+    fn column_scan_does_not_depend_on_the_row_ranges() {
+        let mut x = 777u64;
+        let vol = LabelVolume::from_fn([13, 17, 11], |_| {
+            x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+            ((x >> 33) % 3) as u32
+        });
+        let vol = LabelVolume::new(vol.labels().as_standard_layout().into_owned());
+        let regions = RegionMap::per_label().resolve(&vol).unwrap();
+        let outside = scan::outside_of(&vol.view(), &regions);
+        type Face = ([u32; 3], u8, [u32; 2], [u32; 2]);
+        let flat = |tasks| -> Vec<Face> {
+            let found = scan::all_faces(&vol.view(), &regions, &outside, tasks).unwrap();
+            found.into_iter().flatten().flatten().map(|f| (f.cell, f.axis, f.regions, f.labels)).collect()
+        };
+        let one = flat(1);
+        assert!(one.len() > 1000);
+        for tasks in [2, 5, 17, 40] {
+            assert_eq!(flat(tasks), one);
+        }
+    }
+
     proptest! {
+        /// A volume stored `z` fastest (read column by column) and the same labels stored
+        /// `x` fastest (read layer by layer) give the same surface.
+        #[test]
+        fn columns_and_layers_give_the_same_surface(
+            (dims, labels) in (1usize..=6, 1usize..=6, 2usize..=6).prop_flat_map(|(x, y, z)| {
+                (Just([x, y, z]), proptest::collection::vec(0u32..4, x * y * z))
+            }),
+            open in any::<bool>(),
+            sides in any::<[[bool; 2]; 3]>(),
+        ) {
+            let layers = LabelVolume::from_x_fastest(dims, labels).unwrap();
+            let columns = LabelVolume::new(layers.labels().as_standard_layout().into_owned());
+            prop_assert!(scan::z_fastest(&columns.view()).is_some());
+            prop_assert!(dims[0] * dims[1] == 1 || scan::z_fastest(&layers.view()).is_none());
+            let (layers, columns) = if open {
+                (layers.with_background(None), columns.with_background(None))
+            } else {
+                (layers.with_open_sides(sides), columns.with_open_sides(sides))
+            };
+            let (a, b) = (DigitalSurface::from_volume(&layers), DigitalSurface::from_volume(&columns));
+            match (a, b) {
+                (Ok(a), Ok(b)) => prop_assert_eq!(a, b),
+                (a, b) => prop_assert_eq!(a.is_err(), b.is_err()),
+            }
+        }
+
         #[test]
         fn edges_built_per_vertex_are_those_of_a_sort_of_small_volumes(
             (dims, labels) in (1usize..=5, 1usize..=5, 1usize..=5).prop_flat_map(|(x, y, z)| {

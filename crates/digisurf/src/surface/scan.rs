@@ -1,9 +1,12 @@
 //! The parallel pass of the surface's construction: the faces between voxels of
-//! different regions, found over ranges of z-slabs (read up to `LAYER_BATCH` layers at a
-//! time where the volume is stored `z` fastest), and the sequential numbering of their
+//! different regions, found over ranges of z-slabs through rolling layers, or, where the
+//! volume is stored `z` fastest, over ranges of `y` rows reading each `(x, y)` column of
+//! labels once, in memory order (`all_faces`); and the sequential numbering of their
 //! vertices through two rolling corner layers (`Scan`).
 
 use std::collections::HashMap;
+
+use rayon::prelude::*;
 
 use super::{Surfel, NONE};
 use crate::{InterfaceId, LabelView, RegionId, Regions, SurfaceError, VertexId};
@@ -333,5 +336,179 @@ impl Scan {
             interface: InterfaceId(interface),
         });
         Ok(())
+    }
+}
+
+/// The faces of every slab `k` in `0..=nz`, in scan order (see [`slab_faces`]), each slab's
+/// as a list of pieces to be read in turn.
+pub(super) type SlabFaces = Vec<Vec<Vec<RawFace>>>;
+
+/// The faces of all slabs, found in parallel: over ranges of slabs through rolling layers
+/// ([`range_faces`]), or, for a volume stored `z` fastest, over ranges of `y` rows, each
+/// `(x, y)` column of labels read once as one contiguous run ([`rows_faces`]).
+pub(super) fn all_faces(
+    volume: &LabelView<'_>,
+    regions: &Regions,
+    outside: &Outside,
+    tasks: usize,
+) -> Result<SlabFaces, SurfaceError> {
+    let [_, ny, nz] = volume.dims();
+    if let Some(all) = z_fastest(volume) {
+        let per_task = ny.div_ceil(tasks).max(1);
+        let mut found: Vec<[Vec<Vec<RawFace>>; 3]> = (0..ny.div_ceil(per_task))
+            .into_par_iter()
+            .map(|t| rows_faces(volume, all, regions, outside, t * per_task..((t + 1) * per_task).min(ny)))
+            .collect::<Result<_, _>>()?;
+        // Slab `k`: its z faces row range after row range, then its x faces, then its y faces.
+        let mut slabs: SlabFaces = (0..=nz).map(|_| Vec::with_capacity(3 * found.len())).collect();
+        for axis in [2, 0, 1] {
+            for part in &mut found {
+                for (k, faces) in part[axis].iter_mut().enumerate() {
+                    slabs[k].push(std::mem::take(faces));
+                }
+            }
+        }
+        return Ok(slabs);
+    }
+    let per_task = (nz + 1).div_ceil(tasks);
+    let found: Vec<Vec<Vec<RawFace>>> = (0..tasks)
+        .into_par_iter()
+        .map(|t| {
+            range_faces(
+                volume,
+                regions,
+                outside,
+                (t * per_task).min(nz + 1)..((t + 1) * per_task).min(nz + 1),
+            )
+        })
+        .collect::<Result<_, _>>()?;
+    Ok(found.into_iter().flatten().map(|faces| vec![faces]).collect())
+}
+
+/// The faces of rows `ys` of a volume stored `z` fastest (`all`, indexed
+/// `(x * ny + y) * nz + z`), `[x, y, z]` faces by axis and slab: the faces perpendicular to
+/// `z` between `(x, y)` columns' voxels, and those perpendicular to `x` and `y` between
+/// neighbouring columns, with cell `y` in `ys` (and `y = ny` for the last rows). Each
+/// slab's list is in the order of [`slab_faces`] restricted to these rows.
+pub(super) fn rows_faces(
+    volume: &LabelView<'_>,
+    all: &[u32],
+    regions: &Regions,
+    outside: &Outside,
+    ys: std::ops::Range<usize>,
+) -> Result<[Vec<Vec<RawFace>>; 3], SurfaceError> {
+    let [nx, ny, nz] = volume.dims();
+    let mut out: [Vec<Vec<RawFace>>; 3] = [0, 1, 2].map(|_| (0..=nz).map(|_| Vec::new()).collect());
+    let label = |x: usize, y: usize, z: usize| all[(x * ny + y) * nz + z];
+    // The regions of row `y`'s voxels, `x * nz + z`.
+    let row = |y: usize, rs: &mut Vec<u32>| -> Result<(), SurfaceError> {
+        rs.clear();
+        let labels = &all[y * nz..];
+        for x in 0..nx {
+            let column = &labels[x * ny * nz..x * ny * nz + nz];
+            for &l in column {
+                let r = regions.region_of(l).map_or(NONE, |id| id.0);
+                if r == NONE {
+                    return Err(SurfaceError::InvalidRegions(format!("label {l} has no region")));
+                }
+                rs.push(r);
+            }
+        }
+        Ok(())
+    };
+    let (mut prev, mut cur) = (Vec::with_capacity(nx * nz), Vec::with_capacity(nx * nz));
+    if ys.start > 0 {
+        row(ys.start - 1, &mut prev)?;
+    }
+    // A column of the outside beyond each side, `[axis][low, high]`.
+    let beyond: [[Vec<u32>; 2]; 3] = outside.map(|sides| sides.map(|(r, _)| vec![r; nz]));
+    let last = if ys.end == ny { ny + 1 } else { ys.end };
+    for y in ys.start..last {
+        let yy = y as u32;
+        if y < ny {
+            row(y, &mut cur)?;
+            // Faces perpendicular to z (each slab's list gets one face per column at most).
+            for x in 0..nx {
+                let col = &cur[x * nz..(x + 1) * nz];
+                let cell = |z: usize| [x as u32, yy, z as u32];
+                let label_at = |z: usize| label(x, y, z);
+                let (lo, hi) = (outside[2][0], outside[2][1]);
+                if col[0] != lo.0 && lo.0 != NONE {
+                    out[2][0].push(RawFace {
+                        cell: cell(0),
+                        axis: 2,
+                        regions: [lo.0, col[0]],
+                        labels: [lo.1, label_at(0)],
+                    });
+                }
+                for_differences(&col[..nz - 1], &col[1..], |j, a, b| {
+                    let z = j + 1;
+                    out[2][z].push(RawFace {
+                        cell: cell(z),
+                        axis: 2,
+                        regions: [a, b],
+                        labels: [label_at(z - 1), label_at(z)],
+                    });
+                });
+                if col[nz - 1] != hi.0 && hi.0 != NONE {
+                    let face = RawFace {
+                        cell: cell(nz),
+                        axis: 2,
+                        regions: [col[nz - 1], hi.0],
+                        labels: [label_at(nz - 1), hi.1],
+                    };
+                    out[2][nz].push(face);
+                }
+            }
+            // Faces perpendicular to x.
+            for x in 0..=nx {
+                let a = if x > 0 { &cur[(x - 1) * nz..x * nz] } else { &beyond[0][0][..] };
+                let b = if x < nx { &cur[x * nz..(x + 1) * nz] } else { &beyond[0][1][..] };
+                for_differences(a, b, |z, ra, rb| {
+                    let la = if x > 0 { label(x - 1, y, z) } else { outside[0][0].1 };
+                    let lb = if x < nx { label(x, y, z) } else { outside[0][1].1 };
+                    out[0][z].push(RawFace {
+                        cell: [x as u32, yy, z as u32],
+                        axis: 0,
+                        regions: [ra, rb],
+                        labels: [la, lb],
+                    });
+                });
+            }
+        }
+        // Faces perpendicular to y, between rows `y - 1` and `y`.
+        for x in 0..nx {
+            let a = if y > 0 { &prev[x * nz..(x + 1) * nz] } else { &beyond[1][0][..] };
+            let b = if y < ny { &cur[x * nz..(x + 1) * nz] } else { &beyond[1][1][..] };
+            for_differences(a, b, |z, ra, rb| {
+                let la = if y > 0 { label(x, y - 1, z) } else { outside[1][0].1 };
+                let lb = if y < ny { label(x, y, z) } else { outside[1][1].1 };
+                out[1][z].push(RawFace {
+                    cell: [x as u32, yy, z as u32],
+                    axis: 1,
+                    regions: [ra, rb],
+                    labels: [la, lb],
+                });
+            });
+        }
+        std::mem::swap(&mut prev, &mut cur);
+    }
+    Ok(out)
+}
+
+/// Calls `f(i, a[i], b[i])` for each `i` where the two regions differ and both are regions
+/// (not [`NONE`]: an open side), in increasing `i`: the common case, equal runs, is a
+/// plain comparison of the two slices.
+fn for_differences(a: &[u32], b: &[u32], mut f: impl FnMut(usize, u32, u32)) {
+    const BLOCK: usize = 16;
+    for (k, (ca, cb)) in a.chunks(BLOCK).zip(b.chunks(BLOCK)).enumerate() {
+        if ca == cb {
+            continue;
+        }
+        for (j, (&ra, &rb)) in ca.iter().zip(cb).enumerate() {
+            if ra != rb && ra != NONE && rb != NONE {
+                f(k * BLOCK + j, ra, rb);
+            }
+        }
     }
 }
