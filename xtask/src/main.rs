@@ -24,6 +24,9 @@
 //!   `voxart.rs`).
 //! - `gallery [--out DIR]`: every bundled model rendered as voxels and output, two views,
 //!   into `docs/gallery/` (see `voxart.rs`).
+//! - `lod-figure [--out FILE.png] [--ratio R] VOLUME...`: each volume before and after
+//!   simplification with the partition kept (default a tenth of the faces), side by side,
+//!   into `docs/figures/simplify.png` (see `lod_figure.rs`).
 //! - `diag NAME [VOLUME]`: measurements and diagnostics that print figures (the solver
 //!   table, AT's CG tolerance, chunked solves against the whole volume, interrupt latency,
 //!   geodesic speed; see `diag.rs`).
@@ -32,6 +35,7 @@ mod compare;
 mod diag;
 mod figures;
 mod labelled;
+mod lod_figure;
 mod synth;
 mod table1;
 mod voxart;
@@ -54,6 +58,7 @@ fn main() -> Result<()> {
         Some("voxart") => voxart::voxart(&args[1..]),
         Some("gallery") => voxart::gallery(&args[1..]),
         Some("diag") => diag::diag(&args[1..]),
+        Some("lod-figure") => lod_figure::lod_figure(&args[1..]),
         _ => {
             eprintln!("usage: cargo xtask timings [--runs N] [FILE...]");
             eprintln!("       cargo xtask compare [--quick] [--labels] [--surfacenets] [--out DIR]");
@@ -63,6 +68,7 @@ fn main() -> Result<()> {
             eprintln!("       cargo xtask voxart [--smoothness S] [--no-clamp] [FILE.vox...]");
             eprintln!("       cargo xtask gallery [--out DIR]");
             eprintln!("       cargo xtask diag NAME [VOLUME] (cargo xtask diag: the names)");
+            eprintln!("       cargo xtask lod-figure [--out FILE.png] [--ratio R] VOLUME...");
             bail!("unknown or missing command")
         }
     }

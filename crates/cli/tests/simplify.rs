@@ -79,3 +79,63 @@ fn simplify_refuses_bad_options_before_any_work() {
         assert!(!out.exists());
     }
 }
+
+/// Runs the Khronos glTF validator (tools/gltf-validate) on `files`: its report, or
+/// `None` when node is missing outside CI.
+fn validate_gltf(files: &[std::path::PathBuf]) -> Option<String> {
+    use std::process::Command;
+    let tool = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/gltf-validate");
+    let have_node = Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
+    if !have_node {
+        assert!(std::env::var_os("CI").is_none(), "CI needs node for the glTF validator");
+        return None;
+    }
+    if !tool.join("node_modules/gltf-validator").exists() {
+        let ok = Command::new("npm")
+            .args(["ci", "--silent", "--prefix"])
+            .arg(&tool)
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "npm ci in tools/gltf-validate failed");
+    }
+    let out = Command::new("node").arg(tool.join("validate.mjs")).args(files).output().unwrap();
+    let report = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "validator: {report}{}", String::from_utf8_lossy(&out.stderr));
+    Some(report)
+}
+
+/// Triangles of a .glb file (the index accessors' counts over three).
+fn glb_triangles(path: &Path) -> u64 {
+    let bytes = std::fs::read(path).unwrap();
+    assert_eq!(&bytes[..4], b"glTF");
+    let json_len = u32::from_le_bytes(bytes[12..16].try_into().unwrap()) as usize;
+    let json: serde_json::Value = serde_json::from_slice(&bytes[20..20 + json_len]).unwrap();
+    let accessors = json["accessors"].as_array().unwrap();
+    json["meshes"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .flat_map(|m| m["primitives"].as_array().unwrap())
+        .map(|p| accessors[p["indices"].as_u64().unwrap() as usize]["count"].as_u64().unwrap() / 3)
+        .sum()
+}
+
+#[test]
+fn every_gltf_level_passes_the_khronos_validator() {
+    let dir = tempfile::tempdir().unwrap();
+    let mut files = Vec::new();
+    for (name, stem) in [("cat10.vol", "cat"), ("chr_army1.vox", "army")] {
+        let out = dir.path().join(format!("{stem}.glb"));
+        let o = regularize(data(name).to_str().unwrap(), &out, &["--lod", "3"]);
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let levels: Vec<_> = (0..3).map(|k| dir.path().join(format!("{stem}.lod{k}.glb"))).collect();
+        let triangles: Vec<u64> = levels.iter().map(|p| glb_triangles(p)).collect();
+        assert!(triangles[0] > triangles[1] && triangles[1] > triangles[2], "{name}: {triangles:?}");
+        files.extend(levels);
+    }
+    if let Some(report) = validate_gltf(&files) {
+        assert_eq!(report.lines().filter(|l| l.contains(": 0 errors")).count(), files.len(), "{report}");
+        // Not even a warning: no degenerate triangle from the triangles among the quads.
+        assert_eq!(report.lines().filter(|l| l.contains(", 0 warnings")).count(), files.len(), "{report}");
+    }
+}

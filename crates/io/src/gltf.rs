@@ -17,7 +17,7 @@ use crate::{IoError, Material, QuadMesh};
 ///
 /// Quads are split into two triangles along the diagonal from their first vertex (a
 /// triangle of a quad stays in the quad's convex hull, as the papers' Proposition 2
-/// requires). Faces are grouped into one primitive per material, so each face keeps its
+/// requires); a triangle, written as a quad repeating its last vertex, stays one. Faces are grouped into one primitive per material, so each face keeps its
 /// material's colour exactly; vertices on a boundary between materials are duplicated.
 /// Per-vertex normals are the area-weighted average of the quad normals around the
 /// vertex, over the whole mesh (so shading is continuous across materials). A mesh
@@ -97,7 +97,13 @@ fn parts(mesh: &QuadMesh) -> Vec<Part> {
         let label = fs.first().map(inner).filter(|&l| fs.iter().all(|f| inner(f) == l));
         for f in fs {
             let [a, b, c, d] = mesh.quads[f].map(|v| id(v, &mut vertices));
-            triangles.extend([a, b, c, a, c, d]);
+            // A triangle is written as a quad repeating a vertex: one triangle, not a
+            // degenerate second one.
+            if d == c || d == a {
+                triangles.extend([a, b, c]);
+            } else {
+                triangles.extend([a, b, c, a, c, d]);
+            }
         }
         for &v in &vertices {
             local[v as usize] = u32::MAX;

@@ -12,6 +12,7 @@ mod mesh;
 mod params;
 mod read;
 mod run;
+mod simplify;
 mod volume;
 
 use pyo3::prelude::*;
@@ -25,6 +26,8 @@ fn _voxreg(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(mesh::check, m)?)?;
     m.add_function(wrap_pyfunction!(params::option_names, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::write_arrays, m)?)?;
+    m.add_function(wrap_pyfunction!(simplify::simplify_arrays, m)?)?;
+    m.add_function(wrap_pyfunction!(simplify::pyramid_targets, m)?)?;
     m.add_class::<mesh::Surface>()?;
     m.add_class::<mesh::PlyParts>()?;
     m.add("__version__", env!("CARGO_PKG_VERSION"))?;

@@ -38,7 +38,7 @@ pub(crate) struct Arrays {
 }
 
 impl Arrays {
-    fn of(mesh: &QuadMesh) -> Self {
+    pub(crate) fn of(mesh: &QuadMesh) -> Self {
         let colors = (!mesh.materials.is_empty())
             .then(|| mesh.face_materials.iter().flat_map(|&m| mesh.materials[m as usize].color).collect());
         Arrays {
@@ -99,7 +99,7 @@ pub(crate) struct Surface {
 }
 
 impl Surface {
-    fn part(kind: Option<PartSpec>) -> Result<Part> {
+    pub(crate) fn part(kind: Option<PartSpec>) -> Result<Part> {
         Ok(match kind {
             None => Part::All,
             Some((k, i, m)) if k == "interface" => Part::Interface(i, m),
@@ -137,7 +137,7 @@ impl Surface {
         Arrays::of(&self.quad_mesh(part))
     }
 
-    fn check_part(&self, part: Part) -> Result<()> {
+    pub(crate) fn check_part(&self, part: Part) -> Result<()> {
         let (what, i, n) = match part {
             Part::All => return Ok(()),
             Part::Interface(i, _) => ("interface", i, self.surface.interfaces().len()),
@@ -175,6 +175,21 @@ impl Surface {
         check_extension(&path)?;
         py.detach(|| no_panic(|| write_mesh(&path, &self.quad_mesh(part)).map_err(|e| Error::io(&e))))?;
         Ok(())
+    }
+
+    /// The part (as `mesh`) simplified to each of `targets` (`(ratio or None,
+    /// max_error)`) in turn, one collapse sequence: `[(arrays, stats)]`, level `k` a
+    /// simplification of level `k - 1`.
+    #[pyo3(signature = (targets, part=None))]
+    fn simplify<'py>(
+        &self,
+        py: Python<'py>,
+        targets: Vec<crate::simplify::TargetTuple>,
+        part: Option<PartSpec>,
+    ) -> PyResult<Bound<'py, PyList>> {
+        let part = Self::part(part)?;
+        self.check_part(part)?;
+        crate::simplify::surface_levels(self, py, &targets, part)
     }
 
     /// Per interface, in order: `(name, (a, b), (region_a, region_b))`, `a` and `b` the
@@ -223,7 +238,7 @@ fn check_extension(path: &std::path::Path) -> Result<()> {
     }
 }
 
-fn positions_of(vertices: &PyReadonlyArray2<'_, f64>) -> Result<Vec<DVec3>> {
+pub(crate) fn positions_of(vertices: &PyReadonlyArray2<'_, f64>) -> Result<Vec<DVec3>> {
     let v = vertices.as_array();
     if v.ncols() != 3 {
         return Err(Error::input(format!("vertices must be an (n, 3) array, got {:?}", v.shape())));
@@ -231,7 +246,7 @@ fn positions_of(vertices: &PyReadonlyArray2<'_, f64>) -> Result<Vec<DVec3>> {
     Ok(v.rows().into_iter().map(|r| DVec3::new(r[0], r[1], r[2])).collect())
 }
 
-fn quads_of(quads: &PyReadonlyArray2<'_, i64>, n: usize) -> Result<Vec<[u32; 4]>> {
+pub(crate) fn quads_of(quads: &PyReadonlyArray2<'_, i64>, n: usize) -> Result<Vec<[u32; 4]>> {
     let q = quads.as_array();
     if q.ncols() != 4 {
         return Err(Error::input(format!("quads must be an (m, 4) array, got {:?}", q.shape())));
@@ -251,7 +266,7 @@ fn quads_of(quads: &PyReadonlyArray2<'_, i64>, n: usize) -> Result<Vec<[u32; 4]>
         .collect()
 }
 
-fn labels_of(labels: &PyReadonlyArray2<'_, u32>, m: usize) -> Result<Vec<[u32; 2]>> {
+pub(crate) fn labels_of(labels: &PyReadonlyArray2<'_, u32>, m: usize) -> Result<Vec<[u32; 2]>> {
     let l = labels.as_array();
     if l.dim() != (m, 2) {
         return Err(Error::input(format!("labels must be an ({m}, 2) array, got {:?}", l.shape())));
@@ -308,26 +323,33 @@ pub(crate) fn write_arrays(
     let face_labels = labels_of(&labels, quads.len())?;
     let mut mesh = QuadMesh { positions, quads, face_labels, ..Default::default() };
     if let Some(colors) = colors {
-        let c = colors.as_array();
-        if c.nrows() != mesh.quads.len() || !(c.ncols() == 3 || c.ncols() == 4) {
-            return Err(Error::input(format!(
-                "colors must be an ({}, 3 or 4) array, got {:?}",
-                mesh.quads.len(),
-                c.shape()
-            ))
-            .into());
-        }
-        let rgba: Vec<[u8; 4]> =
-            c.rows().into_iter().map(|r| [r[0], r[1], r[2], if r.len() == 4 { r[3] } else { 255 }]).collect();
-        let mut distinct = rgba.clone();
-        distinct.sort_unstable();
-        distinct.dedup();
-        mesh.materials =
-            distinct.iter().enumerate().map(|(i, &c)| Material::diffuse(format!("color_{i}"), c)).collect();
-        mesh.face_materials = rgba.iter().map(|c| distinct.binary_search(c).unwrap_or(0) as u32).collect();
+        let (materials, face_materials) = colors_materials(&colors, mesh.quads.len())?;
+        mesh.materials = materials;
+        mesh.face_materials = face_materials;
     }
     py.detach(|| no_panic(|| write_mesh(&path, &mesh).map_err(|e| Error::io(&e))))?;
     Ok(())
+}
+
+/// Per-face colours, (m, 3 | 4) uint8, as materials: one per distinct colour, and each
+/// face's material.
+pub(crate) fn colors_materials(
+    colors: &PyReadonlyArray2<'_, u8>,
+    faces: usize,
+) -> Result<(Vec<Material>, Vec<u32>)> {
+    let c = colors.as_array();
+    if c.nrows() != faces || !(c.ncols() == 3 || c.ncols() == 4) {
+        return Err(Error::input(format!("colors must be an ({faces}, 3 or 4) array, got {:?}", c.shape())));
+    }
+    let rgba: Vec<[u8; 4]> =
+        c.rows().into_iter().map(|r| [r[0], r[1], r[2], if r.len() == 4 { r[3] } else { 255 }]).collect();
+    let mut distinct = rgba.clone();
+    distinct.sort_unstable();
+    distinct.dedup();
+    let materials =
+        distinct.iter().enumerate().map(|(i, &c)| Material::diffuse(format!("color_{i}"), c)).collect();
+    let face_materials = rgba.iter().map(|c| distinct.binary_search(c).unwrap_or(0) as u32).collect();
+    Ok((materials, face_materials))
 }
 
 /// A binary PLY file written in parts (`voxreg_io::PlyParts`: `write_ply`'s file, the

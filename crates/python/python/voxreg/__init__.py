@@ -255,7 +255,9 @@ def regularize(
         label_argument("background", background),
         preset, options, threads, progress, colors, materials, max_memory, palette_names=names,
     )
-    return Mesh._from_core(d, _report(d), d["surface"], None, d["summary"])
+    mesh = Mesh._from_core(d, _report(d), d["surface"], None, d["summary"])
+    mesh._spacing = _triple("spacing", spacing)
+    return mesh
 
 
 def read(

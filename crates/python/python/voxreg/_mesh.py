@@ -9,7 +9,7 @@ from typing import Any, Dict, List, Optional, Tuple
 import numpy as np
 
 from . import _voxreg
-from ._errors import InputError, VoxregError
+from ._errors import InputError, ParameterError, VoxregError
 
 
 class Mesh:
@@ -63,6 +63,7 @@ class Mesh:
         self._part = _part
         self._groups = _groups or []
         self._summary = _summary
+        self._spacing: Optional[Tuple[float, float, float]] = None
 
     @classmethod
     def _from_core(cls, d: Dict[str, Any], report: Dict[str, Any], surface: Any,
@@ -119,7 +120,9 @@ class Mesh:
         for i, (_, _, regions) in enumerate(s.interfaces()):
             if ra is not None and rb is not None and set(regions) == {ra, rb}:
                 part = ("interface", i, bool(manifold))
-                return Mesh._from_core(s.mesh(part), self.report, s, part)
+                sub = Mesh._from_core(s.mesh(part), self.report, s, part)
+                sub._spacing = self._spacing
+                return sub
         raise InputError(f"no interface between labels {a} and {b}")
 
     def region(self, label: int, manifold: bool = True) -> "Mesh":
@@ -138,13 +141,125 @@ class Mesh:
         if r is None:
             raise InputError(f"no voxel has label {label}")
         part = ("region", r, bool(manifold))
-        return Mesh._from_core(s.mesh(part), self.report, s, part)
+        sub = Mesh._from_core(s.mesh(part), self.report, s, part)
+        sub._spacing = self._spacing
+        return sub
 
     def regions(self) -> List[int]:
         """The smallest label of every region but the background, in region order."""
         s = self._need_surface("regions()")
         bg = s.background_region()
         return [labels[0] for r, labels in enumerate(s.region_labels()) if r != bg and labels]
+
+    # Simplification --------------------------------------------------------------------
+
+    def _default_error(self) -> float:
+        """Half a voxel: of the smallest spacing when known, else of the median edge
+        length of the quads (a voxel's edge for voxreg's unsimplified output)."""
+        spacing = getattr(self, "_spacing", None)
+        if spacing is not None:
+            return 0.5 * float(min(spacing))
+        if len(self.quads) == 0:
+            return 0.0
+        q = self.quads
+        edges = np.linalg.norm(self.vertices[q[:, 1]] - self.vertices[q[:, 0]], axis=1)
+        return 0.5 * float(np.median(edges))
+
+    def _simplified(self, targets: List[Tuple[Optional[float], float]]) -> List["Mesh"]:
+        if self._surface is not None:
+            levels = self._surface.simplify(targets, self._part)
+        else:
+            colors = None if self.colors is None else np.ascontiguousarray(self.colors, dtype=np.uint8)
+            groups = None
+            if self._groups:
+                groups = np.full(len(self.quads), -1, dtype=np.int64)
+                for i, (_, faces) in enumerate(self._groups):
+                    groups[np.asarray(faces, dtype=np.int64)] = i
+            levels = _voxreg.simplify_arrays(
+                np.ascontiguousarray(self.vertices, dtype=np.float64),
+                np.ascontiguousarray(self.quads, dtype=np.int64),
+                np.ascontiguousarray(self.labels, dtype=np.uint32), targets, groups, colors)
+        out = []
+        for d, stats in levels:
+            report = dict(self.report)
+            report["simplify"] = stats
+            names = dict(self.label_names)
+            names.update({int(k): str(v) for k, v in d.get("label_names", {}).items()})
+            mesh = Mesh(d["vertices"], d["quads"], d["labels"], d["colors"], report,
+                        _groups=d["groups"], label_names=names)
+            mesh._spacing = getattr(self, "_spacing", None)
+            out.append(mesh)
+        return out
+
+    def simplify(self, ratio: Optional[float] = None, max_error: Optional[float] = None) -> "Mesh":
+        """A simplified copy that keeps the partition (``voxreg regularize --simplify``):
+        each interface simplified once and shared by its two regions, junction lines
+        simplified once, their corners kept, each region closed with its Euler
+        characteristic; quads where pairs of triangles make good ones, triangles written
+        as quads repeating their last vertex.
+
+        Parameters
+        ----------
+        ratio : float in (0, 1], default None
+            Keep about this fraction of the faces (None: as far as ``max_error`` allows).
+        max_error : float >= 0, default None (half a voxel)
+            The largest distance allowed from any vertex of this mesh to the simplified
+            one, in the mesh's units. Collapses that would break it are refused, so the
+            ratio may not be reached. Default: half the smallest voxel spacing for a
+            regularized mesh, else half the median edge length.
+
+        Returns
+        -------
+        Mesh
+            Built from arrays (no sub-meshes); its ``report["simplify"]`` gives the input
+            and output face counts, the quads among them and ``error_bound``, the largest
+            distance reached.
+
+        Raises
+        ------
+        ParameterError
+            A ratio outside (0, 1], a negative, infinite or NaN ``max_error``.
+        InputError
+            A mesh the simplifier cannot read (an index out of range, a degenerate face).
+        """
+        ratio = _number("ratio", ratio)
+        if ratio is not None and not 0.0 < ratio <= 1.0:
+            raise ParameterError(f"ratio must be in (0, 1], got {ratio!r}")
+        error = self._error(max_error)
+        return self._simplified([(ratio, error)])[0]
+
+    def levels(self, n: int, factor: float = 4.0, max_error: Optional[float] = None) -> List["Mesh"]:
+        """Levels of detail (``voxreg regularize --lod N``): ``n`` meshes, level ``k``
+        keeping ``factor**-k`` of the faces within ``max_error * 2**(k - 1)`` of every
+        vertex of this mesh (level 0 is this mesh). One collapse sequence: each level
+        is a simplification of the one before, and every level keeps the partition (see
+        :meth:`simplify`).
+
+        Parameters
+        ----------
+        n : int, 1 to 12
+        factor : float > 1, default 4
+        max_error : float >= 0, default None (half a voxel, as in :meth:`simplify`)
+
+        Raises
+        ------
+        ParameterError
+            ``n`` outside 1..12, ``factor`` not above 1, a bad ``max_error``.
+        """
+        if isinstance(n, bool) or not isinstance(n, (int, np.integer)) or not 1 <= int(n) <= 12:
+            raise ParameterError(f"n must be an integer from 1 to 12 levels, got {n!r}")
+        f = _number("factor", factor)
+        if f is None or not f > 1.0 or not np.isfinite(f):
+            raise ParameterError(f"factor must be a number above 1, got {factor!r}")
+        return self._simplified(_voxreg.pyramid_targets(int(n), f, self._error(max_error)))
+
+    def _error(self, max_error: Optional[float]) -> float:
+        e = _number("max_error", max_error)
+        if e is None:
+            return self._default_error()
+        if not (e >= 0.0 and np.isfinite(e)):
+            raise ParameterError(f"max_error must be a non-negative number, got {max_error!r}")
+        return e
 
     # Conversions -----------------------------------------------------------------------
 
@@ -200,6 +315,18 @@ class Mesh:
             colors = None if self.colors is None else np.ascontiguousarray(self.colors, dtype=np.uint8)
             _voxreg.write_arrays(path, np.ascontiguousarray(self.vertices), np.ascontiguousarray(self.quads),
                                  np.ascontiguousarray(self.labels), colors)
+
+
+def _number(name: str, value: Any) -> Optional[float]:
+    """``value`` as a float, None kept; else a ``ParameterError`` naming ``name``."""
+    if value is None:
+        return None
+    if isinstance(value, bool):
+        raise ParameterError(f"{name} must be a number, got {value!r}")
+    try:
+        return float(value)
+    except (TypeError, ValueError):
+        raise ParameterError(f"{name} must be a number, got {value!r}") from None
 
 
 def _report(d: Dict[str, Any]) -> Dict[str, Any]:

@@ -176,7 +176,8 @@ def regularize(array: Any, chunks: Union[None, int, Sequence[int]] = None, halo:
                out: "Optional[str | os.PathLike[str]]" = None,
                formats: Iterable[str] = ("ply",), scheduler: Any = None,
                spacing: Sequence[float] = (1.0, 1.0, 1.0), origin: Sequence[float] = (0.0, 0.0, 0.0),
-               background: Optional[int] = 0, threads: int = 1, **params: Any) -> Union[Mesh, str]:
+               background: Optional[int] = 0, threads: int = 1, lods: int = 3,
+               **params: Any) -> Union[Mesh, str]:
     """Regularizes a label volume chunk by chunk through Dask, and stitches the chunks.
 
     Parameters
@@ -202,13 +203,19 @@ def regularize(array: Any, chunks: Union[None, int, Sequence[int]] = None, halo:
         its quads, vertices and whether it is closed; per task its chunk, voxels read,
         quads, times and its worker's peak memory; the merge's time and peak memory.
         None: the stitched mesh is returned (it must fit in memory).
-    formats : iterable of {"ply", "glb", "precomputed"}, default ("ply",)
+    formats : iterable of {"ply", "glb", "precomputed", "multilod"}, default ("ply",)
         What ``out`` receives (``glb`` holds one label's surface in memory at a time).
+        ``multilod``: Neuroglancer's multi-resolution meshes in ``out/multilod/``
+        (``voxreg.neuroglancer.write_multilod``: ``lods`` levels, the finest octree cube
+        the smallest chunk side), every level simplified with the partition kept and no
+        crack between levels; the stitched mesh is held in memory for it.
     scheduler : default None
         Passed to ``dask.compute`` (None: the current one, e.g. a distributed Client's).
     spacing, origin, background : as in ``voxreg.regularize``
     threads : int, default 1
         Threads per task (dask runs several tasks at once).
+    lods : int, default 3
+        Levels of detail of the ``multilod`` format.
     **params
         Any parameter of ``voxreg.regularize`` (preset, normals, alpha, refine, ...).
 
@@ -227,7 +234,7 @@ def regularize(array: Any, chunks: Union[None, int, Sequence[int]] = None, halo:
     if int(halo) < 2:
         raise ParameterError(f"halo must be at least 2 voxels, got {halo}")
     formats = tuple(formats)
-    bad = set(formats) - {"ply", "glb", "precomputed"}
+    bad = set(formats) - {"ply", "glb", "precomputed", "multilod"}
     if bad:
         raise ParameterError(f"unknown formats: {', '.join(sorted(bad))}")
     out_dir = None if out is None else os.fspath(out)
@@ -264,6 +271,18 @@ def regularize(array: Any, chunks: Union[None, int, Sequence[int]] = None, halo:
     summary = merge(out_dir, [r["path"] for r in results], formats, background)
     summary["client"] = {"peak_rss_bytes_before_merge": client_peak}
     summary["tasks"] = [r["stats"] for r in results]
+    if "multilod" in formats:
+        from .neuroglancer import write_multilod
+
+        loaded = []
+        for r in results:
+            with np.load(r["path"]) as f:
+                loaded.append({k: f[k] for k in ("vertex_ids", "positions", "owns_vertex", "quads", "labels")})
+        mesh, _ = stitch(loaded)
+        del loaded
+        summary["multilod"] = write_multilod(mesh, os.path.join(out_dir, "multilod"), lods=lods,
+                                             chunk=max(2, min(chunks)), spacing=spacing, origin=origin,
+                                             background=background, dims=dims)
     _write_json(os.path.join(out_dir, "summary.json"), summary)
     return out_dir
 
