@@ -414,6 +414,8 @@ pub(crate) enum SolverKind {
     /// Conjugate gradient inside per-vertex boxes: the only one that can --clamp.
     #[value(alias = "gd")]
     Bounded,
+    /// Fixed batches of block-Jacobi sweeps, not to a tolerance (the fast preset's).
+    Sweeps,
 }
 
 impl SolverKind {
@@ -423,6 +425,7 @@ impl SolverKind {
             SolverKind::Direct => SolverChoice::Direct,
             SolverKind::Cg => SolverChoice::Cg,
             SolverKind::Bounded => SolverChoice::Bounded,
+            SolverKind::Sweeps => SolverChoice::Sweeps,
         }
     }
 }
