@@ -10,10 +10,18 @@ use crate::{Interrupt, NormalError, NormalEstimator, NormalField};
 /// No neighbour in a slot of [`QuadGraph`].
 const NONE: u32 = u32::MAX;
 
-/// Each surfel's neighbours for [`Diffused`]: the surfels across its four edges that
-/// belong to the same interface and do not face the opposite way (the other side of a
-/// sheet one voxel thick at a pinch). Across a junction edge there is none: the diffusion
-/// never mixes two interfaces. Built once per surface, 16 bytes a surfel.
+/// The bit of a [`QuadGraph`] slot whose neighbour's orientation is the opposite of the
+/// surfel's (surfel ids are below `2^30`).
+const FLIP: u32 = 1 << 31;
+
+/// Each surfel's neighbours for [`Diffused`], one across each of its four edges at most:
+/// the surfel of the same interface that does not face the opposite way (at a pinch edge,
+/// the two perpendicular ones; never the other side of a sheet one voxel thick), else,
+/// across a junction edge, the smooth continuation: the coplanar surfel of another
+/// interface that shares a region with it on the same side (the sphere across the cut of a
+/// split ball), its orientation flipped where the shared region is on the other side. A
+/// quad is never averaged with one across a crease of the staircase between interfaces.
+/// Built once per surface, 16 bytes a surfel.
 #[derive(Clone, Debug, Default)]
 pub struct QuadGraph {
     nbrs: Vec<[u32; 4]>,
@@ -30,16 +38,41 @@ impl QuadGraph {
                 let mut out = [NONE; 4];
                 let mut k = 0;
                 for e in surface.surfel_edges(SurfelId(s as u32)) {
-                    for &t in surface.edge_surfels(e) {
+                    let others = surface.edge_surfels(e);
+                    let mut found = false;
+                    for &t in others {
                         let other = &surfels[t.index()];
                         if t.index() == s || other.interface != me.interface {
                             continue;
                         }
-                        if other.normal().dot(me.normal()) < 0.0 || k == 4 || out.contains(&t.0) {
+                        found = true;
+                        if other.normal().dot(me.normal()) >= 0.0 && k < 4 && !out.contains(&t.0) {
+                            out[k] = t.0;
+                            k += 1;
+                        }
+                    }
+                    if found || k == 4 {
+                        continue;
+                    }
+                    for &t in others {
+                        let other = &surfels[t.index()];
+                        if t.index() == s || other.axis != me.axis {
                             continue;
                         }
-                        out[k] = t.0;
-                        k += 1;
+                        let [a, b] = me.regions;
+                        let [c, d] = other.regions;
+                        let sign = if a == c || b == d {
+                            1.0
+                        } else if a == d || b == c {
+                            -1.0
+                        } else {
+                            continue;
+                        };
+                        if sign * other.normal().dot(me.normal()) > 0.0 {
+                            out[k] = t.0 | if sign < 0.0 { FLIP } else { 0 };
+                            k += 1;
+                            break;
+                        }
                     }
                 }
                 out
@@ -65,12 +98,13 @@ impl QuadGraph {
 }
 
 /// Normals re-estimated from given vertex positions, cheaply: each quad's vector area
-/// (oriented as its surfel), then `steps` rounds of lazy diffusion over the [`QuadGraph`]
-/// (`u <- (u + mean of u over the neighbours) / 2`), normalized. On a flat grid each round
-/// adds a variance of a quarter of a square voxel per axis, so `radius^2` rounds spread a
-/// quad's weight as far as the uniform disc of `radius` voxels (variance `radius^2 / 4`)
-/// that an area-weighted mean over a ball would use, in O(`steps`) reads a surfel and
-/// without any search. A quad whose diffused vector vanishes keeps its `previous` normal.
+/// (oriented as its surfel), then [`Diffused::steps`] rounds of diffusion over the
+/// [`QuadGraph`] (`u <- mean of u over the quad and its neighbours`), normalized. On a flat
+/// grid each round adds a variance of 0.4 square voxel per axis, so `radius^2 / 1.6`
+/// rounds spread a quad's weight as far as the uniform disc of `radius` voxels (variance
+/// `radius^2 / 4`) that an area-weighted mean over a ball would use, in O(`steps`) reads a
+/// surfel and without any search. A quad whose diffused vector vanishes keeps its
+/// `previous` normal.
 ///
 /// Why: the fast pipeline re-estimates its field between batches of sweeps from quads that
 /// already follow the shape; [`crate::Refined`]'s discs and feature rule cost more than the
@@ -86,9 +120,9 @@ pub struct Diffused<'a> {
 }
 
 impl Diffused<'_> {
-    /// The diffusion rounds of `radius`: `radius^2`, rounded.
+    /// The diffusion rounds of `radius`: `radius^2 / 1.6`, rounded.
     pub fn steps(radius: f64) -> usize {
-        (radius * radius).round() as usize
+        (radius * radius / 1.6).round() as usize
     }
 
     /// The estimate on `surface`, whose graph is `graph` ([`QuadGraph::new`]); polls
@@ -129,24 +163,22 @@ impl Diffused<'_> {
         for _ in 0..Self::steps(self.radius) {
             interrupt.check()?;
             next.par_iter_mut().zip(&graph.nbrs).enumerate().for_each(|(s, (out, nb))| {
-                let (mut sum, mut k) = (Vec3::ZERO, 0u32);
+                let (mut sum, mut k) = (u[s], 1u32);
                 for &t in nb {
                     if t != NONE {
-                        sum += u[t as usize];
+                        let v = u[(t & !FLIP) as usize];
+                        sum += if t & FLIP == 0 { v } else { -v };
                         k += 1;
                     }
                 }
-                *out = if k == 0 { u[s] } else { 0.5 * (u[s] + sum / k as f32) };
+                *out = sum / k as f32;
             });
             std::mem::swap(&mut u, &mut next);
         }
         drop(next);
         let previous = self.previous.as_slice();
         Ok(NormalField::new(
-            u.par_iter()
-                .zip(previous)
-                .map(|(v, p)| v.as_dvec3().try_normalize().unwrap_or(*p))
-                .collect(),
+            u.par_iter().zip(previous).map(|(v, p)| v.as_dvec3().try_normalize().unwrap_or(*p)).collect(),
         ))
     }
 }
@@ -190,7 +222,9 @@ mod tests {
         let radial: Vec<DVec3> = s
             .surfels()
             .iter()
-            .map(|f| (f.vertices.iter().map(|v| positions[v.index()]).sum::<DVec3>() / 4.0 - centre).normalize())
+            .map(|f| {
+                (f.vertices.iter().map(|v| positions[v.index()]).sum::<DVec3>() / 4.0 - centre).normalize()
+            })
             .collect();
         let error = |field: &NormalField| {
             field.as_slice().iter().zip(&radial).map(|(a, b)| a.dot(*b).clamp(-1.0, 1.0).acos()).sum::<f64>()
@@ -202,13 +236,16 @@ mod tests {
             .estimate_on(&s, &graph, &Interrupt::never())
             .unwrap();
         assert_eq!(zero, trivial, "no round: each quad's own normal");
-        let three = Diffused { positions: &positions, previous: &trivial, radius: 3.0 }
+        let three = Diffused { positions: &positions, previous: &trivial, radius: 4.0 }
             .estimate_on(&s, &graph, &Interrupt::never())
             .unwrap();
         // Orientation kept (outward), and far closer to the radial direction.
         assert!(three.as_slice().iter().zip(&radial).all(|(a, b)| a.dot(*b) > 0.8));
         assert!(error(&three) < 0.4 * error(&trivial), "{} vs {}", error(&three), error(&trivial));
-        assert_eq!(Diffused { positions: &positions, previous: &trivial, radius: 3.0 }.estimate(&s).unwrap(), three);
+        assert_eq!(
+            Diffused { positions: &positions, previous: &trivial, radius: 4.0 }.estimate(&s).unwrap(),
+            three
+        );
     }
 
     #[test]

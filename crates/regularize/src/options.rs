@@ -52,7 +52,9 @@ impl Preset {
             Preset::VoxelArt => {
                 "One solve clamped to the voxels' boxes (never self-intersecting), all colours one solid"
             }
-            Preset::Fast => "Speed of surface nets: trivial normals, 4 x 8 block-Jacobi sweeps, 3 cheap re-estimates",
+            Preset::Fast => {
+                "Speed of surface nets: trivial normals, 4 x 8 block-Jacobi sweeps, 3 cheap re-estimates"
+            }
         }
     }
 

@@ -450,7 +450,8 @@ impl Regularizer {
                 });
                 if let Solver::Sweeps(s) = &mut *solver {
                     // The fast pipeline: the cheap re-estimate alone between the batches.
-                    let diffused = Diffused { positions: &positions, previous: &field, radius: params.refine_radius };
+                    let diffused =
+                        Diffused { positions: &positions, previous: &field, radius: params.refine_radius };
                     field = diffused.estimate_on(&surface, s.graph(&surface), &interrupt)?;
                 } else {
                     let estimate = Refined {

@@ -39,8 +39,13 @@ pub enum SolverChoice {
 
 impl SolverChoice {
     /// Every choice.
-    pub const ALL: [SolverChoice; 5] =
-        [SolverChoice::Auto, SolverChoice::Direct, SolverChoice::Cg, SolverChoice::Bounded, SolverChoice::Sweeps];
+    pub const ALL: [SolverChoice; 5] = [
+        SolverChoice::Auto,
+        SolverChoice::Direct,
+        SolverChoice::Cg,
+        SolverChoice::Bounded,
+        SolverChoice::Sweeps,
+    ];
 
     /// `"auto"`, `"direct"`, `"cg"`, `"bounded"` or `"sweeps"`.
     pub fn name(self) -> &'static str {
@@ -150,7 +155,8 @@ impl SolverParams {
         choice: Option<SolverChoice>,
         clamp: ClampOverride,
     ) -> Result<Self, OverrideError> {
-        let unbounded = matches!(choice, Some(SolverChoice::Direct | SolverChoice::Cg | SolverChoice::Sweeps));
+        let unbounded =
+            matches!(choice, Some(SolverChoice::Direct | SolverChoice::Cg | SolverChoice::Sweeps));
         let eps = match clamp {
             ClampOverride::Eps(_) if unbounded => return Err(OverrideError::ClampNeedsBoundedSolver),
             ClampOverride::Eps(eps) if !(eps > 0.0 && eps < 1.0) => {
