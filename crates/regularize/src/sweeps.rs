@@ -208,7 +208,7 @@ impl SweepsSolver {
                 |(chunk, (part, next))| {
                     let base = chunk * CHUNK;
                     let (mut r2, mut step2) = (0.0, 0.0f64);
-                    for o in 0..next.len() {
+                    for (o, out) in next.iter_mut().enumerate() {
                         let i = base + o;
                         let xi = xs[i];
                         let a = c.alpha.get(i);
@@ -222,7 +222,7 @@ impl SweepsSolver {
                         hx += nb.len() as f64 * fair[i] - sum;
                         let r = a * input[i] - hx;
                         let step = omega * sym_mul(&dinv[i], r);
-                        next[o] = xi + step;
+                        *out = xi + step;
                         r2 += r.length_squared();
                         step2 = step2.max(step.length_squared());
                     }
