@@ -207,12 +207,13 @@ VOXREG = {
     "0 rounds, convolved": ["--refine", "0", "--normals", "convolved"],
     "0 rounds, trivial": ["--refine", "0", "--normals", "trivial"],
     "papers": ["--preset", "papers"],
+    "fast": ["--preset", "fast"],
 }
 SNETS = [0, 16, 32, 64]
-VOLUME_SETTINGS = ["default (3 rounds)", "1 round, tol 1e-2", "0 rounds", "0 rounds, tol 5e-2", "0 rounds, trivial"]
+VOLUME_SETTINGS = ["default (3 rounds)", "1 round, tol 1e-2", "0 rounds", "0 rounds, tol 5e-2", "0 rounds, trivial", "fast"]
 # --volume-settings short: the default, one solve and one solve from the trivial normals.
-SHORT_VOLUME_SETTINGS = ["default (3 rounds)", "0 rounds", "0 rounds, trivial"]
-QUICK_SETTINGS = ["default (3 rounds)", "0 rounds", "0 rounds, trivial"]
+SHORT_VOLUME_SETTINGS = ["default (3 rounds)", "0 rounds", "0 rounds, trivial", "fast"]
+QUICK_SETTINGS = ["default (3 rounds)", "0 rounds", "0 rounds, trivial", "fast"]
 
 # --- running -----------------------------------------------------------------------------
 
@@ -669,6 +670,7 @@ def main():
     ap.add_argument("--volumes", nargs="*", help="only the volumes whose name contains one of these")
     ap.add_argument("--volume-settings", choices=["all", "short"], default="all", help="voxreg settings on the volumes")
     ap.add_argument("--no-volumes", action="store_true", help="skip the tissue and channels.vti")
+    ap.add_argument("--settings", nargs="*", help="only these voxreg settings (names of VOXREG, e.g. fast)")
     ap.add_argument("--quick", action="store_true", help="sphere and torus, three settings, one run, no volumes")
     ap.add_argument("--conditions", default="", help="a sentence on the machine's load, for the report")
     ap.add_argument("--json", help="write the raw samples here")
@@ -708,6 +710,11 @@ def main():
         if not os.path.exists(exe):
             raise SystemExit(f"{exe}: no such binary (cargo build --release -p voxreg-cli)")
         settings = list(VOXREG)
+        if args.settings:
+            unknown = [s for s in args.settings if s not in VOXREG]
+            if unknown:
+                raise SystemExit(f"unknown settings {unknown}: one of {list(VOXREG)}")
+            settings = args.settings
         if args.quick:
             args.runs, args.no_volumes = 1, True
             args.shapes = args.shapes or ["sphere R=20, h", "torus"]

@@ -18,6 +18,7 @@ Needs a Python with numpy and pip's ``vtk`` (9.4 or later). Example:
     python bench/speed/vs_vtk.py --quick         # bunny-128 and a small tissue, 1 run
     python bench/speed/vs_vtk.py --set-aside     # inputs kept out of tuning: torus, tissue seed 2
     python bench/speed/vs_vtk.py --before target/voxreg-before --json ab.json   # and an older build
+    python bench/speed/vs_vtk.py --voxreg-args "--preset fast"   # voxreg's fast preset
 
 The tissue volumes are made with ``cargo xtask synth-labels`` and the torus with the
 ``digitize`` example when missing (under target/bench/).
@@ -158,11 +159,12 @@ def run_measured(cmd):
     return wall, usage.ru_maxrss / 1024.0, b"".join(chunks).decode()
 
 
-def voxreg_run(exe, inp, no_background, tmp):
+def voxreg_run(exe, inp, no_background, tmp, extra=()):
     report = os.path.join(tmp, "report.json")
     cmd = [exe, "regularize", inp, "-o", os.path.join(tmp, "out.ply"), "-q", "--report", report]
     if no_background:
         cmd.append("--no-background")
+    cmd += list(extra)
     wall, peak, _ = run_measured(cmd)
     with open(report) as f:
         rep = json.load(f)
@@ -212,6 +214,8 @@ def inputs(args):
             ("tissue 400x380x110 (set aside)", tissue("400,380,110"), False),
             ("torus (set aside)", torus(args.torus_step), False),
         ]
+    if args.tissue:
+        return [(os.path.basename(args.tissue), args.tissue, False)]
     return [
         ("tissue (synth-labels)", tissue(None), False),
         ("channels.vti", os.path.join(ROOT, "data/channels.vti"), True),
@@ -228,6 +232,9 @@ def main():
     ap.add_argument("--set-aside", action="store_true", help="the inputs kept out of tuning")
     ap.add_argument("--torus-step", default="0.05", help="grid step of the set-aside torus")
     ap.add_argument("--json", help="also write the medians to this file")
+    ap.add_argument("--voxreg-args", default="", help="extra arguments of voxreg regularize, e.g. '--preset fast'")
+    ap.add_argument("--only", nargs="*", help="only the inputs whose name contains one of these")
+    ap.add_argument("--tissue", help="this .npy volume instead of the synth-labels tissue (e.g. another --seed)")
     ap.add_argument("--child", help=argparse.SUPPRESS)
     ap.add_argument("--smooth", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--no-background", action="store_true", help=argparse.SUPPRESS)
@@ -242,11 +249,13 @@ def main():
     results = {}
     with tempfile.TemporaryDirectory() as tmp:
         for name, path, nobg in inputs(args):
+            if args.only and not any(o in name for o in args.only):
+                continue
             rows = {"voxreg": [], "SurfaceNets3D + smoothing": [], "SurfaceNets3D, no smoothing": []}
             if args.before:
                 rows["voxreg before"] = []
             for _ in range(args.runs):  # interleaved: A B C A B C ...
-                rows["voxreg"].append(voxreg_run(exe, path, nobg, tmp))
+                rows["voxreg"].append(voxreg_run(exe, path, nobg, tmp, args.voxreg_args.split()))
                 if args.before:
                     rows["voxreg before"].append(voxreg_run(os.path.abspath(args.before), path, nobg, tmp))
                 rows["SurfaceNets3D + smoothing"].append(vtk_run(path, True, nobg))

@@ -415,6 +415,8 @@ pub(crate) enum SolverKind {
     /// Conjugate gradient inside per-vertex boxes: the only one that can --clamp.
     #[value(alias = "gd")]
     Bounded,
+    /// Fixed batches of block-Jacobi sweeps, not to a tolerance (the fast preset's).
+    Sweeps,
 }
 
 impl SolverKind {
@@ -424,6 +426,7 @@ impl SolverKind {
             SolverKind::Direct => SolverChoice::Direct,
             SolverKind::Cg => SolverChoice::Cg,
             SolverKind::Bounded => SolverChoice::Bounded,
+            SolverKind::Sweeps => SolverChoice::Sweeps,
         }
     }
 }

@@ -385,6 +385,26 @@ fn every_solver_reaches_the_same_surface_and_reports_itself() {
     }
 }
 
+/// `--preset fast` resolves through the library's presets: four batches of sweeps (the
+/// report names the solver and its sweeps), no integral invariants.
+#[test]
+fn the_fast_preset_runs_its_sweeps() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("fast.obj");
+    let report = dir.path().join("fast.json");
+    let input = data("cat10.vol");
+    let args = ["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--report"];
+    let out = voxreg(&[&args[..], &[report.to_str().unwrap(), "--preset", "fast", "--quiet"]].concat());
+    assert!(out.status.success(), "{}", stderr(&out));
+    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let solves = r["solves"].as_array().unwrap();
+    assert_eq!(solves.len(), 4);
+    assert!(solves.iter().all(|s| s["solver"] == "sweeps" && s["iterations"] == 8), "{solves:?}");
+    assert_eq!(r["normals"]["estimator"], "trivial");
+    assert_eq!(r["params"]["solver"]["choice"], "sweeps");
+    assert_eq!(obj_positions(&obj).len(), r["counts"]["vertices"].as_u64().unwrap() as usize);
+}
+
 #[test]
 fn clamped_output_stays_in_cubes_and_passes_the_check() {
     let dir = tempfile::tempdir().unwrap();

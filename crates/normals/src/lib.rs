@@ -15,6 +15,8 @@
 //! - [`ConvolvedTrivial`]: trivial normals averaged over a geodesic disc of the surface.
 //! - [`Refined`]: normals re-estimated from given vertex positions (the front door's
 //!   refinement rounds).
+//! - [`Diffused`]: the same from the quads' vector areas diffused over each interface's
+//!   surfel graph ([`QuadGraph`]), the fast pipeline's cheap re-estimate.
 //!
 //! [`NormalEstimator::estimate_interruptible`] stops an estimate early when the caller
 //! raises an [`Interrupt`] (an interactive front end replacing a run).
@@ -45,6 +47,7 @@
 
 mod at;
 mod convolved;
+mod diffused;
 mod eigen;
 mod field;
 mod ii;
@@ -56,6 +59,7 @@ mod trivial;
 
 pub use at::{AmbrosioTortorelli, AtInfo, AtLinearSolver, AtParams, AtSolver, FeatureField};
 pub use convolved::ConvolvedTrivial;
+pub use diffused::{Diffused, QuadGraph};
 pub use field::NormalField;
 pub use ii::{default_radius, multigrid_radius, IntegralInvariant, MAX_DEFAULT_RADIUS_VOXELS};
 pub use interrupt::Interrupt;

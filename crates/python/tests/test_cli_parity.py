@@ -144,6 +144,8 @@ def test_every_option_reaches_the_cli_and_python(cli):
     (["--smoothness", "0.4", "--preset", "voxel-art"], dict(smoothness=0.4, preset="voxel_art")),
     (["--preset", "voxel-art", "--no-clamp"], dict(preset="voxel_art", clamp=False)),
     (["--preset", "papers", "--solver", "direct"], dict(preset="papers", solver="direct")),
+    (["--preset", "fast"], dict(preset="fast")),
+    (["--preset", "fast", "--refine", "1"], dict(preset="fast", refine=1)),
 ])
 def test_options_resolve_to_the_same_params(cli, data, tmp_path, args, kwargs):
     import json

@@ -25,7 +25,7 @@ def test_input_errors(labels, message):
 
 
 @pytest.mark.parametrize("kwargs, message", [
-    (dict(preset="fast"), "preset must be one of 'default', 'papers', 'voxel_art', got 'fast'"),
+    (dict(preset="quick"), "preset must be one of 'default', 'papers', 'voxel_art', 'fast', got 'quick'"),
     (dict(alpha=0), "alpha must be finite and positive, got 0"),
     (dict(beta=-1), "beta must be finite and non-negative"),
     (dict(radius=float("nan")), "radius must be finite and positive"),

@@ -154,15 +154,18 @@ pub enum SolveInfo {
     Cg(CgInfo),
     /// Bound-constrained preconditioned conjugate gradient.
     Bounded(BoundedInfo),
+    /// Damped block-Jacobi sweeps (a fixed count: always "converged").
+    Sweeps(crate::sweeps::SweepsInfo),
 }
 
 impl SolveInfo {
-    /// `"direct"`, `"cg"` or `"bounded"`.
+    /// `"direct"`, `"cg"`, `"bounded"` or `"sweeps"`.
     pub fn name(&self) -> &'static str {
         match self {
             SolveInfo::Direct(_) => "direct",
             SolveInfo::Cg(_) => "cg",
             SolveInfo::Bounded(_) => "bounded",
+            SolveInfo::Sweeps(_) => "sweeps",
         }
     }
 
@@ -172,6 +175,7 @@ impl SolveInfo {
             SolveInfo::Direct(i) => i.relative_gradient,
             SolveInfo::Cg(i) => i.relative_gradient,
             SolveInfo::Bounded(i) => i.relative_gradient,
+            SolveInfo::Sweeps(i) => i.relative_gradient,
         }
     }
 
@@ -181,6 +185,7 @@ impl SolveInfo {
             SolveInfo::Direct(_) => true,
             SolveInfo::Cg(i) => i.converged,
             SolveInfo::Bounded(i) => i.converged,
+            SolveInfo::Sweeps(_) => true,
         }
     }
 
@@ -192,16 +197,18 @@ impl SolveInfo {
             SolveInfo::Direct(i) => 1 + i.refinement_steps,
             SolveInfo::Cg(i) => i.iterations,
             SolveInfo::Bounded(i) => i.active_set_iterations + i.iterations,
+            SolveInfo::Sweeps(i) => i.iterations,
         }
     }
 
     /// The estimated distance to the minimizer in voxels (`None` for the direct solver,
-    /// exact up to rounding).
+    /// exact up to rounding, and for the sweeps, which stop early on purpose).
     pub fn error_estimate(&self) -> Option<f64> {
         match self {
             SolveInfo::Direct(_) => None,
             SolveInfo::Cg(i) => Some(i.error_estimate),
             SolveInfo::Bounded(i) => Some(i.error_estimate),
+            SolveInfo::Sweeps(_) => None,
         }
     }
 
@@ -211,6 +218,7 @@ impl SolveInfo {
             SolveInfo::Direct(i) => &i.seconds,
             SolveInfo::Cg(i) => &i.seconds,
             SolveInfo::Bounded(i) => &i.seconds,
+            SolveInfo::Sweeps(i) => &i.seconds,
         }
     }
 
@@ -220,6 +228,7 @@ impl SolveInfo {
             SolveInfo::Direct(i) => i.memory_bytes,
             SolveInfo::Cg(i) => i.memory_bytes,
             SolveInfo::Bounded(i) => i.memory_bytes,
+            SolveInfo::Sweeps(i) => i.memory_bytes,
         }
     }
 }

@@ -85,6 +85,7 @@ mod regularizer;
 mod report;
 mod solver;
 mod stencil;
+mod sweeps;
 mod unfold;
 mod vecops;
 mod weights;
@@ -111,6 +112,7 @@ pub use solver::{
     SolverParams,
 };
 pub use stencil::MatrixFreeOperator;
+pub use sweeps::{SweepsInfo, SweepsParams, SweepsSolver};
 /// The flag that stops a run early ([`Regularizer::set_interrupt`]), from
 /// `voxreg-normals`, whose estimators poll it too.
 pub use voxreg_normals::Interrupt;

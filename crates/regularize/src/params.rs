@@ -176,10 +176,11 @@ impl NormalsParams {
 /// Everything the front door ([`crate::regularize`], [`crate::Regularizer`]) does, from
 /// the volume's labels to the regularized positions.
 ///
-/// Three presets: [`Params::default`] (the fidelity pipeline: one solve, then refinement
+/// Four presets: [`Params::default`] (the fidelity pipeline: one solve, then refinement
 /// rounds with re-centring and weak alignment at creases), [`Params::papers`] (the
-/// papers' single solve) and [`Params::voxel_art`] (one solve clamped to the voxels'
-/// boxes, so the result never self-intersects).
+/// papers' single solve), [`Params::voxel_art`] (one solve clamped to the voxels'
+/// boxes, so the result never self-intersects) and [`Params::fast`] (batches of sweeps
+/// and cheap re-estimates, at about the cost of surface nets).
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Params {
     /// How labels form regions (materials). Default: every label its own region
@@ -321,6 +322,31 @@ impl Params {
         }
     }
 
+    /// The fast pipeline, for speed on a par with surface nets: trivial normals, then four
+    /// batches of [`crate::SweepsParams::default`]'s 8 damped block-Jacobi sweeps from the
+    /// staircase ([`SolverChoice::Sweeps`]), the normals re-estimated between batches by
+    /// diffusing the quads' vector areas over [`Params::FAST_RADIUS`] voxels
+    /// ([`voxreg_normals::Diffused`]); no integral invariants, no conjugate gradient, no
+    /// re-centring, crease weights or thin-sheet rule (`docs/design/fast-preset.md`).
+    pub fn fast() -> Self {
+        Params {
+            normals: NormalsParams { estimator: Estimator::Trivial, ..Default::default() },
+            refine: 3,
+            refine_radius: Self::FAST_RADIUS,
+            preserve_size: false,
+            crease_alignment: 1.0,
+            sheet_thickness: 0.0,
+            solver: SolverParams { choice: SolverChoice::Sweeps, ..Default::default() },
+            ..Default::default()
+        }
+    }
+
+    /// The re-estimates' radius of [`Params::fast`], in lattice steps
+    /// ([`voxreg_normals::Diffused`]): wider than the fidelity pipeline's 3-voxel discs,
+    /// since the field comes from quads only 8 sweeps from the staircase (on the sphere
+    /// R = 20, 1.89 degrees at 3, 1.26 at 6).
+    pub const FAST_RADIUS: f64 = 6.0;
+
     /// The ii normals' ball radius of [`Params::voxel_art`], in voxels
     /// ([`NormalsParams::radius_voxels`]).
     pub const VOXEL_ART_RADIUS: f64 = 2.0;
@@ -423,9 +449,11 @@ mod tests {
 
     #[test]
     fn presets_validate_and_differ_where_documented() {
-        for p in [Params::default(), Params::papers(), Params::voxel_art()] {
+        for p in [Params::default(), Params::papers(), Params::voxel_art(), Params::fast()] {
             p.validate().unwrap();
         }
+        assert_eq!(Params::fast().solver.choice, SolverChoice::Sweeps);
+        assert!(!Params::fast().clamps() && Params::fast().normals.estimator == Estimator::Trivial);
         assert_eq!(Params::papers().energy.alpha, 1e-3);
         assert!(Params::voxel_art().clamps() && !Params::default().clamps());
         assert_eq!(Params::voxel_art().regions, RegionMap::single_solid());

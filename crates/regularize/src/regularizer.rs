@@ -5,7 +5,9 @@ use std::time::Instant;
 
 use glam::DVec3;
 use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
-use voxreg_normals::{anisotropic_fit_weight, FeatureField, Interrupt, NormalField, ProbeHints, Refined};
+use voxreg_normals::{
+    anisotropic_fit_weight, Diffused, FeatureField, Interrupt, NormalField, ProbeHints, Refined,
+};
 
 use crate::energy::Energy;
 use crate::error::RegularizeError;
@@ -457,21 +459,28 @@ impl Regularizer {
                     iteration: None,
                     input: None,
                 });
-                let estimate = Refined {
-                    positions: &positions,
-                    previous: &field,
-                    radius: params.refine_radius,
-                    feature_angle_deg: params.feature_angle_deg,
-                }
-                .estimate_with_hints(&surface, &interrupt, &mut hints)?;
-                // Thin sheets keep the first round's normals.
-                let estimate = if round == 1 {
-                    held.iter_mut().for_each(|h| h.1 = estimate.as_slice()[h.0 as usize]);
-                    estimate
+                if let Solver::Sweeps(s) = &mut *solver {
+                    // The fast pipeline: the cheap re-estimate alone between the batches.
+                    let diffused =
+                        Diffused { positions: &positions, previous: &field, radius: params.refine_radius };
+                    field = diffused.estimate_on(&surface, s.graph(&surface), &interrupt)?;
                 } else {
-                    hold_thin_sheets(estimate, &held)
-                };
-                field = relaxed_normals(&field, estimate, &mut change);
+                    let estimate = Refined {
+                        positions: &positions,
+                        previous: &field,
+                        radius: params.refine_radius,
+                        feature_angle_deg: params.feature_angle_deg,
+                    }
+                    .estimate_with_hints(&surface, &interrupt, &mut hints)?;
+                    // Thin sheets keep the first round's normals.
+                    let estimate = if round == 1 {
+                        held.iter_mut().for_each(|h| h.1 = estimate.as_slice()[h.0 as usize]);
+                        estimate
+                    } else {
+                        hold_thin_sheets(estimate, &held)
+                    };
+                    field = relaxed_normals(&field, estimate, &mut change);
+                }
                 if let Some(r) = recentring {
                     let lift = (lift_weight > 0.0).then(|| {
                         let mut lift = sagitta_lift(&surface, &positions, &field);

@@ -13,6 +13,7 @@ use crate::energy::Energy;
 use crate::error::RegularizeError;
 use crate::info::SolveInfo;
 use crate::progress::Progress;
+use crate::sweeps::{SweepsParams, SweepsSolver};
 use voxreg_normals::Interrupt;
 
 /// Which solver [`Solver::new`] builds.
@@ -30,20 +31,30 @@ pub enum SolverChoice {
     /// Bound-constrained conjugate gradient ([`BoundedSolver`]), the only one that can
     /// clamp.
     Bounded,
+    /// A fixed number of damped block-Jacobi sweeps ([`SweepsSolver`]), not to a
+    /// tolerance: the fast pipeline, whose refinement rounds re-estimate the normals with
+    /// [`voxreg_normals::Diffused`] ([`crate::Params::fast`]).
+    Sweeps,
 }
 
 impl SolverChoice {
     /// Every choice.
-    pub const ALL: [SolverChoice; 4] =
-        [SolverChoice::Auto, SolverChoice::Direct, SolverChoice::Cg, SolverChoice::Bounded];
+    pub const ALL: [SolverChoice; 5] = [
+        SolverChoice::Auto,
+        SolverChoice::Direct,
+        SolverChoice::Cg,
+        SolverChoice::Bounded,
+        SolverChoice::Sweeps,
+    ];
 
-    /// `"auto"`, `"direct"`, `"cg"` or `"bounded"`.
+    /// `"auto"`, `"direct"`, `"cg"`, `"bounded"` or `"sweeps"`.
     pub fn name(self) -> &'static str {
         match self {
             SolverChoice::Auto => "auto",
             SolverChoice::Direct => "direct",
             SolverChoice::Cg => "cg",
             SolverChoice::Bounded => "bounded",
+            SolverChoice::Sweeps => "sweeps",
         }
     }
 }
@@ -108,6 +119,8 @@ pub struct SolverParams {
     /// Settings of the bound-constrained solver (its boxes included). Default:
     /// [`BoundedParams::default`].
     pub bounded: BoundedParams,
+    /// Settings of the sweeps. Default: [`SweepsParams::default`].
+    pub sweeps: SweepsParams,
 }
 
 impl SolverParams {
@@ -133,7 +146,7 @@ impl SolverParams {
     /// A preset's solver settings with a front end's choices applied over them (the CLI's
     /// `--solver` and `--clamp`/`--no-clamp`, the Python `solver=` and `clamp=`):
     /// `choice`, when given, replaces the preset's; an explicit unbounded choice
-    /// ([`SolverChoice::Direct`] or [`SolverChoice::Cg`]) or [`ClampOverride::Off`] drops
+    /// ([`SolverChoice::Direct`], [`SolverChoice::Cg`] or [`SolverChoice::Sweeps`]) or [`ClampOverride::Off`] drops
     /// the preset's boxes; [`ClampOverride::Eps`] sets them, which needs the bounded
     /// solver (`Auto`, or no choice, becomes [`SolverChoice::Bounded`]); dropping the
     /// voxel-art preset's boxes without a choice returns to [`SolverChoice::Auto`].
@@ -142,7 +155,8 @@ impl SolverParams {
         choice: Option<SolverChoice>,
         clamp: ClampOverride,
     ) -> Result<Self, OverrideError> {
-        let unbounded = matches!(choice, Some(SolverChoice::Direct | SolverChoice::Cg));
+        let unbounded =
+            matches!(choice, Some(SolverChoice::Direct | SolverChoice::Cg | SolverChoice::Sweeps));
         let eps = match clamp {
             ClampOverride::Eps(_) if unbounded => return Err(OverrideError::ClampNeedsBoundedSolver),
             ClampOverride::Eps(eps) if !(eps > 0.0 && eps < 1.0) => {
@@ -171,7 +185,7 @@ impl SolverParams {
                 self.choice
             )));
         }
-        Ok(())
+        self.sweeps.validate()
     }
 }
 
@@ -182,6 +196,7 @@ impl Default for SolverParams {
             direct_budget: 16 << 20,
             cg: CgParams::default(),
             bounded: BoundedParams::default(),
+            sweeps: SweepsParams::default(),
         }
     }
 }
@@ -196,6 +211,8 @@ pub enum Solver {
     Cg(CgSolver),
     /// Bound-constrained conjugate gradient, possibly clamped.
     Bounded(BoundedSolver),
+    /// Damped block-Jacobi sweeps.
+    Sweeps(SweepsSolver),
 }
 
 /// A quick estimate of the Cholesky factor's entries for a surface of `n` vertices
@@ -220,6 +237,7 @@ impl Solver {
             SolverChoice::Direct => Solver::Direct(DirectSolver::for_surface(surface)?),
             SolverChoice::Cg => Solver::Cg(CgSolver::for_surface(surface, params.cg)?),
             SolverChoice::Bounded => Solver::Bounded(BoundedSolver::for_surface(surface, params.bounded)?),
+            SolverChoice::Sweeps => Solver::Sweeps(SweepsSolver::for_surface(surface, params.sweeps)?),
             SolverChoice::Auto => {
                 let budget = params.direct_budget as f64 / 8.0;
                 if estimate_factor_nnz(surface.num_vertices()) <= 2.0 * budget {
@@ -233,12 +251,13 @@ impl Solver {
         })
     }
 
-    /// `"direct"`, `"cg"` or `"bounded"`.
+    /// `"direct"`, `"cg"`, `"bounded"` or `"sweeps"`.
     pub fn kind(&self) -> &'static str {
         match self {
             Solver::Direct(_) => "direct",
             Solver::Cg(_) => "cg",
             Solver::Bounded(_) => "bounded",
+            Solver::Sweeps(_) => "sweeps",
         }
     }
 
@@ -256,6 +275,7 @@ impl Solver {
         match self {
             Solver::Cg(s) => s.set_interrupt(interrupt),
             Solver::Bounded(s) => s.set_interrupt(interrupt),
+            Solver::Sweeps(s) => s.set_interrupt(interrupt),
             Solver::Direct(_) => {}
         }
     }
@@ -299,6 +319,14 @@ impl Solver {
             }
             (Solver::Bounded(s), SolveStart::Owned(x)) => {
                 s.solve_from(energy, &x, progress).map(|(x, i)| (x, SolveInfo::Bounded(i)))
+            }
+            (Solver::Sweeps(s), start) => {
+                let start = match start {
+                    SolveStart::Input => None,
+                    SolveStart::Given(x) => Some(x.to_vec()),
+                    SolveStart::Owned(x) => Some(x),
+                };
+                s.solve(energy, start, progress).map(|(x, i)| (x, SolveInfo::Sweeps(i)))
             }
         }?;
         if !keep_cycle {

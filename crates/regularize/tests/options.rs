@@ -13,6 +13,7 @@ fn reference(preset: Preset, o: &Overrides) -> Option<Params> {
         Preset::Default => Params::default(),
         Preset::Papers => Params::papers(),
         Preset::VoxelArt => Params::voxel_art(),
+        Preset::Fast => Params::fast(),
     };
     if let Some(Regions::Spec(s)) = &o.regions {
         p.regions = match s.as_str() {

@@ -124,6 +124,14 @@ mod tests {
     use voxreg_regularize::{Clamp, Estimator};
 
     #[test]
+    fn the_panel_lists_every_preset() {
+        let html = include_str!("../assets/index.html");
+        for preset in Preset::ALL {
+            assert!(html.contains(&format!("<option>{}</option>", preset.name())), "{preset}");
+        }
+    }
+
+    #[test]
     fn every_preset_round_trips_through_the_panel() {
         for preset in Preset::ALL {
             let p = preset.params();

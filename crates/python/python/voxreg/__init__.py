@@ -154,12 +154,14 @@ def regularize(
         How labels form regions (materials): "label" (each label its own), "solid" (all
         non-background labels one), a spec such as "1,2,3;7", or groups such as
         ``[[1, 2, 3], [7]]``. None: the preset's ("solid" for voxel_art, else "label").
-    preset : {"default", "papers", "voxel_art"}, default "default"
+    preset : {"default", "papers", "voxel_art", "fast"}, default "default"
         "default": the fidelity pipeline (ii normals, alpha 1e-2, 3 refinement rounds,
         re-centring); "papers": the papers' single solve (alpha 1e-3, no refinement);
         "voxel_art": one solve clamped to the voxels' boxes (never self-intersecting),
-        all colours one solid (what the CLI uses for .vox files).
-    normals : {"trivial", "convolved", "ii", "at"}, default None (preset: "ii")
+        all colours one solid (what the CLI uses for .vox files); "fast": about the
+        cost of surface nets (trivial normals, 4 batches of 8 block-Jacobi sweeps with
+        3 cheap re-estimates of the normals in between).
+    normals : {"trivial", "convolved", "ii", "at"}, default None (preset: "ii"; fast "trivial")
         Normal estimator driving the alignment term: each face's axis, axes averaged
         within the radius, integral invariants, or Ambrosio-Tortorelli (keeps sharp
         features).
@@ -178,10 +180,11 @@ def regularize(
         of thin curved shapes).
     texture_aware : bool, default None (preset: False)
         Texture-aware fairness: quad edges follow label boundaries (paper, sec. 4.5).
-    solver : {"auto", "direct", "cg", "bounded"}, default None (preset: "auto")
+    solver : {"auto", "direct", "cg", "bounded", "sweeps"}, default None (preset: "auto"; fast "sweeps")
         "auto": exact factorization for small surfaces, else cg; "direct": sparse
         Cholesky; "cg": multigrid conjugate gradient; "bounded": conjugate gradient in
-        per-vertex boxes (the only one that clamps; "gd" is its former name).
+        per-vertex boxes (the only one that clamps; "gd" is its former name); "sweeps":
+        the fast preset's fixed batches of block-Jacobi sweeps.
     clamp : bool or float, default None (preset: off; voxel_art 0.01)
         Keep every vertex within (1 - eps) voxel of its input, which rules out
         self-intersections. A float is eps in voxels, in (0, 1); True is the preset's
