@@ -57,41 +57,7 @@ fn a_zarr_json_declaring_a_billion_voxels_is_refused_under_ulimit() {
 
 #[test]
 fn vox_models_far_apart_are_refused_under_ulimit() {
-    use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
-    let model = || Model { size: Size { x: 1, y: 1, z: 1 }, voxels: vec![Voxel { x: 0, y: 0, z: 0, i: 1 }] };
-    let transform = |child: u32, t: &str| {
-        let mut frame = dot_vox::Dict::new();
-        frame.insert("_t".into(), t.into());
-        SceneNode::Transform {
-            attributes: dot_vox::Dict::new(),
-            frames: vec![Frame::new(frame)],
-            child,
-            layer_id: 0,
-        }
-    };
-    let shape = |model_id| SceneNode::Shape {
-        attributes: dot_vox::Dict::new(),
-        models: vec![ShapeModel { model_id, attributes: dot_vox::Dict::new() }],
-    };
-    let scenes = vec![
-        transform(1, "0 0 0"),
-        SceneNode::Group { attributes: dot_vox::Dict::new(), children: vec![2, 4] },
-        transform(3, "0 0 0"),
-        shape(0),
-        transform(5, "2047 1023 1023"),
-        shape(1),
-    ];
-    let data = DotVoxData {
-        version: 150,
-        index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
-        models: vec![model(), model()],
-        palette: vec![Color { r: 1, g: 2, b: 3, a: 255 }; 256],
-        materials: Vec::new(),
-        scenes,
-        layers: Vec::new(),
-    };
-    let mut bytes = Vec::new();
-    data.write_vox(&mut bytes).unwrap();
+    let bytes = voxreg_testkit::two_model_vox("2047 1023 1023");
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("far.vox");
     std::fs::write(&path, bytes).unwrap();
@@ -181,15 +147,8 @@ fn info_is_refused_over_the_budget_as_regularize_is() {
     // (tens of MB) is not.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("checker.npy");
-    let mut header = "{'descr': '|u1', 'fortran_order': False, 'shape': (16, 16, 16), }".to_string();
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header.as_bytes());
-    bytes.extend((0..16 * 16 * 16).map(|i: usize| ((i + i / 16 + i / 256) % 2) as u8));
+    let checker = (0..16 * 16 * 16).map(|i: usize| ((i + i / 16 + i / 256) % 2) as u8);
+    let bytes = voxreg_testkit::npy_bytes("|u1", [16; 3], checker);
     std::fs::write(&path, bytes).unwrap();
     let out = dir.path().join("m.obj");
     for args in [
