@@ -345,7 +345,6 @@ pub(crate) fn plateau_weights(
 
 #[cfg(test)]
 mod tests {
-    use voxreg_normals::NormalEstimator;
     use voxreg_testkit::{digitize, Cuboid, Lcg, Sphere};
 
     use super::*;

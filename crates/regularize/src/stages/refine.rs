@@ -268,6 +268,7 @@ pub(crate) fn hold_thin_sheets(estimate: NormalField, held: &[(u32, DVec3, f64)]
 #[cfg(test)]
 mod tests {
     use voxreg_normals::NormalEstimator;
+    use voxreg_testkit::{digitize, Sphere};
 
     use super::*;
 
