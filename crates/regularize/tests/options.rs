@@ -95,14 +95,16 @@ impl Former {
 /// and the re-centring it ignored then); otherwise the refinement, the intermediate
 /// tolerance and the re-centring (its sigma only when on).
 fn typed(f: Former) -> Params {
-    let mut p = Params::default();
-    p.regions = f.regions;
-    p.normals = f.normals;
-    p.energy = f.energy;
-    p.texture_aware = f.texture_aware;
-    p.junction_fairness = f.junction_fairness;
-    p.fold_free = f.fold_free;
-    p.solver = f.solver;
+    let mut p = Params {
+        regions: f.regions,
+        normals: f.normals,
+        energy: f.energy,
+        texture_aware: f.texture_aware,
+        junction_fairness: f.junction_fairness,
+        fold_free: f.fold_free,
+        solver: f.solver,
+        ..Default::default()
+    };
     (p.solver.bounded.clamp, p.solver.bounded.thin_depth) = (None, None);
     let r = p.refinement_mut();
     (r.rounds, r.radius, r.feature_angle_deg, r.sheet_thickness) =
