@@ -17,6 +17,7 @@ use voxreg::normals::NormalEstimator;
 use voxreg::normals::NormalField;
 use voxreg::regularize::{
     BoundedParams, BoundedSolver, CgParams, CgSolver, DirectSolver, Energy, EnergyParams, Preconditioner,
+    SolveRequest,
 };
 use voxreg_testkit::{digitize, true_normals, Sphere};
 
@@ -38,18 +39,23 @@ fn solvers(c: &mut Criterion) {
             b.iter(|| {
                 CgSolver::for_surface(black_box(&surface), CgParams::default())
                     .unwrap()
-                    .solve(&energy)
+                    .solve(&energy, SolveRequest::default())
                     .unwrap()
             })
         });
         let mut reused = CgSolver::for_surface(&surface, CgParams::default()).unwrap();
         g.bench_function(format!("cg-reused/{name}"), |b| {
-            b.iter(|| reused.solve(black_box(&energy)).unwrap())
+            b.iter(|| reused.solve(black_box(&energy), SolveRequest::default()).unwrap())
         });
         if radius < 50.0 {
             let block = CgParams { preconditioner: Preconditioner::BlockJacobi, ..Default::default() };
             g.bench_function(format!("cg-block-jacobi/{name}"), |b| {
-                b.iter(|| CgSolver::for_surface(black_box(&surface), block).unwrap().solve(&energy).unwrap())
+                b.iter(|| {
+                    CgSolver::for_surface(black_box(&surface), block)
+                        .unwrap()
+                        .solve(&energy, SolveRequest::default())
+                        .unwrap()
+                })
             });
             g.bench_function(format!("direct/{name}"), |b| {
                 b.iter(|| DirectSolver::for_surface(black_box(&surface)).unwrap().solve(&energy).unwrap())
@@ -67,7 +73,12 @@ fn solvers(c: &mut Criterion) {
     let energy = Energy::new(&surface, &normals, &input, EnergyParams::default()).expect("valid energy");
     let clamped = BoundedParams { clamp: Some(0.01), ..Default::default() };
     g.bench_function("gd-clamped/veh_fire", |b| {
-        b.iter(|| BoundedSolver::for_surface(black_box(&surface), clamped).unwrap().solve(&energy).unwrap())
+        b.iter(|| {
+            BoundedSolver::for_surface(black_box(&surface), clamped)
+                .unwrap()
+                .solve(&energy, SolveRequest::default())
+                .unwrap()
+        })
     });
     g.finish();
 }

@@ -36,9 +36,9 @@ pub(crate) fn case(data: &[u8]) -> Option<(LabelVolume, Params)> {
         2 => SolverChoice::Cg,
         _ => SolverChoice::Bounded,
     };
-    params.refine = usize::from(choices / 48) % 3;
+    params.refinement_mut().rounds = usize::from(choices / 48) % 3;
     if numbers & 1 == 1 {
-        params.solver = params.solver.clamped(Some(0.01 + f64::from(numbers >> 5) * 0.05));
+        params.mode = params.mode.with_margin(0.01 + f64::from(numbers >> 5) * 0.05);
     }
     let scale = 10f64.powi(i32::from((numbers >> 1) & 15) - 8);
     params.energy.alpha *= scale;

@@ -182,10 +182,8 @@ fn voxreg(surface: &DigitalSurface, normals: &NormalField, params: EnergyParams)
 /// `(1 - eps) h`.
 fn voxreg_clamped(surface: &DigitalSurface, normals: &NormalField, eps: f64) -> Result<Vec<DVec3>> {
     // 0.01 voxel is invisible in a figure and takes a third of the iterations of 1e-3.
-    let p = Params {
-        solver: SolverParams::default().with_tolerance(1e-2).clamped(Some(eps)),
-        ..Params::papers()
-    };
+    let mut p = Params { solver: SolverParams::default().with_tolerance(1e-2), ..Params::papers() };
+    p.mode = p.mode.with_margin(eps);
     let t = Instant::now();
     let out = Regularizer::new(surface.clone()).run(Run::new(&p).from_normals(normals))?;
     if let SolveInfo::Bounded(info) = out.report.last_solve() {

@@ -45,7 +45,7 @@ fn run_once(surface: &DigitalSurface) -> Result<Run> {
     let mut cg = CgSolver::for_surface(surface, CgParams::default())?;
     let cg_pre = t.elapsed().as_secs_f64();
     let t = Instant::now();
-    let (_, info) = cg.solve(&energy)?;
+    let (_, info) = cg.solve(&energy, voxreg_regularize::SolveRequest::default())?;
     let cg_solve = t.elapsed().as_secs_f64();
     Ok(Run { normals: normals_s, direct_pre, direct_solve, cg_pre, cg_solve, cg_iterations: info.iterations })
 }

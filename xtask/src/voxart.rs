@@ -73,7 +73,7 @@ pub(crate) fn measure(path: &Path, params: &Params) -> Result<(Row, Output, voxr
 /// fold removal, ii normals of the multigrid rule's radius (3 voxels), `gamma = 0.1`.
 pub(crate) fn former_default() -> Params {
     let mut p = Params::voxel_art();
-    p.solver.bounded.thin_depth = None;
+    p.mode.clamped_mut().expect("the preset clamps").thin_depth = None;
     p.fold_free = false;
     p.normals.radius_voxels = None;
     p.energy.gamma = Params::ENERGY.gamma;
@@ -100,11 +100,12 @@ pub(crate) fn voxart(args: &[String]) -> Result<()> {
                 let s: f64 = it.next().context("--smoothness needs a number")?.parse()?;
                 params = params.with_smoothness(s)?;
             }
-            "--no-clamp" => params.solver = params.solver.clamped(None),
+            "--no-clamp" => params.mode = params.mode.unclamped(),
             // The parts of the preset, one at a time (for the design record's comparisons).
             "--thin-depth" => {
                 let d = it.next().context("--thin-depth needs a number or none")?;
-                params.solver.bounded.thin_depth = if d == "none" { None } else { Some(d.parse()?) };
+                let depth = if d == "none" { None } else { Some(d.parse()?) };
+                params.mode.clamped_mut().context("--thin-depth needs the boxes")?.thin_depth = depth;
             }
             "--no-unfold" => params.fold_free = false,
             "--former" => params = former_default(),

@@ -223,15 +223,8 @@ fn info_is_refused_over_the_budget_as_regularize_is() {
     // (tens of MB) is not.
     let dir = tempfile::tempdir().unwrap();
     let path = dir.path().join("checker.npy");
-    let mut header = "{'descr': '|u1', 'fortran_order': False, 'shape': (16, 16, 16), }".to_string();
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header.as_bytes());
-    bytes.extend((0..16 * 16 * 16).map(|i: usize| ((i + i / 16 + i / 256) % 2) as u8));
+    let checker = (0..16 * 16 * 16).map(|i: usize| ((i + i / 16 + i / 256) % 2) as u8);
+    let bytes = voxreg_testkit::npy_bytes("|u1", [16; 3], checker);
     std::fs::write(&path, bytes).unwrap();
     let out = dir.path().join("m.obj");
     for args in [

@@ -122,7 +122,7 @@ fn the_preset_is_smooth_away_from_thin_parts_and_keeps_hard_edges() {
     use voxreg_io::QuadMesh;
     use voxreg_regularize::{Params, Regularizer};
     let mut former = Params::voxel_art();
-    former.solver.bounded.thin_depth = None;
+    former.mode.clamped_mut().unwrap().thin_depth = None;
     former.fold_free = false;
     former.normals.radius_voxels = None;
     former.energy.gamma = Params::ENERGY.gamma;
@@ -351,7 +351,7 @@ fn the_active_set_rounds_reach_mprgps_minimizer() {
         let energy = Energy::new(r.surface(), &fast.normals, &fast.targets, params.energy).unwrap();
         let (ef, es) = (energy.terms(&fast.positions).total, energy.terms(&slow.positions).total);
         assert!((ef - es).abs() <= 1e-5 * es, "{name}: energies {ef} and {es}");
-        let half = 0.5 * (1.0 - params.solver.bounded.clamp.unwrap()) + 1e-12;
+        let half = 0.5 * (1.0 - params.mode.clamped().unwrap().margin) + 1e-12;
         let input = r.surface().positions();
         assert!(fast.positions.iter().zip(&input).all(|(p, q)| (*p - *q).abs().max_element() <= half));
     }

@@ -68,4 +68,4 @@ pub use ids::{EdgeId, InterfaceId, RegionId, SurfelId, VertexId};
 pub use patch::{Patch, PatchParams};
 pub use regions::{RegionMap, Regions};
 pub use surface::{DigitalSurface, Edge, EdgeKind, Interface, SurfaceCounts, Surfel};
-pub use volume::{LabelStorage, LabelView, LabelVolume, Voxel};
+pub use volume::{checked_origin, checked_spacing, LabelStorage, LabelView, LabelVolume, Voxel};

@@ -153,25 +153,37 @@ impl LabelVolume {
     }
 }
 
+/// `spacing` if each component is finite and positive (a voxel's physical size), else
+/// the one-line error every volume gives for it.
+pub fn checked_spacing(spacing: DVec3) -> Result<DVec3, SurfaceError> {
+    if !(spacing.is_finite() && spacing.min_element() > 0.0) {
+        return Err(SurfaceError::InvalidVolume(format!(
+            "voxel spacing must be finite and positive, got {spacing}"
+        )));
+    }
+    Ok(spacing)
+}
+
+/// `origin` if it is finite (the centre of voxel `[0, 0, 0]`), else the one-line error
+/// every volume gives for it.
+pub fn checked_origin(origin: DVec3) -> Result<DVec3, SurfaceError> {
+    if !origin.is_finite() {
+        return Err(SurfaceError::InvalidVolume(format!("origin must be finite, got {origin}")));
+    }
+    Ok(origin)
+}
+
 impl<S: Data<Elem = u32>> LabelVolume<S> {
     /// Sets the physical size of a voxel along x, y and z (default `1, 1, 1`).
     /// Each component must be finite and positive.
     pub fn with_spacing(mut self, spacing: DVec3) -> Result<Self, SurfaceError> {
-        if !(spacing.is_finite() && spacing.min_element() > 0.0) {
-            return Err(SurfaceError::InvalidVolume(format!(
-                "voxel spacing must be finite and positive, got {spacing}"
-            )));
-        }
-        self.spacing = spacing;
+        self.spacing = checked_spacing(spacing)?;
         Ok(self)
     }
 
     /// Sets the physical position of the centre of voxel `[0, 0, 0]` (default `0`).
     pub fn with_origin(mut self, origin: DVec3) -> Result<Self, SurfaceError> {
-        if !origin.is_finite() {
-            return Err(SurfaceError::InvalidVolume(format!("origin must be finite, got {origin}")));
-        }
-        self.origin = origin;
+        self.origin = checked_origin(origin)?;
         Ok(self)
     }
 

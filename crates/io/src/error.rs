@@ -92,10 +92,10 @@ pub enum IoError {
     },
 }
 
-impl IoError {
-    /// The file the error is about.
-    pub fn path(&self) -> &std::path::Path {
-        match self {
+/// The `path` field of an [`IoError`] (every variant has one), borrowed as `$error` is.
+macro_rules! path_field {
+    ($error:expr) => {
+        match $error {
             IoError::Io { path, .. }
             | IoError::Format { path, .. }
             | IoError::Unsupported { path, .. }
@@ -105,21 +105,19 @@ impl IoError {
             | IoError::InvalidMesh { path, .. }
             | IoError::Volume { path, .. } => path,
         }
+    };
+}
+
+impl IoError {
+    /// The file the error is about.
+    pub fn path(&self) -> &std::path::Path {
+        path_field!(self)
     }
 
     /// The same error, said of the file under `to` where it was about one under `from`
     /// (a staged file, for the file it stands for).
     pub(crate) fn relocated(mut self, from: &std::path::Path, to: &std::path::Path) -> Self {
-        let path = match &mut self {
-            IoError::Io { path, .. }
-            | IoError::Format { path, .. }
-            | IoError::Unsupported { path, .. }
-            | IoError::TooLarge { path, .. }
-            | IoError::OverBudget { path, .. }
-            | IoError::UnsupportedExtension { path, .. }
-            | IoError::InvalidMesh { path, .. }
-            | IoError::Volume { path, .. } => path,
-        };
+        let path = path_field!(&mut self);
         if let Ok(rest) = path.strip_prefix(from) {
             *path = to.join(rest);
         }

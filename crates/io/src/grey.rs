@@ -2,7 +2,7 @@
 
 use glam::DVec3;
 use ndarray::{Array3, ShapeBuilder};
-use voxreg_digisurf::{LabelVolume, SurfaceError};
+use voxreg_digisurf::{checked_origin, checked_spacing, LabelVolume, SurfaceError};
 
 /// A 3D array of grey levels (`f64`, never NaN) with a physical embedding.
 ///
@@ -62,21 +62,13 @@ impl GreyVolume {
     /// Sets the physical size of a voxel (default `1, 1, 1`); each component must be
     /// finite and positive.
     pub fn with_spacing(mut self, spacing: DVec3) -> Result<Self, SurfaceError> {
-        if !(spacing.is_finite() && spacing.min_element() > 0.0) {
-            return Err(SurfaceError::InvalidVolume(format!(
-                "voxel spacing must be finite and positive, got {spacing}"
-            )));
-        }
-        self.spacing = spacing;
+        self.spacing = checked_spacing(spacing)?;
         Ok(self)
     }
 
     /// Sets the physical position of the centre of voxel `[0, 0, 0]` (default `0`).
     pub fn with_origin(mut self, origin: DVec3) -> Result<Self, SurfaceError> {
-        if !origin.is_finite() {
-            return Err(SurfaceError::InvalidVolume(format!("origin must be finite, got {origin}")));
-        }
-        self.origin = origin;
+        self.origin = checked_origin(origin)?;
         Ok(self)
     }
 

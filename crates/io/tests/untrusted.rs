@@ -30,15 +30,7 @@ fn within<T: Send + 'static>(secs: u64, f: impl FnOnce() -> T + Send + 'static) 
 
 /// A `.npy` of `u1` values, shape `(1, 1, 1)`, followed by `padding` bytes.
 fn npy_with_padding(path: &Path, padding: usize) {
-    let mut header = "{'descr': '|u1', 'fortran_order': False, 'shape': (1, 1, 1), }".to_string();
-    while (10 + header.len() + 1) % 64 != 0 {
-        header.push(' ');
-    }
-    header.push('\n');
-    let mut bytes = b"\x93NUMPY\x01\x00".to_vec();
-    bytes.extend((header.len() as u16).to_le_bytes());
-    bytes.extend(header.as_bytes());
-    bytes.push(1);
+    let mut bytes = voxreg_testkit::npy_bytes("|u1", [1; 3], [1]);
     bytes.resize(bytes.len() + padding, 0);
     std::fs::write(path, bytes).unwrap();
 }
@@ -288,41 +280,7 @@ fn coordinates_a_mesh_cannot_represent_are_refused() {
 
 #[test]
 fn vox_corrupt_scene_graph_is_refused_not_dropped() {
-    use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
-    let model = || Model { size: Size { x: 1, y: 1, z: 1 }, voxels: vec![Voxel { x: 0, y: 0, z: 0, i: 1 }] };
-    let transform = |child: u32, t: &str| {
-        let mut frame = dot_vox::Dict::new();
-        frame.insert("_t".into(), t.into());
-        SceneNode::Transform {
-            attributes: dot_vox::Dict::new(),
-            frames: vec![Frame::new(frame)],
-            child,
-            layer_id: 0,
-        }
-    };
-    let shape = |model_id| SceneNode::Shape {
-        attributes: dot_vox::Dict::new(),
-        models: vec![ShapeModel { model_id, attributes: dot_vox::Dict::new() }],
-    };
-    let scenes = vec![
-        transform(1, "0 0 0"),
-        SceneNode::Group { attributes: dot_vox::Dict::new(), children: vec![2, 4] },
-        transform(3, "0 0 0"),
-        shape(0),
-        transform(5, "4 0 0"),
-        shape(1),
-    ];
-    let data = DotVoxData {
-        version: 150,
-        index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
-        models: vec![model(), model()],
-        palette: vec![Color { r: 1, g: 2, b: 3, a: 255 }; 256],
-        materials: Vec::new(),
-        scenes,
-        layers: Vec::new(),
-    };
-    let mut bytes = Vec::new();
-    data.write_vox(&mut bytes).unwrap();
+    let mut bytes = voxreg_testkit::two_model_vox("4 0 0");
     let whole = read_vox_bytes(&bytes, Path::new("s.vox")).unwrap();
     assert_eq!(whole.volume.label_counts(), vec![(0, 3), (2, 2)]);
     // The first nTRN's attribute count made huge: dot_vox drops the chunk.

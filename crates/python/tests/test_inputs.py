@@ -94,7 +94,7 @@ def test_regions_groups_and_presets():
     assert voxreg.regularize(labels, regions="1,2").interfaces() == [(1, 0)]
     assert len(voxreg.regularize(labels, regions="label").interfaces()) == 3
     art = voxreg.regularize(labels, preset="voxel_art")
-    assert art.report["params"]["solver"]["bounded"]["clamp"] == 0.01
+    assert art.report["params"]["mode"]["clamped"]["margin"] == 0.01
     assert voxreg.check(art)["intersecting_pairs"] == 0
 
 

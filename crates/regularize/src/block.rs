@@ -223,7 +223,7 @@ fn owned_part(
 mod tests {
     use std::collections::BTreeMap;
 
-    use super::*;
+    use crate::block::*;
 
     /// Two labels and background in 12 x 10 x 9 voxels, touching the volume's border.
     fn volume() -> LabelVolume {

@@ -19,6 +19,7 @@ use crate::info::{BoundedInfo, Preconditioner};
 use crate::iterative::{Prepared, Setup};
 use crate::multigrid::MultigridParams;
 use crate::progress::Progress;
+use crate::request::{SolveRequest, SolveStart};
 use crate::stencil::MatrixFreeOperator;
 use crate::stencil::CHUNK;
 use crate::vecops::{dot, norm, tail_estimate};
@@ -170,36 +171,35 @@ impl BoundedSolver {
         self.interrupt = interrupt;
     }
 
-    /// Minimizes `energy` from its input positions.
-    pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
-        self.solve_with(energy, &mut |_| {})
-    }
-
-    /// [`BoundedSolver::solve`], calling `progress` after each iteration.
-    pub fn solve_with(
+    /// Minimizes `energy` as `request` asks, calling its `progress` after each iteration.
+    ///
+    /// A given start (one position per vertex) is projected into the boxes: a re-solve
+    /// after a small change of the weights or the boxes, from the previous solution, finds
+    /// the same minimizer (the problem is convex) with fewer operator products. When
+    /// clamping with [`BoundedParams::conjugate`], the active-set rounds start from it (its
+    /// coordinates on a bound that the gradient pushes outwards held), instead of from the
+    /// unconstrained minimizer, which is not computed; a start whose projection has a
+    /// higher energy than the input is dropped for the input. The solver keeps its own
+    /// tolerance ([`BoundedParams::tolerance`]) and has no cycle to keep: the request's
+    /// `tolerance`, `quick_start` and `keep_cycle` are the conjugate gradient's.
+    pub fn solve(
         &mut self,
         energy: &Energy<'_>,
-        progress: &mut dyn FnMut(&Progress),
+        request: SolveRequest<'_>,
     ) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
-        self.run(energy, None, progress)
-    }
-
-    /// [`BoundedSolver::solve_with`], iterating from `start` (one position per vertex)
-    /// projected into the boxes: a re-solve after a small change of the weights or the
-    /// boxes, from the previous solution, finds the same minimizer (the problem is convex)
-    /// with fewer operator products. When clamping with [`BoundedParams::conjugate`], the
-    /// active-set rounds start from it (its coordinates on a bound that the gradient
-    /// pushes outwards held), instead of from the unconstrained minimizer, which is not
-    /// computed; a start whose projection has a higher energy than the input is dropped
-    /// for the input.
-    pub fn solve_from(
-        &mut self,
-        energy: &Energy<'_>,
-        start: &[DVec3],
-        progress: &mut dyn FnMut(&Progress),
-    ) -> Result<(Vec<DVec3>, BoundedInfo), RegularizeError> {
-        energy.check_start(start)?;
-        self.run(energy, Some(start), progress)
+        let mut silent = |_: &Progress| {};
+        let progress = request.progress.unwrap_or(&mut silent);
+        match request.start {
+            SolveStart::Input => self.run(energy, None, progress),
+            SolveStart::Given(start) => {
+                energy.check_start(start)?;
+                self.run(energy, Some(start), progress)
+            }
+            SolveStart::Owned(start) => {
+                energy.check_start(&start)?;
+                self.run(energy, Some(&start), progress)
+            }
+        }
     }
 
     fn run(

@@ -790,6 +790,7 @@ mod tests {
     fn every_phase_writes_the_shared_vectors_before_reading_them() {
         use crate::bounded::{BoundedParams, BoundedSolver};
         use crate::energy::{Energy, EnergyParams};
+        use crate::request::SolveRequest;
         use voxreg_digisurf::DigitalSurface;
         use voxreg_normals::NormalField;
         use voxreg_testkit::{digitize, true_normals, Sphere};
@@ -804,7 +805,8 @@ mod tests {
             let params = BoundedParams { clamp: Some(0.01), active_set_rounds: rounds, ..Default::default() };
             let solve = |poisoned: bool| {
                 POISONED_WORK.with(|p| p.set(poisoned));
-                let out = BoundedSolver::for_surface(&s, params).unwrap().solve(&energy);
+                let out =
+                    BoundedSolver::for_surface(&s, params).unwrap().solve(&energy, SolveRequest::default());
                 POISONED_WORK.with(|p| p.set(false));
                 out.unwrap()
             };

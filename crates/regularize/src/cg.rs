@@ -12,6 +12,7 @@ use crate::info::{CgInfo, Preconditioner};
 use crate::iterative::Setup;
 use crate::multigrid::MultigridParams;
 use crate::progress::Progress;
+use crate::request::{SolveRequest, SolveStart};
 use crate::stencil::MatrixFreeOperator;
 use crate::stencil::{Coefficients, Stencil, CHUNK};
 use crate::vecops::{cg_update, dot, norm, scale_add, tail_estimate};
@@ -83,7 +84,7 @@ pub struct CgSolver {
     params: CgParams,
     setup: Setup,
     /// Whether solves from a given start begin on the last solve's multigrid cycle
-    /// ([`CgSolver::set_quick_start`]).
+    /// ([`SolveRequest::quick_start`]).
     quick_start: bool,
     /// Polled by the multigrid setup (between levels) and before each iteration.
     interrupt: Interrupt,
@@ -164,31 +165,6 @@ impl CgSolver {
         &self.params
     }
 
-    /// Sets the tolerance of the next solves (the refinement loop's intermediate solves
-    /// stop earlier than its last).
-    pub(crate) fn set_tolerance(&mut self, tolerance: f64) -> Result<(), RegularizeError> {
-        check_tolerance(tolerance)?;
-        self.params.tolerance = tolerance;
-        Ok(())
-    }
-
-    /// Whether the next solves from a given start ([`CgSolver::solve_from`], with a
-    /// progress callback) begin on the last solve's multigrid cycle, its fine level put on
-    /// the new energy, and build the energy's own cycle only after the first iteration,
-    /// restarting from that iterate: the first iterate comes without waiting for the
-    /// coarse levels' setup (a re-solve after a parameter change, shown as it converges).
-    /// The minimizer and the stopping rule are those of any solve; the iterations may
-    /// differ by one or two. Off by default.
-    pub(crate) fn set_quick_start(&mut self, on: bool) {
-        self.quick_start = on;
-    }
-
-    /// Drops the multigrid cycle kept from the last solve for a quick start: its memory
-    /// is free for what runs before a next solve that will not quick-start.
-    pub(crate) fn forget_kept_cycle(&mut self) {
-        self.setup.forget_kept();
-    }
-
     /// The flag the next solves poll: once raised, a solve returns
     /// [`RegularizeError::Interrupted`] at its next multigrid level or iteration, keeping
     /// its cycle for the next quick start. Default: [`Interrupt::never`].
@@ -201,46 +177,50 @@ impl CgSolver {
         self.setup.levels()
     }
 
-    /// Minimizes `energy` from its input positions; returns the positions and a report.
-    pub fn solve(&mut self, energy: &Energy<'_>) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        self.run(energy, Start::Input, None)
-    }
-
-    /// [`CgSolver::solve`], calling `progress` after each iteration (its energy costs two
-    /// extra dot products per iteration).
-    pub fn solve_with(
+    /// Minimizes `energy` as `request` asks; returns the positions and a report.
+    ///
+    /// - `start`: the input positions, or given ones (one per vertex): the same minimizer
+    ///   to the same tolerance, in fewer iterations when the start is close to it (the
+    ///   previous solve of a refinement loop, whose normals and targets changed little);
+    ///   the reported relative gradient stays relative to the gradient at the input. An
+    ///   owned start becomes the iterate's vector (one vector fewer held).
+    /// - `tolerance`: replaces [`CgParams::tolerance`] for this solve and the next.
+    /// - `quick_start`: from a given start and with a listener, begin on the last solve's
+    ///   kept multigrid cycle, its fine level put on the new energy, and build the energy's
+    ///   own cycle only after the first iteration, restarting from that iterate: the first
+    ///   iterate comes without waiting for the coarse levels' setup. The minimizer and the
+    ///   stopping rule are those of any solve; the iterations may differ by one or two.
+    /// - `keep_cycle`: keep this solve's cycle for a next quick start (an interrupted solve
+    ///   keeps it anyway); otherwise its memory is freed at the end.
+    /// - `progress`: called after each iteration (its energy costs two extra dot products
+    ///   per iteration).
+    pub fn solve(
         &mut self,
         energy: &Energy<'_>,
-        progress: &mut dyn FnMut(&Progress),
+        request: SolveRequest<'_>,
     ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        self.run(energy, Start::Input, Some(progress))
-    }
-
-    /// [`CgSolver::solve_with`], iterating from `start` (one position per vertex) instead
-    /// of the input positions: the same minimizer to the same tolerance, in fewer
-    /// iterations when `start` is close to it (the previous solve of a refinement loop,
-    /// whose normals and targets changed little). The reported relative gradient stays
-    /// relative to the gradient at the input positions.
-    pub fn solve_from(
-        &mut self,
-        energy: &Energy<'_>,
-        start: &[DVec3],
-        progress: &mut dyn FnMut(&Progress),
-    ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        energy.check_start(start)?;
-        self.run(energy, Start::Given(start), Some(progress))
-    }
-
-    /// [`CgSolver::solve_from`] with a start the solver may take: its vector becomes the
-    /// iterate's (one vector fewer held during the solve), and the result comes back in it.
-    pub(crate) fn solve_from_owned(
-        &mut self,
-        energy: &Energy<'_>,
-        start: Vec<DVec3>,
-        progress: &mut dyn FnMut(&Progress),
-    ) -> Result<(Vec<DVec3>, CgInfo), RegularizeError> {
-        energy.check_start(&start)?;
-        self.run(energy, Start::Taken(start), Some(progress))
+        let SolveRequest { start, tolerance, quick_start, keep_cycle, progress } = request;
+        if let Some(t) = tolerance {
+            check_tolerance(t)?;
+            self.params.tolerance = t;
+        }
+        self.quick_start = quick_start;
+        let start = match start {
+            SolveStart::Input => Start::Input,
+            SolveStart::Given(x) => {
+                energy.check_start(x)?;
+                Start::Given(x)
+            }
+            SolveStart::Owned(x) => {
+                energy.check_start(&x)?;
+                Start::Taken(x)
+            }
+        };
+        let out = self.run(energy, start, progress)?;
+        if !keep_cycle {
+            self.setup.forget_kept();
+        }
+        Ok(out)
     }
 
     fn run(
@@ -526,12 +506,22 @@ mod quick_start {
         solver: &mut CgSolver,
         energy: &Energy<'_>,
         start: &[DVec3],
+        quick: bool,
     ) -> (Vec<DVec3>, CgInfo, Option<usize>, usize) {
         let before = setups();
         let mut first = None;
-        let (x, info) =
-            solver.solve_from(energy, start, &mut |_| _ = *first.get_or_insert(setups() - before)).unwrap();
+        let mut progress = |_: &Progress| _ = *first.get_or_insert(setups() - before);
+        let request = SolveRequest::from(SolveStart::Given(start))
+            .quick_start(quick)
+            .keep_cycle(true)
+            .progress(&mut progress);
+        let (x, info) = solver.solve(energy, request).unwrap();
         (x, info, first, setups() - before)
+    }
+
+    /// A cold solve that keeps its cycle.
+    fn cold(solver: &mut CgSolver, energy: &Energy<'_>) -> (Vec<DVec3>, CgInfo) {
+        solver.solve(energy, SolveRequest::default().keep_cycle(true)).unwrap()
     }
 
     #[test]
@@ -545,7 +535,7 @@ mod quick_start {
         let mut solver = CgSolver::for_surface(&s, CgParams::default()).unwrap();
         assert!(solver.levels() > 2, "a hierarchy with coarse levels");
         let before = Energy::new(&s, &exact_normals, &input, base).unwrap();
-        let (x0, _) = solver.solve(&before).unwrap();
+        let (x0, _) = cold(&mut solver, &before);
         // Changes far larger than a slider step: the stale cycle is a poor match.
         let changes = [
             (EnergyParams { gamma: base.gamma * 10.0, ..base }, &exact_normals),
@@ -556,15 +546,12 @@ mod quick_start {
             let energy = Energy::new(&s, normals, &input, params).unwrap();
             let (exact, _) = DirectSolver::for_surface(&s).unwrap().solve(&energy).unwrap();
             // The kept cycle is the first energy's; the quick start begins on it.
-            solver.set_quick_start(false);
-            solver.solve(&before).unwrap();
-            solver.set_quick_start(true);
-            let (quick, info, first, total) = solve(&mut solver, &energy, &x0);
+            cold(&mut solver, &before);
+            let (quick, info, first, total) = solve(&mut solver, &energy, &x0, true);
             assert_eq!(first, Some(0), "{params:?}: no multigrid setup before the first iterate");
             assert_eq!(total, 1, "the energy's own cycle after it");
             assert_eq!(info.quick_start_iterations, 1);
-            solver.set_quick_start(false);
-            let (plain, plain_info, first, total) = solve(&mut solver, &energy, &x0);
+            let (plain, plain_info, first, total) = solve(&mut solver, &energy, &x0, false);
             assert_eq!((first, total), (Some(1), 1), "without it, the setup comes first");
             let tol = solver.params().tolerance;
             assert!(info.converged);
@@ -589,14 +576,15 @@ mod quick_start {
         let input = s.positions();
         let energy = Energy::new(&s, &normals, &input, EnergyParams::default()).unwrap();
         let mut solver = CgSolver::for_surface(&s, CgParams::default()).unwrap();
-        solver.set_quick_start(true);
         // Nothing kept yet: the first solve sets up its own cycle first.
-        let (x, info, first, _) = solve(&mut solver, &energy, &input);
+        let (x, info, first, _) = solve(&mut solver, &energy, &input, true);
         assert_eq!((first, info.quick_start_iterations), (Some(1), 0));
         // No start (a cold solve) or no listener: nothing to show early.
-        let (_, info) = solver.solve_with(&energy, &mut |_| {}).unwrap();
+        let request = SolveRequest::default().quick_start(true).keep_cycle(true);
+        let (_, info) = solver.solve(&energy, request.progress(&mut |_| {})).unwrap();
         assert_eq!(info.quick_start_iterations, 0);
-        let (_, info) = solver.run(&energy, Start::Given(&x), None).unwrap();
+        let request = SolveRequest::from(SolveStart::Given(&x)).quick_start(true).keep_cycle(true);
+        let (_, info) = solver.solve(&energy, request).unwrap();
         assert_eq!(info.quick_start_iterations, 0);
     }
 }

@@ -25,7 +25,13 @@
 //! - [`Params`], with three presets: [`Params::default`] (the fidelity pipeline: solve,
 //!   then refine the normals from the result and solve again, re-centring the targets),
 //!   [`Params::papers`] (the papers' single solve) and [`Params::voxel_art`] (one solve
-//!   clamped to the voxels' boxes: never self-intersecting).
+//!   clamped to the voxels' boxes: never self-intersecting). What differs between the
+//!   fidelity and the clamped pipeline is a type, [`Mode`]: [`Fidelity`] owns the
+//!   re-centring and the intermediate tolerance, [`Clamped`] the boxes, both a
+//!   [`Refinement`].
+//! - The pipeline runs as named stages (normals, then per round refine and solve, then
+//!   finish), each in its own module, looped by the [`Regularizer`]; progress reports
+//!   name them ([`Stage`], [`Event`]).
 //!
 //! # The layers below
 //!
@@ -76,14 +82,16 @@ mod error;
 mod faces;
 mod info;
 mod iterative;
+mod mode;
 mod multigrid;
 mod options;
 mod params;
-mod pipeline;
 mod progress;
 mod regularizer;
 mod report;
+mod request;
 mod solver;
+mod stages;
 mod stencil;
 mod sweeps;
 mod unfold;
@@ -98,19 +106,19 @@ pub use direct::DirectSolver;
 pub use energy::{Energy, EnergyParams, EnergyTerms, MAX_STIFFNESS_RATIO};
 pub use error::RegularizeError;
 pub use info::{BoundedInfo, CgInfo, DirectInfo, Preconditioner, SolveInfo, SolveTimings};
+pub use mode::{Clamped, Creases, Fidelity, Mode, Recentring, Refinement};
 pub use multigrid::MultigridParams;
 pub use options::{Clamp, InputFacts, Overrides, Preset, Regions};
 pub use params::{EstimatedNormals, Estimator, NormalsParams, Params};
 pub use progress::Progress;
 pub use regularizer::{
-    estimated_bytes, regularize, Event, Output, Regularizer, Run, Stage, BYTES_FIXED, BYTES_PER_SURFEL,
+    estimated_bytes, regularize, Output, Regularizer, Run, BYTES_FIXED, BYTES_PER_SURFEL,
     BYTES_PER_SURFEL_CLAMPED,
 };
 pub use report::{EnergyReport, NormalsReport, Report, StageTimes};
-pub use solver::{
-    estimate_factor_nnz, ClampOverride, OverrideError, SolveRequest, SolveStart, Solver, SolverChoice,
-    SolverParams,
-};
+pub use request::{SolveRequest, SolveStart};
+pub use solver::{estimate_factor_nnz, ClampOverride, OverrideError, Solver, SolverChoice, SolverParams};
+pub use stages::{Event, Stage};
 pub use stencil::MatrixFreeOperator;
 pub use sweeps::{SweepsInfo, SweepsParams, SweepsSolver};
 /// The flag that stops a run early ([`Regularizer::set_interrupt`]), from

@@ -11,9 +11,11 @@ use std::str::FromStr;
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use voxreg_digisurf::RegionMap;
 
+use crate::bounded::BoundedParams;
 use crate::error::RegularizeError;
+use crate::mode::{check_intermediate_tolerance, Mode, Recentring};
 use crate::params::{Estimator, Params};
-use crate::solver::{ClampOverride, OverrideError, SolverChoice};
+use crate::solver::{ClampOverride, OverrideError, SolverChoice, SolverParams};
 
 /// The named parameter sets every option applies over.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Hash)]
@@ -267,9 +269,13 @@ pub struct Overrides {
     /// Normal refinement rounds, at most [`Params::MAX_REFINE`].
     #[serde(default, deserialize_with = "count")]
     pub refine: Option<usize>,
-    /// Tolerance factor of the solves before the last round, `>= 1`.
+    /// Tolerance factor of the solves before the last round, `>= 1`
+    /// ([`crate::Fidelity::intermediate_tolerance`]); checked in every mode, applied in the
+    /// fidelity mode only (the clamped mode's bounded solver keeps its tolerance).
     pub intermediate_tolerance: Option<f64>,
-    /// Re-centre the attachment targets between refinement rounds.
+    /// Re-centre the attachment targets between refinement rounds
+    /// ([`crate::Fidelity::recentring`]); applies to the fidelity mode only (the clamped
+    /// mode's boxes are centred on the input, so it never re-centres).
     pub preserve_size: Option<bool>,
     /// Texture-aware fairness.
     pub texture_aware: Option<bool>,
@@ -385,13 +391,7 @@ impl Overrides {
             p.normals.at.sharpen_threshold = t;
         }
         if let Some(k) = self.refine {
-            p.refine = k;
-        }
-        if let Some(f) = self.intermediate_tolerance {
-            p.intermediate_tolerance = f;
-        }
-        if let Some(keep) = self.preserve_size {
-            p.preserve_size = keep;
+            p.refinement_mut().rounds = k;
         }
         if let Some(t) = self.texture_aware {
             p.texture_aware = t;
@@ -416,7 +416,9 @@ impl Overrides {
             Some(Clamp::On) => ClampOverride::Eps(preset.clamp_margin()),
             Some(Clamp::Margin(eps)) => ClampOverride::Eps(eps),
         };
-        p.solver = p.solver.overridden(self.solver, clamp).map_err(|e| match e {
+        // The solver's rule on the solver with the mode's boxes, whose result picks the
+        // mode: boxes make it clamped (keeping the refinement), none the fidelity mode.
+        let solver = p.solver_params().overridden(self.solver, clamp).map_err(|e| match e {
             OverrideError::ClampNeedsBoundedSolver => {
                 option_error("clamp", "needs the bounded solver (solver bounded or auto)")
             }
@@ -424,6 +426,30 @@ impl Overrides {
                 option_error("clamp", format!("must be a margin in (0, 1) voxel, got {eps}"))
             }
         })?;
+        p.mode = match solver.bounded.clamp {
+            Some(margin) => p.mode.with_margin(margin),
+            None => p.mode.unclamped(),
+        };
+        p.solver = SolverParams {
+            bounded: BoundedParams { clamp: None, thin_depth: None, ..solver.bounded },
+            ..solver
+        };
+        // The fidelity mode's options, over the mode now settled; the clamped mode has no
+        // intermediate solves to loosen (the bounded solver keeps its tolerance) and never
+        // re-centres (its boxes are centred on the input).
+        if let Some(f) = self.intermediate_tolerance {
+            check_intermediate_tolerance(f)?;
+        }
+        if let Mode::Fidelity(f) = &mut p.mode {
+            if let Some(factor) = self.intermediate_tolerance {
+                f.intermediate_tolerance = factor;
+            }
+            match self.preserve_size {
+                Some(false) => f.recentring = None,
+                Some(true) if f.recentring.is_none() => f.recentring = Some(Recentring::default()),
+                _ => {}
+            }
+        }
         p.validate()?;
         Ok(p)
     }
@@ -432,17 +458,16 @@ impl Overrides {
     /// tuning panel shows: estimator, weights, refinement, boxes and texture-awareness,
     /// each explicit; the other fields are `self`'s.
     pub fn explicit(&self, params: &Params) -> Overrides {
-        let clamps = params.clamps();
         Overrides {
             normals: Some(params.normals.estimator),
             alpha: Some(params.energy.alpha),
             beta: Some(params.energy.beta),
             gamma: Some(params.energy.gamma),
-            refine: Some(params.refine),
-            clamp: match (self.smoothness, clamps) {
+            refine: Some(params.refinement().rounds),
+            clamp: match (self.smoothness, params.mode.clamped()) {
                 (Some(_), _) => None,
-                (None, true) => params.solver.bounded.clamp.map(Clamp::Margin),
-                (None, false) => Some(Clamp::Off),
+                (None, Some(c)) => Some(Clamp::Margin(c.margin)),
+                (None, None) => Some(Clamp::Off),
             },
             texture_aware: Some(params.texture_aware),
             ..self.clone()
@@ -534,10 +559,10 @@ mod tests {
         q.energy.alpha = 0.02;
         q.normals.estimator = Estimator::Convolved;
         q.normals.radius = Some(2.5);
-        q.refine = 1;
+        q.refinement_mut().rounds = 1;
         q.solver = q.solver.with_tolerance(1e-4);
         q.solver.choice = SolverChoice::Cg;
-        q.preserve_size = false;
+        q.mode.fidelity_mut().unwrap().recentring = None;
         q.regions = RegionMap::single_solid();
         assert_eq!(p, q);
         // The boxes: on at the preset's margin, off, or by smoothness.
@@ -546,11 +571,22 @@ mod tests {
             o.clamp = Some(c);
             o
         };
+        let on = resolve(&clamp(Clamp::On), Preset::Default).unwrap();
+        assert_eq!(on.solver_params(), Params::default().solver.clamped(Some(0.01)));
+        // The boxes make the mode clamped, keeping the preset's refinement.
         assert_eq!(
-            resolve(&clamp(Clamp::On), Preset::Default).unwrap().solver,
-            Params::default().solver.clamped(Some(0.01))
+            on.mode.clamped().map(|c| (c.margin, c.refinement)),
+            Some((0.01, *Params::default().refinement()))
         );
-        assert_eq!(resolve(&clamp(Clamp::Off), Preset::VoxelArt).unwrap().solver.choice, SolverChoice::Auto);
+        let off = resolve(&clamp(Clamp::Off), Preset::VoxelArt).unwrap();
+        assert_eq!(off.solver.choice, SolverChoice::Auto);
+        assert_eq!(
+            off.mode,
+            Mode::Fidelity(crate::Fidelity {
+                refinement: *Params::voxel_art().refinement(),
+                ..Default::default()
+            })
+        );
         let mut s = Overrides::default();
         s.smoothness = Some(0.3);
         assert_eq!(resolve(&s, Preset::VoxelArt).unwrap(), Params::voxel_art().with_smoothness(0.3).unwrap());

@@ -9,6 +9,7 @@ use voxreg_normals::{
 
 use crate::energy::EnergyParams;
 use crate::error::RegularizeError;
+use crate::mode::{Clamped, Creases, Fidelity, Mode, Refinement};
 use crate::solver::{SolverChoice, SolverParams};
 
 /// The normal estimators of the alignment term's field.
@@ -180,7 +181,9 @@ impl NormalsParams {
 /// rounds with re-centring and weak alignment at creases), [`Params::papers`] (the
 /// papers' single solve), [`Params::voxel_art`] (one solve clamped to the voxels'
 /// boxes, so the result never self-intersects) and [`Params::fast`] (batches of sweeps
-/// and cheap re-estimates, at about the cost of surface nets).
+/// and cheap re-estimates, at about the cost of surface nets). What differs between the
+/// fidelity and the clamped pipeline is the [`Mode`], which owns the parameters only one
+/// of them reads.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct Params {
     /// How labels form regions (materials). Default: every label its own region
@@ -192,63 +195,6 @@ pub struct Params {
     /// The energy's weights. Default: `alpha = 1e-2, beta = 1, gamma = 0.1`
     /// ([`Params::ENERGY`]).
     pub energy: EnergyParams,
-    /// Refinement rounds: after each solve, the normal field is re-estimated from the
-    /// regularized quads ([`voxreg_normals::Refined`]) and the energy solved again.
-    /// Default: `3`.
-    pub refine: usize,
-    /// Tolerance of the solves whose result only feeds a refinement round (every solve
-    /// but the last), as a multiple of the iterative solver's tolerance; the last solve
-    /// stops at the tolerance itself. Their positions only go into the refined normals
-    /// and the re-centring, which can amplify what they leave: at `2` the output stays
-    /// within the tolerance of the one with every round solved to it (`1`), and a chunked
-    /// run stays within 1e-2 voxel of the whole volume's, while larger factors save a few
-    /// iterations but let some vertices move further (at `3`, 1.2e-2 voxel between a
-    /// chunked and a whole run of the synthetic tissue; at `10` a tenth of a voxel on
-    /// bunny-128; `docs/design/intermediate-tolerance.md`). Default: `2`.
-    pub intermediate_tolerance: f64,
-    /// Radius, in voxels, of the disc whose regularized quad normals are averaged into a
-    /// refined normal. Default: `3`.
-    pub refine_radius: f64,
-    /// Feature rule of the refinement: a quad enters the average if its regularized
-    /// normal is within this angle (degrees) of the normal being refined, its weight
-    /// falling to 0 over a ramp of `voxreg_normals::FEATURE_RAMP_DEG` centred on it (a
-    /// continuous rule: see `voxreg_normals::Refined`). Default: `30`.
-    pub feature_angle_deg: f64,
-    /// Size preservation (re-centring): before each refinement solve, the attachment
-    /// targets move by minus the smoothed displacement of the last solve, measured
-    /// outside digital plateaus; this cancels the inward drift of thin curved shapes. On
-    /// anisotropic voxels the quad centres are weighted as samples by their precision,
-    /// long quads' sagitta is lifted out of the measurement, and the interiors of
-    /// plateaus facing a coarse axis are attached and aligned with the inverse variance
-    /// of their level (docs/design/anisotropic-spacing.md).
-    /// Ignored when the solver clamps (its boxes are centred on the input, which
-    /// Proposition 2 needs). Default: `true`.
-    pub preserve_size: bool,
-    /// Standard deviation, in voxels, of the smoothing of displacements used by the
-    /// re-centring. Default: `3`.
-    pub recentre_sigma: f64,
-    /// Alignment weight (a multiplier of `beta`) of the quads that straddle a crease
-    /// (their normal more than `crease_angle_deg` from an edge-neighbour's on the same
-    /// interface and from their own axis) and of those within `crease_dilation` rings of
-    /// them. A quad straddling a crease, fully aligned, would be pinned to both sides'
-    /// planes at once and collapse into a sliver; a weak alignment lets it fold across.
-    /// Applied when the pipeline refines (`refine > 0`); `1` keeps the uniform weight.
-    /// Default: `0.015`.
-    pub crease_alignment: f64,
-    /// The crease angle in degrees (see `crease_alignment`): the middle of the same ramp,
-    /// over which the weight goes from `1` to `crease_alignment`. Default: `20`.
-    pub crease_angle_deg: f64,
-    /// Rings of quads around the straddling ones that also get the weak alignment.
-    /// Default: `1`.
-    pub crease_dilation: usize,
-    /// Thin sheets: the quads of a region thinner than this along its normal (in voxels
-    /// of the finest spacing; a membrane one or two voxels thick between two other
-    /// labels) keep the normals of the first refinement round through the later rounds,
-    /// fully below `sheet_thickness - 0.5` and not at all from `sheet_thickness + 0.5`.
-    /// A sheet's tilt is held only by the weak attachment, and refining its normals again
-    /// and again from that tilt does not settle (docs/design/thin-sheets.md). `0` refines
-    /// every quad in every round. Default: `2.5`.
-    pub sheet_thickness: f64,
     /// Texture-aware fairness (paper, sec. 4.5): barycentres leave out the neighbours
     /// across a region boundary, so quad edges follow colour boundaries. Default: `false`.
     pub texture_aware: bool,
@@ -256,14 +202,20 @@ pub struct Params {
     /// vertices where three regions or more meet take the barycenter of their neighbours
     /// along the junction only. Default: `true`.
     pub junction_fairness: bool,
-    /// The solver and its boxes. Default: [`SolverParams::default`] (exact factorization
-    /// for small surfaces, else multigrid CG, to `1e-3` voxel; no clamping).
+    /// The solver, without boxes: the boxes are the clamped mode's ([`Clamped`]), which
+    /// needs [`SolverChoice::Bounded`] (or `Auto`, which it makes bounded);
+    /// [`Params::solver_params`] gives the solver's settings with them. Default:
+    /// [`SolverParams::default`] (exact factorization for small surfaces, else multigrid
+    /// CG, to `1e-3` voxel).
     pub solver: SolverParams,
-    /// Fold-free post-condition: after the last solve, the vertices of quads folded over
-    /// their diagonal and of edge-adjacent quads folded onto each other (as
-    /// `voxreg_quality` counts them) move back towards their input positions until none is
-    /// left; each stays on the segment to its solved position, so inside its box.
-    /// Default: `false` (`true` in [`Params::voxel_art`]).
+    /// The pipeline around the solves: refinement and re-centring ([`Fidelity`]) or boxes
+    /// ([`Clamped`]). Default: [`Fidelity::default`].
+    pub mode: Mode,
+    /// Fold-free post-condition, in either mode: after the last solve, the vertices of
+    /// quads folded over their diagonal and of edge-adjacent quads folded onto each other
+    /// (as `voxreg_quality` counts them) move back towards their input positions until
+    /// none is left; each stays on the segment to its solved position, so inside its box
+    /// when clamped. Default: `false` (`true` in [`Params::voxel_art`]).
     pub fold_free: bool,
 }
 
@@ -273,27 +225,25 @@ impl Params {
     pub const ENERGY: EnergyParams = EnergyParams { alpha: 1e-2, beta: 1.0, gamma: 0.1 };
 
     /// The papers' behaviour: their weights (`alpha = 1e-3, beta = 1, gamma = 0.1`), one
-    /// solve, no refinement, no re-centring, uniform alignment.
+    /// solve, no refinement, no re-centring, uniform alignment ([`Fidelity::single`]).
     pub fn papers() -> Self {
         Params {
             energy: EnergyParams::default(),
-            refine: 0,
-            preserve_size: false,
-            crease_alignment: 1.0,
+            mode: Mode::Fidelity(Fidelity::single()),
             ..Default::default()
         }
     }
 
     /// The box margin, in voxels, of [`Params::voxel_art`] and of a front end's clamping
     /// option given without a margin ([`crate::Clamp::On`]).
-    pub const CLAMP_MARGIN: f64 = 0.01;
+    pub const CLAMP_MARGIN: f64 = Clamped::MARGIN;
 
     /// The most refinement rounds [`Params::validate`] accepts: each round is a solve,
     /// and the rounds' bookkeeping is allocated up front.
-    pub const MAX_REFINE: usize = 100;
+    pub const MAX_REFINE: usize = Refinement::MAX_ROUNDS;
 
     /// The depth kept inside thin voxels by [`Params::voxel_art`], in voxels
-    /// ([`crate::BoundedParams::thin_depth`]).
+    /// ([`Clamped::thin_depth`]).
     pub const THIN_DEPTH: f64 = 0.3;
 
     /// Voxel art (MagicaVoxel models): every non-background label one solid region (the
@@ -308,13 +258,13 @@ impl Params {
     /// radius 3 and `gamma = 0.1` with box edges at least as sharp
     /// (`docs/design/voxel-art-clamping.md`).
     pub fn voxel_art() -> Self {
-        let mut solver = SolverParams::default().clamped(Some(Self::CLAMP_MARGIN));
-        solver.bounded.thin_depth = Some(Self::THIN_DEPTH);
+        let solver = SolverParams { choice: SolverChoice::Bounded, ..Default::default() };
         let normals = NormalsParams { radius_voxels: Some(Self::VOXEL_ART_RADIUS), ..Default::default() };
+        let boxes = Clamped { thin_depth: Some(Self::THIN_DEPTH), ..Clamped::margin(Self::CLAMP_MARGIN) };
         Params {
             regions: RegionMap::single_solid(),
-            refine: 0,
             solver,
+            mode: Mode::Clamped(boxes),
             fold_free: true,
             normals,
             energy: EnergyParams { gamma: 1.0, ..Self::ENERGY },
@@ -329,14 +279,17 @@ impl Params {
     /// ([`voxreg_normals::Diffused`]); no integral invariants, no conjugate gradient, no
     /// re-centring, crease weights or thin-sheet rule (`docs/design/fast-preset.md`).
     pub fn fast() -> Self {
+        let refinement = Refinement {
+            rounds: 3,
+            radius: Self::FAST_RADIUS,
+            sheet_thickness: 0.0,
+            creases: Creases { alignment: 1.0, ..Creases::default() },
+            ..Refinement::default()
+        };
         Params {
             normals: NormalsParams { estimator: Estimator::Trivial, ..Default::default() },
-            refine: 3,
-            refine_radius: Self::FAST_RADIUS,
-            preserve_size: false,
-            crease_alignment: 1.0,
-            sheet_thickness: 0.0,
             solver: SolverParams { choice: SolverChoice::Sweeps, ..Default::default() },
+            mode: Mode::Fidelity(Fidelity { refinement, recentring: None, ..Fidelity::default() }),
             ..Default::default()
         }
     }
@@ -354,15 +307,17 @@ impl Params {
     /// The same parameters with the boxes of smoothness `s` in `(0, 1]`: each vertex
     /// moves at most `s` times half a voxel (less `0.005`) from its voxel corner along
     /// each axis. `1` is [`Params::voxel_art`]'s default (rounded), small values keep the
-    /// model blocky (clean, with softened edges). Sets the clamping margin to
-    /// `1 - 0.99 s` voxel, which needs the bounded solver.
+    /// model blocky (clean, with softened edges). Sets the clamped mode's margin to
+    /// `1 - 0.99 s` voxel ([`Mode::with_margin`]), which needs the bounded solver (`Auto`
+    /// becomes it).
     pub fn with_smoothness(mut self, s: f64) -> Result<Self, RegularizeError> {
         if !(s > 0.0 && s <= 1.0) {
             return Err(RegularizeError::InvalidParams(format!("the smoothness must be in (0, 1], got {s}")));
         }
-        let thin = self.solver.bounded.thin_depth;
-        self.solver = self.solver.clamped(Some(1.0 - 0.99 * s));
-        self.solver.bounded.thin_depth = thin;
+        self.mode = self.mode.with_margin(1.0 - 0.99 * s);
+        if self.solver.choice == SolverChoice::Auto {
+            self.solver.choice = SolverChoice::Bounded;
+        }
         Ok(self)
     }
 
@@ -371,51 +326,47 @@ impl Params {
         self.energy.validate()?;
         self.normals.validate()?;
         self.solver.validate()?;
-        if self.refine > Self::MAX_REFINE {
-            return Err(RegularizeError::InvalidParams(format!(
-                "the refinement rounds must be at most {}, got {}",
-                Self::MAX_REFINE,
-                self.refine
-            )));
+        if self.solver.bounded.clamp.is_some() || self.solver.bounded.thin_depth.is_some() {
+            return Err(RegularizeError::InvalidParams(
+                "the boxes are the clamped mode's (Mode::Clamped), not the solver's".into(),
+            ));
         }
-        let positive = |x: f64| x.is_finite() && x > 0.0;
-        if !positive(self.refine_radius) || !positive(self.recentre_sigma) {
+        self.mode.validate()?;
+        if self.clamps() && matches!(self.solver.choice, SolverChoice::Direct | SolverChoice::Cg) {
             return Err(RegularizeError::InvalidParams(format!(
-                "the refinement radius and the re-centring sigma must be positive and finite, got {} and {}",
-                self.refine_radius, self.recentre_sigma
+                "clamping needs the bounded solver, not {:?}",
+                self.solver.choice
             )));
-        }
-        if !(self.intermediate_tolerance.is_finite() && self.intermediate_tolerance >= 1.0) {
-            return Err(RegularizeError::InvalidParams(format!(
-                "the intermediate tolerance must be a finite factor of at least 1, got {}",
-                self.intermediate_tolerance
-            )));
-        }
-        if !(self.crease_alignment >= 0.0 && self.crease_alignment <= 1.0) {
-            return Err(RegularizeError::InvalidParams(format!(
-                "the crease alignment weight must be in [0, 1], got {}",
-                self.crease_alignment
-            )));
-        }
-        if !(self.sheet_thickness.is_finite() && self.sheet_thickness >= 0.0) {
-            return Err(RegularizeError::InvalidParams(format!(
-                "the sheet thickness must be finite and non-negative, got {}",
-                self.sheet_thickness
-            )));
-        }
-        for (what, a) in [("feature", self.feature_angle_deg), ("crease", self.crease_angle_deg)] {
-            if !(a > 0.0 && a <= 180.0) {
-                return Err(RegularizeError::InvalidParams(format!(
-                    "the {what} angle must be in (0, 180] degrees, got {a}"
-                )));
-            }
         }
         Ok(())
     }
 
-    /// Whether the solver keeps every vertex in its box.
+    /// Whether the solver keeps every vertex in its box (the clamped mode).
     pub fn clamps(&self) -> bool {
-        self.solver.choice == SolverChoice::Bounded && self.solver.bounded.clamp.is_some()
+        matches!(self.mode, Mode::Clamped(_))
+    }
+
+    /// The refinement rounds and their settings ([`Mode::refinement`]).
+    pub fn refinement(&self) -> &Refinement {
+        self.mode.refinement()
+    }
+
+    /// [`Params::refinement`], to change.
+    pub fn refinement_mut(&mut self) -> &mut Refinement {
+        self.mode.refinement_mut()
+    }
+
+    /// The solver's settings: [`Params::solver`] with the clamped mode's boxes
+    /// ([`SolverParams::clamped`], [`crate::BoundedParams::thin_depth`]).
+    pub fn solver_params(&self) -> SolverParams {
+        match &self.mode {
+            Mode::Clamped(c) => {
+                let mut s = self.solver.clamped(Some(c.margin));
+                s.bounded.thin_depth = c.thin_depth;
+                s
+            }
+            Mode::Fidelity(_) => self.solver,
+        }
     }
 }
 
@@ -425,19 +376,10 @@ impl Default for Params {
             regions: RegionMap::per_label(),
             normals: NormalsParams::default(),
             energy: Self::ENERGY,
-            refine: 3,
-            intermediate_tolerance: 2.0,
-            refine_radius: 3.0,
-            feature_angle_deg: 30.0,
-            preserve_size: true,
-            recentre_sigma: 3.0,
-            crease_alignment: 0.015,
-            crease_angle_deg: 20.0,
-            crease_dilation: 1,
-            sheet_thickness: 2.5,
             texture_aware: false,
             junction_fairness: true,
             solver: SolverParams::default(),
+            mode: Mode::default(),
             fold_free: false,
         }
     }
@@ -459,18 +401,31 @@ mod tests {
         assert_eq!(Params::voxel_art().regions, RegionMap::single_solid());
         assert!(Params::voxel_art().fold_free && !Params::default().fold_free);
         let blocky = Params::voxel_art().with_smoothness(0.5).unwrap();
-        assert_eq!(blocky.solver.bounded.clamp, Some(1.0 - 0.495));
-        assert_eq!(blocky.solver.bounded.thin_depth, Some(Params::THIN_DEPTH));
+        assert_eq!(blocky.solver_params().bounded.clamp, Some(1.0 - 0.495));
+        assert_eq!(blocky.solver_params().bounded.thin_depth, Some(Params::THIN_DEPTH));
+        assert_eq!(blocky.solver_params().choice, SolverChoice::Bounded);
         assert!(Params::voxel_art().with_smoothness(0.0).is_err());
         assert!(Params::voxel_art().with_smoothness(1.5).is_err());
-        let bad = Params { crease_alignment: 2.0, ..Default::default() };
-        assert!(bad.validate().is_err());
-        let bad = Params { intermediate_tolerance: 0.5, ..Default::default() };
-        assert!(bad.validate().is_err());
+        let with = |f: &dyn Fn(&mut Params)| {
+            let mut p = Params::default();
+            f(&mut p);
+            p.validate()
+        };
+        assert!(with(&|p| p.refinement_mut().creases.alignment = 2.0).is_err());
+        assert!(with(&|p| p.mode.fidelity_mut().unwrap().intermediate_tolerance = 0.5).is_err());
         for t in [-1.0, f64::NAN, f64::INFINITY] {
-            assert!(Params { sheet_thickness: t, ..Default::default() }.validate().is_err());
+            assert!(with(&|p| p.refinement_mut().sheet_thickness = t).is_err());
         }
-        assert!(Params { sheet_thickness: 0.0, ..Default::default() }.validate().is_ok());
+        assert!(with(&|p| p.refinement_mut().sheet_thickness = 0.0).is_ok());
+        // The boxes are the mode's: the solver's own are refused, and so is an unbounded
+        // solver in the clamped mode.
+        assert!(with(&|p| p.solver.bounded.clamp = Some(0.01)).is_err());
+        assert!(with(&|p| p.mode = p.mode.with_margin(1.5)).is_err());
+        let mut cg = Params::voxel_art();
+        cg.solver.choice = SolverChoice::Cg;
+        assert!(cg.validate().is_err());
+        cg.solver.choice = SolverChoice::Auto;
+        assert_eq!(cg.solver_params(), Params::voxel_art().solver_params());
         let bad = Params {
             normals: NormalsParams { radius: Some(-1.0), ..Default::default() },
             ..Default::default()

@@ -5,74 +5,14 @@ use std::time::Instant;
 
 use glam::DVec3;
 use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
-use voxreg_normals::{
-    anisotropic_fit_weight, Diffused, FeatureField, Interrupt, NormalField, ProbeHints, Refined,
-};
+use voxreg_normals::{FeatureField, Interrupt, NormalField};
 
-use crate::energy::Energy;
 use crate::error::RegularizeError;
 use crate::params::Params;
-use crate::pipeline::{
-    crease_weights, hold_thin_sheets, informative_vertices, plateau_weights, relaxed_normals, sagitta_lift,
-    sample_weights, surfel_drift, thin_sheets, trusted_drift,
-};
 use crate::progress::Progress;
-use crate::report::{EnergyReport, NormalsReport, Report, StageTimes};
-use crate::solver::{SolveRequest, SolveStart, Solver, SolverParams};
-use crate::weights::{FairnessMask, Weights};
-
-/// A stage of the front door's work, for progress displays.
-#[derive(Copy, Clone, Debug, PartialEq, Eq, serde::Serialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Stage {
-    /// Estimating the initial normal field.
-    Normals,
-    /// Solve number `round` (0 is the first; `1..=refine` follow refinements).
-    Solve {
-        /// The round.
-        round: usize,
-    },
-    /// Refining the normals and re-centring the targets before solve `round`.
-    Refine {
-        /// The round of the solve that follows.
-        round: usize,
-    },
-}
-
-impl Stage {
-    /// A short label: `"normals"`, `"solve 2/4"`, `"refine 1/3"`.
-    pub fn label(&self, params: &Params) -> String {
-        match self {
-            Stage::Normals => "normals".into(),
-            Stage::Solve { round } => format!("solve {}/{}", round + 1, params.refine + 1),
-            Stage::Refine { round } => format!("refine {round}/{}", params.refine),
-        }
-    }
-}
-
-/// What a progress callback receives.
-#[derive(Copy, Clone, Debug)]
-pub struct Event<'a> {
-    /// The stage under way.
-    pub stage: Stage,
-    /// An estimate of the fraction of the whole run done, in `[0, 1]` (stages are
-    /// weighted equally; iterations advance it within a solve).
-    pub fraction: f64,
-    /// The latest iteration of an iterative solver, within [`Stage::Solve`].
-    pub iteration: Option<&'a Progress<'a>>,
-    /// With `iteration`: the solve's input positions (its attachment targets), which
-    /// the iterate is displaced from; see [`Event::iterate`].
-    pub input: Option<&'a [DVec3]>,
-}
-
-impl Event<'_> {
-    /// The current iterate of the solve under way, one position per vertex: `input +
-    /// displacement` (`None` between iterations, and for the direct solver).
-    pub fn iterate(&self) -> Option<Vec<DVec3>> {
-        let (p, input) = (self.iteration?, self.input?);
-        Some(input.iter().zip(p.displacement).map(|(x, d)| *x + *d).collect())
-    }
-}
+use crate::report::{NormalsReport, Report, StageTimes};
+use crate::solver::{Solver, SolverParams};
+use crate::stages::{self, Event, RecentringInputs, Refine, Solve, Stage};
 
 /// The regularized positions and what produced them.
 #[derive(Clone, Debug)]
@@ -217,10 +157,9 @@ pub struct Regularizer {
     surface_seconds: f64,
     solver: Option<(SolverParams, Solver)>,
     normals: Option<(crate::NormalsParams, crate::params::EstimatedNormals)>,
-    /// The re-centring's inputs that depend on the surface alone: the vertices outside
-    /// digital plateaus ([`informative_vertices`]), the surfels' sample weights
-    /// ([`sample_weights`]) and the plateaus' multipliers ([`plateau_weights`]).
-    recentring: Option<Recentring>,
+    /// The re-centring's inputs that depend on the surface alone (the vertices outside
+    /// digital plateaus, the surfels' sample weights, the plateaus' multipliers).
+    recentring: Option<RecentringInputs>,
     /// Vertices the re-centring must not measure its drift at (a block's cut sides).
     pub(crate) untrusted: Option<Vec<bool>>,
     interrupt: Interrupt,
@@ -328,6 +267,8 @@ impl Regularizer {
         }
     }
 
+    /// The stages ([`crate::stages`]) in order, each round of the mode's refinement a
+    /// refine stage (from the second) and a solve stage.
     fn run_stages(
         &mut self,
         params: &Params,
@@ -346,39 +287,20 @@ impl Regularizer {
         let surface = Arc::clone(&self.surface);
         let interrupt = self.interrupt.clone();
         interrupt.check()?;
-        let stages_total = 1.0 + (params.refine as f64) * 2.0 + 1.0;
+        let rounds = params.refinement().rounds;
+        let stages_total = 1.0 + (rounds as f64) * 2.0 + 1.0;
         let mut times = StageTimes { surface: self.surface_seconds, ..Default::default() };
 
-        // Initial normals.
         let t = Instant::now();
         progress(&Event { stage: Stage::Normals, fraction: 0.0, iteration: None, input: None });
-        let (start, features, at_info, estimator) = match initial {
-            Some(field) => {
-                if field.len() != surface.num_surfels() {
-                    return Err(RegularizeError::SizeMismatch(format!(
-                        "{} normals for {} surfels",
-                        field.len(),
-                        surface.num_surfels()
-                    )));
-                }
-                (field.clone(), None, None, "given")
-            }
-            None => {
-                let cached = self.normals.as_ref().filter(|(p, _)| *p == params.normals);
-                if cached.is_none() {
-                    let estimated = params.normals.estimate_interruptible(&surface, &interrupt)?;
-                    self.normals = Some((params.normals.clone(), estimated));
-                }
-                let name = params.normals.estimator.name();
-                if self.keep_normals {
-                    let (_, n) = self.normals.as_ref().expect("estimated above");
-                    (n.field.clone(), n.features.clone(), n.at_info.clone(), name)
-                } else {
-                    let (_, n) = self.normals.take().expect("estimated above");
-                    (n.field, n.features, n.at_info, name)
-                }
-            }
-        };
+        let normals = stages::initial_normals(
+            &surface,
+            &params.normals,
+            initial,
+            &mut self.normals,
+            self.keep_normals,
+            &interrupt,
+        )?;
         times.normals = t.elapsed().as_secs_f64();
 
         // The solver, kept while its settings do not change. Its setup (the operator's
@@ -392,138 +314,45 @@ impl Regularizer {
             input: None,
         });
         interrupt.check()?;
-        if self.solver.as_ref().is_none_or(|(p, _)| *p != params.solver) {
-            self.solver = Some((params.solver, Solver::new(&surface, &params.solver)?));
+        let solver_params = params.solver_params();
+        if self.solver.as_ref().is_none_or(|(p, _)| *p != solver_params) {
+            self.solver = Some((solver_params, Solver::new(&surface, &solver_params)?));
         }
         let solver = &mut self.solver.as_mut().expect("built above").1;
         solver.set_interrupt(interrupt.clone());
-        let clamps = solver.clamp().is_some();
-        let recentre = params.preserve_size && !clamps && params.refine > 0;
-        if recentre && self.recentring.is_none() {
-            let informative = informative_vertices(&surface);
-            let plateaus = plateau_weights(&surface, &informative);
-            let mut trusted = informative;
-            if let Some(untrusted) = &self.untrusted {
-                trusted.iter_mut().zip(untrusted).for_each(|(t, u)| *t &= !*u);
-            }
-            self.recentring = Some(Recentring { trusted, samples: sample_weights(&surface), plateaus });
+        // Re-centring is the fidelity mode's, between refinement rounds.
+        let sigma = params.mode.fidelity().and_then(|f| f.recentring).map(|r| r.sigma).filter(|_| rounds > 0);
+        if sigma.is_some() && self.recentring.is_none() {
+            self.recentring = Some(RecentringInputs::new(&surface, self.untrusted.as_deref()));
         }
-        let recentring = if recentre { self.recentring.as_ref() } else { None };
-        let texture = params.texture_aware.then(|| FairnessMask::texture_aware(&surface));
-        let junction = (params.junction_fairness && surface.interfaces().len() > 1)
-            .then(|| FairnessMask::junction_curves(&surface))
-            .filter(|m| m.num_affected_vertices() > 0);
-        let fairness = match (texture, junction) {
-            (Some(t), Some(j)) => Some(t.and(&j)),
-            (t, j) => t.or(j),
-        };
-        let (alpha, beta) = match recentring.and_then(|r| r.plateaus.as_ref()) {
-            Some((a, b)) => (Some(a.clone().into()), Some(b.clone().into())),
-            None => (None, None),
-        };
-        let weights = Weights { fairness, alpha, beta, ..Default::default() };
-        let weights = (weights != Weights::default()).then_some(weights);
-        // The sagitta lift, blended in with the anisotropy like the refinement's fit
-        // (0 on cubic voxels).
-        let lift_weight = anisotropic_fit_weight(surface.spacing());
+        let recentring = sigma.and(self.recentring.as_ref());
+        let solve = Solve::new(&surface, params, recentring);
 
         // The input positions are the lattice's, recomputed where needed rather than held
-        // through the solves.
+        // through the solves. Finding the thin sheets is timed with the refinement.
         let mut targets = surface.positions();
-        // The thin sheets' quads, with their shares and the normals they keep from the
-        // first refinement round on (timed with the refinement).
         let t = Instant::now();
-        let mut held: Vec<(u32, DVec3, f64)> = if params.refine > 0 {
-            thin_sheets(&surface, &start, params.sheet_thickness)
-                .into_iter()
-                .map(|(s, share)| (s, DVec3::ZERO, share))
-                .collect()
-        } else {
-            Vec::new()
-        };
+        let mut refine = Refine::new(&surface, &normals.field, *params.refinement(), recentring.zip(sigma));
         times.refine += t.elapsed().as_secs_f64();
-        let mut field = start;
+        let mut field = normals.field;
         let mut positions = VertexData::default();
-        let mut solves = Vec::with_capacity(params.refine + 1);
+        let mut solves = Vec::with_capacity(rounds + 1);
         let mut done = 1.0;
-        // Each quad's last change of normal, for the relaxation of the next round's.
-        let mut change = None;
-        // Which quads' wide junction discs the last round found in use (see `Refined`).
-        let mut hints = ProbeHints::default();
-        for round in 0..=params.refine {
+        for round in 0..=rounds {
             if round > 0 {
                 let t = Instant::now();
-                progress(&Event {
-                    stage: Stage::Refine { round },
-                    fraction: done / stages_total,
-                    iteration: None,
-                    input: None,
-                });
-                if let Solver::Sweeps(s) = &mut *solver {
+                let stage = Stage::Refine { round };
+                progress(&Event { stage, fraction: done / stages_total, iteration: None, input: None });
+                match &mut *solver {
                     // The fast pipeline: the cheap re-estimate alone between the batches.
-                    let diffused =
-                        Diffused { positions: &positions, previous: &field, radius: params.refine_radius };
-                    field = diffused.estimate_on(&surface, s.graph(&surface), &interrupt)?;
-                } else {
-                    let estimate = Refined {
-                        positions: &positions,
-                        previous: &field,
-                        radius: params.refine_radius,
-                        feature_angle_deg: params.feature_angle_deg,
+                    Solver::Sweeps(s) => {
+                        refine.diffused(&positions, &mut field, s.graph(&surface), &interrupt)?
                     }
-                    .estimate_with_hints(&surface, &interrupt, &mut hints)?;
-                    // Thin sheets keep the first round's normals.
-                    let estimate = if round == 1 {
-                        held.iter_mut().for_each(|h| h.1 = estimate.as_slice()[h.0 as usize]);
-                        estimate
-                    } else {
-                        hold_thin_sheets(estimate, &held)
-                    };
-                    field = relaxed_normals(&field, estimate, &mut change);
-                }
-                if let Some(r) = recentring {
-                    let lift = (lift_weight > 0.0).then(|| {
-                        let mut lift = sagitta_lift(&surface, &positions, &field);
-                        lift.iter_mut().for_each(|l| *l *= lift_weight);
-                        lift
-                    });
-                    let (drift, sampled) = surfel_drift(
-                        &surface,
-                        &positions,
-                        &surface.positions(),
-                        r.samples.as_deref(),
-                        lift.as_deref(),
-                    );
-                    let weight: Vec<f64> =
-                        sampled.iter().zip(&r.trusted).map(|(w, &t)| if t { *w } else { 0.0 }).collect();
-                    let drift = trusted_drift(&surface, &drift, &weight, params.recentre_sigma, &interrupt)?;
-                    targets.iter_mut().zip(&drift).for_each(|(t, d)| *t -= *d);
+                    _ => refine.round(round, &positions, &mut field, &mut targets, &interrupt)?,
                 }
                 times.refine += t.elapsed().as_secs_f64();
                 done += 1.0;
             }
-            interrupt.check()?;
-            let creased = (params.refine > 0 && params.crease_alignment < 1.0).then(|| {
-                let crease = crease_weights(
-                    &surface,
-                    &field,
-                    params.crease_angle_deg,
-                    params.crease_alignment,
-                    params.crease_dilation,
-                );
-                let mut w = weights.clone().unwrap_or_default();
-                w.beta = Some(match w.beta {
-                    Some(b) => b.iter().zip(&crease).map(|(b, c)| b * c).collect(),
-                    None => crease.into(),
-                });
-                w
-            });
-            interrupt.check()?;
-            let energy = Energy::new(&surface, &field, &targets, params.energy)?;
-            let energy = match creased.as_ref().or(weights.as_ref()) {
-                Some(w) => energy.with_weights(w)?,
-                None => energy,
-            };
             let stage = Stage::Solve { round };
             let base = done / stages_total;
             if round > 0 {
@@ -541,46 +370,16 @@ impl Regularizer {
                     input: Some(&targets),
                 });
             };
-            // Refinement rounds start from the last solution (or the round's given start):
-            // the minimizer moves little when the normals and targets do, so CG needs
-            // fewer iterations to the same tolerance. The solves before the last only
-            // feed the refinement: a looser tolerance.
-            let last = round == params.refine;
-            let factor = if last { 1.0 } else { params.intermediate_tolerance };
-            // The bounded solver's refinement rounds start as its first does (a cold run's
-            // results stay those its measurements describe); given starts it takes.
-            let chained = round > 0 && !matches!(solver, Solver::Bounded(_));
-            let start = match warm.get(round) {
-                Some(start) => SolveStart::Given(start),
-                None if chained => SolveStart::Owned(std::mem::take(&mut positions).into_vec()),
-                None => SolveStart::Input,
-            };
-            // A next round without a given start builds its own cycle: this one's memory
-            // goes to the refinement first (the last solve's is kept for a next run).
-            let keep_cycle = last || warm.get(round + 1).is_some();
-            let request = SolveRequest {
-                start,
-                tolerance: Some(params.solver.cg.tolerance * factor),
-                quick_start: warm.get(round).is_some(),
-                keep_cycle,
-                progress: Some(&mut report),
-            };
-            let (x, info) = solver.solve(&energy, request)?;
-            if !info.relative_gradient().is_finite() || x.iter().any(|p| !p.is_finite()) {
-                let h = surface.spacing();
-                return Err(RegularizeError::NotFinite(format!(
-                    "solve {} gave non-finite positions or residuals (alpha {:e}, beta {:e}, gamma {:e}, \
-                     voxel spacing {:e} {:e} {:e}): the weights or the spacing are out of range for \
-                     double precision",
-                    round + 1,
-                    params.energy.alpha,
-                    params.energy.beta,
-                    params.energy.gamma,
-                    h.x,
-                    h.y,
-                    h.z
-                )));
-            }
+            let (x, info) = solve.round(
+                solver,
+                round,
+                &field,
+                &targets,
+                &mut positions,
+                warm,
+                &mut report,
+                &interrupt,
+            )?;
             let s = info.seconds();
             times.assemble += s.structure + s.assemble;
             times.solve += s.symbolic + s.factor + s.solve;
@@ -590,56 +389,19 @@ impl Regularizer {
         }
 
         interrupt.check()?;
-        // The lattice positions: the targets themselves where no round re-centred them.
-        let staircase = if params.refine == 0 {
-            std::borrow::Cow::Borrowed(targets.as_slice())
-        } else {
-            std::borrow::Cow::Owned(surface.positions().into_vec())
-        };
-        if params.fold_free {
-            crate::unfold::unfold(&surface, &staircase, &mut positions);
-        }
-
-        // The energy of the last round (its normals and targets, without crease weights),
-        // before and after.
-        let energy = Energy::new(&surface, &field, &targets, params.energy)?;
-        let energy = match weights.as_ref() {
-            Some(w) => energy.with_weights(w)?,
-            None => energy,
-        };
-        let (before, after) = (energy.terms(&staircase), energy.terms(&positions));
-        drop(staircase);
-        if !(before.total.is_finite() && after.total.is_finite()) {
-            return Err(RegularizeError::NotFinite(format!(
-                "the energy is not finite ({} -> {}): the weights or the spacing are out of range",
-                before.total, after.total
-            )));
-        }
+        let energy = stages::finish(&surface, params, &mut positions, &field, &targets, solve.weights())?;
         let report = Report {
             params: params.clone(),
             counts: surface.counts(),
             normals: NormalsReport {
-                estimator,
+                estimator: normals.estimator,
                 radius: if initial.is_some() { None } else { params.normals.radius_on(&surface) },
-                at: at_info,
+                at: normals.at_info,
             },
             stages: times,
-            energy: EnergyReport { before, after },
+            energy,
             solves,
         };
-        Ok(Output { surface, positions, normals: field, targets, features, report })
+        Ok(Output { surface, positions, normals: field, targets, features: normals.features, report })
     }
-}
-
-/// What the re-centring reads from the surface alone, kept across runs.
-#[derive(Debug)]
-struct Recentring {
-    /// Per vertex, whether the drift is measured there (outside digital plateaus and a
-    /// block's cut sides).
-    trusted: Vec<bool>,
-    /// Per surfel, the weight of its centre as a sample ([`sample_weights`]; `None`: all 1).
-    samples: Option<Vec<f64>>,
-    /// The plateaus' attachment and alignment multipliers ([`plateau_weights`]; `None`:
-    /// all 1).
-    plateaus: Option<(Vec<f64>, Vec<f64>)>,
 }

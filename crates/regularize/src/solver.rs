@@ -13,6 +13,7 @@ use crate::energy::Energy;
 use crate::error::RegularizeError;
 use crate::info::SolveInfo;
 use crate::progress::Progress;
+use crate::request::{SolveRequest, SolveStart};
 use crate::sweeps::{SweepsParams, SweepsSolver};
 use voxreg_normals::Interrupt;
 
@@ -288,100 +289,30 @@ impl Solver {
         energy: &Energy<'_>,
         request: SolveRequest<'_>,
     ) -> Result<(Vec<DVec3>, SolveInfo), RegularizeError> {
+        // The iterative solvers always get a listener (a silent one where none is given):
+        // their iterations are then the same whether anyone listens or not.
         let SolveRequest { start, tolerance, quick_start, keep_cycle, progress } = request;
         let mut silent = |_: &Progress| {};
         let progress: &mut dyn FnMut(&Progress) = match progress {
             Some(p) => p,
             None => &mut silent,
         };
-        if let Solver::Cg(s) = self {
-            if let Some(t) = tolerance {
-                s.set_tolerance(t)?;
-            }
-            s.set_quick_start(quick_start);
-        }
-        let out = match (&mut *self, start) {
-            (Solver::Direct(s), _) => s.solve(energy).map(|(x, i)| (x, SolveInfo::Direct(i))),
-            (Solver::Cg(s), SolveStart::Input) => {
-                s.solve_with(energy, progress).map(|(x, i)| (x, SolveInfo::Cg(i)))
-            }
-            (Solver::Cg(s), SolveStart::Given(x)) => {
-                s.solve_from(energy, x, progress).map(|(x, i)| (x, SolveInfo::Cg(i)))
-            }
-            (Solver::Cg(s), SolveStart::Owned(x)) => {
-                s.solve_from_owned(energy, x, progress).map(|(x, i)| (x, SolveInfo::Cg(i)))
-            }
-            (Solver::Bounded(s), SolveStart::Input) => {
-                s.solve_with(energy, progress).map(|(x, i)| (x, SolveInfo::Bounded(i)))
-            }
-            (Solver::Bounded(s), SolveStart::Given(x)) => {
-                s.solve_from(energy, x, progress).map(|(x, i)| (x, SolveInfo::Bounded(i)))
-            }
-            (Solver::Bounded(s), SolveStart::Owned(x)) => {
-                s.solve_from(energy, &x, progress).map(|(x, i)| (x, SolveInfo::Bounded(i)))
-            }
-            (Solver::Sweeps(s), start) => {
+        let request = SolveRequest { start, tolerance, quick_start, keep_cycle, progress: Some(progress) };
+        match self {
+            Solver::Direct(s) => s.solve(energy).map(|(x, i)| (x, SolveInfo::Direct(i))),
+            Solver::Cg(s) => s.solve(energy, request).map(|(x, i)| (x, SolveInfo::Cg(i))),
+            Solver::Bounded(s) => s.solve(energy, request).map(|(x, i)| (x, SolveInfo::Bounded(i))),
+            Solver::Sweeps(s) => {
+                let SolveRequest { start, progress, .. } = request;
                 let start = match start {
                     SolveStart::Input => None,
                     SolveStart::Given(x) => Some(x.to_vec()),
                     SolveStart::Owned(x) => Some(x),
                 };
+                let progress = progress.expect("a listener is always given above");
                 s.solve(energy, start, progress).map(|(x, i)| (x, SolveInfo::Sweeps(i)))
             }
-        }?;
-        if !keep_cycle {
-            if let Solver::Cg(s) = self {
-                s.forget_kept_cycle();
-            }
         }
-        Ok(out)
-    }
-}
-
-/// Where a solve's iterations start ([`SolveRequest::start`]).
-#[derive(Debug, Default)]
-pub enum SolveStart<'a> {
-    /// The energy's input positions.
-    #[default]
-    Input,
-    /// These positions, one per vertex (the bounded solver projects them into its boxes).
-    Given(&'a [DVec3]),
-    /// These positions, which the solver may take (the conjugate gradient iterates in
-    /// them: one vector fewer held during the solve).
-    Owned(Vec<DVec3>),
-}
-
-/// One solve of a [`Solver`] ([`Solver::solve`]): where it starts, to which tolerance, and
-/// what it reports.
-#[non_exhaustive]
-#[derive(Default)]
-pub struct SolveRequest<'a> {
-    /// Where the iterations start. Default: [`SolveStart::Input`].
-    pub start: SolveStart<'a>,
-    /// The conjugate gradient's tolerance in voxels, for this solve and the next (the
-    /// bounded solver keeps its own). Default: `None`, unchanged.
-    pub tolerance: Option<f64>,
-    /// Whether the conjugate gradient, from a given start, begins on the last solve's
-    /// multigrid cycle, its fine level put on the new energy, and builds the energy's own
-    /// cycle only after the first iteration, restarting from that iterate: the first
-    /// iterate comes without waiting for the coarse levels' setup. Default: `false`.
-    pub quick_start: bool,
-    /// Whether the conjugate gradient keeps this solve's cycle for a next quick start;
-    /// `false` frees its memory for what runs before the next solve. Default: `false`.
-    pub keep_cycle: bool,
-    /// Called after each iteration of the iterative solvers. Default: none.
-    pub progress: Option<&'a mut dyn FnMut(&Progress)>,
-}
-
-impl std::fmt::Debug for SolveRequest<'_> {
-    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
-        f.debug_struct("SolveRequest")
-            .field("start", &self.start)
-            .field("tolerance", &self.tolerance)
-            .field("quick_start", &self.quick_start)
-            .field("keep_cycle", &self.keep_cycle)
-            .field("progress", &self.progress.is_some())
-            .finish()
     }
 }
 

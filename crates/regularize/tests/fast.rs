@@ -146,8 +146,8 @@ fn explore() {
     let refine: usize = env("REFINE", "3").parse().unwrap();
     let params = |r: f64| {
         let mut params = Params::fast();
-        params.refine_radius = r;
-        params.refine = refine;
+        params.refinement_mut().radius = r;
+        params.refinement_mut().rounds = refine;
         params.solver.sweeps.sweeps = sweeps;
         params.junction_fairness = env("JF", "1") == "1";
         params.solver.sweeps.omega = env("OMEGA", "0.6").parse().unwrap();

@@ -14,7 +14,7 @@ use voxreg_testkit::{angles_deg, digitize, mean_max, Cuboid, Goursat, Shape, Sph
 fn measure(shape: &dyn Shape, h: f64, params: &Params) -> (Accuracy, f64) {
     let surface = DigitalSurface::from_volume(&digitize(shape, h)).unwrap();
     let out = Regularizer::new(surface.clone()).run(params).unwrap();
-    assert_eq!(out.report.solves.len(), params.refine + 1);
+    assert_eq!(out.report.solves.len(), params.refinement().rounds + 1);
     assert!(out.report.converged());
     let mesh = Mesh::from_surface(&surface, &out.positions);
     let mut acc = accuracy(&mesh, &shape);
@@ -76,9 +76,11 @@ fn refinement_keeps_the_edges_of_a_cube_sharp() {
         let faces: Vec<DVec3> = (0..mesh.num_faces()).map(|f| mesh.vector_area(f)).collect();
         mean_max(&angles_deg(&faces, truth)).1
     };
-    let params = Params { refine: 3, ..Default::default() };
+    let params = Params::default();
+    assert_eq!(params.refinement().rounds, 3);
     assert!(worst(&params) <= 5.0, "{}", worst(&params));
-    let blind = Params { feature_angle_deg: 180.0, ..params.clone() };
+    let mut blind = params.clone();
+    blind.refinement_mut().feature_angle_deg = 180.0;
     assert!(worst(&blind) > 10.0, "{}", worst(&blind));
 }
 
@@ -141,7 +143,9 @@ fn multi_label_surfaces_are_refined_per_interface() {
 fn clamping_keeps_every_vertex_in_its_box() {
     let surface = two_balls();
     let normals: NormalField = IntegralInvariant { radius: Some(3.0) }.estimate(&surface).unwrap();
-    let params = Params { solver: SolverParams::default().clamped(Some(0.01)), ..Default::default() };
+    let mut params = Params::default();
+    params.mode = params.mode.with_margin(0.01);
+    assert_eq!(params.refinement().rounds, 3, "refined between clamped solves");
     let out = Regularizer::new(surface.clone()).run(Run::new(&params).from_normals(&normals)).unwrap();
     let input = surface.positions();
     assert_eq!(out.targets, input, "clamping keeps the targets (the boxes' centres) at the input");
@@ -156,8 +160,9 @@ fn intermediate_solves_stop_early_without_moving_the_output() {
     let surface = DigitalSurface::from_volume(&digitize(&Torus { major: 6.0, minor: 2.0 }, h)).unwrap();
     let solver = SolverParams { choice: voxreg_regularize::SolverChoice::Cg, ..Default::default() };
     let loose = Params { solver, ..Default::default() };
-    assert!(loose.intermediate_tolerance > 1.0);
-    let tight = Params { intermediate_tolerance: 1.0, ..loose.clone() };
+    assert!(loose.mode.fidelity().unwrap().intermediate_tolerance > 1.0);
+    let mut tight = loose.clone();
+    tight.mode.fidelity_mut().unwrap().intermediate_tolerance = 1.0;
     let mut r = Regularizer::new(surface);
     let (a, b) = (r.run(&loose).unwrap(), r.run(&tight).unwrap());
     let its = |o: &voxreg_regularize::Output| -> Vec<usize> {
@@ -187,7 +192,9 @@ fn each_refinement_round_improves_the_normals() {
     for (name, shape, h) in cases {
         let mut last = f64::INFINITY;
         for refine in 0..=3 {
-            let (a, sj) = measure(shape, h, &Params { refine, ..Default::default() });
+            let mut params = Params::default();
+            params.refinement_mut().rounds = refine;
+            let (a, sj) = measure(shape, h, &params);
             eprintln!(
                 "| {name} | {refine} | {:.3} / {:.3} | {:+.3} | {:.2} / {:.2} | {sj:.3} |",
                 a.distance_mean, a.distance_max, a.bias, a.normal_mean_deg, a.normal_max_deg

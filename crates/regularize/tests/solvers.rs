@@ -8,7 +8,7 @@ use voxreg_normals::{NormalEstimator, NormalField, Trivial};
 use voxreg_quality::self_intersections;
 use voxreg_regularize::{
     BoundedParams, BoundedSolver, CgParams, CgSolver, DirectSolver, Energy, EnergyParams, FairnessMask,
-    Preconditioner, Run, StoppingRule, Weights,
+    Preconditioner, Run, SolveRequest, SolveStart, StoppingRule, Weights,
 };
 use voxreg_testkit::{digitize, true_normals, Lcg, Sphere, Torus};
 
@@ -94,7 +94,10 @@ fn cg_and_descent_match_the_direct_solve() {
                     StoppingRule::Guaranteed
                 };
                 let params = CgParams { preconditioner: pre, stopping, ..Default::default() };
-                let (y, info) = CgSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
+                let (y, info) = CgSolver::for_surface(&s, params)
+                    .unwrap()
+                    .solve(&energy, SolveRequest::default())
+                    .unwrap();
                 let err = max_distance(&x, &y);
                 assert!(info.converged, "{name} {pre:?}: {info:?}");
                 assert!(err < 1e-3, "{name} {pre:?} weighted {weighted}: cg error {err}");
@@ -107,8 +110,10 @@ fn cg_and_descent_match_the_direct_solve() {
                     info.relative_gradient
                 );
             }
-            let (y, info) =
-                BoundedSolver::for_surface(&s, BoundedParams::default()).unwrap().solve(&energy).unwrap();
+            let (y, info) = BoundedSolver::for_surface(&s, BoundedParams::default())
+                .unwrap()
+                .solve(&energy, SolveRequest::default())
+                .unwrap();
             let err = max_distance(&x, &y);
             assert!(info.converged, "{name}: {info:?}");
             assert!(err < 1e-3, "{name} weighted {weighted}: descent error {err}");
@@ -127,7 +132,8 @@ fn guaranteed_stopping_rule_bounds_the_error() {
         let x = exact(&energy);
         for tolerance in [1e-2, 1e-5] {
             let params = CgParams { tolerance, stopping: StoppingRule::Guaranteed, ..Default::default() };
-            let (y, info) = CgSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
+            let (y, info) =
+                CgSolver::for_surface(&s, params).unwrap().solve(&energy, SolveRequest::default()).unwrap();
             let bound = info.error_bound;
             assert!(bound <= tolerance, "{name}: bound {bound}");
             // The gradient at the result is below the stated threshold.
@@ -153,7 +159,10 @@ fn estimate_rule_meets_the_tolerance_on_larger_shapes() {
             let x = exact(&energy);
             for tolerance in [1e-2, 1e-3, 1e-4] {
                 let params = CgParams { tolerance, ..Default::default() };
-                let (y, info) = CgSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
+                let (y, info) = CgSolver::for_surface(&s, params)
+                    .unwrap()
+                    .solve(&energy, SolveRequest::default())
+                    .unwrap();
                 let err = max_distance(&x, &y);
                 assert!(
                     err < tolerance,
@@ -178,11 +187,12 @@ fn a_warm_start_meets_the_same_tolerance_in_fewer_iterations() {
     let mut rng = Lcg::new(5);
     let first = NormalField::new(second.as_slice().iter().map(|n| *n + 0.05 * rng.vec3(-1.0, 1.0)).collect());
     let mut solver = CgSolver::for_surface(&s, CgParams::default()).unwrap();
-    let (x1, _) = solver.solve(&Energy::new(&s, &first, &input, EnergyParams::default()).unwrap()).unwrap();
+    let first = Energy::new(&s, &first, &input, EnergyParams::default()).unwrap();
+    let (x1, _) = solver.solve(&first, SolveRequest::default()).unwrap();
     let energy = Energy::new(&s, &second, &input, EnergyParams::default()).unwrap();
     let x = exact(&energy);
-    let (cold, cold_info) = solver.solve(&energy).unwrap();
-    let (warm, warm_info) = solver.solve_from(&energy, &x1, &mut |_| {}).unwrap();
+    let (cold, cold_info) = solver.solve(&energy, SolveRequest::default()).unwrap();
+    let (warm, warm_info) = solver.solve(&energy, SolveRequest::from(SolveStart::Given(&x1))).unwrap();
     for (y, info) in [(&cold, &cold_info), (&warm, &warm_info)] {
         let err = max_distance(&x, y);
         assert!(err < 1e-3 && info.converged, "error {err} after {} iterations", info.iterations);
@@ -194,9 +204,12 @@ fn a_warm_start_meets_the_same_tolerance_in_fewer_iterations() {
         cold_info.iterations
     );
     // From the minimizer itself: no iteration needed.
-    let (y, info) = solver.solve_from(&energy, &x, &mut |_| {}).unwrap();
+    let (y, info) = solver.solve(&energy, SolveRequest::from(SolveStart::Given(&x))).unwrap();
     assert!(max_distance(&x, &y) < 1e-9 && info.iterations <= 1, "{} iterations", info.iterations);
-    assert!(solver.solve_from(&energy, &x[1..], &mut |_| {}).is_err());
+    assert!(solver.solve(&energy, SolveRequest::from(SolveStart::Given(&x[1..]))).is_err());
+    // An owned start is taken as the iterate: the same minimizer.
+    let (z, _) = solver.solve(&energy, SolveRequest::from(SolveStart::Owned(x1.clone()))).unwrap();
+    assert!(max_distance(&warm, &z) < 1e-12);
 }
 
 #[test]
@@ -217,7 +230,7 @@ fn descent_energy_decreases_monotonically() {
             let mut energies = vec![energy.terms(&input).total];
             let (x, info) = BoundedSolver::for_surface(&s, params)
                 .unwrap()
-                .solve_with(&energy, &mut |p| energies.push(p.energy))
+                .solve(&energy, SolveRequest::default().progress(&mut |p| energies.push(p.energy)))
                 .unwrap();
             for w in energies.windows(2) {
                 assert!(w[1] <= w[0] + 1e-12 * w[0].abs(), "{name} {pre:?} {clamp:?}: {} -> {}", w[0], w[1]);
@@ -318,7 +331,10 @@ fn clamped_descent_keeps_vertices_in_their_cubes_without_self_intersections() {
                     .unwrap();
             let eps = 0.01;
             let params = BoundedParams { clamp: Some(eps), max_iterations: 2000, ..Default::default() };
-            let (x, info) = BoundedSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
+            let (x, info) = BoundedSolver::for_surface(&s, params)
+                .unwrap()
+                .solve(&energy, SolveRequest::default())
+                .unwrap();
             let half = (1.0 - eps) * 0.5;
             for (v, (p, q)) in x.iter().zip(&input).enumerate() {
                 assert!(
@@ -358,7 +374,8 @@ fn the_checker_finds_the_intersections_of_unclamped_thin_structures() {
     let free = self_intersections(&x, &quads(&s));
     assert!(!free.is_empty(), "expected the unclamped result to intersect itself");
     let params = BoundedParams { clamp: Some(0.01), max_iterations: 3000, ..Default::default() };
-    let (y, _) = BoundedSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
+    let (y, _) =
+        BoundedSolver::for_surface(&s, params).unwrap().solve(&energy, SolveRequest::default()).unwrap();
     assert!(self_intersections(&y, &quads(&s)).is_empty());
 }
 
@@ -375,7 +392,7 @@ fn every_preconditioner_reaches_the_same_clamped_minimizer() {
                 max_iterations: 20_000,
                 ..Default::default()
             };
-            BoundedSolver::for_surface(s, params).unwrap().solve(energy).unwrap()
+            BoundedSolver::for_surface(s, params).unwrap().solve(energy, SolveRequest::default()).unwrap()
         };
         let (reference, info) = solve(Preconditioner::Multigrid);
         assert!(info.converged && info.clamped_vertices > 0, "{name}: {info:?}");
@@ -401,7 +418,8 @@ fn clamping_with_a_loose_box_matches_the_free_minimizer() {
     let x = exact(&energy);
     assert!(max_distance(&x, &input) < 0.45, "{}", max_distance(&x, &input));
     let params = BoundedParams { clamp: Some(0.05), ..Default::default() };
-    let (y, info) = BoundedSolver::for_surface(&s, params).unwrap().solve(&energy).unwrap();
+    let (y, info) =
+        BoundedSolver::for_surface(&s, params).unwrap().solve(&energy, SolveRequest::default()).unwrap();
     assert_eq!(info.clamped_vertices, 0);
     assert!(max_distance(&x, &y) < 1e-3);
 }
@@ -460,7 +478,10 @@ fn texture_aware_fairness_moves_only_vertices_near_colour_boundaries() {
     assert!(off < 0.5 * on, "changes far from the boundary ({off}) rival those on it ({on})");
     // The boundary vertices that are not boundary-adjacent in the plain energy: unchanged
     // vertex set sizes, and the iterative solvers agree on the masked energy too.
-    let (y, _) = CgSolver::for_surface(&s, CgParams::default()).unwrap().solve(&textured).unwrap();
+    let (y, _) = CgSolver::for_surface(&s, CgParams::default())
+        .unwrap()
+        .solve(&textured, SolveRequest::default())
+        .unwrap();
     assert!(max_distance(&xb, &y) < 1e-3);
     let _ = VertexId(0);
 }
@@ -472,8 +493,14 @@ fn solvers_reject_an_energy_on_another_surface() {
     let normals = Trivial.estimate(&b).unwrap();
     let input = b.positions();
     let energy = Energy::new(&b, &normals, &input, EnergyParams::default()).unwrap();
-    assert!(CgSolver::for_surface(&a, CgParams::default()).unwrap().solve(&energy).is_err());
-    assert!(BoundedSolver::for_surface(&a, BoundedParams::default()).unwrap().solve(&energy).is_err());
+    assert!(CgSolver::for_surface(&a, CgParams::default())
+        .unwrap()
+        .solve(&energy, SolveRequest::default())
+        .is_err());
+    assert!(BoundedSolver::for_surface(&a, BoundedParams::default())
+        .unwrap()
+        .solve(&energy, SolveRequest::default())
+        .is_err());
     assert!(BoundedSolver::for_surface(&a, BoundedParams { clamp: Some(1.5), ..Default::default() }).is_err());
     assert!(CgSolver::for_surface(&a, CgParams { tolerance: 0.0, ..Default::default() }).is_err());
 }
@@ -502,9 +529,9 @@ proptest! {
             energy = energy.with_weights(&weights).unwrap();
         }
         let x = exact(&energy);
-        let (y, info) = CgSolver::for_surface(&s, CgParams::default()).unwrap().solve(&energy).unwrap();
+        let (y, info) = CgSolver::for_surface(&s, CgParams::default()).unwrap().solve(&energy, SolveRequest::default()).unwrap();
         prop_assert!(max_distance(&x, &y) < 1e-3, "cg {} ({info:?})", max_distance(&x, &y));
-        let (z, info) = BoundedSolver::for_surface(&s, BoundedParams::default()).unwrap().solve(&energy).unwrap();
+        let (z, info) = BoundedSolver::for_surface(&s, BoundedParams::default()).unwrap().solve(&energy, SolveRequest::default()).unwrap();
         // The descent stops on a geometric extrapolation of its tail, an estimate rather
         // than a bound: it may undershoot the true distance by a few percent.
         prop_assert!(max_distance(&x, &z) < 1.5e-3, "descent {} ({info:?})", max_distance(&x, &z));
@@ -523,7 +550,10 @@ fn regression_small_surface_plateau() {
     let input = s.positions();
     let energy = Energy::new(&s, &normals, &input, EnergyParams::default()).unwrap();
     let x = exact(&energy);
-    let (y, info) = CgSolver::for_surface(&s, CgParams::default()).unwrap().solve(&energy).unwrap();
+    let (y, info) = CgSolver::for_surface(&s, CgParams::default())
+        .unwrap()
+        .solve(&energy, SolveRequest::default())
+        .unwrap();
     assert!(max_distance(&x, &y) < 1e-4, "{info:?}");
     assert!(info.iterations <= 3, "{info:?}");
 }
@@ -540,7 +570,8 @@ fn clamped_minimizer_satisfies_the_optimality_conditions() {
         let half = (1.0 - eps) * 0.5;
         let tight =
             BoundedParams { clamp: Some(eps), tolerance: 1e-7, max_iterations: 20_000, ..Default::default() };
-        let (x, info) = BoundedSolver::for_surface(s, tight).unwrap().solve(energy).unwrap();
+        let (x, info) =
+            BoundedSolver::for_surface(s, tight).unwrap().solve(energy, SolveRequest::default()).unwrap();
         assert!(info.converged, "{name}: {info:?}");
         let g = energy.gradient(&x);
         let scale = energy.gradient(input).iter().map(|v| v.abs().max_element()).fold(0.0, f64::max);
@@ -562,7 +593,8 @@ fn clamped_minimizer_satisfies_the_optimality_conditions() {
         }
         assert!(held > 0, "{name}: the boxes should bind somewhere");
         let plain = BoundedParams { conjugate: false, ..tight };
-        let (y, _) = BoundedSolver::for_surface(s, plain).unwrap().solve(energy).unwrap();
+        let (y, _) =
+            BoundedSolver::for_surface(s, plain).unwrap().solve(energy, SolveRequest::default()).unwrap();
         let (ex, ey) = (energy.terms(&x).total, energy.terms(&y).total);
         assert!(ex <= ey * (1.0 + 1e-6), "{name}: conjugate {ex} vs projected descent {ey}");
     });
@@ -600,7 +632,7 @@ fn warm_started_rounds_report_their_iterates_energy() {
     let volume = digitize(&Sphere { radius: 7.0 }, 1.0);
     let mut params = Params::default();
     params.solver.choice = SolverChoice::Cg;
-    params.refine = 2;
+    params.refinement_mut().rounds = 2;
     let (r, out, iterates, energies) = streamed_round(&volume, &params, 2);
     assert!(iterates.len() >= 2, "{} iterates", iterates.len());
     let energy = Energy::new(r.surface(), &out.normals, &out.targets, params.energy).unwrap();
@@ -617,12 +649,9 @@ fn warm_started_rounds_report_their_iterates_energy() {
 fn streamed_iterates_match_the_reported_energy_and_converge() {
     use voxreg_regularize::{Params, SolverChoice};
     let volume = digitize(&Sphere { radius: 7.0 }, 1.0);
-    for (choice, clamp) in [(SolverChoice::Cg, false), (SolverChoice::Bounded, true)] {
+    for choice in [SolverChoice::Cg, SolverChoice::Bounded] {
         let mut params = Params::papers();
         params.solver.choice = choice;
-        if !clamp {
-            params.solver.bounded.clamp = None;
-        }
         let (r, out, iterates, energies) = streamed_round(&volume, &params, 0);
         assert!(iterates.len() >= 2, "{choice:?}: {} iterates", iterates.len());
         let surface = r.surface();

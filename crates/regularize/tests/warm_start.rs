@@ -78,7 +78,7 @@ fn a_warm_refined_run_matches_the_cold_one_in_fewer_iterations() {
         Regularizer::from_volume(&digitize(&Sphere { radius: 9.6 }, 1.0), &RegionMap::per_label()).unwrap();
     let before = with_solver(Params::default(), SolverChoice::Cg);
     let (_, rounds) = run_keeping_iterates(&mut r, &before, &[]);
-    assert_eq!(rounds.len(), before.refine + 1);
+    assert_eq!(rounds.len(), before.refinement().rounds + 1);
     let mut after = before.clone();
     after.energy.gamma *= 1.2;
     let cold = r.run(&after).unwrap();
@@ -194,7 +194,7 @@ fn a_warm_clamped_solve_reaches_the_cold_minimizer_with_fewer_operator_products(
         let moved = max_distance(&first.positions, &cold.positions);
         assert!(moved > 10.0 * tol, "change {k}: the change moves the minimizer ({moved} voxel)");
         // Inside the new boxes (the warm start was projected into them).
-        let half = 0.5 * (1.0 - after.solver.bounded.clamp.unwrap()) + 1e-9;
+        let half = 0.5 * (1.0 - after.mode.clamped().unwrap().margin) + 1e-9;
         for (x, p) in warm.positions.iter().zip(input.iter()) {
             assert!((*x - *p).abs().max_element() <= half, "change {k}: {x} outside the box of {p}");
         }

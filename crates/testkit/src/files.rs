@@ -10,6 +10,48 @@ pub const BUNDLED_VOX_MODELS: [&str; 6] = [
     "placeholder-with-materials.vox",
 ];
 
+/// A MagicaVoxel `.vox` file's bytes: two one-voxel models in one group, the second
+/// translated by `offset` (`"x y z"`, the scene graph's `_t`), for readers' tests of scenes
+/// far apart or corrupted.
+pub fn two_model_vox(offset: &str) -> Vec<u8> {
+    use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+    let model = || Model { size: Size { x: 1, y: 1, z: 1 }, voxels: vec![Voxel { x: 0, y: 0, z: 0, i: 1 }] };
+    let transform = |child: u32, t: &str| {
+        let mut frame = dot_vox::Dict::new();
+        frame.insert("_t".into(), t.into());
+        SceneNode::Transform {
+            attributes: dot_vox::Dict::new(),
+            frames: vec![Frame::new(frame)],
+            child,
+            layer_id: 0,
+        }
+    };
+    let shape = |model_id| SceneNode::Shape {
+        attributes: dot_vox::Dict::new(),
+        models: vec![ShapeModel { model_id, attributes: dot_vox::Dict::new() }],
+    };
+    let scenes = vec![
+        transform(1, "0 0 0"),
+        SceneNode::Group { attributes: dot_vox::Dict::new(), children: vec![2, 4] },
+        transform(3, "0 0 0"),
+        shape(0),
+        transform(5, offset),
+        shape(1),
+    ];
+    let data = DotVoxData {
+        version: 150,
+        index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
+        models: vec![model(), model()],
+        palette: vec![Color { r: 1, g: 2, b: 3, a: 255 }; 256],
+        materials: Vec::new(),
+        scenes,
+        layers: Vec::new(),
+    };
+    let mut bytes = Vec::new();
+    data.write_vox(&mut bytes).expect("writing to memory");
+    bytes
+}
+
 /// A version-1 `.npy` file's bytes: `descr` (`'<u4'`, `'|u1'`, `'<f4'`), shape `(X, Y, Z)`
 /// in C order (z fastest), then `data` (after the header, if `data` is empty: a writer
 /// can stream the values after it).

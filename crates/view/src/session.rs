@@ -517,7 +517,7 @@ fn solve(
                     *x = warm.get(k).cloned().unwrap_or_default();
                 }
             }
-            let solves = params.refine + 1;
+            let solves = params.refinement().rounds + 1;
             if rounds.len() < solves {
                 rounds.resize(solves, Vec::new());
             }

@@ -153,7 +153,7 @@ mod tests {
         t.overrides.alpha = Some(0.5);
         t.overrides.normals = Some(Estimator::At);
         let p = t.params(Preset::VoxelArt, &base).unwrap();
-        assert_eq!(p.solver.bounded.clamp, None);
+        assert!(!p.clamps());
         assert_eq!(p.energy.alpha, 0.5);
         assert_eq!(p.normals.estimator, Estimator::At);
         assert_eq!(p.normals.radius, Some(1.5));
@@ -196,7 +196,7 @@ mod tests {
         t.overrides.smoothness = Some(0.3);
         let p = t.params(Preset::VoxelArt, &Overrides::default()).unwrap();
         let expected = Params::voxel_art().with_smoothness(0.3).unwrap();
-        assert_eq!(p.solver, expected.solver);
+        assert_eq!((p.solver, p.mode), (expected.solver, expected.mode));
         let line = t.command_line("a.vox", "a.glb");
         assert!(line.contains("--smoothness 0.3"), "{line}");
         assert!(!line.contains("clamp"), "{line}");
@@ -206,7 +206,7 @@ mod tests {
         let mut margin = Tuning::preset(Preset::VoxelArt);
         margin.overrides.clamp = Some(Clamp::Margin(0.2));
         let p = margin.params(Preset::VoxelArt, &base).unwrap();
-        assert_eq!(p.solver.bounded.clamp, Some(0.2));
+        assert_eq!(p.mode.clamped().map(|c| c.margin), Some(0.2));
     }
 
     #[test]

@@ -87,7 +87,9 @@ fn tolerances(mut params: Params, prefix: &str) -> Result<Params> {
         params.solver = params.solver.with_tolerance(tol);
     }
     if let Some(itol) = env_opt::<f64>(&format!("{prefix}_ITOL"))? {
-        params.intermediate_tolerance = itol;
+        if let Some(f) = params.mode.fidelity_mut() {
+            f.intermediate_tolerance = itol;
+        }
     }
     Ok(params)
 }
@@ -106,11 +108,11 @@ pub(super) fn stitched(path: PathBuf) -> Result<()> {
     let (chunk, halo) = (env_or("VOXREG_DIAG_CHUNK", 32)?, env_or("VOXREG_DIAG_HALO", 24)?);
     let volume = read(&path)?;
     let dims = volume.dims();
-    let params = Params {
-        preserve_size: env_or::<u8>("VOXREG_DIAG_PRESERVE", 1)? != 0,
-        refine: env_or("VOXREG_DIAG_REFINE", Params::default().refine)?,
-        ..Params::default()
-    };
+    let mut params = Params::default();
+    if env_or::<u8>("VOXREG_DIAG_PRESERVE", 1)? == 0 {
+        params.mode.fidelity_mut().expect("the default preset's mode").recentring = None;
+    }
+    params.refinement_mut().rounds = env_or("VOXREG_DIAG_REFINE", Params::default().refinement().rounds)?;
     let params = tolerances(params, "VOXREG_DIAG")?;
     let block_params = tolerances(params.clone(), "VOXREG_DIAG_BLOCK")?;
     let only: Option<Vec<usize>> = std::env::var("VOXREG_DIAG_BLOCKS")
@@ -215,13 +217,18 @@ pub(super) fn blocks(path: PathBuf) -> Result<()> {
     let only: Option<usize> = env_opt("VOXREG_DIAG_BLOCK")?;
     let volume = read(&path)?;
     let dims = volume.dims();
-    let mut params = Params {
-        preserve_size: env_or::<u8>("VOXREG_DIAG_PRESERVE", 1)? != 0,
-        intermediate_tolerance: 1.0,
-        ..Params::default()
-    };
+    let mut params = Params::default();
+    let fidelity = params.mode.fidelity_mut().expect("the default preset's mode");
+    fidelity.intermediate_tolerance = 1.0;
+    if env_or::<u8>("VOXREG_DIAG_PRESERVE", 1)? == 0 {
+        fidelity.recentring = None;
+    }
     params.solver = params.solver.with_tolerance(env_or("VOXREG_DIAG_TOL", 1e-3)?);
-    let round = |r: usize| Params { refine: r, ..params.clone() };
+    let round = |r: usize| {
+        let mut p = params.clone();
+        p.refinement_mut().rounds = r;
+        p
+    };
     let mut whole = Regularizer::from_volume(&volume, &params.regions)?;
     let whole_k: Vec<HashMap<u64, DVec3>> = (0..=max_refine)
         .map(|r| {
@@ -285,7 +292,8 @@ pub(super) fn blocks(path: PathBuf) -> Result<()> {
 pub(super) fn sensitivity(path: PathBuf) -> Result<()> {
     let eps: f64 = env_or("VOXREG_EPS", 1e-4)?;
     let volume = read(&path)?;
-    let params = Params { refine: 1, ..Params::default() };
+    let mut params = Params::default();
+    params.refinement_mut().rounds = 1;
     let out = regularize(&volume, &params)?;
     let s = &out.surface;
     let p = out.positions.as_slice();
@@ -295,8 +303,8 @@ pub(super) fn sensitivity(path: PathBuf) -> Result<()> {
         Refined {
             positions,
             previous: &out.normals,
-            radius: params.refine_radius,
-            feature_angle_deg: params.feature_angle_deg,
+            radius: params.refinement().radius,
+            feature_angle_deg: params.refinement().feature_angle_deg,
         }
         .estimate(s)
     };

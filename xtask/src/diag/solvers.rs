@@ -22,7 +22,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 use voxreg_normals::{NormalEstimator, NormalField, Trivial};
-use voxreg_regularize::{CgParams, CgSolver, Energy, EnergyParams, StoppingRule};
+use voxreg_regularize::{CgParams, CgSolver, Energy, EnergyParams, SolveRequest, StoppingRule};
 use voxreg_testkit::{digitize, true_normals, Sphere};
 
 use super::{env_opt, env_or};
@@ -108,7 +108,7 @@ pub(super) fn solver_table() -> Result<()> {
             let (t, c0) = (Instant::now(), cpu_seconds());
             let mut cg = CgSolver::for_surface(&s, cg_params()?)?;
             let levels = cg.levels();
-            let (x, info) = cg.solve(&energy)?;
+            let (x, info) = cg.solve(&energy, SolveRequest::default())?;
             times.push(t.elapsed().as_secs_f64());
             cpu.push(cpu_seconds() - c0);
             last = Some((x, info, levels));
@@ -117,7 +117,7 @@ pub(super) fn solver_table() -> Result<()> {
         println!("cpu seconds per solve (all threads): median {:.3}, min {cpu_min:.3}", median(cpu.clone()));
         let (x, info, levels) = last.expect("at least one run");
         let tight = CgParams { tolerance: 1e-6, stopping: StoppingRule::Guaranteed, ..Default::default() };
-        let (reference, _) = CgSolver::for_surface(&s, tight)?.solve(&energy)?;
+        let (reference, _) = CgSolver::for_surface(&s, tight)?.solve(&energy, SolveRequest::default())?;
         let err =
             x.iter().zip(&reference).map(|(a, b): (&DVec3, &DVec3)| (*a - *b).length()).fold(0.0, f64::max);
         let setup = info.seconds.structure + info.seconds.assemble + info.seconds.factor;

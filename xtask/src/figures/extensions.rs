@@ -132,8 +132,7 @@ pub(super) fn fig14(index: &mut Index, path: &Path) -> Result<()> {
     let mut images = Vec::new();
     for (caption, texture_aware) in [("fairness", false), ("texture-aware fairness", true)] {
         // Unclamped, so the fairness term is what places the quads.
-        let params =
-            Params { regions: RegionMap::single_solid(), texture_aware, refine: 0, ..Params::papers() };
+        let params = Params { regions: RegionMap::single_solid(), texture_aware, ..Params::papers() };
         let x = Regularizer::new(surface.clone()).run(&params)?.positions.into_vec();
         let shot = Shot {
             caption: caption.into(),

@@ -1,133 +1,64 @@
-//! What the pipeline does between solves: weak alignment at creases, and re-centring of
-//! the attachment targets (size preservation).
+//! Size preservation between refinement rounds: the re-centring of the attachment
+//! targets ([`crate::Recentring`]), and what it reads from the surface alone
+//! ([`RecentringInputs`]).
 
-use glam::{DVec3, Vec3};
+use glam::DVec3;
 use rayon::prelude::*;
-use voxreg_digisurf::{DigitalSurface, Surfel, SurfelId, VertexId};
-use voxreg_normals::{FeatureRamp, Interrupt, NormalField};
+use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
+use voxreg_normals::{Interrupt, NormalField};
 
 use crate::error::RegularizeError;
-use crate::faces::FaceIndex;
 
-/// Per-surfel alignment multipliers: `weight` for the quads whose normal in `field` is
-/// more than `feature_angle_deg` from the normal of an edge-adjacent quad of the same
-/// interface (the quads on either side of a feature) and from their own surfel's axis,
-/// and for the quads within `dilation` rings of them (sharing a vertex with a marked
-/// quad, ring by ring); `1` for the others. Quads that keep their axis (the faces of an
-/// axis-aligned box, whose edges run along the quads' edges) are not marked by the angle
-/// test: they lie flat unsqueezed. The test is continuous: a quad within the feature rule's
-/// ramp of both angles takes a weight between `weight` and 1 ([`straddling_degree`]), so
-/// a small change of the field changes the weights little (a volume solved in chunks
-/// must give the whole volume's weights to within as much).
-pub(crate) fn crease_weights(
-    surface: &DigitalSurface,
-    field: &NormalField,
-    feature_angle_deg: f64,
-    weight: f64,
-    dilation: usize,
-) -> Vec<f64> {
-    let mut degree = straddling_degree(surface, field, feature_angle_deg);
-    for _ in 0..dilation {
-        let mut touched = vec![0.0f64; surface.num_vertices()];
-        for (s, &m) in degree.iter().enumerate().filter(|(_, &m)| m > 0.0) {
-            surface.surfels()[s].vertices.iter().for_each(|v| touched[v.index()] = touched[v.index()].max(m));
+/// What the re-centring reads from the surface alone, kept across runs.
+#[derive(Debug)]
+pub(crate) struct RecentringInputs {
+    /// Per vertex, whether the drift is measured there (outside digital plateaus and a
+    /// block's cut sides).
+    pub(crate) trusted: Vec<bool>,
+    /// Per surfel, the weight of its centre as a sample ([`sample_weights`]; `None`: all 1).
+    pub(crate) samples: Option<Vec<f64>>,
+    /// The plateaus' attachment and alignment multipliers ([`plateau_weights`]; `None`:
+    /// all 1).
+    pub(crate) plateaus: Option<(Vec<f64>, Vec<f64>)>,
+}
+
+impl RecentringInputs {
+    /// The inputs of `surface`, the vertices flagged in `untrusted` (a block's cut sides)
+    /// left out of the drift's measurement.
+    pub(crate) fn new(surface: &DigitalSurface, untrusted: Option<&[bool]>) -> Self {
+        let informative = informative_vertices(surface);
+        let plateaus = plateau_weights(surface, &informative);
+        let mut trusted = informative;
+        if let Some(untrusted) = untrusted {
+            trusted.iter_mut().zip(untrusted).for_each(|(t, u)| *t &= !*u);
         }
-        degree = surface
-            .surfels()
-            .par_iter()
-            .map(|s| s.vertices.iter().map(|v| touched[v.index()]).fold(0.0, f64::max))
-            .collect();
+        RecentringInputs { trusted, samples: sample_weights(surface), plateaus }
     }
-    degree
-        .into_iter()
-        .map(|m| match m {
-            m if m >= 1.0 => weight,
-            m if m <= 0.0 => 1.0,
-            m => 1.0 - (1.0 - weight) * m,
-        })
-        .collect()
-}
 
-/// How much each quad is marked by [`crease_weights`]'s angle test, from 0 to 1: the
-/// smaller of how far its normal is tilted from its surfel's axis and how far the most
-/// tilted neighbour of its interface is from it, each through the feature rule's ramp
-/// ([`FeatureRamp`], 1 past the angle plus half the ramp).
-fn straddling_degree(surface: &DigitalSurface, field: &NormalField, feature_angle_deg: f64) -> Vec<f64> {
-    let ramp = FeatureRamp::new(feature_angle_deg);
-    let past = |c: f64| 1.0 - ramp.weight(c);
-    let normals = field.as_slice();
-    (0..surface.num_surfels())
-        .into_par_iter()
-        .map(|f| {
-            let sf = surface.surfels()[f];
-            // A quad in the plane of its own surfel lies flat without being squeezed.
-            let tilted = past(normals[f].dot(sf.normal()));
-            if tilted <= 0.0 {
-                return 0.0;
-            }
-            let iface = sf.interface;
-            let mut across = 0.0f64;
-            for &e in surface.surfel_edges(SurfelId(f as u32)).iter() {
-                for g in surface.edge_surfels(e) {
-                    if surface.surfel(*g).interface == iface {
-                        across = across.max(past(normals[g.index()].dot(normals[f])));
-                    }
-                }
-            }
-            tilted.min(across)
-        })
-        .collect()
-}
-
-/// The scale below which a quad's normal changes are not treated as an oscillation by
-/// [`relaxed_normals`], squared: 1e-4 (a hundredth of a radian, about 0.6 degree).
-const OSCILLATION_SCALE2: f64 = 1e-4;
-
-/// The refined normals of a round, relaxed where they swing back: each quad moves from
-/// its normal `n` of the last round by `t d` instead of the whole change
-/// `d = estimate - n`, with `t = 1 / (1 + c)` and
-/// `c = max(0, -d . p) / (|p|^2 + s^2)`, where `p` is the change the quad took in the
-/// round before (`previous`, updated here to the change taken now) and `s` a hundredth of
-/// a radian. A quad whose normal keeps turning the same way, or barely moved, takes the
-/// estimate (`c = 0`); one that undoes its last change (`d = -p`, an oscillation between
-/// two normals) takes about half of it, the midpoint that the iteration would otherwise
-/// circle around. `t` is a continuous function of the normals, so a small change of the
-/// positions changes the result little (chunks must agree with the whole volume).
-///
-/// Why: on thin sheets of real segmentations the rounds do not settle on their own: some
-/// quads' normals alternate between two directions, and the alternation amplifies a
-/// difference of the positions (a solver tolerance, a chunk's cut) round after round.
-pub(crate) fn relaxed_normals(
-    field: &NormalField,
-    estimate: NormalField,
-    previous: &mut Option<Vec<Vec3>>,
-) -> NormalField {
-    let (n, e) = (field.as_slice(), estimate.as_slice());
-    let change =
-        |relaxed: &[DVec3]| Some(relaxed.par_iter().zip(n).map(|(r, n)| (*r - *n).as_vec3()).collect());
-    let relaxed: Vec<DVec3> = match previous.as_deref() {
-        None => {
-            *previous = change(e);
-            return estimate;
-        }
-        Some(p) => n
-            .par_iter()
-            .zip(e)
-            .zip(p)
-            .map(|((n, e), p)| {
-                let (d, p) = (*e - *n, p.as_dvec3());
-                let c = (-d.dot(p)).max(0.0) / (p.length_squared() + OSCILLATION_SCALE2);
-                let m = (*n + d / (1.0 + c)).normalize_or_zero();
-                if m == DVec3::ZERO {
-                    *e
-                } else {
-                    m
-                }
-            })
-            .collect(),
-    };
-    *previous = change(&relaxed);
-    NormalField::new(relaxed)
+    /// The targets' displacement for this round: minus the smoothed drift (standard
+    /// deviation `sigma` voxels) of `positions` from the lattice, measured at the trusted
+    /// vertices, with the sagitta of long quads lifted out by `lift_weight` (the
+    /// anisotropy's blend, 0 on cubic voxels).
+    pub(crate) fn drift(
+        &self,
+        surface: &DigitalSurface,
+        positions: &[DVec3],
+        field: &NormalField,
+        lift_weight: f64,
+        sigma: f64,
+        interrupt: &Interrupt,
+    ) -> Result<Vec<DVec3>, RegularizeError> {
+        let lift = (lift_weight > 0.0).then(|| {
+            let mut lift = sagitta_lift(surface, positions, field);
+            lift.iter_mut().for_each(|l| *l *= lift_weight);
+            lift
+        });
+        let (drift, sampled) =
+            surfel_drift(surface, positions, &surface.positions(), self.samples.as_deref(), lift.as_deref());
+        let weight: Vec<f64> =
+            sampled.iter().zip(&self.trusted).map(|(w, &t)| if t { *w } else { 0.0 }).collect();
+        trusted_drift(surface, &drift, &weight, sigma, interrupt)
+    }
 }
 
 /// Low-pass filter of per-vertex displacements: lazy diffusion over the vertex graph,
@@ -412,130 +343,8 @@ pub(crate) fn plateau_weights(
     Some((alpha, beta))
 }
 
-/// Full width, in voxels of the finest spacing, of the thin-sheet rule's ramp (see
-/// [`thin_sheets`]): a quad's share falls from 1 at `thickness - 0.5` to 0 at
-/// `thickness + 0.5`.
-const SHEET_RAMP: f64 = 1.0;
-
-/// The angles, in degrees, between a sheet's two sides (their outward normals, one
-/// reversed) within which they count as parallel in full and past which not at all
-/// (see [`thin_sheets`]).
-const SHEET_PARALLEL_DEG: [f64; 2] = [30.0, 50.0];
-
-/// The quads of thin sheets, as `(surfel, share)` with `share` in `(0, 1]`: for each quad
-/// and each of its two regions, the distance from the quad's centre through that region
-/// along `field`'s normal to the region's other side (marched voxel by voxel, in voxels of
-/// the finest spacing), where that side faces the opposite way (its outward normal in
-/// `field` within [`SHEET_PARALLEL_DEG`] of the march). The share is 1 for a sheet
-/// thinner than `thickness - 0.5`, 0 from `thickness + 0.5` on, linear between, and
-/// weighed by how parallel the sides are; the thinner region counts. A quad whose
-/// normal in `field` does not enter a region through the quad skips that region.
-///
-/// Why: a region one or two voxels thick between two others (a membrane between two
-/// compartments of a segmentation) is a long sheet whose tilt only the weak attachment
-/// holds; refined normals read that tilt back and the next solve amplifies it, so the
-/// rounds do not settle there and a difference of thousandths of a voxel (a solver's
-/// tolerance, a chunk's cut) grows to tenths. Measured on the initial field (from the
-/// voxels alone), the rule does not depend on the positions; the wedges at the rim of a
-/// thick region (sides not parallel) are not sheets.
-pub(crate) fn thin_sheets(surface: &DigitalSurface, field: &NormalField, thickness: f64) -> Vec<(u32, f64)> {
-    if thickness <= 0.0 {
-        return Vec::new();
-    }
-    let reach = thickness + 0.5 * SHEET_RAMP;
-    let dims = surface.dims().map(|d| d as i64);
-    let faces = FaceIndex::new(surface);
-    let h = surface.spacing();
-    let unit = h.min_element();
-    let [par_one, par_zero] = SHEET_PARALLEL_DEG.map(|a| a.to_radians().cos());
-    let normals = field.as_slice();
-    // From quad `s` into its region `side` along `dir`: the distance to the region's far
-    // side and how parallel that side is; `None` past `reach` or out of the domain.
-    let march = |s: &Surfel, side: usize, dir: DVec3| -> Option<(f64, f64)> {
-        let a = s.axis as usize;
-        let mut p = DVec3::from_array(s.cell.map(|c| c as f64 + 0.5));
-        p[a] = s.cell[a] as f64;
-        // Lattice steps per voxel of the finest spacing.
-        let u = dir * unit / h;
-        let mut v = s.voxels()[side];
-        let mut next = [f64::INFINITY; 3];
-        let mut delta = [f64::INFINITY; 3];
-        for k in 0..3 {
-            if u[k] != 0.0 {
-                let bound = if u[k] > 0.0 { (v[k] + 1) as f64 } else { v[k] as f64 };
-                next[k] = ((bound - p[k]) / u[k]).max(0.0);
-                delta[k] = 1.0 / u[k].abs();
-            }
-        }
-        // The quad's own face is behind the start.
-        next[a] = delta[a];
-        loop {
-            let k = (0..3).min_by(|&i, &j| next[i].total_cmp(&next[j])).expect("three axes");
-            let t = next[k];
-            if t >= reach {
-                return None;
-            }
-            let mut cell = v;
-            if u[k] > 0.0 {
-                cell[k] += 1;
-            }
-            if let Some(g) = faces.get(k, cell) {
-                let far = &surface.surfels()[g as usize];
-                let n = normals[g as usize];
-                let outward = if far.regions[0] == s.regions[side] { n } else { -n };
-                let parallel = ((dir.dot(outward) - par_zero) / (par_one - par_zero)).clamp(0.0, 1.0);
-                return Some((t, parallel));
-            }
-            v[k] += if u[k] > 0.0 { 1 } else { -1 };
-            if v[k] < -1 || v[k] > dims[k] {
-                return None;
-            }
-            next[k] += delta[k];
-        }
-    };
-    surface
-        .surfels()
-        .par_iter()
-        .zip(normals.par_iter())
-        .enumerate()
-        .filter_map(|(i, (s, n))| {
-            let oriented = s.normal();
-            let share = (0..2)
-                .filter_map(|side| {
-                    // Into the inner voxel against the normal, into the outer one along it.
-                    let dir = if side == 0 { -*n } else { *n };
-                    let entering = if side == 0 { -dir.dot(oriented) } else { dir.dot(oriented) };
-                    if entering <= 1e-6 {
-                        return None;
-                    }
-                    let (t, parallel) = march(s, side, dir)?;
-                    let thin = ((thickness + 0.5 * SHEET_RAMP - t) / SHEET_RAMP).clamp(0.0, 1.0);
-                    Some(thin * parallel)
-                })
-                .fold(0.0, f64::max);
-            (share > 0.0).then_some((i as u32, share))
-        })
-        .collect()
-}
-
-/// `estimate` moved towards the normals `held` (one per quad of a thin sheet, with its
-/// share from [`thin_sheets`]): by each quad's share, all the way at share 1.
-pub(crate) fn hold_thin_sheets(estimate: NormalField, held: &[(u32, DVec3, f64)]) -> NormalField {
-    if held.is_empty() {
-        return estimate;
-    }
-    let mut normals = estimate.as_slice().to_vec();
-    for &(s, n, share) in held {
-        let e = &mut normals[s as usize];
-        let m = (share * n + (1.0 - share) * *e).normalize_or_zero();
-        *e = if m == DVec3::ZERO { n } else { m };
-    }
-    NormalField::new(normals)
-}
-
 #[cfg(test)]
 mod tests {
-    use voxreg_normals::NormalEstimator;
     use voxreg_testkit::{digitize, Cuboid, Lcg, Sphere};
 
     use super::*;
@@ -635,131 +444,5 @@ mod tests {
             let on_edge = p.abs().to_array().iter().filter(|c| (**c - 4.5).abs() < 1e-9).count() >= 2;
             assert_eq!(informative[v], on_edge, "vertex at {p}");
         }
-    }
-
-    #[test]
-    fn relaxed_normals_halve_an_oscillation_and_keep_a_steady_turn() {
-        let unit = |x: f64, y: f64| DVec3::new(x, y, 1.0).normalize();
-        let n0 = NormalField::new(vec![unit(0.0, 0.0), unit(0.0, 0.0), unit(0.0, 0.0)]);
-        let n1 = NormalField::new(vec![unit(0.2, 0.0), unit(0.2, 0.0), unit(1e-4, 0.0)]);
-        // The first round has no previous change: the estimate as it is.
-        let mut previous = None;
-        let r1 = relaxed_normals(&n0, n1.clone(), &mut previous);
-        assert_eq!(r1.as_slice(), n1.as_slice());
-        // Then: quad 0 swings back to where it was, quad 1 keeps turning the same way,
-        // quad 2 swings back by a change far below the oscillation scale.
-        let e2 = NormalField::new(vec![unit(0.0, 0.0), unit(0.4, 0.0), unit(0.0, 0.0)]);
-        let r2 = relaxed_normals(&r1, e2.clone(), &mut previous);
-        let (r, e) = (r2.as_slice(), e2.as_slice());
-        let mid = (n1.as_slice()[0] + e[0]).normalize();
-        assert!(r[0].angle_between(mid) < 0.01, "{} from the midpoint", r[0].angle_between(mid));
-        assert_eq!(r[1], e[1]);
-        assert!(r[2].angle_between(e[2]) < 1e-6);
-        for m in r {
-            assert!((m.length() - 1.0).abs() < 1e-12);
-        }
-        // The change taken is what the next round compares with.
-        let p = previous.unwrap();
-        assert!((p[1].as_dvec3() - (e[1] - n1.as_slice()[1])).length() < 1e-7);
-    }
-
-    #[test]
-    fn relaxed_normals_are_continuous_in_the_estimate() {
-        // The estimate's change crosses from turning on (d . p > 0) to swinging back
-        // (d . p < 0) at k = 0: a tiny change of the estimate moves the result by about as
-        // much, not by a jump (a rule switching at d . p = 0 would jump by degrees here).
-        let n = DVec3::new(0.0, 0.0, 1.0);
-        let mut last = None;
-        for k in -5..=5 {
-            let e = DVec3::new(1e-6 * k as f64, 0.3, 1.0).normalize();
-            let mut previous = Some(vec![Vec3::new(0.1, 0.0, 0.0)]);
-            let r = relaxed_normals(&NormalField::new(vec![n]), NormalField::new(vec![e]), &mut previous);
-            let m = r.as_slice()[0];
-            if let Some(l) = last {
-                assert!(m.angle_between(l) < 1e-5, "step {k}: {}", m.angle_between(l));
-            }
-            last = Some(m);
-        }
-    }
-
-    /// A sheet of label 2, `thickness` voxels thick along z, sloping one in three along x,
-    /// between label 1 below and label 3 above, in a 40 x 24 x 28 box; and its integral
-    /// invariant normals.
-    fn sloping_sheet(thickness: f64) -> (DigitalSurface, NormalField) {
-        let volume = voxreg_digisurf::LabelVolume::from_fn([40, 24, 28], |[x, _, z]| {
-            let h = z as f64 + 0.5 - 8.0 - (x as f64 + 0.5) / 3.0;
-            if h < 0.0 {
-                1
-            } else if h < thickness {
-                2
-            } else {
-                3
-            }
-        });
-        let surface = DigitalSurface::from_volume(&volume).unwrap();
-        let field = voxreg_normals::IntegralInvariant { radius: None }.estimate(&surface).unwrap();
-        (surface, field)
-    }
-
-    /// The sheet's own quads (between labels 1 and 2 or 2 and 3), away from the box.
-    fn sheet_quads(surface: &DigitalSurface) -> Vec<usize> {
-        (0..surface.num_surfels())
-            .filter(|&i| {
-                let s = &surface.surfels()[i];
-                let inside = (6..34).contains(&s.cell[0]) && (6..18).contains(&s.cell[1]);
-                inside && s.labels.contains(&2) && s.labels.iter().all(|&l| l != 0)
-            })
-            .collect()
-    }
-
-    #[test]
-    fn thin_sheets_are_the_quads_of_sheets_one_or_two_voxels_thick() {
-        // Thickness along z, the shares' range on the sheet's quads.
-        for (thickness, least, most) in [(1.0, 1.0, 1.0), (1.8, 0.5, 1.0), (4.0, 0.0, 0.0)] {
-            let (surface, field) = sloping_sheet(thickness);
-            let shares: std::collections::HashMap<u32, f64> =
-                thin_sheets(&surface, &field, 2.5).into_iter().collect();
-            let quads = sheet_quads(&surface);
-            assert!(quads.len() > 200);
-            for f in quads {
-                let share = shares.get(&(f as u32)).copied().unwrap_or(0.0);
-                assert!(share >= least && share <= most, "thickness {thickness}, quad {f}: {share}");
-            }
-        }
-        // A ball is thick everywhere along its normals, the rim of a shallow cap included
-        // (its two sides are not parallel); 0 turns the rule off.
-        let ball = DigitalSurface::from_volume(&digitize(&Sphere { radius: 9.3 }, 1.0)).unwrap();
-        let field = voxreg_normals::IntegralInvariant { radius: None }.estimate(&ball).unwrap();
-        assert!(thin_sheets(&ball, &field, 2.5).is_empty());
-        let (surface, field) = sloping_sheet(1.0);
-        assert!(thin_sheets(&surface, &field, 0.0).is_empty());
-    }
-
-    #[test]
-    fn held_normals_move_the_estimate_by_their_share() {
-        let (a, b) = (DVec3::X, DVec3::Y);
-        let estimate = NormalField::new(vec![a, a, a]);
-        let held = hold_thin_sheets(estimate, &[(0, b, 1.0), (2, b, 0.5)]);
-        let [full, none, half] = [0, 1, 2].map(|i| held.as_slice()[i]);
-        assert!(full.distance(b) < 1e-15 && none.distance(a) < 1e-15);
-        assert!((half.angle_between(a) - half.angle_between(b)).abs() < 1e-12 && half.angle_between(a) > 0.7);
-    }
-
-    #[test]
-    fn thin_sheets_keep_the_first_rounds_normals() {
-        let (surface, _) = sloping_sheet(1.0);
-        let run = |refine: usize, sheet_thickness: f64| {
-            let params = crate::Params { refine, sheet_thickness, ..crate::Params::default() };
-            crate::Regularizer::new(surface.clone()).run(&params).unwrap().normals
-        };
-        let quads = sheet_quads(&surface);
-        let turn = |a: &NormalField, b: &NormalField| {
-            quads.iter().map(|&f| a.as_slice()[f].angle_between(b.as_slice()[f])).fold(0.0, f64::max)
-        };
-        let first = run(1, 2.5);
-        assert!(turn(&first, &run(3, 2.5)) < 1e-9);
-        // Refined in every round, the same quads turn on.
-        let free = turn(&run(1, 0.0), &run(3, 0.0));
-        assert!(free > 1e-4, "{free}");
     }
 }
