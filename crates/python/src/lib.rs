@@ -27,6 +27,7 @@ fn _voxreg(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(params::option_names, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::write_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(simplify::simplify_arrays, m)?)?;
+    m.add_function(wrap_pyfunction!(simplify::simplify_surface, m)?)?;
     m.add_function(wrap_pyfunction!(simplify::pyramid_targets, m)?)?;
     m.add_class::<mesh::Surface>()?;
     m.add_class::<mesh::PlyParts>()?;

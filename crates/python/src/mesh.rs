@@ -83,7 +83,7 @@ impl Arrays {
 }
 
 /// A part as Python names it: `("interface" | "region", index, manifold)`.
-type PartSpec = (String, u32, bool);
+pub(crate) type PartSpec = (String, u32, bool);
 
 /// An interface as Python sees it: its file name, its regions' smallest labels, its regions.
 type InterfaceEntry = (String, (u32, u32), (u32, u32));
@@ -175,21 +175,6 @@ impl Surface {
         check_extension(&path)?;
         py.detach(|| no_panic(|| write_mesh(&path, &self.quad_mesh(part)).map_err(|e| Error::io(&e))))?;
         Ok(())
-    }
-
-    /// The part (as `mesh`) simplified to each of `targets` (`(ratio or None,
-    /// max_error)`) in turn, one collapse sequence: `[(arrays, stats)]`, level `k` a
-    /// simplification of level `k - 1`.
-    #[pyo3(signature = (targets, part=None))]
-    fn simplify<'py>(
-        &self,
-        py: Python<'py>,
-        targets: Vec<crate::simplify::TargetTuple>,
-        part: Option<PartSpec>,
-    ) -> PyResult<Bound<'py, PyList>> {
-        let part = Self::part(part)?;
-        self.check_part(part)?;
-        crate::simplify::surface_levels(self, py, &targets, part)
     }
 
     /// Per interface, in order: `(name, (a, b), (region_a, region_b))`, `a` and `b` the

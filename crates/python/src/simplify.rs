@@ -8,7 +8,7 @@ use voxreg_io::{FaceGroup, Material, QuadMesh};
 use voxreg_simplify::{simplify_levels, Options, Simplified, SimplifyError, Stats, Target};
 
 use crate::error::{no_panic, Error, Result};
-use crate::mesh::{colors_materials, labels_of, positions_of, quads_of, Arrays, Part, Surface};
+use crate::mesh::{colors_materials, labels_of, positions_of, quads_of, Arrays, PartSpec, Surface};
 
 /// A level's target as Python passes it: `(ratio or None, max_error)`.
 pub(crate) type TargetTuple = (Option<f64>, f64);
@@ -51,14 +51,20 @@ fn run(mesh: &QuadMesh, targets: &[Target]) -> Result<Vec<(Arrays, Stats)>> {
     Ok(levels.into_iter().map(|Simplified { mesh, stats }| (Arrays::of(&mesh), stats)).collect())
 }
 
-/// The levels of a regularized surface's part (`Surface.simplify`).
-pub(crate) fn surface_levels<'py>(
-    surface: &Surface,
+/// A regularized surface's part (as `Surface.mesh`) simplified to each of `targets`
+/// (`(ratio or None, max_error)`) in turn, one collapse sequence: `[(arrays, stats)]`,
+/// level `k` a simplification of level `k - 1`.
+#[pyfunction]
+#[pyo3(signature = (surface, targets, part=None))]
+pub(crate) fn simplify_surface<'py>(
     py: Python<'py>,
-    targets: &[TargetTuple],
-    part: Part,
+    surface: PyRef<'py, Surface>,
+    targets: Vec<TargetTuple>,
+    part: Option<PartSpec>,
 ) -> PyResult<Bound<'py, PyList>> {
-    let targets = targets_of(targets);
+    let part = Surface::part(part)?;
+    surface.check_part(part)?;
+    let targets = targets_of(&targets);
     let levels = py.detach(|| no_panic(|| run(&surface.quad_mesh(part), &targets)))?;
     levels_list(py, levels)
 }

@@ -144,6 +144,21 @@ pub struct BoundedInfo {
     pub seconds: SolveTimings,
 }
 
+/// What [`crate::SweepsSolver`] reports.
+#[derive(Clone, Debug, PartialEq, Serialize)]
+pub struct SweepsInfo {
+    /// Sweeps done (each one product by the operator).
+    pub iterations: usize,
+    /// `|b - H x|` before the last sweep relative to its value at the start.
+    pub relative_gradient: f64,
+    /// The largest move of a vertex in the last sweep, in voxels (of the finest spacing).
+    pub last_move: f64,
+    /// Bytes of the solver's data (connectivity, block inverses, vectors).
+    pub memory_bytes: usize,
+    /// Seconds per step.
+    pub seconds: SolveTimings,
+}
+
 /// What a solver reports about its solve: the report of the solver that ran.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 #[serde(tag = "solver", rename_all = "snake_case")]
@@ -155,7 +170,7 @@ pub enum SolveInfo {
     /// Bound-constrained preconditioned conjugate gradient.
     Bounded(BoundedInfo),
     /// Damped block-Jacobi sweeps (a fixed count: always "converged").
-    Sweeps(crate::sweeps::SweepsInfo),
+    Sweeps(SweepsInfo),
 }
 
 impl SolveInfo {

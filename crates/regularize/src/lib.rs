@@ -105,7 +105,7 @@ pub use cg::{CgParams, CgSolver, StoppingRule};
 pub use direct::DirectSolver;
 pub use energy::{Energy, EnergyParams, EnergyTerms, MAX_STIFFNESS_RATIO};
 pub use error::RegularizeError;
-pub use info::{BoundedInfo, CgInfo, DirectInfo, Preconditioner, SolveInfo, SolveTimings};
+pub use info::{BoundedInfo, CgInfo, DirectInfo, Preconditioner, SolveInfo, SolveTimings, SweepsInfo};
 pub use mode::{Clamped, Creases, Fidelity, Mode, Recentring, Refinement};
 pub use multigrid::MultigridParams;
 pub use options::{Clamp, InputFacts, Overrides, Preset, Regions};
@@ -120,7 +120,7 @@ pub use request::{SolveRequest, SolveStart};
 pub use solver::{estimate_factor_nnz, ClampOverride, OverrideError, Solver, SolverChoice, SolverParams};
 pub use stages::{Event, Stage};
 pub use stencil::MatrixFreeOperator;
-pub use sweeps::{SweepsInfo, SweepsParams, SweepsSolver};
+pub use sweeps::{SweepsParams, SweepsSolver};
 /// The flag that stops a run early ([`Regularizer::set_interrupt`]), from
 /// `voxreg-normals`, whose estimators poll it too.
 pub use voxreg_normals::Interrupt;

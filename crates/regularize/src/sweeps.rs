@@ -10,7 +10,7 @@ use voxreg_normals::{Interrupt, QuadGraph};
 
 use crate::energy::Energy;
 use crate::error::RegularizeError;
-use crate::info::SolveTimings;
+use crate::info::{SolveTimings, SweepsInfo};
 use crate::progress::Progress;
 use crate::stencil::{Stencil, CHUNK};
 use crate::vecops::{sym_inverse, sym_mul};
@@ -57,21 +57,6 @@ impl SweepsParams {
         }
         Ok(())
     }
-}
-
-/// What [`SweepsSolver`] reports.
-#[derive(Clone, Debug, PartialEq, Serialize)]
-pub struct SweepsInfo {
-    /// Sweeps done (each one product by the operator).
-    pub iterations: usize,
-    /// `|b - H x|` before the last sweep relative to its value at the start.
-    pub relative_gradient: f64,
-    /// The largest move of a vertex in the last sweep, in voxels (of the finest spacing).
-    pub last_move: f64,
-    /// Bytes of the solver's data (connectivity, block inverses, vectors).
-    pub memory_bytes: usize,
-    /// Seconds per step.
-    pub seconds: SolveTimings,
 }
 
 /// A fixed number of damped block-Jacobi sweeps on the energy's normal equations `H x = b`

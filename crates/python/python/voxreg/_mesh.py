@@ -167,7 +167,7 @@ class Mesh:
 
     def _simplified(self, targets: List[Tuple[Optional[float], float]]) -> List["Mesh"]:
         if self._surface is not None:
-            levels = self._surface.simplify(targets, self._part)
+            levels = _voxreg.simplify_surface(self._surface, targets, self._part)
         else:
             colors = None if self.colors is None else np.ascontiguousarray(self.colors, dtype=np.uint8)
             groups = None
