@@ -65,6 +65,7 @@ pub(crate) fn simplify_surface<'py>(
     let part = Surface::part(part)?;
     surface.check_part(part)?;
     let targets = targets_of(&targets);
+    let surface: &Surface = &surface;
     let levels = py.detach(|| no_panic(|| run(&surface.quad_mesh(part), &targets)))?;
     levels_list(py, levels)
 }
