@@ -154,7 +154,7 @@ def _level_meshes(u: np.ndarray, tris: np.ndarray, labels: np.ndarray, lods: int
     if lods == 1:
         return out
     phys = u * spacing
-    # Exact position lookup: the simplifier keeps input vertices where they are.
+    # Exact position lookup of the vertices the simplifier keeps.
     rows = np.ascontiguousarray(phys).view(np.dtype((np.void, 24))).reshape(-1)
     order = np.argsort(rows)
     sorted_rows = rows[order]
@@ -171,13 +171,17 @@ def _level_meshes(u: np.ndarray, tris: np.ndarray, labels: np.ndarray, lods: int
         (d, _stats), = _voxreg.simplify_arrays(
             np.ascontiguousarray(phys), np.ascontiguousarray(quads, dtype=np.int64),
             np.ascontiguousarray(labels, dtype=np.uint32), [(ratio, max_error * 2.0 ** (k - 1))], group, None)
-        out_rows = np.ascontiguousarray(d["vertices"]).view(np.dtype((np.void, 24))).reshape(-1)
-        at = np.searchsorted(sorted_rows, out_rows)
-        if np.any(at >= len(rows)) or np.any(sorted_rows[np.minimum(at, len(rows) - 1)] != out_rows):
-            raise RuntimeError("the simplifier moved a vertex")  # pragma: no cover - its contract
-        vmap = order[at]
+        # Vertices the simplifier kept (those on the frozen faces of the cube planes among
+        # them) take their input position exactly; interior ones it placed anew (volume
+        # preservation) come back in voxels.
+        out_vertices = np.ascontiguousarray(d["vertices"], dtype=np.float64)
+        out_rows = out_vertices.view(np.dtype((np.void, 24))).reshape(-1)
+        at = np.minimum(np.searchsorted(sorted_rows, out_rows), len(rows) - 1)
+        kept = sorted_rows[at] == out_rows
+        pos = out_vertices / spacing
+        pos[kept] = u[order[at[kept]]]
         level_tris, owner = _triangles(d["quads"])
-        out.append((u, vmap[level_tris], np.asarray(d["labels"])[owner]))
+        out.append((pos, level_tris, np.asarray(d["labels"])[owner]))
     return out
 
 
