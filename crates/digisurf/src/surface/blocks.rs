@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
-use super::scan::{outside_of, range_face_count, range_faces, RawFace, MAX_SURFELS};
+use super::scan::{face_corners, outside_of, range_face_count, range_faces, RawFace, MAX_SURFELS};
 use super::{Surfel, NONE};
 use crate::{
     BlockVolume, DigitalSurface, InterfaceId, LabelView, LabelVolume, RegionId, RegionMap, Regions,
@@ -63,15 +63,7 @@ impl DigitalSurface {
             let axis = f.axis as usize;
             let flipped = a > b;
             let (inner, outer, li, lo) = if flipped { (b, a, lb, la) } else { (a, b, la, lb) };
-            let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-            let cell = f.cell;
-            let mut cu = cell;
-            cu[u] += 1;
-            let mut cuv = cu;
-            cuv[v] += 1;
-            let mut cv = cell;
-            cv[v] += 1;
-            let corners = if flipped { [cell, cv, cuv, cu] } else { [cell, cu, cuv, cv] };
+            let corners = face_corners(f.cell, axis, flipped);
             let mut vertices = [VertexId(0); 4];
             for (slot, c) in vertices.iter_mut().zip(corners) {
                 let next = vertex_corners.len() as u32;
@@ -87,7 +79,7 @@ impl DigitalSurface {
             let n = interface_of_pair.len() as u32;
             let interface = *interface_of_pair.entry((inner, outer)).or_insert(n);
             surfels.push(Surfel {
-                cell,
+                cell: f.cell,
                 axis: axis as u8,
                 flipped,
                 regions: [RegionId(inner), RegionId(outer)],

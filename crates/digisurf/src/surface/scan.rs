@@ -305,14 +305,7 @@ impl Scan {
         }
         let flipped = a > b;
         let (inner, outer, li, lo) = if flipped { (b, a, lb, la) } else { (a, b, la, lb) };
-        let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
-        let mut cu = cell;
-        cu[u] += 1;
-        let mut cuv = cu;
-        cuv[v] += 1;
-        let mut cv = cell;
-        cv[v] += 1;
-        let corners = if flipped { [cell, cv, cuv, cu] } else { [cell, cu, cuv, cv] };
+        let corners = face_corners(cell, axis, flipped);
         let mut vertices = [VertexId(0); 4];
         for (slot, c) in vertices.iter_mut().zip(corners) {
             *slot = self.vertex(c, k)?;
@@ -510,5 +503,23 @@ fn for_differences(a: &[u32], b: &[u32], mut f: impl FnMut(usize, u32, u32)) {
                 f(k * BLOCK + j, ra, rb);
             }
         }
+    }
+}
+
+/// The lattice corners of the face of `cell` normal to `axis`, in the order that orients
+/// its surfel from the inner region to the outer (`flipped`: the face's regions are in the
+/// opposite order).
+pub(super) fn face_corners(cell: [u32; 3], axis: usize, flipped: bool) -> [[u32; 3]; 4] {
+    let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
+    let mut cu = cell;
+    cu[u] += 1;
+    let mut cuv = cu;
+    cuv[v] += 1;
+    let mut cv = cell;
+    cv[v] += 1;
+    if flipped {
+        [cell, cv, cuv, cu]
+    } else {
+        [cell, cu, cuv, cv]
     }
 }
