@@ -4,7 +4,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 mod common;
-use common::{data, stderr, voxreg};
+use common::{data, stderr, validate_gltf, voxreg};
 
 /// Faces of a mesh file, and whether every edge is used an even number of times.
 fn faces_and_closed(path: &Path) -> (usize, bool) {
@@ -78,30 +78,6 @@ fn simplify_refuses_bad_options_before_any_work() {
         assert_eq!(err.trim().lines().count(), 1, "{extra:?}: {err}");
         assert!(!out.exists());
     }
-}
-
-/// Runs the Khronos glTF validator (tools/gltf-validate) on `files`: its report, or
-/// `None` when node is missing outside CI.
-fn validate_gltf(files: &[std::path::PathBuf]) -> Option<String> {
-    use std::process::Command;
-    let tool = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/gltf-validate");
-    let have_node = Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
-    if !have_node {
-        assert!(std::env::var_os("CI").is_none(), "CI needs node for the glTF validator");
-        return None;
-    }
-    if !tool.join("node_modules/gltf-validator").exists() {
-        let ok = Command::new("npm")
-            .args(["ci", "--silent", "--prefix"])
-            .arg(&tool)
-            .status()
-            .is_ok_and(|s| s.success());
-        assert!(ok, "npm ci in tools/gltf-validate failed");
-    }
-    let out = Command::new("node").arg(tool.join("validate.mjs")).args(files).output().unwrap();
-    let report = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(out.status.success(), "validator: {report}{}", String::from_utf8_lossy(&out.stderr));
-    Some(report)
 }
 
 /// Triangles of a .glb file (the index accessors' counts over three).

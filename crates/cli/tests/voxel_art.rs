@@ -2,15 +2,12 @@
 //! gives a valid, coloured, self-intersection-free mesh; `voxreg upscale` doubles a model
 //! into a .vox that dot_vox reads back.
 
-use std::path::{Path, PathBuf};
-use std::process::Command;
-
 use voxreg_digisurf::{DigitalSurface, RegionMap};
 use voxreg_io::{read_mesh, read_voxels, Voxels};
 use voxreg_quality::{angle_report, check, hard_edges, self_intersections, solid_report, Occupancy};
 
 mod common;
-use common::{data, stderr, voxreg};
+use common::{data, stderr, validate_gltf, voxreg};
 
 use voxreg_testkit::BUNDLED_VOX_MODELS as MODELS;
 
@@ -27,28 +24,6 @@ fn surface_of(name: &str) -> DigitalSurface {
     let loaded = read_voxels(&data(name)).unwrap();
     let Voxels::Labels(volume) = loaded.voxels else { panic!("{name}: .vox models are labels") };
     DigitalSurface::new(&volume, &RegionMap::single_solid()).unwrap()
-}
-
-/// Runs the Khronos validator on `files`; `None` when node is missing outside CI.
-fn validate_gltf(files: &[PathBuf]) -> Option<String> {
-    let tool = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/gltf-validate");
-    let have_node = Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
-    if !have_node {
-        assert!(std::env::var_os("CI").is_none(), "CI needs node for the glTF validator");
-        return None;
-    }
-    if !tool.join("node_modules/gltf-validator").exists() {
-        let ok = Command::new("npm")
-            .args(["ci", "--silent", "--prefix"])
-            .arg(&tool)
-            .status()
-            .is_ok_and(|s| s.success());
-        assert!(ok, "npm ci in tools/gltf-validate failed");
-    }
-    let out = Command::new("node").arg(tool.join("validate.mjs")).args(files).output().unwrap();
-    let report = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(out.status.success(), "validator: {report}{}", String::from_utf8_lossy(&out.stderr));
-    Some(report)
 }
 
 #[test]

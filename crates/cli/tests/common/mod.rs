@@ -23,3 +23,25 @@ pub(crate) fn stdout(o: &Output) -> String {
 pub(crate) fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
+
+/// Runs the Khronos validator on `files`; `None` when node is missing outside CI.
+pub(crate) fn validate_gltf(files: &[PathBuf]) -> Option<String> {
+    let tool = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/gltf-validate");
+    let have_node = Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
+    if !have_node {
+        assert!(std::env::var_os("CI").is_none(), "CI needs node for the glTF validator");
+        return None;
+    }
+    if !tool.join("node_modules/gltf-validator").exists() {
+        let ok = Command::new("npm")
+            .args(["ci", "--silent", "--prefix"])
+            .arg(&tool)
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "npm ci in tools/gltf-validate failed");
+    }
+    let out = Command::new("node").arg(tool.join("validate.mjs")).args(files).output().unwrap();
+    let report = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "validator: {report}{}", String::from_utf8_lossy(&out.stderr));
+    Some(report)
+}
