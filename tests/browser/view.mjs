@@ -4,7 +4,8 @@
 // (/usr/bin/chromium, or $CHROMIUM) through playwright-core, and checks that
 //   1. the page shows the model (pixels other than the background): first its staircase
 //      drawn without WebGL, within FIRST_PICTURE_MS, then WebGL's,
-//   2. a parameter change re-solves and a new mesh arrives,
+//   2. a parameter change re-solves and a new mesh arrives, and the level-of-detail control
+//      shows a coarser level of the result (fewer faces, said on the page) and the full one again,
 //   3. the GLB download passes the Khronos validator (tools/gltf-validate),
 //   4. a corrupt dropped file shows the reader's error and the server keeps serving,
 //   5. the voxel-art smoothness slider re-solves with --smoothness in the command line,
@@ -108,6 +109,33 @@ try {
     `server: first iterate ${solved.first?.toFixed(0)} ms, done ${solved.total?.toFixed(0)} ms), ${solved.frames} frames`);
   check((await page.inputValue('#command')).includes('--gamma 1.5'), 'the command line does not follow the panel');
   check(await drawnPixels() > 1000, 'the re-solved model is not drawn');
+
+  // 2b. Levels of detail: level 1 chosen in the control, then the full surface again.
+  {
+    const full = await page.evaluate(() => window.voxregView.state.faces);
+    const infoFull = await page.textContent('#level-info');
+    check(infoFull.includes(full.toLocaleString('en')), `the level shown does not give the full face count ${full}: "${infoFull}"`);
+    const frame = await page.evaluate(() => window.voxregView.state.frame);
+    const asked = Date.now();
+    await page.selectOption('#level', '1');
+    await page.waitForFunction(() => window.voxregView.levelShown?.level === 1, null, { timeout: 60000 });
+    const shownMs = Date.now() - asked;
+    const level = await page.evaluate(() => ({ shown: window.voxregView.levelShown, state: window.voxregView.state }));
+    const info = await page.textContent('#level-info');
+    const options = await page.$$eval('#level option', (o) => o.map((x) => x.textContent));
+    check(level.state.frame === frame, 'choosing a level re-solved');
+    check(level.shown.faces === level.state.levels[1].faces && level.shown.faces < full,
+      `level 1 drew ${level.shown.faces} faces (the server's level 1: ${level.state.levels[1].faces}, full: ${full})`);
+    check(info !== infoFull && info.includes(level.shown.faces.toLocaleString('en')), `the page says "${info}" for level 1`);
+    check(options.length === 4 && options.every((o, k) => o.includes(level.state.levels[k].faces.toLocaleString('en'))),
+      `the control does not list each level's faces: ${options.join(' | ')}`);
+    check(await drawnPixels() > 1000, 'level 1 is not drawn');
+    console.log(`levels of detail: ${options.join(' | ')}; level 1 drawn ${shownMs} ms after the choice ("${info}")`);
+    await page.selectOption('#level', '0');
+    await page.waitForFunction(() => window.voxregView.levelShown?.level === 0, null, { timeout: 60000 });
+    const back = await page.textContent('#level-info');
+    check(back.includes(full.toLocaleString('en')), `back to the full surface, the page says "${back}"`);
+  }
 
   if (!measure) {
     // 3. The GLB download, validated.

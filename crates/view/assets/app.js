@@ -5,7 +5,7 @@ import { OrbitControls } from '/three/OrbitControls.js';
 
 const $ = (id) => document.getElementById(id);
 // What the browser test reads.
-const view = (window.voxregView = { frames: 0, modelId: 0, state: null, solveAskedAt: null, solveLatencyMs: null, solveFrames: 0, marks: {}, edits: 0, solves: 0, solveJob: null });
+const view = (window.voxregView = { frames: 0, modelId: 0, state: null, solveAskedAt: null, solveLatencyMs: null, solveFrames: 0, marks: {}, edits: 0, solves: 0, solveJob: null, levelShown: null });
 // Milliseconds since navigation of the first time each step happened (the browser test prints them).
 const mark = (k, at = performance.now()) => { if (!(k in view.marks)) view.marks[k] = Math.round(at); };
 mark('module');
@@ -37,6 +37,10 @@ scene.add(mesh, wire, arrows);
 mark('webgl');
 
 let model = null; // { quads, faceGroups, faceColors, stair, groups, colors, visible, lo, hi }
+// A coarser level of detail of the result, drawn instead of the surface while the server
+// says it is the level shown: { level, frame, model, faces, quads, faceGroups, labels, stair, faceColors }
+// (its faces are in the surface's groups; `stair` holds its positions).
+let lod = null;
 let result = null; // latest positions (Float32Array)
 let normals = null, features = null;
 let frame = -1, loadingModel = 0, fetching = false;
@@ -93,6 +97,7 @@ async function loadModel(s) {
   // A voxel edit of the surface shown keeps the view: the camera, and the groups' settings
   // where the groups are the same.
   const previous = s.edited && model && model.groups.map((x) => x.name).join('\n') === s.groups.map((x) => x.name).join('\n') ? model : null;
+  lod = null;
   model = { id, quads, faceGroups, faceColors, stair, lo, hi,
     groups: s.groups, colors: s.groups.map((x) => x.color.slice()), visible: s.groups.map(() => true), custom: s.groups.map(() => false) };
   if (previous) Object.assign(model, { colors: previous.colors, visible: previous.visible, custom: previous.custom });
@@ -160,14 +165,14 @@ function scratch(name, n) {
 
 // A new layout for the visible faces and the current colours.
 function buildLayout() {
-  const q = model.quads, m = q.length / 4, fg = model.faceGroups, fc = model.faceColors;
-  const showFeatures = $('features').checked && features;
+  const d = lod ?? model, q = d.quads, m = q.length / 4, fg = d.faceGroups, fc = d.faceColors;
+  const showFeatures = $('features').checked && features && !lod;
   let drawn = 0;
   for (let f = 0; f < m; f++) if (model.visible[fg[f]]) drawn++;
   const faces = new Uint32Array(drawn);
   for (let f = 0, j = 0; f < m; f++) if (model.visible[fg[f]]) faces[j++] = f;
   // A drawn vertex per surface vertex and colour: the first copy in `first`, others in `more`.
-  const nv = model.stair.length / 3, first = new Int32Array(nv).fill(-1), firstKey = new Int32Array(nv), more = new Map();
+  const nv = d.stair.length / 3, first = new Int32Array(nv).fill(-1), firstKey = new Int32Array(nv), more = new Map();
   const src = [], keys = [], index = new Uint32Array(6 * drawn), corner = [0, 1, 2, 0, 2, 3];
   const packed = model.colors.map((c) => (c[0] << 16) | (c[1] << 8) | c[2]);
   for (let j = 0; j < drawn; j++) {
@@ -218,13 +223,13 @@ function buildLayout() {
 // Positions blended between the staircase and the latest result, with area-weighted
 // vertex normals (the quads' diagonal cross products), into the drawn vertices.
 function fillPositions() {
-  const t = parseFloat($('blend').value), st = model.stair, n = st.length;
-  let x = result;
-  if (t !== 1) {
+  const d = lod ?? model, t = parseFloat($('blend').value), st = d.stair, n = st.length;
+  let x = lod ? lod.stair : result;
+  if (t !== 1 && !lod) {
     x = scratch('x', n);
     for (let i = 0; i < n; i++) x[i] = st[i] + (result[i] - st[i]) * t;
   }
-  const q = model.quads, m = q.length / 4, vn = scratch('vn', n);
+  const q = d.quads, m = q.length / 4, vn = scratch('vn', n);
   vn.fill(0);
   for (let f = 0; f < m; f++) {
     const a = 3 * q[4 * f], b = 3 * q[4 * f + 1], c = 3 * q[4 * f + 2], d = 3 * q[4 * f + 3];
@@ -270,7 +275,7 @@ function refresh() {
   const flat = !$('smooth').checked;
   if (material.flatShading !== flat) { material.flatShading = flat; material.needsUpdate = true; }
   wire.visible = $('wireframe').checked;
-  arrows.visible = $('normals').checked && !!normals;
+  arrows.visible = $('normals').checked && !!normals && !lod;
   if (arrows.visible) {
     const q = model.quads, faces = layout.faces;
     const step = Math.max(1, Math.floor(faces.length / 20000)), len = 0.6;
@@ -352,6 +357,8 @@ async function fetchPositions() {
 
 // Draws the frame just fetched (at once: it is what a change waits for).
 function drawFrame(job, final) {
+  // A frame of another result: the level drawn belonged to the one before.
+  if (lod && lod.frame !== frame) { lod = null; layout = null; }
   refresh();
   lastDrawnAt = performance.now();
   mark(final ? 'result drawn' : 'iterate drawn');
@@ -450,6 +457,72 @@ async function onState(s) {
     } else return;
   }
   fetchPositions();
+  showLevels(s);
+  syncLevel(s).catch((err) => showError(`the page could not show the level: ${err}`));
+}
+
+// Levels of detail: the control lists the levels with their face counts (once the server
+// computed them for the result shown; 1/4^k of the faces is the target before), and the
+// level shown, the server's `level_shown`, is fetched (/api/level?k=K) and drawn.
+const levelPart = (k) => (k === 0 ? 'full' : `1/${4 ** k}`);
+const count = (n) => n.toLocaleString('en');
+function showLevels(s) {
+  const select = $('level'), n = s.level_count ?? 1;
+  while (select.options.length < n) select.add(new Option('', String(select.options.length)));
+  for (let k = 0; k < n; k++) {
+    const faces = k === 0 ? s.faces : s.levels?.[k]?.faces;
+    select.options[k].text = faces != null ? `${levelPart(k)}: ${count(faces)} faces` : `${levelPart(k)} of the faces`;
+  }
+  if (document.activeElement !== select || select.value === String(s.level)) select.value = String(s.level);
+  showLevelInfo();
+}
+
+// The level drawn and its face count, and what the chosen one waits for.
+function showLevelInfo() {
+  const s = view.state;
+  if (!s || !model) return;
+  const shown = lod ? lod.level : 0, faces = lod ? lod.faces : s.faces;
+  let info = `shown: ${shown === 0 ? 'full surface' : `level ${shown} (${levelPart(shown)})`}, ${count(faces)} faces`;
+  if (s.level !== shown) info += s.busy ? `; level ${s.level} after the run` : s.levels_busy ? `; simplifying for level ${s.level}…` : '';
+  $('level-info').textContent = info;
+  // The downloads give the level shown.
+  for (const f of ['glb', 'ply', 'obj']) $('get-' + f).href = api(`/api/download?format=${f}${shown ? `&level=${shown}` : ''}`);
+}
+
+let levelLoading = null;
+async function syncLevel(s) {
+  const want = s.level_shown ?? 0;
+  if (want === 0) {
+    if (lod) { lod = null; rebuild(); }
+    if (view.state === s && s.model_id === model?.id) view.levelShown = { level: 0, faces: s.faces };
+    showLevelInfo();
+    return;
+  }
+  const key = `${s.model_id}/${s.frame}/${want}`;
+  if ((lod && `${lod.model}/${lod.frame}/${lod.level}` === key) || levelLoading === key) return;
+  levelLoading = key;
+  let got;
+  try {
+    got = await get(`/api/level?k=${want}`);
+  } finally {
+    if (levelLoading === key) levelLoading = null;
+  }
+  const { r, body } = got;
+  if (!r.ok) return; // replaced meanwhile: a newer state follows
+  const now = view.state, frameOf = Number(r.headers.get('X-Frame')), modelOf = Number(r.headers.get('X-Model'));
+  if (now.level_shown !== want || now.frame !== frameOf || modelOf !== model?.id) return;
+  lod = { level: want, frame: frameOf, model: modelOf, ...unpackLevel(body) };
+  rebuild();
+  view.levelShown = { level: want, faces: lod.faces };
+  showLevelInfo();
+}
+
+// The arrays of /api/level (levels.rs, level_bytes).
+function unpackLevel(body) {
+  const [faces, vertices] = new Uint32Array(body, 0, 2);
+  const q = 8, g = q + 16 * faces, l = g + 4 * faces, p = l + 8 * faces, c = p + 12 * vertices;
+  return { faces, quads: new Uint32Array(body, q, 4 * faces), faceGroups: new Uint32Array(body, g, faces),
+    labels: new Uint32Array(body, l, 2 * faces), stair: new Float32Array(body, p, 3 * vertices), faceColors: new Uint8Array(body, c, 3 * faces) };
 }
 
 // The stream index.html opened; its latest event, if one came while this module loaded.
@@ -478,6 +551,10 @@ $('tuning').addEventListener('change', async (e) => {
   fetchPositions();
 });
 $('tuning').addEventListener('submit', (e) => e.preventDefault());
+$('level').addEventListener('change', async () => {
+  const r = await fetch(api('/api/level'), { method: 'POST', body: JSON.stringify({ level: parseInt($('level').value) }) });
+  if (!r.ok) showError((await r.json()).error); else showError(null);
+});
 for (const id of ['blend', 'wireframe', 'smooth', 'normals', 'clip', 'clip-axis', 'clip-at']) $(id).addEventListener('input', refresh);
 $('features').addEventListener('input', rebuild);
 $('copy').onclick = async () => {
@@ -494,6 +571,7 @@ renderer.domElement.addEventListener('pointerup', async (e) => {
   const click = pressed && Math.hypot(e.clientX - pressed.x, e.clientY - pressed.y) < 4;
   pressed = null;
   if (!click || !(e.shiftKey || e.altKey) || !model || !layout) return;
+  if (lod || view.state?.level) { showError('voxel edits apply to the full surface: choose its level (full) first'); return; }
   const r = renderer.domElement.getBoundingClientRect();
   raycaster.setFromCamera(new THREE.Vector2(((e.clientX - r.left) / r.width) * 2 - 1, -((e.clientY - r.top) / r.height) * 2 + 1), camera);
   const clip = $('clip').checked ? clipPlane : null;

@@ -12,6 +12,12 @@
 //! `f32` arrays; while a solve runs, the iterates stream
 //! ([`Event::iterate`](voxreg_regularize::Event::iterate)) at most every 60 ms.
 //!
+//! Once a run is over, the page may show a coarser level of detail of its result (a
+//! quarter, a sixteenth, a sixty-fourth of the faces: the pyramid of `voxreg regularize
+//! --lod 4`, simplified by [`voxreg_simplify`] with the labels, colours and partition
+//! kept), chosen with `POST /api/level`: the pyramid is computed on its own thread once
+//! per result, when a coarser level is first chosen, and dropped when a new run starts.
+//!
 //! - [`Viewer::bind`], [`Viewer::open`], [`Viewer::serve`]: listen, queue the first input
 //!   ([`Loaded`]), answer requests; [`StopHandle`] stops it.
 //! - [`Tuning`]: the page's parameter panel, a [`Preset`](voxreg_regularize::Preset) and
@@ -61,6 +67,7 @@
 //!
 //! None.
 
+mod levels;
 mod model;
 mod server;
 mod session;

@@ -3,7 +3,7 @@
 
 use serde::Serialize;
 use voxreg_digisurf::{DigitalSurface, LabelVolume};
-use voxreg_io::{interface_name, Palette};
+use voxreg_io::{interface_name, Palette, QuadMesh};
 use voxreg_regularize::{Overrides, Preset};
 
 /// An input the viewer shows: the volume, its palette, and the parameters to start from.
@@ -41,6 +41,18 @@ pub(crate) struct Model {
     pub(crate) groups: Vec<Group>,
     pub(crate) vertices: usize,
     pub(crate) faces: usize,
+    /// The labels the groups stand for, when the groups are labels (a single-interface
+    /// surface); `None` when they are the interfaces, in interface order.
+    pub(crate) group_labels: Option<Vec<u32>>,
+}
+
+/// The colour the page gives a face whose inner label is `label`: the palette's, else
+/// [`label_color`].
+pub(crate) fn face_color(palette: Option<&Palette>, label: u32) -> [u8; 3] {
+    match palette.and_then(|p| p.material(label)) {
+        Some(m) => [m.color[0], m.color[1], m.color[2]],
+        None => label_color(label),
+    }
 }
 
 /// A distinct colour per label without a palette: hues spaced by the golden angle.
@@ -86,13 +98,11 @@ impl Model {
 
     pub(crate) fn new(surface: &DigitalSurface, palette: Option<&Palette>) -> Model {
         let surfels = surface.surfels();
-        let color_of = |label: u32| match palette.and_then(|p| p.material(label)) {
-            Some(m) => [m.color[0], m.color[1], m.color[2]],
-            None => label_color(label),
-        };
+        let color_of = |label: u32| face_color(palette, label);
         // The solid side of a face is its inner label (the background's region is last).
         let mut face_groups = vec![0u32; surfels.len()];
         let mut groups = Vec::new();
+        let mut group_labels = None;
         if surface.interfaces().len() > 1 {
             for (i, interface) in surface.interfaces().iter().enumerate() {
                 let first = interface.surfels.first().map(|s| surfels[s.index()].labels[0]).unwrap_or(0);
@@ -120,6 +130,7 @@ impl Model {
                 .zip(counts)
                 .map(|(&l, faces)| Group { name: format!("label_{l}"), color: color_of(l), faces })
                 .collect();
+            group_labels = Some(labels);
         }
         let face_colors = surfels.iter().flat_map(|s| color_of(s.labels[0])).collect();
         Model {
@@ -130,6 +141,29 @@ impl Model {
             groups,
             vertices: surface.num_vertices(),
             faces: surfels.len(),
+            group_labels,
+        }
+    }
+
+    /// The group of each face of `mesh`, a simplification of this surface's mesh
+    /// ([`QuadMesh::from_surface`]: one mesh group per interface, in interface order, which
+    /// the simplifier keeps): the interface's group, or the inner label's.
+    pub(crate) fn face_groups_of(&self, mesh: &QuadMesh) -> Vec<u32> {
+        match &self.group_labels {
+            Some(labels) => {
+                mesh.face_labels.iter().map(|l| labels.binary_search(&l[0]).unwrap_or(0) as u32).collect()
+            }
+            None => {
+                let mut out = vec![0u32; mesh.quads.len()];
+                for (g, group) in mesh.groups.iter().enumerate() {
+                    for &f in &group.faces {
+                        if let Some(slot) = out.get_mut(f as usize) {
+                            *slot = g as u32;
+                        }
+                    }
+                }
+                out
+            }
         }
     }
 }
@@ -166,5 +200,19 @@ mod tests {
         let m = Model::new(&surface, None);
         let names: Vec<_> = m.groups.iter().map(|g| g.name.as_str()).collect();
         assert_eq!(names, ["label_1", "label_2"]);
+    }
+
+    #[test]
+    fn a_mesh_of_the_surface_gets_the_surfaces_groups() {
+        // The mesh written of a surface (and its simplifications: the same groups, labels
+        // and faces' labels) is grouped as the surface's faces are.
+        let volume = LabelVolume::from_fn([4, 2, 2], |[x, _, _]| if x < 2 { 1 } else { 2 });
+        for regions in [voxreg_digisurf::RegionMap::per_label(), voxreg_digisurf::RegionMap::single_solid()] {
+            let surface = DigitalSurface::new(&volume, &regions).unwrap();
+            let m = Model::new(&surface, None);
+            let mesh = QuadMesh::from_surface(&surface, surface.positions().as_slice());
+            let groups: Vec<u8> = m.face_groups_of(&mesh).iter().flat_map(|g| g.to_le_bytes()).collect();
+            assert_eq!(groups, m.face_groups);
+        }
     }
 }

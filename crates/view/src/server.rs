@@ -18,6 +18,7 @@ use std::time::Duration;
 
 use serde_json::json;
 
+use crate::levels::{level_bytes, Levels, LEVELS};
 use crate::session::{mesh_file, panic_message, Edit, Job, Shared};
 use voxreg_regularize::Preset;
 
@@ -32,7 +33,7 @@ pub type Loader = dyn Fn(&str, &[u8]) -> Result<Loaded, String> + Send + Sync;
 /// The largest file the page may upload.
 const MAX_UPLOAD: u64 = 1 << 30;
 
-/// The largest parameters or edit the page may post.
+/// The largest parameters, edit or level choice the page may post.
 const MAX_FORM: u64 = 1 << 16;
 
 /// The largest request head (request line and headers) read.
@@ -161,6 +162,11 @@ impl Viewer {
         std::thread::Builder::new()
             .name("voxreg-view-solve".into())
             .spawn(move || crate::session::worker(worker_shared, rx))
+            .map_err(|e| ViewError::Bind(port, e.to_string()))?;
+        let levels_shared = Arc::clone(&shared);
+        std::thread::Builder::new()
+            .name("voxreg-view-levels".into())
+            .spawn(move || crate::levels::worker(levels_shared))
             .map_err(|e| ViewError::Bind(port, e.to_string()))?;
         Ok(Viewer { listener, addr, token, shared, jobs: Mutex::new(tx), loader: Arc::from(loader) })
     }
@@ -423,8 +429,13 @@ impl Viewer {
                 if !matches!(ext.as_str(), "glb" | "ply" | "obj") {
                     return error(400, &format!("unknown download format '{ext}' (glb, ply or obj)"));
                 }
+                let level = match query_value(query, "level").map(|k| k.parse::<usize>()) {
+                    None => 0,
+                    Some(Ok(k)) if k < LEVELS => k,
+                    Some(_) => return error(400, &format!("the levels of detail are 0 to {}", LEVELS - 1)),
+                };
                 let s = self.shared.lock();
-                match mesh_file(&s, &ext) {
+                match mesh_file(&s, &ext, level) {
                     Ok(bytes) => {
                         let stem =
                             Path::new(&s.name).file_stem().and_then(|s| s.to_str()).unwrap_or("result");
@@ -432,9 +443,10 @@ impl Viewer {
                             .chars()
                             .map(|c| if c.is_ascii_alphanumeric() || c == '-' { c } else { '_' })
                             .collect();
+                        let lod = if level > 0 { format!(".lod{level}") } else { String::new() };
                         binary(bytes).with_header(
                             "Content-Disposition",
-                            &format!("attachment; filename=\"{stem}.{ext}\""),
+                            &format!("attachment; filename=\"{stem}{lod}.{ext}\""),
                         )
                     }
                     Err(e) => error(409, &e),
@@ -471,6 +483,12 @@ impl Viewer {
                 if edit.model != s.model_id {
                     return error(409, "the surface changed since that click: click again");
                 }
+                if s.level != 0 {
+                    return error(
+                        409,
+                        "voxel edits apply to the full surface: choose its level (full) first",
+                    );
+                }
                 if edit.face >= faces {
                     return error(400, &format!("no face {} on this surface of {faces} faces", edit.face));
                 }
@@ -483,6 +501,37 @@ impl Viewer {
                 let job = self.shared.next_job();
                 self.send(Job::Edit(edit, job));
                 json_response(202, &json!({ "queued": true, "job": job }))
+            }
+            ("POST", "/api/level") => {
+                let choice: LevelChoice = match serde_json::from_slice(&request.body) {
+                    Ok(c) => c,
+                    Err(e) => return error(400, &format!("bad level: {e}")),
+                };
+                if choice.level >= LEVELS {
+                    return error(
+                        400,
+                        &format!("no level {}: the levels of detail are 0 to {}", choice.level, LEVELS - 1),
+                    );
+                }
+                if self.shared.lock().model.is_none() {
+                    return error(409, "no surface to simplify: open a file");
+                }
+                self.shared.update(|s| s.level = choice.level);
+                json_response(200, &json!({ "level": choice.level }))
+            }
+            ("GET", "/api/level") => {
+                let k = match query_value(query, "k").map(|k| k.parse::<usize>()) {
+                    Some(Ok(k)) if k < LEVELS => k,
+                    _ => return error(400, &format!("ask for a level ?k= from 0 to {}", LEVELS - 1)),
+                };
+                let s = self.shared.lock();
+                match (Levels::of(&s).and_then(|l| l.get(k)), &s.model) {
+                    (Some(level), Some(model)) => binary(level_bytes(&level.mesh, model, s.palette.as_ref()))
+                        .with_header("X-Frame", &s.frame.to_string())
+                        .with_header("X-Model", &s.model_id.to_string())
+                        .with_header("X-Level", &k.to_string()),
+                    _ => error(409, &format!("level {k} is not computed for this result: choose it first")),
+                }
             }
             ("POST", "/api/open") => {
                 let name = query_value(query, "name").unwrap_or_default();
@@ -557,6 +606,14 @@ impl Viewer {
             "superseded": s.superseded,
             "edited": s.edited,
             "edit_ms": s.edit_ms,
+            "level": s.level,
+            "level_count": LEVELS,
+            "level_shown": crate::levels::shown(&s),
+            "levels": Levels::of(&s).map(|l| l.iter().map(|l| json!({
+                "faces": l.stats.faces,
+                "error_bound": l.stats.error_bound,
+            })).collect::<Vec<_>>()),
+            "levels_busy": s.levels_busy,
         })
     }
 
@@ -683,13 +740,22 @@ fn read_head(input: &mut impl Read) -> Result<Option<(usize, Vec<u8>)>, Reply> {
     }
 }
 
-/// The largest body a route takes: an upload, parameters or an edit; nothing elsewhere.
+/// The largest body a route takes: an upload, parameters, an edit or a level; nothing
+/// elsewhere.
 fn body_limit(method: &str, path: &str) -> u64 {
     match (method, path) {
         ("POST", "/api/open") => MAX_UPLOAD,
-        ("POST", "/api/solve" | "/api/edit") => MAX_FORM,
+        ("POST", "/api/solve" | "/api/edit" | "/api/level") => MAX_FORM,
         _ => 0,
     }
+}
+
+/// The level of detail the page chooses (`POST /api/level`): 0 (the full surface) to
+/// [`LEVELS`]` - 1`.
+#[derive(serde::Deserialize)]
+#[serde(deny_unknown_fields)]
+struct LevelChoice {
+    level: usize,
 }
 
 /// Whether two secrets are equal, in a time that does not depend on where they differ.

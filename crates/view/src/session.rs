@@ -13,6 +13,7 @@ use voxreg_digisurf::{LabelVolume, RegionMap};
 use voxreg_io::{Palette, QuadMesh};
 use voxreg_regularize::{Interrupt, Output, Params, RegularizeError, Regularizer, Run, Stage};
 
+use crate::levels::Levels;
 use crate::model::{f32_bytes, Model};
 use crate::tuning::Tuning;
 use crate::Loaded;
@@ -95,6 +96,12 @@ pub(crate) struct State {
     /// its view), and the milliseconds the edit's new surface took to build.
     pub(crate) edited: bool,
     pub(crate) edit_ms: Option<f64>,
+    /// The level of detail the page chose (0: the full surface; see [`crate::levels`]).
+    pub(crate) level: usize,
+    /// The levels of detail of a result, once computed (dropped when a new run starts).
+    pub(crate) levels: Option<Arc<Levels>>,
+    /// Whether the levels' thread is simplifying a result.
+    pub(crate) levels_busy: bool,
     pub(crate) shutdown: bool,
 }
 
@@ -240,6 +247,8 @@ fn run(shared: &Shared, current: &mut Option<Current>, job: Job, t: Instant, int
             });
             match build(&loaded.volume, &params.regions, &loaded.name) {
                 Ok(regularizer) => {
+                    // A new input is shown whole first.
+                    shared.update(|s| s.level = 0);
                     let regions = params.regions.clone();
                     *current = Some(Current { loaded, regularizer, regions, last: Vec::new(), tuned: None });
                     let c = current.as_mut().expect("set above");
@@ -441,6 +450,7 @@ fn publish_model(shared: &Shared, c: &Current, positions: Option<&[DVec3]>) {
         // input's.
         s.tuning = None;
         s.finished = None;
+        s.levels = None;
         s.error = None;
     });
 }
@@ -461,6 +471,8 @@ fn solve(
         s.tuning = Some(tuning);
         s.first_frame_ms = None;
         s.total_ms = None;
+        // The last result's levels of detail: this run replaces them.
+        s.levels = None;
     });
     let mut last: Option<Instant> = None;
     // The same surface: each round starts from the last run's (the same minimizers, fewer
@@ -564,19 +576,40 @@ fn finish(out: &Output) -> Finished {
     }
 }
 
+/// The mesh `voxreg regularize` writes of `surface` at `positions`: one quad per surfel,
+/// one group per interface, and with a palette its materials.
+pub(crate) fn result_mesh(
+    surface: &voxreg_digisurf::DigitalSurface,
+    positions: &[DVec3],
+    palette: Option<&Palette>,
+) -> QuadMesh {
+    let mut mesh = QuadMesh::from_surface(surface, positions);
+    if let Some(p) = palette {
+        mesh.assign_materials(p);
+    }
+    mesh
+}
+
 /// The final result as a mesh file of format `ext` (`glb`, `ply` or `obj`), written by
-/// `voxreg_io::write_mesh` (what `voxreg regularize` writes).
-pub(crate) fn mesh_file(state: &State, ext: &str) -> Result<Vec<u8>, String> {
+/// `voxreg_io::write_mesh` (what `voxreg regularize` writes), at level of detail `level`
+/// (0: the full surface; another level once computed: what `--lod` writes).
+pub(crate) fn mesh_file(state: &State, ext: &str, level: usize) -> Result<Vec<u8>, String> {
     let (Some(surface), Some(finished)) = (&state.surface, &state.finished) else {
         return Err("no result yet: wait for the solve to finish".into());
     };
-    let mut mesh = QuadMesh::from_surface(surface, &finished.positions);
-    if let Some(p) = &state.palette {
-        mesh.assign_materials(p);
-    }
+    let level_mesh;
+    let mesh = if level == 0 {
+        level_mesh = result_mesh(surface, &finished.positions, state.palette.as_ref());
+        &level_mesh
+    } else {
+        match Levels::of(state).and_then(|l| l.get(level)) {
+            Some(l) => &l.mesh,
+            None => return Err(format!("level {level} is not computed for this result: choose it first")),
+        }
+    };
     let dir = tempfile::tempdir().map_err(|e| format!("cannot create a temporary directory: {e}"))?;
     let path = dir.path().join(format!("result.{ext}"));
-    voxreg_io::write_mesh(&path, &mesh).map_err(|e| e.to_string())?;
+    voxreg_io::write_mesh(&path, mesh).map_err(|e| e.to_string())?;
     std::fs::read(&path).map_err(|e| format!("cannot read back {}: {e}", path.display()))
 }
 

@@ -56,6 +56,7 @@ fn the_seeds_get_their_answers() {
         ("edit.http", 409),
         ("events.http", 200),
         ("huge.http", 413),
+        ("level.http", 409), // a level chosen, but no input open
         ("open.http", 400),
         ("page.http", 200),
         ("positions.http", 404),

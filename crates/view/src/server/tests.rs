@@ -656,3 +656,189 @@ fn adding_a_voxel_outside_the_volume_is_refused_with_a_message() {
     assert_eq!(refused["model_id"].as_u64(), Some(model));
     assert_eq!(get(&r, "/").0, 200);
 }
+
+/// A level of detail as `/api/level?k=K` serves it.
+struct LevelMesh {
+    quads: Vec<[u32; 4]>,
+    groups: Vec<u32>,
+    labels: Vec<[u32; 2]>,
+    positions: Vec<[f32; 3]>,
+    colors: Vec<[u8; 3]>,
+}
+
+fn level_mesh(bytes: &[u8]) -> LevelMesh {
+    let u32_at = |i: usize| u32::from_le_bytes(bytes[i..i + 4].try_into().unwrap());
+    let (faces, vertices) = (u32_at(0) as usize, u32_at(4) as usize);
+    assert_eq!(bytes.len(), 8 + (16 + 4 + 8 + 3) * faces + 12 * vertices);
+    let (q, g) = (8, 8 + 16 * faces);
+    let (l, p) = (g + 4 * faces, g + 12 * faces);
+    let c = p + 12 * vertices;
+    let f32_at = |i: usize| f32::from_le_bytes(bytes[i..i + 4].try_into().unwrap());
+    LevelMesh {
+        quads: (0..faces).map(|f| [0, 1, 2, 3].map(|k| u32_at(q + 16 * f + 4 * k))).collect(),
+        groups: (0..faces).map(|f| u32_at(g + 4 * f)).collect(),
+        labels: (0..faces).map(|f| [u32_at(l + 8 * f), u32_at(l + 8 * f + 4)]).collect(),
+        positions: (0..vertices).map(|v| [0, 1, 2].map(|k| f32_at(p + 12 * v + 4 * k))).collect(),
+        colors: (0..faces).map(|f| [0, 1, 2].map(|k| bytes[c + 3 * f + k])).collect(),
+    }
+}
+
+/// Per label: the Euler characteristic of the faces it bounds, and the edges left
+/// unmatched once each face is oriented away from the label (a face's normal points from
+/// its inner label to its outer one): none when every region is closed and oriented.
+fn regions(m: &LevelMesh) -> std::collections::BTreeMap<u32, (i64, usize)> {
+    use std::collections::{BTreeMap, BTreeSet, HashMap};
+    let mut faces: BTreeMap<u32, Vec<Vec<u32>>> = BTreeMap::new();
+    for (q, l) in m.quads.iter().zip(&m.labels) {
+        // The distinct corners (a triangle repeats its last vertex).
+        let p: Vec<u32> = (0..4).filter(|&i| q[i] != q[(i + 3) % 4]).map(|i| q[i]).collect();
+        assert!(p.len() >= 3, "{q:?}");
+        faces.entry(l[0]).or_default().push(p.clone());
+        faces.entry(l[1]).or_default().push(p.into_iter().rev().collect());
+    }
+    faces
+        .into_iter()
+        .map(|(label, polygons)| {
+            let mut verts = BTreeSet::new();
+            let mut edges: HashMap<(u32, u32), i64> = HashMap::new();
+            for p in &polygons {
+                for i in 0..p.len() {
+                    let (a, b) = (p[i], p[(i + 1) % p.len()]);
+                    verts.insert(a);
+                    *edges.entry((a.min(b), a.max(b))).or_default() += if a < b { 1 } else { -1 };
+                }
+            }
+            let euler = verts.len() as i64 - edges.len() as i64 + polygons.len() as i64;
+            (label, (euler, edges.values().filter(|&&c| c != 0).count()))
+        })
+        .collect()
+}
+
+#[test]
+fn a_level_of_detail_is_served_closed_per_region_and_a_new_run_replaces_it() {
+    // A ball of radius 7 in two labels, each its own region (the default preset): three
+    // interfaces, a junction line where they meet.
+    let volume = LabelVolume::from_fn([17, 17, 17], |[x, y, z]| {
+        let d = |c: usize| c as f64 - 8.0;
+        let inside = d(x).powi(2) + d(y).powi(2) + d(z).powi(2) <= 49.0;
+        if !inside {
+            0
+        } else if x < 8 {
+            1
+        } else {
+            2
+        }
+    });
+    let r = start_with(Loaded {
+        name: "halves.vol".into(),
+        volume,
+        palette: None,
+        preset: Preset::Default,
+        overrides: Overrides::default(),
+    });
+    let state = wait_for(&r, |s| s["final"] == true && s["busy"] == false);
+    let faces = state["faces"].as_u64().unwrap() as usize;
+    assert_eq!((state["level"].as_u64(), state["level_count"].as_u64()), (Some(0), Some(4)));
+    assert_eq!((state["level_shown"].as_u64(), &state["levels"]), (Some(0), &serde_json::Value::Null));
+    // Nothing is simplified before a coarser level is chosen.
+    assert_eq!(error_of(get(&r, "/api/level?k=1")).0, 409);
+    // The choice is a state change: a JSON body within the form limit, the token, the
+    // page's own origin; bad levels are refused with a message.
+    for (body, expected) in [
+        (&b"{\"level\": 4}"[..], "no level 4: the levels of detail are 0 to 3"),
+        (b"{\"level\": -1}", "bad level:"),
+        (b"{\"level\": 1, \"k\": 2}", "bad level:"),
+        (b"level=1", "bad level:"),
+    ] {
+        let (status, message) = error_of(post(&r, "/api/level", body));
+        assert_eq!(status, 400);
+        assert!(message.starts_with(expected), "{message}");
+    }
+    let choose = |level: usize| format!("{{\"level\":{level}}}");
+    let host = r.host();
+    assert_eq!(request(r.addr, "POST", "/api/level", Some(&host), choose(1).as_bytes()).0, 403);
+    let body = choose(1);
+    let foreign = format!(
+        "POST {} HTTP/1.1\r\nHost: {host}\r\nOrigin: https://evil.example\r\nContent-Length: {}\r\n\r\n{body}",
+        r.tokened("/api/level"),
+        body.len()
+    );
+    assert_eq!(send_head(r.addr, &foreign).0, 403);
+    let huge =
+        format!("POST {} HTTP/1.1\r\nHost: {host}\r\nContent-Length: 70000\r\n\r\n", r.tokened("/api/level"));
+    assert_eq!(send_head(r.addr, &huge).0, 413);
+    assert_eq!(json(&get(&r, "/api/state").1)["level"], 0, "a refused choice changed the level");
+
+    // Level 2 chosen: the pyramid is computed once, and the page is told to show it.
+    assert_eq!(post(&r, "/api/level", choose(2).as_bytes()), (200, b"{\"level\":2}".to_vec()));
+    let ready = wait_for(&r, |s| s["level_shown"] == 2);
+    assert_eq!(ready["frame"], state["frame"], "the level choice re-solved");
+    let counts: Vec<usize> =
+        ready["levels"].as_array().unwrap().iter().map(|l| l["faces"].as_u64().unwrap() as usize).collect();
+    assert_eq!(counts.len(), 4);
+    assert_eq!(counts[0], faces);
+    assert!(counts[1] < faces && counts.windows(2).all(|w| w[1] <= w[0]), "{counts:?} of {faces}");
+    let levels: Vec<LevelMesh> = (0..4)
+        .map(|k| {
+            let (status, head, bytes) =
+                exchange(r.addr, "GET", &r.tokened(&format!("/api/level?k={k}")), Some(&host), b"");
+            assert_eq!(status, 200, "{}", String::from_utf8_lossy(&bytes));
+            assert!(head.contains(&format!("X-Frame: {}", ready["frame"])), "{head}");
+            level_mesh(&bytes)
+        })
+        .collect();
+    let full = &levels[0];
+    let groups = ready["groups"].as_array().unwrap().len();
+    let colour_of: std::collections::HashMap<u32, [u8; 3]> =
+        full.labels.iter().zip(&full.colors).map(|(l, c)| (l[0], *c)).collect();
+    let group_of: std::collections::HashMap<[u32; 2], u32> =
+        full.labels.iter().zip(&full.groups).map(|(l, g)| (*l, *g)).collect();
+    let full_regions = regions(full);
+    assert_eq!(full_regions.keys().copied().collect::<Vec<_>>(), [0, 1, 2]);
+    for (k, level) in levels.iter().enumerate() {
+        assert_eq!(level.quads.len(), counts[k], "level {k}");
+        assert!(level.positions.iter().flatten().all(|x| x.is_finite()));
+        assert!(level.quads.iter().flatten().all(|&v| (v as usize) < level.positions.len()));
+        // Each region closed, of the full surface's topology; the colours, labels and
+        // groups (interfaces) of the full surface.
+        let per_region = regions(level);
+        for (label, (euler, open)) in &per_region {
+            assert_eq!(*open, 0, "level {k}: region {label} is not closed");
+            assert_eq!(*euler, full_regions[label].0, "level {k}: region {label}");
+        }
+        assert_eq!(per_region.len(), full_regions.len(), "level {k}");
+        for f in 0..level.quads.len() {
+            let l = level.labels[f];
+            assert_eq!(level.colors[f], colour_of[&l[0]], "level {k} face {f}");
+            assert_eq!(level.groups[f], group_of[&l], "level {k} face {f}");
+            assert!((level.groups[f] as usize) < groups);
+        }
+    }
+    // The downloads give the level, as `--lod` writes it.
+    let (status, obj) = get(&r, "/api/download?format=obj&level=2");
+    assert_eq!(status, 200);
+    assert_eq!(String::from_utf8_lossy(&obj).lines().filter(|l| l.starts_with("f ")).count(), counts[2]);
+    assert_eq!(get(&r, "/api/download?format=obj&level=9").0, 400);
+    // Voxel edits need the full surface.
+    let edit = serde_json::json!({ "model": ready["model_id"], "face": 0 }).to_string();
+    let (status, message) = error_of(post(&r, "/api/edit", edit.as_bytes()));
+    assert_eq!(status, 409);
+    assert!(message.starts_with("voxel edits apply to the full surface"), "{message}");
+
+    // A new run drops the levels; the level stays chosen and is computed again for the new
+    // result.
+    let mut tuning = ready["tuning"].clone();
+    tuning["gamma"] = serde_json::json!(2.0);
+    assert_eq!(post(&r, "/api/solve", tuning.to_string().as_bytes()).0, 202);
+    let frame = ready["frame"].as_u64().unwrap();
+    let again = wait_for(&r, |s| s["frame"].as_u64().unwrap() > frame && s["level_shown"] == 2);
+    assert_eq!(again["tuning"]["gamma"], 2.0);
+    let (status, head, bytes) = exchange(r.addr, "GET", &r.tokened("/api/level?k=2"), Some(&host), b"");
+    assert_eq!(status, 200);
+    assert!(head.contains(&format!("X-Frame: {}", again["frame"])), "{head}");
+    assert_ne!(level_mesh(&bytes).positions, levels[2].positions);
+    // Back to the full surface: nothing else changes.
+    assert_eq!(post(&r, "/api/level", choose(0).as_bytes()).0, 200);
+    let full_again = wait_for(&r, |s| s["level_shown"] == 0);
+    assert_eq!(full_again["frame"], again["frame"]);
+}
