@@ -35,6 +35,8 @@ pub(crate) struct Levels {
     pub(crate) frame: u64,
     /// The [`LEVELS`] levels, level 0 first.
     pub(crate) result: Result<Vec<Simplified>, String>,
+    /// Milliseconds the simplification took.
+    pub(crate) ms: f64,
 }
 
 impl Levels {
@@ -82,6 +84,7 @@ pub(crate) fn worker(shared: Arc<Shared>) {
             (s.frame, surface, finished, s.palette.clone())
         };
         shared.update(|s| s.levels_busy = true);
+        let t = std::time::Instant::now();
         let result =
             catch_unwind(AssertUnwindSafe(|| pyramid(&surface, &finished.positions, palette.as_ref())))
                 .unwrap_or_else(|panic| Err(format!("internal error: {}", panic_message(&*panic))));
@@ -94,7 +97,7 @@ pub(crate) fn worker(shared: Arc<Shared>) {
             if let Err(e) = &result {
                 s.error = Some(format!("{}: cannot simplify: {e}", s.name));
             }
-            s.levels = Some(Arc::new(Levels { frame, result }));
+            s.levels = Some(Arc::new(Levels { frame, result, ms: t.elapsed().as_secs_f64() * 1e3 }));
         });
     }
 }
