@@ -788,11 +788,11 @@ fn a_level_of_detail_is_served_closed_per_region_and_a_new_run_replaces_it() {
         })
         .collect();
     let full = &levels[0];
-    let groups = ready["groups"].as_array().unwrap().len();
+    let names: Vec<&str> =
+        ready["groups"].as_array().unwrap().iter().map(|g| g["name"].as_str().unwrap()).collect();
+    assert_eq!(names.len(), 3, "{names:?}");
     let colour_of: std::collections::HashMap<u32, [u8; 3]> =
         full.labels.iter().zip(&full.colors).map(|(l, c)| (l[0], *c)).collect();
-    let group_of: std::collections::HashMap<[u32; 2], u32> =
-        full.labels.iter().zip(&full.groups).map(|(l, g)| (*l, *g)).collect();
     let full_regions = regions(full);
     assert_eq!(full_regions.keys().copied().collect::<Vec<_>>(), [0, 1, 2]);
     for (k, level) in levels.iter().enumerate() {
@@ -810,8 +810,11 @@ fn a_level_of_detail_is_served_closed_per_region_and_a_new_run_replaces_it() {
         for f in 0..level.quads.len() {
             let l = level.labels[f];
             assert_eq!(level.colors[f], colour_of[&l[0]], "level {k} face {f}");
-            assert_eq!(level.groups[f], group_of[&l], "level {k} face {f}");
-            assert!((level.groups[f] as usize) < groups);
+            assert_eq!(level.colors[f], crate::model::label_color(l[0]), "level {k} face {f}");
+            // The interface of its two labels (named after them, in either order).
+            let name = names[level.groups[f] as usize];
+            let pair = [format!("interface_{}_{}", l[0], l[1]), format!("interface_{}_{}", l[1], l[0])];
+            assert!(pair.contains(&name.to_string()), "level {k} face {f}: {l:?} in {name}");
         }
     }
     // The downloads give the level, as `--lod` writes it.
