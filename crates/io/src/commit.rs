@@ -3,8 +3,9 @@
 use std::io;
 use std::path::{Path, PathBuf};
 
+use crate::error::IoError;
 use crate::inflight::{StagingDir, LOCK_FILE};
-use crate::{IoError, MeshBatch};
+use crate::mesh::MeshBatch;
 
 /// Where files replaced by a commit are moved aside, inside each staging directory.
 const REPLACED: &str = ".voxreg-replaced";
@@ -108,8 +109,10 @@ pub(crate) fn commit_stages(stages: &[&Stage]) -> Result<Vec<PathBuf>, IoError> 
     Ok(moves.into_iter().map(|(_, target, _)| target).collect())
 }
 
-/// What a file that is not a regular file is, for error messages.
-pub(crate) fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+/// What the file of `meta` (from [`std::fs::symlink_metadata`]) is, for error messages:
+/// "a device", "a FIFO", "a socket", "a symbolic link", "a directory", "a regular file"
+/// or "a special file".
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
     let t = meta.file_type();
     #[cfg(unix)]
     {
@@ -209,19 +212,12 @@ impl Outputs {
 
 #[cfg(test)]
 mod tests {
+    use voxreg_testkit::dir_names;
+
     use super::*;
 
-    fn names(dir: &Path) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
-    }
-
     fn text(outputs: &mut Outputs, target: &Path, text: &str) -> Result<(), IoError> {
-        outputs.write(target, |p| crate::write_file_atomically(p, |w| w.write_all(text.as_bytes())))
+        outputs.write(target, |p| crate::mesh::write_file_atomically(p, |w| w.write_all(text.as_bytes())))
     }
 
     #[test]
@@ -239,8 +235,8 @@ mod tests {
         assert_eq!(written.len(), 2);
         assert_eq!(std::fs::read(&a).unwrap(), b"new a");
         assert_eq!(std::fs::read(&b).unwrap(), b"new b");
-        assert_eq!(names(dir.path()), ["a.json", "sub"], "staging directories left");
-        assert_eq!(names(&dir.path().join("sub")), ["b.json"]);
+        assert_eq!(dir_names(dir.path()), ["a.json", "sub"], "staging directories left");
+        assert_eq!(dir_names(&dir.path().join("sub")), ["b.json"]);
     }
 
     #[test]
@@ -252,12 +248,12 @@ mod tests {
         let mut outputs = Outputs::new();
         text(&mut outputs, &a, "new a").unwrap();
         let e = outputs
-            .write(&b, |p| crate::write_file_atomically(p, |_| Err(std::io::Error::other("disk full"))))
+            .write(&b, |p| crate::mesh::write_file_atomically(p, |_| Err(std::io::Error::other("disk full"))))
             .unwrap_err();
         assert_eq!(e.path(), b, "the error names the target, not the staged file");
         drop(outputs);
         assert_eq!(std::fs::read(&a).unwrap(), b"old");
-        assert_eq!(names(dir.path()), ["a.json"]);
+        assert_eq!(dir_names(dir.path()), ["a.json"]);
         // A directory in the way of the second file: refused before the first moves.
         std::fs::create_dir(&b).unwrap();
         let mut outputs = Outputs::new();
@@ -266,7 +262,7 @@ mod tests {
         let e = outputs.commit().unwrap_err();
         assert!(e.to_string().contains("a directory is in the way"), "{e}");
         assert_eq!(std::fs::read(&a).unwrap(), b"old");
-        assert_eq!(names(dir.path()), ["a.json", "b.json"]);
+        assert_eq!(dir_names(dir.path()), ["a.json", "b.json"]);
         // The same file twice.
         let mut outputs = Outputs::new();
         text(&mut outputs, &a, "one").unwrap();

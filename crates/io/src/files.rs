@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use crate::IoError;
+use crate::error::IoError;
 
 /// The largest number of voxels a reader accepts: `2^31`.
 ///
@@ -41,7 +41,7 @@ pub(crate) fn checked_voxel_count(
         return Err(IoError::TooLarge { path: path.to_path_buf(), dims, limit: MAX_VOXELS });
     };
     let what = format!("a volume of {}x{}x{} voxels", dims[0], dims[1], dims[2]);
-    crate::check_memory(path, &what, count * u128::from(bytes_per_voxel))?;
+    crate::limits::check_memory(path, &what, count * u128::from(bytes_per_voxel))?;
     usize::try_from(count).map_err(|_| IoError::TooLarge {
         path: path.to_path_buf(),
         dims,
@@ -57,7 +57,7 @@ pub(crate) fn checked_voxel_count(
 pub fn read_input_file(path: &Path) -> Result<Vec<u8>, IoError> {
     use std::io::Read as _;
     let len = regular_file_len(path)?;
-    crate::check_memory(path, "the file", u128::from(len))?;
+    crate::limits::check_memory(path, "the file", u128::from(len))?;
     let file = std::fs::File::open(path).map_err(|e| IoError::io(path, e))?;
     let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
     file.take(len).read_to_end(&mut bytes).map_err(|e| IoError::io(path, e))?;

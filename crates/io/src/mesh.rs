@@ -6,8 +6,14 @@ use std::path::Path;
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, InterfaceId, Patch, RegionId};
 
+use crate::error::IoError;
 use crate::files::lowercase_extension;
-use crate::{write_gltf, write_obj, write_ply, write_stl, write_vtp, IoError, Material, NamedLabel, Palette};
+use crate::gltf::write_gltf;
+use crate::material::{Material, NamedLabel, Palette};
+use crate::obj::write_obj;
+use crate::ply::write_ply;
+use crate::stl::write_stl;
+use crate::vtp::write_vtp;
 
 /// A mesh of quads with two labels per face and named groups of faces: what the
 /// writers take.
@@ -312,7 +318,7 @@ fn first_label(surface: &DigitalSurface, r: RegionId) -> u32 {
 /// run leaves no partial output. Renames within one directory are atomic per file;
 /// should one of them fail (a full disk cannot cause it), `commit` takes back what it
 /// moved and reports which file. A batch can also be committed with a run's other files
-/// ([`Outputs::add_batch`](crate::Outputs::add_batch)).
+/// ([`Outputs::add_batch`](crate::commit::Outputs::add_batch)).
 #[derive(Debug)]
 pub struct MeshBatch {
     dir: std::path::PathBuf,
