@@ -88,3 +88,32 @@ pub(crate) fn regular_file_len(path: &Path) -> Result<u64, IoError> {
     }
     Err(IoError::format(path, format!("{what}, not a regular file: inputs are read from regular files")))
 }
+
+/// What the file of `meta` (from [`std::fs::symlink_metadata`]) is, for error messages:
+/// "a device", "a FIFO", "a socket", "a symbolic link", "a directory", "a regular file"
+/// or "a special file".
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    let t = meta.file_type();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_symlink() {
+        "a symbolic link"
+    } else if t.is_dir() {
+        "a directory"
+    } else if t.is_file() {
+        "a regular file"
+    } else {
+        "a special file"
+    }
+}

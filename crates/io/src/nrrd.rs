@@ -11,11 +11,11 @@ use glam::{DMat3, DVec3};
 
 use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::loaded::LoadedVoxels;
 use crate::material::Palette;
 use crate::orient::place;
 use crate::samples::{decode, Layout, Order};
 use crate::samples::{DataType, Endian};
-use crate::volume::LoadedVoxels;
 
 /// The largest label value a `.seg.nrrd` segment may name (the palette is indexed by
 /// label).

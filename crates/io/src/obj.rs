@@ -21,7 +21,7 @@ use crate::mesh::{write_atomically, write_temporary, SmallWrites};
 /// not written, except through the group names (see [`QuadMesh::from_surface`]).
 ///
 /// Written to a temporary file renamed onto `path` when complete (see
-/// [`write_mesh`](crate::mesh::write_mesh)); an inconsistent mesh is refused with
+/// `write_mesh`); an inconsistent mesh is refused with
 /// [`IoError::InvalidMesh`] before anything is created.
 ///
 /// A mesh with materials also gets a material library next to it, `<stem>.mtl`
@@ -46,7 +46,7 @@ pub fn write_obj(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
     mesh.check().map_err(|message| IoError::InvalidMesh { path: path.to_path_buf(), message })?;
     if let Ok(meta) = std::fs::symlink_metadata(&mtl) {
         if !meta.is_file() {
-            let what = crate::commit::file_kind(&meta);
+            let what = crate::files::file_kind(&meta);
             return Err(IoError::io(
                 &mtl,
                 io::Error::other(format!("{what} is in the way of the material library")),

@@ -43,7 +43,7 @@ use crate::mesh::{write_atomically, write_temporary};
 /// created.
 ///
 /// Written to a temporary file renamed onto `path` when complete (see
-/// [`write_mesh`](crate::mesh::write_mesh)).
+/// `write_mesh`).
 pub fn write_ply(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
     write_atomically(path, mesh, check_ply, |mesh, w| encode_ply(mesh, w))
 }

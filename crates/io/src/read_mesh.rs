@@ -293,7 +293,7 @@ mod tests {
     use voxreg_digisurf::{DigitalSurface, LabelVolume};
 
     use super::*;
-    use crate::mesh::write_mesh;
+    use crate::mesh_writer::write_mesh;
 
     #[test]
     fn reads_back_what_voxreg_writes() {

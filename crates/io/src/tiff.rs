@@ -10,9 +10,9 @@ use tiff::ColorType;
 
 use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::loaded::LoadedVoxels;
 use crate::samples::{decode, Layout, Order};
 use crate::samples::{DataType, Endian};
-use crate::volume::LoadedVoxels;
 
 /// Reads a TIFF stack: a multi-page `.tif`/`.tiff` file, see [`read_tiff_bytes`].
 pub fn read_tiff(path: &Path) -> Result<LoadedVoxels, IoError> {

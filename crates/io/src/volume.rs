@@ -2,34 +2,18 @@
 
 use std::path::Path;
 
-use voxreg_digisurf::LabelVolume;
-
 use crate::error::IoError;
 #[cfg(test)]
 use crate::files::checked_voxel_count;
 use crate::files::{lowercase_extension, read_file};
 use crate::grey::Voxels;
+use crate::loaded::{LoadedVolume, LoadedVoxels};
 use crate::longvol::read_longvol;
-use crate::material::Palette;
 use crate::nifti::read_nifti;
 use crate::npy::read_npy;
 use crate::pgm3d::read_pgm3d;
 use crate::vol::read_vol;
 use crate::vti::read_vti;
-
-/// A volume read from a file, with what the file says about its labels.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LoadedVolume {
-    /// The labeled voxels, spacing and origin.
-    pub volume: LabelVolume,
-    /// Colours and materials indexed by label, for formats that have a palette
-    /// (MagicaVoxel `.vox`: 256 entries, entry 0, the background, transparent); `None`
-    /// for formats without (`.vol`).
-    pub palette: Option<Palette>,
-    /// The unit of the spacing and origin, where the file names one (`mm`, `µm`, `nm`,
-    /// `Å`...).
-    pub units: Option<String>,
-}
 
 /// Reads a labeled volume, choosing the format by the file's extension, as
 /// [`read_voxels`] does.
@@ -46,17 +30,6 @@ pub fn read_volume(path: &Path) -> Result<LoadedVolume, IoError> {
         )
     })?;
     Ok(LoadedVolume { volume, palette, units })
-}
-
-/// The voxels read from a file (labels or grey levels), with its palette if any.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LoadedVoxels {
-    /// The voxels, spacing and origin.
-    pub voxels: Voxels,
-    /// As [`LoadedVolume::palette`].
-    pub palette: Option<Palette>,
-    /// As [`LoadedVolume::units`].
-    pub units: Option<String>,
 }
 
 /// The extensions [`read_voxels`] knows, for error messages.

@@ -9,9 +9,9 @@ use voxreg_digisurf::{Block, BlockVolume, LabelVolume};
 
 use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::loaded::LoadedVolume;
 use crate::material::apply_vox_material;
 use crate::material::Palette;
-use crate::volume::LoadedVolume;
 
 /// Scene graphs nested deeper than this are refused (they are malformed or cyclic).
 const MAX_SCENE_DEPTH: usize = 64;

@@ -24,7 +24,7 @@ use crate::mesh::QuadMesh;
 /// tuple per named label, in ASCII.
 ///
 /// Written to a temporary file renamed onto `path` when complete (see
-/// [`write_mesh`](crate::mesh::write_mesh)); an inconsistent mesh is refused with
+/// `write_mesh`); an inconsistent mesh is refused with
 /// [`IoError::InvalidMesh`] before anything is created.
 pub fn write_vtp(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
     write_atomically(path, mesh, |_| Ok(()), |mesh, w| encode_vtp(mesh, w))

@@ -20,9 +20,9 @@ use zarrs::storage::{
 
 use crate::error::IoError;
 use crate::files::checked_voxel_count;
+use crate::loaded::LoadedVoxels;
 use crate::samples::{decode, Layout, Order};
 use crate::samples::{DataType, Endian};
-use crate::volume::LoadedVoxels;
 
 /// Whether the directory `path` is a Zarr node: it holds `zarr.json` (v3), `.zarray` or
 /// `.zgroup` (v2).
