@@ -6,7 +6,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{bail, Result};
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, Patch, PatchParams, RegionId};
-use voxreg_io::{named_interface_name, named_region_name, MeshBatch, Outputs, Palette, QuadMesh};
+use voxreg_io::{file_kind, named_interface_name, named_region_name, MeshBatch, Outputs, Palette, QuadMesh};
 
 use crate::args::{GeodesicOptions, RegularizeArgs, Split};
 use crate::input::Source;
@@ -182,28 +182,8 @@ fn check_kind(option: &str, path: &Path, dir_output: bool) -> Result<()> {
     bail!(
         "{}: {option} is {}, not a regular file: voxreg writes only regular files or new paths",
         path.display(),
-        kind(&meta)
+        file_kind(&meta)
     )
-}
-
-/// What a file that is neither a regular file, a directory nor a link is.
-fn kind(meta: &std::fs::Metadata) -> &'static str {
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        let t = meta.file_type();
-        if t.is_char_device() || t.is_block_device() {
-            return "a device";
-        }
-        if t.is_fifo() {
-            return "a FIFO";
-        }
-        if t.is_socket() {
-            return "a socket";
-        }
-    }
-    let _ = meta;
-    "a special file"
 }
 
 /// The material library an OBJ `-o` may come with: `<stem>.mtl` beside it.

@@ -463,40 +463,37 @@ fn clamped_output_stays_in_cubes_and_passes_the_check() {
     assert!(stderr(&out).contains("--clamp needs the bounded solver"), "{}", stderr(&out));
 }
 
-#[test]
-fn check_reports_folds_and_fails() {
+/// `voxreg check` on the OBJ file `obj`, which must fail: its standard output and error.
+fn check_fails(obj: &str) -> (String, String) {
     let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("folded.obj");
-    // Two unit squares sharing the edge x = 1, the second folded back over the first.
-    std::fs::write(
-        &path,
-        "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.2 0 0.05\nv 0.2 1 0.05\nf 1 2 3 4\nf 2 5 6 3\n",
-    )
-    .unwrap();
+    let path = dir.path().join("mesh.obj");
+    std::fs::write(&path, obj).unwrap();
     let out = voxreg(&["check", path.to_str().unwrap()]);
     assert!(!out.status.success());
-    let text = String::from_utf8_lossy(&out.stdout);
+    (String::from_utf8_lossy(&out.stdout).into_owned(), stderr(&out))
+}
+
+#[test]
+fn check_reports_folds_and_fails() {
+    // Two unit squares sharing the edge x = 1, the second folded back over the first.
+    let (text, err) =
+        check_fails("v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.2 0 0.05\nv 0.2 1 0.05\nf 1 2 3 4\nf 2 5 6 3\n");
     assert!(
         text.contains("0 self-intersecting face pairs, 0 folded quads, 1 folded adjacent pairs"),
         "{text}"
     );
-    assert!(stderr(&out).contains("1 folded adjacent pairs"), "{}", stderr(&out));
+    assert!(err.contains("1 folded adjacent pairs"), "{err}");
 }
 
 #[test]
 fn check_reports_self_intersections_and_fails() {
-    let dir = tempfile::tempdir().unwrap();
-    let path = dir.path().join("crossing.obj");
     // Two unit squares crossing each other, sharing no vertex.
-    std::fs::write(
-        &path,
+    let (text, err) = check_fails(
         "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 0.5 -1\nv 0.6 0.5 -1\nv 0.6 0.5 1\nv 0.5 0.5 1\nf 1 2 3 4\nf 5 6 7 8\n",
-    )
-    .unwrap();
-    let out = voxreg(&["check", path.to_str().unwrap()]);
-    assert!(!out.status.success());
-    assert!(String::from_utf8_lossy(&out.stdout).contains("2 faces, 1 self-intersecting face pairs"));
-    assert!(stderr(&out).contains("1 self-intersections (first: faces 0 and 1)"), "{}", stderr(&out));
+    );
+    assert!(text.contains("2 faces, 1 self-intersecting face pairs"), "{text}");
+    assert!(err.contains("1 self-intersections (first: faces 0 and 1)"), "{err}");
+    let dir = tempfile::tempdir().unwrap();
     let out = voxreg(&["check", dir.path().join("missing.obj").to_str().unwrap()]);
     assert!(!out.status.success());
 }

@@ -7,24 +7,17 @@ use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 mod common;
-use common::{data, stderr, voxreg};
+#[cfg(unix)]
+use common::wait_code;
+use common::{data, one_error, s, stderr, voxreg};
 
-/// Runs `voxreg args`, expects exit 1 and one error line holding every one of `needles`.
+/// Runs `voxreg args`, expects exit 1 and one error line, the last, holding every one of
+/// `needles`.
 fn refused(args: &[&str], needles: &[&str]) -> String {
-    let out = voxreg(args);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(1), "voxreg {args:?}: {err}");
-    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(errors.len(), 1, "voxreg {args:?}: not one error line: {err}");
-    assert!(err.trim_end().ends_with(errors[0]), "voxreg {args:?}: the error is not last: {err}");
-    for n in needles {
-        assert!(err.contains(n), "voxreg {args:?}: '{n}' not in {err}");
-    }
+    let err = one_error(args, &voxreg(args), needles);
+    let last = err.lines().rev().find(|l| !l.trim().is_empty()).unwrap_or("");
+    assert!(last.starts_with("error:"), "voxreg {args:?}: the error is not last: {err}");
     err
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
 }
 
 /// A C-order `.npy` of `u4` labels, shape `dims`, from `f(x, y, z)`.
@@ -239,20 +232,6 @@ fn failed_split_leaves_no_directory() {
     let out = dir.path().join("new/parts");
     refused(&["regularize", s(&input), "-o", s(&out), "--split", "regions", "-q"], &["does not fit PLY"]);
     assert!(!dir.path().join("new").exists());
-}
-
-/// Waits for `child` at most `secs` seconds, then kills it; its exit code.
-#[cfg(unix)]
-fn wait_code(child: &mut std::process::Child, secs: u64) -> Option<i32> {
-    let start = Instant::now();
-    while start.elapsed().as_secs() < secs {
-        if let Some(status) = child.try_wait().unwrap() {
-            return status.code();
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    let _ = child.kill();
-    panic!("voxreg did not exit within {secs} s of the signal");
 }
 
 #[cfg(unix)]

@@ -5,36 +5,16 @@
 
 use std::path::{Path, PathBuf};
 use std::process::Command;
-use std::time::Instant;
 
 mod common;
-use common::{data, stderr, voxreg};
+#[cfg(unix)]
+use common::wait_code;
+use common::{data, one_error, s, stderr, voxreg};
+use voxreg_testkit::dir_names;
 
 /// Runs `voxreg args`, expects exit 1 and one error line holding every one of `needles`.
 fn refused(args: &[&str], needles: &[&str]) -> String {
-    let out = voxreg(args);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(1), "voxreg {args:?}: {err}");
-    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(errors.len(), 1, "voxreg {args:?}: not one error line: {err}");
-    for n in needles {
-        assert!(err.contains(n), "voxreg {args:?}: '{n}' not in {err}");
-    }
-    err
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
-}
-
-/// The names in `dir`, sorted.
-fn names(dir: &Path) -> Vec<String> {
-    let mut v: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    v.sort();
-    v
+    one_error(args, &voxreg(args), needles)
 }
 
 /// A `.vol` that no reader takes: a run that gets past the output checks fails on it, so
@@ -78,7 +58,7 @@ fn device_nodes_are_refused_as_outputs_whatever_the_permissions() {
             &["/dev/stdout", "symbolic link"],
         );
     }
-    assert_eq!(names(dir.path()), ["bad.vol"]);
+    assert_eq!(dir_names(dir.path()), ["bad.vol"]);
 }
 
 #[cfg(unix)]
@@ -108,7 +88,7 @@ fn fifos_sockets_and_symbolic_links_are_refused_as_outputs() {
     refused(&["regularize", s(&cat), "-o", s(&link), "-q"], &["link.obj", "symbolic link"]);
     assert!(std::fs::symlink_metadata(&link).unwrap().file_type().is_symlink());
     assert_eq!(std::fs::read(&target).unwrap(), b"kept");
-    assert_eq!(names(dir.path()), ["f.obj", "link.obj", "s.json", "target.obj"]);
+    assert_eq!(dir_names(dir.path()), ["f.obj", "link.obj", "s.json", "target.obj"]);
 }
 
 #[test]
@@ -157,7 +137,7 @@ fn the_material_library_of_an_obj_is_no_other_output() {
         &["regularize", s(&data("axes.vox")), "-o", s(&obj), "--report", s(&dir.path().join("a.mtl")), "-q"],
         &["a.mtl: the material library of -o and --report name the same file"],
     );
-    assert!(names(dir.path()).is_empty());
+    assert!(dir_names(dir.path()).is_empty());
 }
 
 #[test]
@@ -182,7 +162,7 @@ fn names_are_checked_before_any_work() {
         ],
         &["--report names a directory"],
     );
-    assert_eq!(names(dir.path()), ["bad.vol", "bad.vox"]);
+    assert_eq!(dir_names(dir.path()), ["bad.vol", "bad.vox"]);
 }
 
 #[test]
@@ -191,7 +171,7 @@ fn a_material_library_in_the_way_stops_the_run_before_the_mesh_is_written() {
     let obj = dir.path().join("m.obj");
     std::fs::create_dir(dir.path().join("m.mtl")).unwrap();
     refused(&["regularize", s(&data("axes.vox")), "-o", s(&obj), "-q"], &["m.mtl", "names a directory"]);
-    assert_eq!(names(dir.path()), ["m.mtl"]);
+    assert_eq!(dir_names(dir.path()), ["m.mtl"]);
 }
 
 /// `voxreg args` under a file size limit of `kib` KiB (bash's `ulimit -f`).
@@ -238,7 +218,7 @@ fn outputs_are_committed_together_or_not_at_all() {
     for p in [&mesh, &features, &report] {
         assert!(std::fs::read(p).unwrap() == b"old", "{} changed", p.display());
     }
-    assert_eq!(names(dir.path()), ["f.ply", "m.ply", "r.json"], "temporaries left");
+    assert_eq!(dir_names(dir.path()), ["f.ply", "m.ply", "r.json"], "temporaries left");
 }
 
 #[cfg(unix)]
@@ -274,20 +254,6 @@ fn temporaries_are_removed_only_when_no_live_run_holds_them() {
     assert!(!dead.exists() && !dead_dir.exists(), "a killed run's entries kept");
 }
 
-/// Waits for `child` at most `secs` seconds, then kills it; its exit code.
-#[cfg(unix)]
-fn wait_code(child: &mut std::process::Child, secs: u64) -> Option<i32> {
-    let start = Instant::now();
-    while start.elapsed().as_secs() < secs {
-        if let Some(status) = child.try_wait().unwrap() {
-            return status.code();
-        }
-        std::thread::sleep(std::time::Duration::from_millis(20));
-    }
-    let _ = child.kill();
-    panic!("voxreg did not exit within {secs} s of the signal");
-}
-
 #[cfg(unix)]
 #[test]
 fn sigquit_and_sighup_exit_with_nothing_left_behind() {
@@ -320,6 +286,6 @@ fn sigquit_and_sighup_exit_with_nothing_left_behind() {
         let mut err = String::new();
         std::io::Read::read_to_string(&mut child.stderr.take().unwrap(), &mut err).unwrap();
         assert!(err.contains(&format!("interrupted by SIG{signal}")), "{err}");
-        assert!(names(&out_dir).is_empty(), "SIG{signal} left {:?}", names(&out_dir));
+        assert!(dir_names(&out_dir).is_empty(), "SIG{signal} left {:?}", dir_names(&out_dir));
     }
 }

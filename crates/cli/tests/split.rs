@@ -13,6 +13,7 @@ use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, PatchParams, Ver
 
 mod common;
 use common::voxreg;
+use voxreg_testkit::dir_names;
 
 fn run_ok(args: &[&str]) {
     let out = voxreg(args);
@@ -308,15 +309,6 @@ fn write_odd_names(path: &Path) {
     std::fs::write(path, voxreg_testkit::odd_names_seg_nrrd()).unwrap();
 }
 
-fn file_names(dir: &Path) -> Vec<String> {
-    let mut names: Vec<String> = std::fs::read_dir(dir)
-        .unwrap()
-        .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-        .collect();
-    names.sort();
-    names
-}
-
 /// Label names become file names (sanitized, label numbers kept, so unique), and the
 /// report's `labels` table lists them as written.
 #[test]
@@ -337,7 +329,7 @@ fn label_names_name_the_split_files_and_fill_the_report() {
         .concat(),
     );
     assert_eq!(
-        file_names(&regions),
+        dir_names(&regions),
         [
             "region_1_Left_kidney.ply",
             "region_2_a_b_c.ply",
@@ -357,7 +349,7 @@ fn label_names_name_the_split_files_and_fill_the_report() {
             .concat(),
     );
     assert_eq!(
-        file_names(&interfaces),
+        dir_names(&interfaces),
         [
             "interface_1_Left_kidney__0.ply",
             "interface_1_Left_kidney__2_a_b_c.ply",

@@ -9,7 +9,7 @@ use std::process::{Command, Output, Stdio};
 use std::time::{Duration, Instant};
 
 mod common;
-use common::{stderr, stdout};
+use common::{one_error, s, stderr, stdout};
 
 /// Runs `voxreg args` under `ulimit -v 4194304` (a 4 GiB address space).
 fn limited(args: &[&str]) -> Output {
@@ -24,18 +24,7 @@ fn limited(args: &[&str]) -> Output {
 
 /// `limited(args)` exits 1 with one error line holding every one of `needles`.
 fn refused(args: &[&str], needles: &[&str]) {
-    let out = limited(args);
-    let err = stderr(&out);
-    assert_eq!(out.status.code(), Some(1), "voxreg {args:?} (killed by a signal if None): {err}");
-    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
-    assert_eq!(errors.len(), 1, "voxreg {args:?}: not one error line: {err}");
-    for n in needles {
-        assert!(err.contains(n), "voxreg {args:?}: '{n}' not in {err}");
-    }
-}
-
-fn s(p: &Path) -> &str {
-    p.to_str().unwrap()
+    one_error(args, &limited(args), needles);
 }
 
 #[test]
@@ -58,7 +47,7 @@ fn a_zarr_json_declaring_a_billion_voxels_is_refused_under_ulimit() {
 /// A `.vox` scene: models of `sizes` (each full of colour 1, then 2, ...), placed by
 /// translations `at`.
 fn vox_scene(models: &[[u32; 3]], at: &[&str]) -> Vec<u8> {
-    use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+    use dot_vox::{Color, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
     let model = |k: usize, [x, y, z]: [u32; 3]| Model {
         size: Size { x, y, z },
         voxels: (0..x * y * z)
@@ -89,18 +78,8 @@ fn vox_scene(models: &[[u32; 3]], at: &[&str]) -> Vec<u8> {
             models: vec![ShapeModel { model_id: k as u32, attributes: dot_vox::Dict::new() }],
         });
     }
-    let data = DotVoxData {
-        version: 150,
-        index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
-        models: models.iter().enumerate().map(|(k, &m)| model(k, m)).collect(),
-        palette: vec![Color { r: 1, g: 2, b: 3, a: 255 }; 256],
-        materials: Vec::new(),
-        scenes,
-        layers: Vec::new(),
-    };
-    let mut bytes = Vec::new();
-    data.write_vox(&mut bytes).unwrap();
-    bytes
+    let models = models.iter().enumerate().map(|(k, &m)| model(k, m)).collect();
+    voxreg_testkit::vox_bytes(models, vec![Color { r: 1, g: 2, b: 3, a: 255 }; 256], scenes)
 }
 
 /// The quads of an OBJ file.

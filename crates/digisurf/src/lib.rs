@@ -58,6 +58,7 @@ mod ids;
 mod patch;
 mod regions;
 mod surface;
+mod union_find;
 mod volume;
 
 pub use blocks::{Block, BlockVolume};
@@ -68,4 +69,7 @@ pub use ids::{EdgeId, InterfaceId, RegionId, SurfelId, VertexId};
 pub use patch::{Patch, PatchParams};
 pub use regions::{RegionMap, Regions};
 pub use surface::{DigitalSurface, Edge, EdgeKind, Interface, SurfaceCounts, Surfel};
-pub use volume::{checked_origin, checked_spacing, LabelStorage, LabelView, LabelVolume, Voxel};
+pub use union_find::union_find_root;
+pub use volume::{
+    checked_origin, checked_spacing, x_fastest_array, LabelStorage, LabelView, LabelVolume, Voxel,
+};

@@ -1,6 +1,7 @@
 //! Parts of the digital surface as meshes of their own: one interface, or the closed
 //! surface of one region, optionally made 2-manifold by splitting pinches.
 
+use crate::union_find::union_find_root as find;
 use crate::{DigitalSurface, InterfaceId, RegionId, SurfelId, VertexId, Voxel};
 
 const NONE: u32 = u32::MAX;
@@ -215,14 +216,6 @@ impl DigitalSurface {
         }
         (0..surfels.len()).map(|f| std::array::from_fn(|k| find(&mut parent, (4 * f + k) as u32))).collect()
     }
-}
-
-fn find(parent: &mut [u32], mut x: u32) -> u32 {
-    while parent[x as usize] != x {
-        parent[x as usize] = parent[parent[x as usize] as usize];
-        x = parent[x as usize];
-    }
-    x
 }
 
 fn union(parent: &mut [u32], a: u32, b: u32) {

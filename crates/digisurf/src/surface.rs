@@ -9,6 +9,7 @@ use rayon::prelude::*;
 use crate::csr::split_lengths;
 use crate::csr::Lists;
 use crate::data::VertexData;
+use crate::union_find::union_find_root;
 use crate::{
     EdgeId, InterfaceId, LabelStorage, LabelView, LabelVolume, RegionId, RegionMap, Regions, SurfaceError,
     SurfelId, VertexId, Voxel,
@@ -685,8 +686,8 @@ impl DigitalSurface {
     fn fan_count(&self, v: VertexId) -> usize {
         let around = self.vertex_surfels.get(v.index());
         // (edge, local surfel index) for the two edges of each surfel that touch v.
-        let mut links: Vec<(EdgeId, usize)> = Vec::with_capacity(2 * around.len());
-        for (li, s) in around.iter().enumerate() {
+        let mut links: Vec<(EdgeId, u32)> = Vec::with_capacity(2 * around.len());
+        for (li, s) in (0u32..).zip(around) {
             let sf = &self.surfels[s.index()];
             let i = sf.vertices.iter().position(|&w| w == v).unwrap_or(0);
             let es = self.surfel_edges[s.index()];
@@ -694,21 +695,14 @@ impl DigitalSurface {
             links.push((es[(i + 3) % 4], li));
         }
         links.sort_unstable();
-        let mut parent: Vec<usize> = (0..around.len()).collect();
-        fn find(p: &mut [usize], mut x: usize) -> usize {
-            while p[x] != x {
-                p[x] = p[p[x]];
-                x = p[x];
-            }
-            x
-        }
+        let mut parent: Vec<u32> = (0..around.len() as u32).collect();
         for group in links.chunk_by(|a, b| a.0 == b.0) {
             for w in group.windows(2) {
-                let (a, b) = (find(&mut parent, w[0].1), find(&mut parent, w[1].1));
-                parent[a] = b;
+                let (a, b) = (union_find_root(&mut parent, w[0].1), union_find_root(&mut parent, w[1].1));
+                parent[a as usize] = b;
             }
         }
-        (0..around.len()).filter(|&i| find(&mut parent, i) == i).count()
+        (0..around.len() as u32).filter(|&i| union_find_root(&mut parent, i) == i).count()
     }
 
     /// The edge-connected components of the surfels, numbered in the order of their
@@ -719,19 +713,11 @@ impl DigitalSurface {
         let n = self.surfels.len();
         // `parent[s] <= s`: each tree's root is its smallest surfel.
         let mut parent: Vec<u32> = (0..n as u32).collect();
-        fn root(parent: &mut [u32], mut x: u32) -> u32 {
-            while parent[x as usize] != x {
-                let up = parent[parent[x as usize] as usize];
-                parent[x as usize] = up;
-                x = up;
-            }
-            x
-        }
         for e in 0..self.edges.len() {
             let incident = self.edge_surfels.get(e);
-            let mut a = root(&mut parent, incident[0].0);
+            let mut a = union_find_root(&mut parent, incident[0].0);
             for t in &incident[1..] {
-                let b = root(&mut parent, t.0);
+                let b = union_find_root(&mut parent, t.0);
                 if a != b {
                     let (lo, hi) = (a.min(b), a.max(b));
                     parent[hi as usize] = lo;

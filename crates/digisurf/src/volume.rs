@@ -132,25 +132,31 @@ impl LabelVolume {
     /// A volume from labels listed with `x` fastest, then `y`, then `z` (the order of
     /// most file formats).
     pub fn from_x_fastest(dims: [usize; 3], labels: Vec<u32>) -> Result<Self, SurfaceError> {
-        let expected = dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));
-        if expected != Some(labels.len()) {
-            return Err(SurfaceError::InvalidVolume(format!(
-                "{} labels given for dimensions {}x{}x{}",
-                labels.len(),
-                dims[0],
-                dims[1],
-                dims[2]
-            )));
-        }
-        let labels = Array3::from_shape_vec((dims[0], dims[1], dims[2]).f(), labels)
-            .map_err(|e| SurfaceError::InvalidVolume(e.to_string()))?;
-        Ok(Self::new(labels))
+        Ok(Self::new(x_fastest_array(dims, labels, "labels")?))
     }
 
     /// Mutable access to the label array, indexed `[x, y, z]`.
     pub fn labels_mut(&mut self) -> &mut Array3<u32> {
         &mut self.labels
     }
+}
+
+/// The array of dimensions `dims` over `values` listed with `x` fastest, then `y`, then
+/// `z`, else the one-line error every volume gives when their number is not the product
+/// of `dims` (`what` names the values: `"labels"`, `"grey levels"`).
+pub fn x_fastest_array<T>(dims: [usize; 3], values: Vec<T>, what: &str) -> Result<Array3<T>, SurfaceError> {
+    let expected = dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));
+    if expected != Some(values.len()) {
+        return Err(SurfaceError::InvalidVolume(format!(
+            "{} {what} given for dimensions {}x{}x{}",
+            values.len(),
+            dims[0],
+            dims[1],
+            dims[2]
+        )));
+    }
+    Array3::from_shape_vec((dims[0], dims[1], dims[2]).f(), values)
+        .map_err(|e| SurfaceError::InvalidVolume(e.to_string()))
 }
 
 /// `spacing` if each component is finite and positive (a voxel's physical size), else

@@ -3,8 +3,11 @@
 use std::io;
 use std::path::{Path, PathBuf};
 
+use crate::error::IoError;
+use crate::files::file_kind;
 use crate::inflight::{StagingDir, LOCK_FILE};
-use crate::{IoError, MeshBatch};
+use crate::mesh::QuadMesh;
+use crate::mesh_writer::write_mesh;
 
 /// Where files replaced by a commit are moved aside, inside each staging directory.
 const REPLACED: &str = ".voxreg-replaced";
@@ -108,30 +111,111 @@ pub(crate) fn commit_stages(stages: &[&Stage]) -> Result<Vec<PathBuf>, IoError> 
     Ok(moves.into_iter().map(|(_, target, _)| target).collect())
 }
 
-/// What a file that is not a regular file is, for error messages.
-pub(crate) fn file_kind(meta: &std::fs::Metadata) -> &'static str {
-    let t = meta.file_type();
-    #[cfg(unix)]
-    {
-        use std::os::unix::fs::FileTypeExt;
-        if t.is_char_device() || t.is_block_device() {
-            return "a device";
-        }
-        if t.is_fifo() {
-            return "a FIFO";
-        }
-        if t.is_socket() {
-            return "a socket";
+/// Writes several meshes into one directory, all or nothing.
+///
+/// [`MeshBatch::write`] writes each mesh (any format of [`write_mesh`]) into a hidden
+/// staging directory inside the target directory, locked by this process (see
+/// [`inflight`](crate::inflight)); [`MeshBatch::commit`] then renames every file into
+/// place. Dropping the batch before `commit` (after an error, say) removes the staging
+/// directory and everything in it, and the directories the batch created, so a failed
+/// run leaves no partial output. Renames within one directory are atomic per file;
+/// should one of them fail (a full disk cannot cause it), `commit` takes back what it
+/// moved and reports which file. A batch can also be committed with a run's other files
+/// ([`Outputs::add_batch`]).
+#[derive(Debug)]
+pub struct MeshBatch {
+    dir: std::path::PathBuf,
+    /// `None` once dropped.
+    stage: Option<Stage>,
+    names: Vec<String>,
+    /// The outermost directory this batch created, removed again (with what it holds)
+    /// unless the batch is committed.
+    created: Option<std::path::PathBuf>,
+}
+
+impl Drop for MeshBatch {
+    fn drop(&mut self) {
+        drop(self.stage.take());
+        if let Some(created) = self.created.take() {
+            let mut in_flight = crate::inflight::lock();
+            let _ = std::fs::remove_dir_all(&created);
+            crate::inflight::note_created(&mut in_flight, &created, false);
         }
     }
-    if t.is_symlink() {
-        "a symbolic link"
-    } else if t.is_dir() {
-        "a directory"
-    } else if t.is_file() {
-        "a regular file"
-    } else {
-        "a special file"
+}
+
+impl MeshBatch {
+    /// Starts a batch writing into `dir`, created (with its parents) if missing; if the
+    /// batch is not committed, what it created is removed again.
+    pub fn new(dir: &Path) -> Result<MeshBatch, IoError> {
+        let created = dir
+            .ancestors()
+            .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
+            .last()
+            .map(Path::to_path_buf);
+        let mut in_flight = crate::inflight::lock();
+        std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, e))?;
+        if let Some(c) = &created {
+            crate::inflight::note_created(&mut in_flight, c, true);
+        }
+        let staging = crate::inflight::StagingDir::new_in(&mut in_flight, dir).map_err(|e| {
+            if let Some(c) = &created {
+                let _ = std::fs::remove_dir_all(c);
+                crate::inflight::note_created(&mut in_flight, c, false);
+            }
+            IoError::io(dir, e)
+        })?;
+        let stage = Stage { target: dir.to_path_buf(), staging };
+        Ok(MeshBatch { dir: dir.to_path_buf(), stage: Some(stage), names: Vec::new(), created })
+    }
+
+    pub(crate) fn stage(&self) -> Option<&Stage> {
+        self.stage.as_ref()
+    }
+
+    /// The names of the meshes written so far, in order.
+    pub fn names(&self) -> &[String] {
+        &self.names
+    }
+
+    /// Writes `mesh` as `name` (a plain file name with a mesh extension) in the staging
+    /// directory; errors name the final path.
+    pub fn write(&mut self, name: &str, mesh: &QuadMesh) -> Result<(), IoError> {
+        let target = self.dir.join(name);
+        let plain = Path::new(name).file_name().map(|n| n.to_string_lossy()) == Some(name.into());
+        let Some(stage) = self.stage.as_ref().filter(|_| plain && name != crate::inflight::LOCK_FILE) else {
+            return Err(IoError::InvalidMesh {
+                path: target,
+                message: format!("'{name}' is not a plain file name"),
+            });
+        };
+        write_mesh(&stage.staging.path().join(name), mesh).map_err(|e| stage.relocate(e))?;
+        self.names.push(name.to_string());
+        Ok(())
+    }
+
+    /// Once committed: the directories the batch created stay.
+    pub(crate) fn committed(&mut self, in_flight: &mut crate::inflight::InFlight) {
+        if let Some(created) = self.created.take() {
+            crate::inflight::note_created(in_flight, &created, false);
+        }
+    }
+
+    /// Moves every file written so far (and companions such as `.mtl` libraries) into
+    /// the target directory, replacing files of the same names, and removes the
+    /// staging directory. Returns the paths written.
+    ///
+    /// All or nothing: a target that exists and is not a regular file (a directory, a
+    /// symbolic link, a device...) is refused before anything moves; files being replaced
+    /// are first moved aside into the staging directory, and if a rename fails, every
+    /// file already moved in is taken out again and the replaced ones are put back.
+    pub fn commit(mut self) -> Result<Vec<std::path::PathBuf>, IoError> {
+        // Not cut in two by an interruption (see `remove_in_flight`).
+        let mut in_flight = crate::inflight::lock();
+        let stages: Vec<&Stage> = self.stage.iter().collect();
+        let written = commit_stages(&stages)?;
+        self.committed(&mut in_flight);
+        Ok(written)
     }
 }
 
@@ -209,19 +293,12 @@ impl Outputs {
 
 #[cfg(test)]
 mod tests {
+    use voxreg_testkit::dir_names;
+
     use super::*;
 
-    fn names(dir: &Path) -> Vec<String> {
-        let mut v: Vec<String> = std::fs::read_dir(dir)
-            .unwrap()
-            .map(|e| e.unwrap().file_name().to_string_lossy().into_owned())
-            .collect();
-        v.sort();
-        v
-    }
-
     fn text(outputs: &mut Outputs, target: &Path, text: &str) -> Result<(), IoError> {
-        outputs.write(target, |p| crate::write_file_atomically(p, |w| w.write_all(text.as_bytes())))
+        outputs.write(target, |p| crate::mesh::write_file_atomically(p, |w| w.write_all(text.as_bytes())))
     }
 
     #[test]
@@ -239,8 +316,8 @@ mod tests {
         assert_eq!(written.len(), 2);
         assert_eq!(std::fs::read(&a).unwrap(), b"new a");
         assert_eq!(std::fs::read(&b).unwrap(), b"new b");
-        assert_eq!(names(dir.path()), ["a.json", "sub"], "staging directories left");
-        assert_eq!(names(&dir.path().join("sub")), ["b.json"]);
+        assert_eq!(dir_names(dir.path()), ["a.json", "sub"], "staging directories left");
+        assert_eq!(dir_names(&dir.path().join("sub")), ["b.json"]);
     }
 
     #[test]
@@ -252,12 +329,12 @@ mod tests {
         let mut outputs = Outputs::new();
         text(&mut outputs, &a, "new a").unwrap();
         let e = outputs
-            .write(&b, |p| crate::write_file_atomically(p, |_| Err(std::io::Error::other("disk full"))))
+            .write(&b, |p| crate::mesh::write_file_atomically(p, |_| Err(std::io::Error::other("disk full"))))
             .unwrap_err();
         assert_eq!(e.path(), b, "the error names the target, not the staged file");
         drop(outputs);
         assert_eq!(std::fs::read(&a).unwrap(), b"old");
-        assert_eq!(names(dir.path()), ["a.json"]);
+        assert_eq!(dir_names(dir.path()), ["a.json"]);
         // A directory in the way of the second file: refused before the first moves.
         std::fs::create_dir(&b).unwrap();
         let mut outputs = Outputs::new();
@@ -266,7 +343,7 @@ mod tests {
         let e = outputs.commit().unwrap_err();
         assert!(e.to_string().contains("a directory is in the way"), "{e}");
         assert_eq!(std::fs::read(&a).unwrap(), b"old");
-        assert_eq!(names(dir.path()), ["a.json", "b.json"]);
+        assert_eq!(dir_names(dir.path()), ["a.json", "b.json"]);
         // The same file twice.
         let mut outputs = Outputs::new();
         text(&mut outputs, &a, "one").unwrap();

@@ -35,7 +35,7 @@ pub enum IoError {
         /// The feature that is not supported.
         message: String,
     },
-    /// The volume has more voxels than [`MAX_VOXELS`](crate::MAX_VOXELS); refused before
+    /// The volume has more voxels than [`MAX_VOXELS`](crate::files::MAX_VOXELS); refused before
     /// anything is allocated for it.
     #[error(
         "{}: volume of {}x{}x{} voxels exceeds the limit of {limit} voxels",
@@ -50,10 +50,10 @@ pub enum IoError {
         limit: u64,
     },
     /// What the file declares would need more memory than the budget
-    /// ([`max_memory`](crate::max_memory)); refused before anything is allocated for it.
+    /// ([`max_memory`](crate::limits::max_memory)); refused before anything is allocated for it.
     #[error(
         "{}: {what} needs {}, over the memory limit of {} (raise it with --max-memory)",
-        .path.display(), crate::format_size(*.bytes), crate::format_size(*.limit)
+        .path.display(), crate::size::format_size(*.bytes), crate::size::format_size(*.limit)
     )]
     OverBudget {
         /// The file being read (or written).

@@ -3,7 +3,7 @@
 
 use std::path::Path;
 
-use crate::IoError;
+use crate::error::IoError;
 
 /// The largest number of voxels a reader accepts: `2^31`.
 ///
@@ -41,7 +41,7 @@ pub(crate) fn checked_voxel_count(
         return Err(IoError::TooLarge { path: path.to_path_buf(), dims, limit: MAX_VOXELS });
     };
     let what = format!("a volume of {}x{}x{} voxels", dims[0], dims[1], dims[2]);
-    crate::check_memory(path, &what, count * u128::from(bytes_per_voxel))?;
+    crate::limits::check_memory(path, &what, count * u128::from(bytes_per_voxel))?;
     usize::try_from(count).map_err(|_| IoError::TooLarge {
         path: path.to_path_buf(),
         dims,
@@ -57,7 +57,7 @@ pub(crate) fn checked_voxel_count(
 pub fn read_input_file(path: &Path) -> Result<Vec<u8>, IoError> {
     use std::io::Read as _;
     let len = regular_file_len(path)?;
-    crate::check_memory(path, "the file", u128::from(len))?;
+    crate::limits::check_memory(path, "the file", u128::from(len))?;
     let file = std::fs::File::open(path).map_err(|e| IoError::io(path, e))?;
     let mut bytes = Vec::with_capacity(usize::try_from(len).unwrap_or(0));
     file.take(len).read_to_end(&mut bytes).map_err(|e| IoError::io(path, e))?;
@@ -87,4 +87,33 @@ pub(crate) fn regular_file_len(path: &Path) -> Result<u64, IoError> {
         }
     }
     Err(IoError::format(path, format!("{what}, not a regular file: inputs are read from regular files")))
+}
+
+/// What the file of `meta` (from [`std::fs::symlink_metadata`]) is, for error messages:
+/// "a device", "a FIFO", "a socket", "a symbolic link", "a directory", "a regular file"
+/// or "a special file".
+pub fn file_kind(meta: &std::fs::Metadata) -> &'static str {
+    let t = meta.file_type();
+    #[cfg(unix)]
+    {
+        use std::os::unix::fs::FileTypeExt;
+        if t.is_char_device() || t.is_block_device() {
+            return "a device";
+        }
+        if t.is_fifo() {
+            return "a FIFO";
+        }
+        if t.is_socket() {
+            return "a socket";
+        }
+    }
+    if t.is_symlink() {
+        "a symbolic link"
+    } else if t.is_dir() {
+        "a directory"
+    } else if t.is_file() {
+        "a regular file"
+    } else {
+        "a special file"
+    }
 }

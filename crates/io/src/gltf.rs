@@ -8,9 +8,11 @@ use glam::{DVec3, Vec3};
 use gltf::json::{self as gj, validation::Checked, validation::USize64, Index};
 use rayon::prelude::*;
 
+use crate::error::IoError;
 use crate::files::lowercase_extension;
+use crate::material::Material;
 use crate::mesh::write_atomically;
-use crate::{IoError, Material, QuadMesh};
+use crate::mesh::QuadMesh;
 
 /// Writes `mesh` to `path` as glTF 2.0: binary `.glb`, or `.gltf` JSON with the buffer
 /// embedded as a base64 data URI (one self-contained file either way).

@@ -2,7 +2,7 @@
 
 use glam::DVec3;
 use ndarray::{Array3, ShapeBuilder};
-use voxreg_digisurf::{checked_origin, checked_spacing, LabelVolume, SurfaceError};
+use voxreg_digisurf::{checked_origin, checked_spacing, x_fastest_array, LabelVolume, SurfaceError};
 
 /// A 3D array of grey levels (`f64`, never NaN) with a physical embedding.
 ///
@@ -44,19 +44,7 @@ impl GreyVolume {
     /// A volume from values listed with `x` fastest, then `y`, then `z`; fails if their
     /// number is not the product of `dims` or a value is NaN.
     pub fn from_x_fastest(dims: [usize; 3], values: Vec<f64>) -> Result<Self, SurfaceError> {
-        let expected = dims.iter().try_fold(1usize, |acc, &d| acc.checked_mul(d));
-        if expected != Some(values.len()) {
-            return Err(SurfaceError::InvalidVolume(format!(
-                "{} grey levels given for dimensions {}x{}x{}",
-                values.len(),
-                dims[0],
-                dims[1],
-                dims[2]
-            )));
-        }
-        let values = Array3::from_shape_vec((dims[0], dims[1], dims[2]).f(), values)
-            .map_err(|e| SurfaceError::InvalidVolume(e.to_string()))?;
-        Self::new(values)
+        Self::new(x_fastest_array(dims, values, "grey levels")?)
     }
 
     /// Sets the physical size of a voxel (default `1, 1, 1`); each component must be

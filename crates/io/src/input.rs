@@ -8,10 +8,12 @@ use std::path::{Path, PathBuf};
 use glam::DVec3;
 use voxreg_digisurf::{Block, BlockVolume, LabelVolume, SurfaceError};
 
-use crate::{
-    is_voxel_art, read_raw, read_voxels_with, DataType, Endian, IoError, NotALabel, Palette, RawSpec,
-    ReadOptions, Voxels,
-};
+use crate::error::IoError;
+use crate::grey::{NotALabel, Voxels};
+use crate::material::Palette;
+use crate::raw::{read_raw, RawSpec};
+use crate::samples::{DataType, Endian};
+use crate::volume::{is_voxel_art, read_voxels_with, ReadOptions};
 
 /// What to do with the background label.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
@@ -105,13 +107,13 @@ pub enum InputError {
 /// are labels), the labels kept and the background. Spacings and origins whose vertex
 /// coordinates a mesh cannot represent distinctly are refused ([`check_coordinates`]).
 ///
-/// [`check_coordinates`]: crate::check_coordinates
+/// [`check_coordinates`]: crate::orient::check_coordinates
 pub fn read_input(path: &Path, options: &InputOptions<'_>) -> Result<Input, InputError> {
     read_input_from(path, None, options)
 }
 
 /// [`read_input`] of a file held in memory (an upload to the viewer): `path` only names
-/// it, and nothing else is read ([`read_voxels_bytes`](crate::read_voxels_bytes)).
+/// it, and nothing else is read ([`read_voxels_bytes`](crate::volume::read_voxels_bytes)).
 pub fn read_input_bytes(bytes: &[u8], path: &Path, options: &InputOptions<'_>) -> Result<Input, InputError> {
     read_input_from(path, Some(bytes), options)
 }
@@ -131,7 +133,7 @@ fn read_input_from(
                 spacing: options.spacing.unwrap_or(DVec3::ONE),
             };
             let voxels = match bytes {
-                Some(b) => crate::read_raw_bytes(b, path, &spec)?,
+                Some(b) => crate::raw::read_raw_bytes(b, path, &spec)?,
                 None => read_raw(path, &spec)?,
             };
             (voxels, None, None)
@@ -143,7 +145,7 @@ fn read_input_from(
             }
             let read = ReadOptions { vox_model: options.vox_model };
             let loaded = match bytes {
-                Some(b) => crate::read_voxels_bytes(b, path, &read)?,
+                Some(b) => crate::volume::read_voxels_bytes(b, path, &read)?,
                 None => read_voxels_with(path, &read)?,
             };
             (loaded.voxels, loaded.palette, loaded.units)
@@ -196,7 +198,7 @@ pub struct SparseInput {
 }
 
 /// Reads `path` as [`read_input`] does, into blocks built from the models' own boxes
-/// ([`read_vox_scene_bytes`](crate::read_vox_scene_bytes)), when it is a MagicaVoxel
+/// ([`read_vox_scene_bytes`](crate::vox::read_vox_scene_bytes)), when it is a MagicaVoxel
 /// scene whose blocks hold less than half of its bounding box (models far apart) and
 /// the options leave empty space empty: no raw dimensions, no model picked, no
 /// threshold, the file's background (label `0`). The spacing and the labels kept apply
@@ -219,11 +221,11 @@ pub fn read_sparse_input(
     let bytes = match bytes {
         Some(b) => b,
         None => {
-            owned = crate::read_input_file(path)?;
+            owned = crate::files::read_input_file(path)?;
             &owned
         }
     };
-    let scene = crate::read_vox_scene_bytes(bytes, path, &crate::VoxOptions::default())?;
+    let scene = crate::vox::read_vox_scene_bytes(bytes, path, &crate::vox::VoxOptions::default())?;
     if !scene.is_sparse() {
         return Ok(None);
     }

@@ -34,15 +34,15 @@ pub fn input_files(path: &Path, raw: bool) -> InputFiles {
         return out;
     }
     let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
-    if lowercase_extension(path).as_deref() == Some("zarr") || crate::is_zarr(path) {
+    if lowercase_extension(path).as_deref() == Some("zarr") || crate::zarr::is_zarr(path) {
         out.dirs.push(path.to_path_buf());
-        if let Some(parent) = path.parent().filter(|p| crate::is_zarr(p)) {
+        if let Some(parent) = path.parent().filter(|p| crate::zarr::is_zarr(p)) {
             out.dirs.push(parent.to_path_buf());
         }
         return out;
     }
     if path.is_dir() || name.contains(['*', '?']) {
-        out.files.extend(crate::tiff_slices(path).unwrap_or_default());
+        out.files.extend(crate::tiff::tiff_slices(path).unwrap_or_default());
         return out;
     }
     if matches!(lowercase_extension(path).as_deref(), Some("nrrd" | "nhdr")) {

@@ -108,9 +108,11 @@ pub mod inflight;
 mod input;
 mod input_files;
 mod limits;
+mod loaded;
 mod longvol;
 mod material;
 mod mesh;
+mod mesh_writer;
 mod mrc;
 mod nifti;
 mod npy;
@@ -122,6 +124,7 @@ mod ply;
 mod raw;
 mod read_mesh;
 mod samples;
+mod size;
 mod stl;
 mod tiff;
 mod vol;
@@ -132,9 +135,9 @@ mod vtp;
 mod write_volume;
 mod zarr;
 
-pub use commit::Outputs;
+pub use commit::{MeshBatch, Outputs};
 pub use error::IoError;
-pub use files::{read_input_file, MAX_VOXELS};
+pub use files::{file_kind, read_input_file, MAX_VOXELS};
 pub use gltf::write_gltf;
 pub use grey::{GreyVolume, NotALabel, Voxels};
 pub use input::{
@@ -142,19 +145,20 @@ pub use input::{
 };
 pub use input_files::{input_files, same_output, InputFiles};
 pub use limits::{
-    check_memory, default_max_memory, environment_limit, format_size, max_memory, parse_size, set_max_memory,
-    with_max_memory, FALLBACK_MAX_MEMORY,
+    check_memory, default_max_memory, environment_limit, max_memory, set_max_memory, with_max_memory,
+    FALLBACK_MAX_MEMORY,
 };
+pub use loaded::{LoadedVolume, LoadedVoxels};
 pub use longvol::{read_longvol, read_longvol_bytes};
 pub use material::{material_name, Material, NamedLabel, Palette};
 pub use mesh::{
     file_name_part, interface_name, named_interface_name, named_region_name, region_name,
-    write_file_atomically, write_mesh, FaceGroup, MeshBatch, QuadMesh,
+    write_file_atomically, FaceGroup, QuadMesh,
 };
+pub use mesh_writer::write_mesh;
 pub use mrc::{read_mrc, read_mrc_bytes};
 pub use nifti::{read_nifti, read_nifti_bytes};
 pub use npy::{read_npy, read_npy_bytes};
-pub(crate) use nrrd::read_nrrd_in_memory;
 pub use nrrd::{read_nrrd, read_nrrd_bytes};
 pub use obj::write_obj;
 pub use orient::{check_coordinates, COORDINATE_RANGE};
@@ -163,13 +167,11 @@ pub use ply::{scalar_ramp, write_ply, write_ply_with_vertex_field, write_ply_wit
 pub use raw::{read_raw, read_raw_bytes, RawSpec};
 pub use read_mesh::{read_mesh, read_mesh_bytes};
 pub use samples::{DataType, Endian};
+pub use size::{format_size, parse_size};
 pub use stl::write_stl;
 pub use tiff::{read_tiff, read_tiff_bytes, read_tiff_slices, tiff_slices};
 pub use vol::{read_vol, read_vol_bytes};
-pub use volume::{
-    is_voxel_art, read_volume, read_voxels, read_voxels_bytes, read_voxels_with, LoadedVolume, LoadedVoxels,
-    ReadOptions,
-};
+pub use volume::{is_voxel_art, read_volume, read_voxels, read_voxels_bytes, read_voxels_with, ReadOptions};
 pub use vox::{
     read_vox, read_vox_bytes, read_vox_bytes_with, read_vox_scene_bytes, vox_model_sizes, VoxOptions,
     VoxScene, VOX_MAX_INSTANCES, VOX_MAX_PLACED_VOXELS,

@@ -7,10 +7,12 @@
 
 use std::path::Path;
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::grey::Voxels;
 use crate::samples::{check_data_len, data_len, decode, Layout, Order};
+use crate::samples::{DataType, Endian};
 use crate::vol::{inflate_at_most, parse_header};
-use crate::{DataType, Endian, IoError, Voxels};
 
 /// Reads a DGtal `.longvol` file (versions 2 and 3). See [`read_longvol_bytes`].
 pub fn read_longvol(path: &Path) -> Result<Voxels, IoError> {
@@ -20,7 +22,7 @@ pub fn read_longvol(path: &Path) -> Result<Voxels, IoError> {
 /// Reads a DGtal `.longvol` file held in memory; `path` only names the file in errors.
 ///
 /// Header fields read: `X`, `Y`, `Z` (or `Dim`), each at least 1, together at most
-/// [`MAX_VOXELS`](crate::MAX_VOXELS) voxels (checked before any allocation), and
+/// [`MAX_VOXELS`](crate::files::MAX_VOXELS) voxels (checked before any allocation), and
 /// `Version`: `2` (raw) or `3` (zlib); files without it (the older layout with a binary
 /// size header) are [`IoError::Unsupported`]. Other fields are ignored, `Lvoxel-Size`
 /// included: DGtal writes `4` there and eight bytes per voxel.

@@ -6,8 +6,8 @@ use std::path::Path;
 use glam::DVec3;
 use voxreg_digisurf::{DigitalSurface, InterfaceId, Patch, RegionId};
 
-use crate::files::lowercase_extension;
-use crate::{write_gltf, write_obj, write_ply, write_stl, write_vtp, IoError, Material, NamedLabel, Palette};
+use crate::error::IoError;
+use crate::material::{Material, NamedLabel, Palette};
 
 /// A mesh of quads with two labels per face and named groups of faces: what the
 /// writers take.
@@ -300,140 +300,6 @@ pub fn file_name_part(name: &str) -> String {
 
 fn first_label(surface: &DigitalSurface, r: RegionId) -> u32 {
     surface.regions().labels(r).first().copied().unwrap_or(0)
-}
-
-/// Writes several meshes into one directory, all or nothing.
-///
-/// [`MeshBatch::write`] writes each mesh (any format of [`write_mesh`]) into a hidden
-/// staging directory inside the target directory, locked by this process (see
-/// [`inflight`](crate::inflight)); [`MeshBatch::commit`] then renames every file into
-/// place. Dropping the batch before `commit` (after an error, say) removes the staging
-/// directory and everything in it, and the directories the batch created, so a failed
-/// run leaves no partial output. Renames within one directory are atomic per file;
-/// should one of them fail (a full disk cannot cause it), `commit` takes back what it
-/// moved and reports which file. A batch can also be committed with a run's other files
-/// ([`Outputs::add_batch`](crate::Outputs::add_batch)).
-#[derive(Debug)]
-pub struct MeshBatch {
-    dir: std::path::PathBuf,
-    /// `None` once dropped.
-    stage: Option<crate::commit::Stage>,
-    names: Vec<String>,
-    /// The outermost directory this batch created, removed again (with what it holds)
-    /// unless the batch is committed.
-    created: Option<std::path::PathBuf>,
-}
-
-impl Drop for MeshBatch {
-    fn drop(&mut self) {
-        drop(self.stage.take());
-        if let Some(created) = self.created.take() {
-            let mut in_flight = crate::inflight::lock();
-            let _ = std::fs::remove_dir_all(&created);
-            crate::inflight::note_created(&mut in_flight, &created, false);
-        }
-    }
-}
-
-impl MeshBatch {
-    /// Starts a batch writing into `dir`, created (with its parents) if missing; if the
-    /// batch is not committed, what it created is removed again.
-    pub fn new(dir: &Path) -> Result<MeshBatch, IoError> {
-        let created = dir
-            .ancestors()
-            .take_while(|a| !a.as_os_str().is_empty() && !a.exists())
-            .last()
-            .map(Path::to_path_buf);
-        let mut in_flight = crate::inflight::lock();
-        std::fs::create_dir_all(dir).map_err(|e| IoError::io(dir, e))?;
-        if let Some(c) = &created {
-            crate::inflight::note_created(&mut in_flight, c, true);
-        }
-        let staging = crate::inflight::StagingDir::new_in(&mut in_flight, dir).map_err(|e| {
-            if let Some(c) = &created {
-                let _ = std::fs::remove_dir_all(c);
-                crate::inflight::note_created(&mut in_flight, c, false);
-            }
-            IoError::io(dir, e)
-        })?;
-        let stage = crate::commit::Stage { target: dir.to_path_buf(), staging };
-        Ok(MeshBatch { dir: dir.to_path_buf(), stage: Some(stage), names: Vec::new(), created })
-    }
-
-    pub(crate) fn stage(&self) -> Option<&crate::commit::Stage> {
-        self.stage.as_ref()
-    }
-
-    /// The names of the meshes written so far, in order.
-    pub fn names(&self) -> &[String] {
-        &self.names
-    }
-
-    /// Writes `mesh` as `name` (a plain file name with a mesh extension) in the staging
-    /// directory; errors name the final path.
-    pub fn write(&mut self, name: &str, mesh: &QuadMesh) -> Result<(), IoError> {
-        let target = self.dir.join(name);
-        let plain = Path::new(name).file_name().map(|n| n.to_string_lossy()) == Some(name.into());
-        let Some(stage) = self.stage.as_ref().filter(|_| plain && name != crate::inflight::LOCK_FILE) else {
-            return Err(IoError::InvalidMesh {
-                path: target,
-                message: format!("'{name}' is not a plain file name"),
-            });
-        };
-        write_mesh(&stage.staging.path().join(name), mesh).map_err(|e| stage.relocate(e))?;
-        self.names.push(name.to_string());
-        Ok(())
-    }
-
-    /// Once committed: the directories the batch created stay.
-    pub(crate) fn committed(&mut self, in_flight: &mut crate::inflight::InFlight) {
-        if let Some(created) = self.created.take() {
-            crate::inflight::note_created(in_flight, &created, false);
-        }
-    }
-
-    /// Moves every file written so far (and companions such as `.mtl` libraries) into
-    /// the target directory, replacing files of the same names, and removes the
-    /// staging directory. Returns the paths written.
-    ///
-    /// All or nothing: a target that exists and is not a regular file (a directory, a
-    /// symbolic link, a device...) is refused before anything moves; files being replaced
-    /// are first moved aside into the staging directory, and if a rename fails, every
-    /// file already moved in is taken out again and the replaced ones are put back.
-    pub fn commit(mut self) -> Result<Vec<std::path::PathBuf>, IoError> {
-        // Not cut in two by an interruption (see `remove_in_flight`).
-        let mut in_flight = crate::inflight::lock();
-        let stages: Vec<&crate::commit::Stage> = self.stage.iter().collect();
-        let written = crate::commit::commit_stages(&stages)?;
-        self.committed(&mut in_flight);
-        Ok(written)
-    }
-}
-
-/// Writes `mesh` to `path`, choosing the format by the extension (case insensitive):
-///
-/// - `.obj`: Wavefront OBJ, ASCII, with groups, see [`write_obj`];
-/// - `.ply`: binary little-endian PLY with per-face labels (and colours), see [`write_ply`];
-/// - `.glb`, `.gltf`: glTF 2.0 with materials, see [`write_gltf`];
-/// - `.stl`: binary STL, triangles only, see [`write_stl`];
-/// - `.vtp`: VTK XML PolyData with per-face labels (and colours), see [`write_vtp`].
-///
-/// Fails with [`IoError::UnsupportedExtension`] for any other name, before creating
-/// anything. Like every writer of this crate, it writes a temporary file next to
-/// `path` and renames it onto `path` only once complete, so a failure leaves no
-/// partial file (and an existing file at `path` untouched).
-pub fn write_mesh(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
-    match lowercase_extension(path).as_deref() {
-        Some("obj") => write_obj(path, mesh),
-        Some("ply") => write_ply(path, mesh),
-        Some("glb" | "gltf") => write_gltf(path, mesh),
-        Some("stl") => write_stl(path, mesh),
-        Some("vtp") => write_vtp(path, mesh),
-        _ => Err(IoError::UnsupportedExtension {
-            path: path.to_path_buf(),
-            expected: ".obj, .ply, .glb, .gltf, .stl or .vtp",
-        }),
-    }
 }
 
 /// Checks `mesh`, then writes it through `encode` atomically (see

@@ -7,10 +7,12 @@ use std::path::Path;
 
 use glam::{DMat3, DVec3};
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::loaded::LoadedVoxels;
 use crate::orient::place;
 use crate::samples::{check_data_len, data_len, decode, Layout, Order};
-use crate::{DataType, Endian, IoError, LoadedVoxels};
+use crate::samples::{DataType, Endian};
 
 /// The fixed header's length.
 const HEADER_LEN: usize = 1024;

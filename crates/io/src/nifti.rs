@@ -10,10 +10,12 @@ use std::path::Path;
 use flate2::read::MultiGzDecoder;
 use glam::{DMat3, DVec3};
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::grey::Voxels;
 use crate::orient::place;
 use crate::samples::{check_data_len, data_len, decode, Layout, Order};
-use crate::{DataType, Endian, IoError, Voxels};
+use crate::samples::{DataType, Endian};
 
 /// Size of a NIfTI-1 header.
 const HEADER_LEN: usize = 348;
@@ -51,7 +53,7 @@ pub fn read_nifti(path: &Path) -> Result<Voxels, IoError> {
 /// other data types (bit, complex, RGB, float128) and 4-D or higher data are
 /// [`IoError::Unsupported`]. A truncated header or data, data longer than declared, bad
 /// dimensions, `vox_offset` and corrupt gzip are [`IoError::Format`]; volumes above
-/// [`MAX_VOXELS`](crate::MAX_VOXELS) are [`IoError::TooLarge`], checked before any
+/// [`MAX_VOXELS`](crate::files::MAX_VOXELS) are [`IoError::TooLarge`], checked before any
 /// allocation (and a `.nii.gz` is never inflated beyond its declared size plus one byte).
 pub fn read_nifti_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> {
     let inflated;

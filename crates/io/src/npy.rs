@@ -6,9 +6,11 @@
 
 use std::path::Path;
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::grey::Voxels;
 use crate::samples::{check_data_len, data_len, decode, Layout, Order};
-use crate::{DataType, Endian, IoError, Voxels};
+use crate::samples::{DataType, Endian};
 
 const MAGIC: &[u8] = b"\x93NUMPY";
 
@@ -33,7 +35,7 @@ pub fn read_npy(path: &Path) -> Result<Voxels, IoError> {
 /// Other dtypes (half floats, complex, strings, objects, structured arrays) and arrays
 /// of other than 3 dimensions are [`IoError::Unsupported`]; a bad magic, version or
 /// header, a zero dimension, or data that do not match the shape are
-/// [`IoError::Format`]; shapes above [`MAX_VOXELS`](crate::MAX_VOXELS) are
+/// [`IoError::Format`]; shapes above [`MAX_VOXELS`](crate::files::MAX_VOXELS) are
 /// [`IoError::TooLarge`] (checked before any allocation).
 pub fn read_npy_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> {
     let not_npy = |message: String| IoError::format(path, format!("not a NumPy .npy file: {message}"));

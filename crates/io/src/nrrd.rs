@@ -9,10 +9,13 @@ use std::path::{Path, PathBuf};
 use flate2::read::MultiGzDecoder;
 use glam::{DMat3, DVec3};
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::loaded::LoadedVoxels;
+use crate::material::Palette;
 use crate::orient::place;
 use crate::samples::{decode, Layout, Order};
-use crate::{DataType, Endian, IoError, LoadedVoxels, Palette};
+use crate::samples::{DataType, Endian};
 
 /// The largest label value a `.seg.nrrd` segment may name (the palette is indexed by
 /// label).
@@ -143,7 +146,7 @@ fn detached_data_file(header: &Path, file: &Path) -> Result<PathBuf, IoError> {
 }
 
 /// Places the voxels and attaches units and segments.
-fn finish(voxels: crate::Voxels, header: &Header, path: &Path) -> Result<LoadedVoxels, IoError> {
+fn finish(voxels: crate::grey::Voxels, header: &Header, path: &Path) -> Result<LoadedVoxels, IoError> {
     let (voxels, _) = place(voxels, header.directions, header.origin)
         .map_err(|e| IoError::format(path, format!("space directions: {e}")))?;
     Ok(LoadedVoxels { voxels, palette: header.palette.clone(), units: header.units.clone() })
@@ -175,7 +178,7 @@ fn skip_lines(mut data: &[u8], lines: usize) -> &[u8] {
 }
 
 /// ASCII data: whitespace-separated numbers, as many as voxels.
-fn ascii(path: &Path, data: &[u8], layout: Layout) -> Result<crate::Voxels, IoError> {
+fn ascii(path: &Path, data: &[u8], layout: Layout) -> Result<crate::grey::Voxels, IoError> {
     let text =
         std::str::from_utf8(data).map_err(|_| IoError::format(path, "ascii data that are not text"))?;
     let count = layout.dims.iter().product::<usize>();

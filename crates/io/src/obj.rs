@@ -5,8 +5,9 @@ use std::path::Path;
 
 use rayon::prelude::*;
 
+use crate::error::IoError;
+use crate::mesh::QuadMesh;
 use crate::mesh::{write_atomically, write_temporary, SmallWrites};
-use crate::{IoError, QuadMesh};
 
 /// Writes `mesh` to `path` as an ASCII Wavefront OBJ file.
 ///
@@ -20,7 +21,7 @@ use crate::{IoError, QuadMesh};
 /// not written, except through the group names (see [`QuadMesh::from_surface`]).
 ///
 /// Written to a temporary file renamed onto `path` when complete (see
-/// [`write_mesh`](crate::write_mesh)); an inconsistent mesh is refused with
+/// `write_mesh`); an inconsistent mesh is refused with
 /// [`IoError::InvalidMesh`] before anything is created.
 ///
 /// A mesh with materials also gets a material library next to it, `<stem>.mtl`
@@ -45,7 +46,7 @@ pub fn write_obj(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
     mesh.check().map_err(|message| IoError::InvalidMesh { path: path.to_path_buf(), message })?;
     if let Ok(meta) = std::fs::symlink_metadata(&mtl) {
         if !meta.is_file() {
-            let what = crate::commit::file_kind(&meta);
+            let what = crate::files::file_kind(&meta);
             return Err(IoError::io(
                 &mtl,
                 io::Error::other(format!("{what} is in the way of the material library")),
@@ -164,7 +165,8 @@ mod tests {
     use glam::DVec3;
 
     use super::*;
-    use crate::{FaceGroup, Material};
+    use crate::material::Material;
+    use crate::mesh::FaceGroup;
 
     /// The OBJ text written one line at a time, as the encoder did before it formatted in
     /// parallel pieces.

@@ -5,7 +5,7 @@ use glam::{DMat3, DVec3};
 use ndarray::{Array3, ArrayView3, Axis, ShapeBuilder};
 use voxreg_digisurf::{LabelVolume, SurfaceError};
 
-use crate::{GreyVolume, Voxels};
+use crate::grey::{GreyVolume, Voxels};
 
 /// Off-axis entries of a column below this fraction of its largest entry count as zero.
 const AXIS_TOLERANCE: f64 = 1e-6;

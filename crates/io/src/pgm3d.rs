@@ -11,8 +11,8 @@ use std::path::Path;
 
 use voxreg_digisurf::LabelVolume;
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
-use crate::IoError;
 
 /// Reads a DGtal `.pgm3d` file (`P3D` binary or `P2-3D` ASCII) as a labeled volume.
 /// See [`read_pgm3d_bytes`].
@@ -31,7 +31,7 @@ pub fn read_pgm3d(path: &Path) -> Result<LabelVolume, IoError> {
 ///
 /// A missing or unknown magic, a malformed header, a zero dimension, and data shorter
 /// (truncated) or longer (dimensions that do not match) than declared are
-/// [`IoError::Format`] errors; dimensions above [`MAX_VOXELS`](crate::MAX_VOXELS) are
+/// [`IoError::Format`] errors; dimensions above [`MAX_VOXELS`](crate::files::MAX_VOXELS) are
 /// [`IoError::TooLarge`], checked before any allocation.
 pub fn read_pgm3d_bytes(bytes: &[u8], path: &Path) -> Result<LabelVolume, IoError> {
     let not_pgm3d = |message: String| IoError::format(path, format!("not a DGtal .pgm3d file: {message}"));
@@ -197,7 +197,8 @@ mod tests {
         assert_eq!(cat.label_counts(), vec![(0, 55957), (96, 8043)]);
         // The same cat as cat10.vol, voxel for voxel.
         let vol =
-            crate::read_vol(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../data/cat10.vol"))).unwrap();
+            crate::vol::read_vol(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../data/cat10.vol")))
+                .unwrap();
         assert_eq!(cat, vol);
         let ball = read(&data("ascii_ball.pgm3d")).unwrap();
         assert_eq!(ball.dims(), [9, 9, 9]);

@@ -5,8 +5,9 @@ use std::path::{Path, PathBuf};
 
 use glam::DVec3;
 
+use crate::error::IoError;
+use crate::mesh::QuadMesh;
 use crate::mesh::{write_atomically, write_temporary};
-use crate::{IoError, QuadMesh};
 
 /// Writes `mesh` to `path` as a binary little-endian PLY file.
 ///
@@ -42,7 +43,7 @@ use crate::{IoError, QuadMesh};
 /// created.
 ///
 /// Written to a temporary file renamed onto `path` when complete (see
-/// [`write_mesh`](crate::write_mesh)).
+/// `write_mesh`).
 pub fn write_ply(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
     write_atomically(path, mesh, check_ply, |mesh, w| encode_ply(mesh, w))
 }

@@ -4,9 +4,11 @@ use std::path::Path;
 
 use glam::DVec3;
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::grey::Voxels;
 use crate::samples::{check_data_len, data_len, decode, Layout, Order};
-use crate::{DataType, Endian, IoError, Voxels};
+use crate::samples::{DataType, Endian};
 
 /// The layout of a raw file, which has none of its own.
 #[derive(Clone, Copy, Debug, PartialEq)]

@@ -4,8 +4,9 @@ use std::path::Path;
 
 use glam::DVec3;
 
+use crate::error::IoError;
 use crate::files::lowercase_extension;
-use crate::{FaceGroup, IoError, QuadMesh};
+use crate::mesh::{FaceGroup, QuadMesh};
 
 /// Reads the positions and faces of an OBJ or PLY mesh (by extension, case insensitive)
 /// into a [`QuadMesh`]: quads as they are, triangles as quads repeating their last vertex
@@ -292,7 +293,7 @@ mod tests {
     use voxreg_digisurf::{DigitalSurface, LabelVolume};
 
     use super::*;
-    use crate::write_mesh;
+    use crate::mesh_writer::write_mesh;
 
     #[test]
     fn reads_back_what_voxreg_writes() {

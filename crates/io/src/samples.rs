@@ -7,8 +7,9 @@ use std::str::FromStr;
 use ndarray::Array3;
 use voxreg_digisurf::LabelVolume;
 
+use crate::error::IoError;
 use crate::grey::as_label;
-use crate::{GreyVolume, IoError, Voxels};
+use crate::grey::{GreyVolume, Voxels};
 
 /// The type of one voxel value in a binary file.
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
@@ -315,7 +316,7 @@ pub(crate) fn check_data_len(
 }
 
 /// The number of bytes of the values of `layout` (the voxel count already checked
-/// against [`MAX_VOXELS`](crate::MAX_VOXELS), so this cannot overflow a `u64`).
+/// against [`MAX_VOXELS`](crate::files::MAX_VOXELS), so this cannot overflow a `u64`).
 pub(crate) fn data_len(layout: &Layout) -> u64 {
     layout.dims.iter().map(|&d| d as u64).product::<u64>() * layout.dtype.size() as u64
 }

@@ -5,8 +5,9 @@ use std::path::Path;
 
 use glam::DVec3;
 
+use crate::error::IoError;
 use crate::mesh::write_atomically;
-use crate::{IoError, QuadMesh};
+use crate::mesh::QuadMesh;
 
 /// The start of the 80-byte header of the files written: not `solid`, so no reader
 /// mistakes them for ASCII STL.
@@ -24,7 +25,7 @@ const HEADER: &[u8] = b"voxreg binary STL: quads split into triangles";
 /// beyond `f32`, is refused with [`IoError::InvalidMesh`] before anything is created.
 ///
 /// Written to a temporary file renamed onto `path` when complete (see
-/// [`write_mesh`](crate::write_mesh)).
+/// `write_mesh`).
 pub fn write_stl(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
     write_atomically(path, mesh, check_stl, |mesh, w| encode_stl(mesh, w))
 }

@@ -8,9 +8,11 @@ use tiff::decoder::{Decoder, DecodingResult, Limits};
 use tiff::tags::Tag;
 use tiff::ColorType;
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::loaded::LoadedVoxels;
 use crate::samples::{decode, Layout, Order};
-use crate::{DataType, Endian, IoError, LoadedVoxels};
+use crate::samples::{DataType, Endian};
 
 /// Reads a TIFF stack: a multi-page `.tif`/`.tiff` file, see [`read_tiff_bytes`].
 pub fn read_tiff(path: &Path) -> Result<LoadedVoxels, IoError> {
@@ -124,7 +126,7 @@ impl<'a> Stack<'a> {
     fn add_file(&mut self, bytes: &[u8], file: &Path, first: bool) -> Result<(), IoError> {
         let err = |e: tiff::TiffError| tiff_error(file, e);
         let mut limits = Limits::default();
-        limits.decoding_buffer_size = usize::try_from(crate::max_memory()).unwrap_or(usize::MAX);
+        limits.decoding_buffer_size = usize::try_from(crate::limits::max_memory()).unwrap_or(usize::MAX);
         let mut decoder = Decoder::new(Cursor::new(bytes)).map_err(err)?.with_limits(limits);
         let mut pages = 1u64;
         while decoder.more_images() {

@@ -10,8 +10,8 @@ use std::path::Path;
 use flate2::read::ZlibDecoder;
 use voxreg_digisurf::LabelVolume;
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
-use crate::IoError;
 
 /// At most this many header lines before the `.` line (as DGtal).
 const MAX_HEADER_LINES: usize = 64;
@@ -32,7 +32,7 @@ pub fn read_vol(path: &Path) -> Result<LabelVolume, IoError> {
 /// Header fields read:
 ///
 /// - `X`, `Y`, `Z` (or `Dim: x y z`): the dimensions, each at least 1 and together at
-///   most [`MAX_VOXELS`](crate::MAX_VOXELS) voxels, checked before any allocation;
+///   most [`MAX_VOXELS`](crate::files::MAX_VOXELS) voxels, checked before any allocation;
 /// - `Version`: `2` (raw bytes) or `3` (zlib); files without it (the older layout with
 ///   a binary size header) are refused with [`IoError::Unsupported`];
 /// - `Voxel-Size`: must be `1` (one byte per voxel) when present.

@@ -2,26 +2,18 @@
 
 use std::path::Path;
 
-use voxreg_digisurf::LabelVolume;
-
+use crate::error::IoError;
 #[cfg(test)]
 use crate::files::checked_voxel_count;
 use crate::files::{lowercase_extension, read_file};
-use crate::{read_longvol, read_nifti, read_npy, read_pgm3d, read_vol, read_vti, IoError, Palette, Voxels};
-
-/// A volume read from a file, with what the file says about its labels.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LoadedVolume {
-    /// The labeled voxels, spacing and origin.
-    pub volume: LabelVolume,
-    /// Colours and materials indexed by label, for formats that have a palette
-    /// (MagicaVoxel `.vox`: 256 entries, entry 0, the background, transparent); `None`
-    /// for formats without (`.vol`).
-    pub palette: Option<Palette>,
-    /// The unit of the spacing and origin, where the file names one (`mm`, `µm`, `nm`,
-    /// `Å`...).
-    pub units: Option<String>,
-}
+use crate::grey::Voxels;
+use crate::loaded::{LoadedVolume, LoadedVoxels};
+use crate::longvol::read_longvol;
+use crate::nifti::read_nifti;
+use crate::npy::read_npy;
+use crate::pgm3d::read_pgm3d;
+use crate::vol::read_vol;
+use crate::vti::read_vti;
 
 /// Reads a labeled volume, choosing the format by the file's extension, as
 /// [`read_voxels`] does.
@@ -40,17 +32,6 @@ pub fn read_volume(path: &Path) -> Result<LoadedVolume, IoError> {
     Ok(LoadedVolume { volume, palette, units })
 }
 
-/// The voxels read from a file (labels or grey levels), with its palette if any.
-#[derive(Clone, Debug, PartialEq)]
-pub struct LoadedVoxels {
-    /// The voxels, spacing and origin.
-    pub voxels: Voxels,
-    /// As [`LoadedVolume::palette`].
-    pub palette: Option<Palette>,
-    /// As [`LoadedVolume::units`].
-    pub units: Option<String>,
-}
-
 /// The extensions [`read_voxels`] knows, for error messages.
 const KNOWN_EXTENSIONS: &str =
     ".vol, .longvol, .pgm3d, .vox, .nii, .nii.gz, .vti, .npy, .tif, .tiff (or a directory or pattern of slices), .nrrd, .nhdr, .mrc, .map, .rec or a .zarr directory";
@@ -59,24 +40,24 @@ const KNOWN_EXTENSIONS: &str =
 /// file's extension (case insensitive):
 ///
 /// - `.vol`: DGtal Vol, see [`read_vol`];
-/// - `.longvol`: DGtal Longvol, see [`read_longvol`](crate::read_longvol);
-/// - `.pgm3d`: DGtal PGM 3-D, see [`read_pgm3d`](crate::read_pgm3d);
-/// - `.vox`: MagicaVoxel, see [`read_vox`](crate::read_vox);
-/// - `.nii`, `.nii.gz`: NIfTI-1, see [`read_nifti`](crate::read_nifti);
-/// - `.vti`: VTK XML image data, see [`read_vti`](crate::read_vti);
-/// - `.npy`: NumPy array, see [`read_npy`](crate::read_npy);
-/// - `.tif`, `.tiff`: a TIFF stack, see [`read_tiff`](crate::read_tiff); a directory, or a
+/// - `.longvol`: DGtal Longvol, see [`read_longvol`](crate::longvol::read_longvol);
+/// - `.pgm3d`: DGtal PGM 3-D, see [`read_pgm3d`](crate::pgm3d::read_pgm3d);
+/// - `.vox`: MagicaVoxel, see [`read_vox`](crate::vox::read_vox);
+/// - `.nii`, `.nii.gz`: NIfTI-1, see [`read_nifti`](crate::nifti::read_nifti);
+/// - `.vti`: VTK XML image data, see [`read_vti`](crate::vti::read_vti);
+/// - `.npy`: NumPy array, see [`read_npy`](crate::npy::read_npy);
+/// - `.tif`, `.tiff`: a TIFF stack, see [`read_tiff`](crate::tiff::read_tiff); a directory, or a
 ///   file name with `*` or `?`: the TIFF slices it holds or matches, stacked in name order
-///   (see [`tiff_slices`](crate::tiff_slices));
-/// - `.nrrd`, `.nhdr` (and `.seg.nrrd`): NRRD, see [`read_nrrd`](crate::read_nrrd);
-/// - `.mrc`, `.map`, `.rec`: MRC/CCP4 maps, see [`read_mrc`](crate::read_mrc);
+///   (see [`tiff_slices`](crate::tiff::tiff_slices));
+/// - `.nrrd`, `.nhdr` (and `.seg.nrrd`): NRRD, see [`read_nrrd`](crate::nrrd::read_nrrd);
+/// - `.mrc`, `.map`, `.rec`: MRC/CCP4 maps, see [`read_mrc`](crate::mrc::read_mrc);
 /// - a `.zarr` directory, or any directory holding Zarr metadata (`zarr.json`, `.zarray`,
 ///   `.zgroup`, such as a level `image.ome.zarr/0`): a Zarr array or OME-Zarr image, see
-///   [`read_zarr`](crate::read_zarr).
+///   [`read_zarr`](crate::zarr::read_zarr).
 ///
 /// Fails with [`IoError::UnsupportedExtension`] for any other name, and with
 /// [`IoError::Unsupported`] for `.raw` (which has no header: see
-/// [`read_raw`](crate::read_raw)), before opening the file.
+/// [`read_raw`](crate::raw::read_raw)), before opening the file.
 pub fn read_voxels(path: &Path) -> Result<LoadedVoxels, IoError> {
     read_voxels_with(path, &ReadOptions::default())
 }
@@ -84,7 +65,7 @@ pub fn read_voxels(path: &Path) -> Result<LoadedVoxels, IoError> {
 /// Options of [`read_voxels_with`] for formats that hold several volumes.
 #[derive(Copy, Clone, Debug, Default, PartialEq, Eq)]
 pub struct ReadOptions {
-    /// `.vox`: read only this model (see [`VoxOptions::model`](crate::VoxOptions::model)).
+    /// `.vox`: read only this model (see [`VoxOptions::model`](crate::vox::VoxOptions::model)).
     pub vox_model: Option<usize>,
 }
 
@@ -92,11 +73,11 @@ pub struct ReadOptions {
 pub fn read_voxels_with(path: &Path, options: &ReadOptions) -> Result<LoadedVoxels, IoError> {
     let plain = |voxels| Ok(LoadedVoxels { voxels, palette: None, units: None });
     let name = path.file_name().map(|n| n.to_string_lossy()).unwrap_or_default();
-    if lowercase_extension(path).as_deref() == Some("zarr") || crate::is_zarr(path) {
-        return crate::read_zarr(path);
+    if lowercase_extension(path).as_deref() == Some("zarr") || crate::zarr::is_zarr(path) {
+        return crate::zarr::read_zarr(path);
     }
     if path.is_dir() || name.contains(['*', '?']) {
-        return crate::read_tiff_slices(&crate::tiff_slices(path)?, path);
+        return crate::tiff::read_tiff_slices(&crate::tiff::tiff_slices(path)?, path);
     }
     let is_nii_gz = path
         .file_name()
@@ -108,17 +89,17 @@ pub fn read_voxels_with(path: &Path, options: &ReadOptions) -> Result<LoadedVoxe
         Some("longvol") => plain(read_longvol(path)?),
         Some("pgm3d") => plain(Voxels::Labels(read_pgm3d(path)?)),
         Some("vox") => {
-            let vox = crate::VoxOptions { model: options.vox_model };
+            let vox = crate::vox::VoxOptions { model: options.vox_model };
             let LoadedVolume { volume, palette, .. } =
-                crate::read_vox_bytes_with(&read_file(path)?, path, &vox)?;
+                crate::vox::read_vox_bytes_with(&read_file(path)?, path, &vox)?;
             Ok(LoadedVoxels { voxels: Voxels::Labels(volume), palette, units: None })
         }
         Some("nii") => plain(read_nifti(path)?),
         Some("vti") => plain(read_vti(path)?),
         Some("npy") => plain(read_npy(path)?),
-        Some("tif" | "tiff") => crate::read_tiff(path),
-        Some("nrrd" | "nhdr") => crate::read_nrrd(path),
-        Some("mrc" | "map" | "rec") => crate::read_mrc(path),
+        Some("tif" | "tiff") => crate::tiff::read_tiff(path),
+        Some("nrrd" | "nhdr") => crate::nrrd::read_nrrd(path),
+        Some("mrc" | "map" | "rec") => crate::mrc::read_mrc(path),
         Some("raw") => Err(IoError::unsupported(
             path,
             "raw voxel data have no header: give their dimensions and type (read_raw with a RawSpec)",
@@ -143,20 +124,20 @@ pub fn read_voxels_bytes(bytes: &[u8], path: &Path, options: &ReadOptions) -> Re
         ));
     }
     match ext.as_deref() {
-        Some("vol") => plain(Voxels::Labels(crate::read_vol_bytes(bytes, path)?)),
-        Some("longvol") => plain(crate::read_longvol_bytes(bytes, path)?),
-        Some("pgm3d") => plain(Voxels::Labels(crate::read_pgm3d_bytes(bytes, path)?)),
+        Some("vol") => plain(Voxels::Labels(crate::vol::read_vol_bytes(bytes, path)?)),
+        Some("longvol") => plain(crate::longvol::read_longvol_bytes(bytes, path)?),
+        Some("pgm3d") => plain(Voxels::Labels(crate::pgm3d::read_pgm3d_bytes(bytes, path)?)),
         Some("vox") => {
-            let vox = crate::VoxOptions { model: options.vox_model };
-            let LoadedVolume { volume, palette, .. } = crate::read_vox_bytes_with(bytes, path, &vox)?;
+            let vox = crate::vox::VoxOptions { model: options.vox_model };
+            let LoadedVolume { volume, palette, .. } = crate::vox::read_vox_bytes_with(bytes, path, &vox)?;
             Ok(LoadedVoxels { voxels: Voxels::Labels(volume), palette, units: None })
         }
-        Some("nii") => plain(crate::read_nifti_bytes(bytes, path)?),
-        Some("vti") => plain(crate::read_vti_bytes(bytes, path)?),
-        Some("npy") => plain(crate::read_npy_bytes(bytes, path)?),
-        Some("tif" | "tiff") => crate::read_tiff_bytes(bytes, path),
-        Some("nrrd" | "nhdr") => crate::read_nrrd_in_memory(bytes, path),
-        Some("mrc" | "map" | "rec") => crate::read_mrc_bytes(bytes, path),
+        Some("nii") => plain(crate::nifti::read_nifti_bytes(bytes, path)?),
+        Some("vti") => plain(crate::vti::read_vti_bytes(bytes, path)?),
+        Some("npy") => plain(crate::npy::read_npy_bytes(bytes, path)?),
+        Some("tif" | "tiff") => crate::tiff::read_tiff_bytes(bytes, path),
+        Some("nrrd" | "nhdr") => crate::nrrd::read_nrrd_in_memory(bytes, path),
+        Some("mrc" | "map" | "rec") => crate::mrc::read_mrc_bytes(bytes, path),
         Some("raw") => Err(IoError::unsupported(
             path,
             "raw voxel data have no header: give their dimensions and type (read_raw_bytes with a RawSpec)",
@@ -190,8 +171,12 @@ mod tests {
         let p = Path::new("x.vol");
         assert_eq!(checked_voxel_count(p, [2, 3, 4], 1).unwrap(), 24);
         assert_eq!(
-            crate::with_max_memory(u64::MAX, || checked_voxel_count(p, [1 << 11, 1 << 10, 1 << 10], 1))
-                .unwrap(),
+            crate::limits::with_max_memory(u64::MAX, || checked_voxel_count(
+                p,
+                [1 << 11, 1 << 10, 1 << 10],
+                1
+            ))
+            .unwrap(),
             1 << 31
         );
         assert!(matches!(checked_voxel_count(p, [1 << 11, 1 << 10, 1025], 1), Err(IoError::TooLarge { .. })));

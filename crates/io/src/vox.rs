@@ -7,9 +7,11 @@ use glam::DVec3;
 use ndarray::{Array3, ShapeBuilder};
 use voxreg_digisurf::{Block, BlockVolume, LabelVolume};
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::loaded::LoadedVolume;
 use crate::material::apply_vox_material;
-use crate::{IoError, LoadedVolume, Palette};
+use crate::material::Palette;
 
 /// Scene graphs nested deeper than this are refused (they are malformed or cyclic).
 const MAX_SCENE_DEPTH: usize = 64;
@@ -63,7 +65,7 @@ pub fn read_vox(path: &Path) -> Result<LoadedVolume, IoError> {
 /// errors; scene graphs placing more than [`VOX_MAX_INSTANCES`] instances or
 /// [`VOX_MAX_PLACED_VOXELS`] voxels are [`IoError::Unsupported`] (checked while
 /// walking the graph, before any volume is allocated); volumes above
-/// [`MAX_VOXELS`](crate::MAX_VOXELS) are [`IoError::TooLarge`], and those above the
+/// [`MAX_VOXELS`](crate::files::MAX_VOXELS) are [`IoError::TooLarge`], and those above the
 /// memory budget [`IoError::OverBudget`].
 pub fn read_vox_bytes(bytes: &[u8], path: &Path) -> Result<LoadedVolume, IoError> {
     read_vox_bytes_with(bytes, path, &VoxOptions::default())
@@ -188,7 +190,7 @@ impl VoxScene {
 /// volume of [`read_vox_bytes_with`].
 ///
 /// Errors are those of [`read_vox_bytes_with`], except that the blocks' voxels, not the
-/// bounding box's, are held against [`MAX_VOXELS`](crate::MAX_VOXELS) and the memory
+/// bounding box's, are held against [`MAX_VOXELS`](crate::files::MAX_VOXELS) and the memory
 /// budget, and that lattices of more than `2^31` voxels along an axis are
 /// [`IoError::TooLarge`].
 pub fn read_vox_scene_bytes(bytes: &[u8], path: &Path, options: &VoxOptions) -> Result<VoxScene, IoError> {
@@ -198,14 +200,14 @@ pub fn read_vox_scene_bytes(bytes: &[u8], path: &Path, options: &VoxOptions) -> 
     let (lo, hi) = enclosing(&boxes);
     let dims = [0, 1, 2].map(|k| (hi[k] - lo[k]).max(0) as u64);
     if dims.iter().any(|&d| d > 1 << 31) {
-        return Err(IoError::TooLarge { path: path.to_path_buf(), dims, limit: crate::MAX_VOXELS });
+        return Err(IoError::TooLarge { path: path.to_path_buf(), dims, limit: crate::files::MAX_VOXELS });
     }
     let (cluster_of, cluster_boxes) = clusters(&boxes);
     let sizes: Vec<[u64; 3]> =
         cluster_boxes.iter().map(|(a, b)| [0, 1, 2].map(|k| (b[k] - a[k]) as u64)).collect();
     let total: u128 = sizes.iter().map(|s| s.iter().map(|&d| u128::from(d)).product::<u128>()).sum();
-    if total > u128::from(crate::MAX_VOXELS) {
-        return Err(IoError::TooLarge { path: path.to_path_buf(), dims, limit: crate::MAX_VOXELS });
+    if total > u128::from(crate::files::MAX_VOXELS) {
+        return Err(IoError::TooLarge { path: path.to_path_buf(), dims, limit: crate::files::MAX_VOXELS });
     }
     let what = format!(
         "{} blocks of {total} voxels in all (a scene of {}x{}x{})",
@@ -214,7 +216,7 @@ pub fn read_vox_scene_bytes(bytes: &[u8], path: &Path, options: &VoxOptions) -> 
         dims[1],
         dims[2]
     );
-    crate::check_memory(path, &what, total * 4)?;
+    crate::limits::check_memory(path, &what, total * 4)?;
 
     let empty = empty_voxels(bytes, data.models.len());
     let mut blocks = Vec::with_capacity(cluster_boxes.len());
@@ -642,18 +644,8 @@ mod tests {
     }
 
     fn encode(models: Vec<Model>, scenes: Vec<SceneNode>) -> Vec<u8> {
-        let data = DotVoxData {
-            version: 150,
-            index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
-            models,
-            palette: (0..=255u8).map(|i| Color { r: i, g: 255 - i, b: 7, a: 255 }).collect(),
-            materials: Vec::new(),
-            scenes,
-            layers: Vec::new(),
-        };
-        let mut bytes = Vec::new();
-        data.write_vox(&mut bytes).unwrap();
-        bytes
+        let palette = (0..=255u8).map(|i| Color { r: i, g: 255 - i, b: 7, a: 255 }).collect();
+        voxreg_testkit::vox_bytes(models, palette, scenes)
     }
 
     fn transform(child: u32, t: &str, r: Option<&str>) -> SceneNode {
@@ -897,7 +889,7 @@ mod tests {
             ],
             &[("0 0 0".into(), None), ("2047 1023 1023".into(), None), ("2 0 0".into(), None)],
         );
-        let s = crate::with_max_memory(1 << 20, || {
+        let s = crate::limits::with_max_memory(1 << 20, || {
             read_vox_scene_bytes(&bytes, Path::new("f.vox"), &VoxOptions::default())
         })
         .unwrap();
@@ -911,7 +903,7 @@ mod tests {
         assert_eq!(v.label([2048, 1023, 1023]), 9);
         assert_eq!(v.origin(), DVec3::new(-0.5, 0.5, 0.5));
         // The dense reader refuses the same file under that budget.
-        let dense = crate::with_max_memory(1 << 20, || read_vox_bytes(&bytes, Path::new("f.vox")));
+        let dense = crate::limits::with_max_memory(1 << 20, || read_vox_bytes(&bytes, Path::new("f.vox")));
         assert!(matches!(dense, Err(IoError::OverBudget { .. } | IoError::TooLarge { .. })), "{dense:?}");
     }
 

@@ -14,10 +14,12 @@ use std::path::Path;
 use glam::{DMat3, DVec3};
 use roxmltree::{Document, Node};
 
+use crate::error::IoError;
 use crate::files::{checked_voxel_count, read_file};
+use crate::grey::Voxels;
 use crate::orient::place;
 use crate::samples::{decode, Layout, Order};
-use crate::{DataType, Endian, IoError, Voxels};
+use crate::samples::{DataType, Endian};
 
 mod binary;
 #[cfg(test)]
@@ -56,7 +58,7 @@ pub fn read_vti(path: &Path) -> Result<Voxels, IoError> {
 /// extents, a piece outside the whole extent, arrays whose size does not match the
 /// extent (truncated or longer data), bad base64 or zlib data are
 /// [`IoError::Format`]; other dataset types, multi-component arrays and other types
-/// are [`IoError::Unsupported`]; extents above [`MAX_VOXELS`](crate::MAX_VOXELS) are
+/// are [`IoError::Unsupported`]; extents above [`MAX_VOXELS`](crate::files::MAX_VOXELS) are
 /// [`IoError::TooLarge`], checked before any allocation.
 pub fn read_vti_bytes(bytes: &[u8], path: &Path) -> Result<Voxels, IoError> {
     let malformed = |message: String| IoError::format(path, message);

@@ -3,8 +3,9 @@
 use std::io::{self, Write};
 use std::path::Path;
 
+use crate::error::IoError;
 use crate::mesh::write_atomically;
-use crate::{IoError, QuadMesh};
+use crate::mesh::QuadMesh;
 
 /// Writes `mesh` to `path` as a VTK XML PolyData file (`.vtp`, ParaView, VTK, pyvista,
 /// meshio).
@@ -23,7 +24,7 @@ use crate::{IoError, QuadMesh};
 /// tuple per named label, in ASCII.
 ///
 /// Written to a temporary file renamed onto `path` when complete (see
-/// [`write_mesh`](crate::write_mesh)); an inconsistent mesh is refused with
+/// `write_mesh`); an inconsistent mesh is refused with
 /// [`IoError::InvalidMesh`] before anything is created.
 pub fn write_vtp(path: &Path, mesh: &QuadMesh) -> Result<(), IoError> {
     write_atomically(path, mesh, |_| Ok(()), |mesh, w| encode_vtp(mesh, w))

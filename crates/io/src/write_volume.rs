@@ -6,9 +6,10 @@ use std::path::Path;
 use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
 use voxreg_digisurf::LabelVolume;
 
+use crate::error::IoError;
 use crate::files::lowercase_extension;
+use crate::material::Palette;
 use crate::mesh::write_file_atomically;
-use crate::{IoError, Palette};
 
 /// The largest model MagicaVoxel opens, per axis.
 pub const VOX_MAX_MODEL: usize = 256;
@@ -33,7 +34,7 @@ fn check_byte_labels(path: &Path, volume: &LabelVolume, what: &str) -> Result<()
 /// Writes `volume` as a MagicaVoxel `.vox` file: label `l` (`1..=255`) is colour index
 /// `l`, label 0 is empty. A volume larger than [`VOX_MAX_MODEL`] along an axis is split
 /// into models of at most that size, placed by a scene graph (one group of translated
-/// shapes) so that reading the file back (e.g. with [`read_vox`](crate::read_vox))
+/// shapes) so that reading the file back (e.g. with [`read_vox`](crate::vox::read_vox))
 /// gives the same labels at the same lattice positions. The palette's colours are
 /// written (a default grey ramp without one); materials are not written back.
 pub fn write_vox(path: &Path, volume: &LabelVolume, palette: Option<&Palette>) -> Result<(), IoError> {
@@ -152,7 +153,8 @@ pub fn write_vol(path: &Path, volume: &LabelVolume) -> Result<(), IoError> {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::{read_vol, read_vox};
+    use crate::vol::read_vol;
+    use crate::vox::read_vox;
     use voxreg_testkit::Lcg;
 
     fn random_volume(dims: [usize; 3]) -> LabelVolume {

@@ -18,9 +18,11 @@ use zarrs::storage::{
     MaybeBytes, MaybeBytesIterator, ReadableStorageTraits, StorageError, StoreKey, WritableStorageTraits,
 };
 
+use crate::error::IoError;
 use crate::files::checked_voxel_count;
+use crate::loaded::LoadedVoxels;
 use crate::samples::{decode, Layout, Order};
-use crate::{DataType, Endian, IoError, LoadedVoxels};
+use crate::samples::{DataType, Endian};
 
 /// Whether the directory `path` is a Zarr node: it holds `zarr.json` (v3), `.zarray` or
 /// `.zgroup` (v2).
@@ -52,8 +54,8 @@ pub fn is_zarr(path: &Path) -> bool {
 ///
 /// **Bad input.** Metadata that `zarrs` refuses, missing or malformed OME fields, and
 /// undecodable chunks are [`IoError::Format`]; the volume and one decoded chunk are
-/// checked against [`MAX_VOXELS`](crate::MAX_VOXELS) and the memory budget
-/// ([`max_memory`](crate::max_memory)) before any chunk is read.
+/// checked against [`MAX_VOXELS`](crate::files::MAX_VOXELS) and the memory budget
+/// ([`max_memory`](crate::limits::max_memory)) before any chunk is read.
 pub fn read_zarr(path: &Path) -> Result<LoadedVoxels, IoError> {
     if !path.is_dir() {
         let source = std::io::Error::new(std::io::ErrorKind::NotFound, "not a Zarr directory");
@@ -218,7 +220,7 @@ fn read_store<S: ReadableStorageTraits + ?Sized + 'static>(
     let threads = std::thread::available_parallelism().map_or(1, usize::from) as u128;
     let need =
         chunk_elements.saturating_mul(size as u128 * threads).saturating_add((count * (size + 4)) as u128);
-    crate::check_memory(path, &what, need)?;
+    crate::limits::check_memory(path, &what, need)?;
     // Every chunk's decompression is checked against the chunk's size before zarrs
     // inflates it (its decoders inflate to the end, whatever the array declares).
     let chunk_bytes = u64::try_from(chunk_elements.saturating_mul(size as u128)).unwrap_or(u64::MAX);

@@ -5,10 +5,11 @@
 use std::io::Write;
 use std::path::Path;
 
-use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+use dot_vox::{Color, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
 use flate2::write::{GzEncoder, ZlibEncoder};
 use flate2::Compression;
 use voxreg_io::{read_nifti_bytes, read_vol_bytes, read_vox_bytes, read_vti_bytes, with_max_memory, IoError};
+use voxreg_testkit::vox_bytes;
 
 fn zlib(bytes: &[u8]) -> Vec<u8> {
     let mut e = ZlibEncoder::new(Vec::new(), Compression::default());
@@ -113,21 +114,6 @@ fn vti_overlapping_pieces_and_holes_are_refused() {
     assert!(err.contains("piece 1: its Extent overlaps that of piece 0"), "{err}");
 }
 
-fn vox(models: Vec<Model>, palette: Vec<Color>, scenes: Vec<SceneNode>) -> Vec<u8> {
-    let data = DotVoxData {
-        version: 150,
-        index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
-        models,
-        palette,
-        materials: Vec::new(),
-        scenes,
-        layers: Vec::new(),
-    };
-    let mut bytes = Vec::new();
-    data.write_vox(&mut bytes).unwrap();
-    bytes
-}
-
 fn one_voxel(i: u8) -> Model {
     Model { size: Size { x: 1, y: 1, z: 1 }, voxels: vec![Voxel { x: 0, y: 0, z: 0, i }] }
 }
@@ -168,7 +154,7 @@ fn vox_groups_listing_a_child_twice_thirty_deep_are_refused() {
     }
     scenes.push(transform(32, "0 0 0"));
     scenes.push(shape(0));
-    let bytes = vox(vec![one_voxel(0), one_voxel(1)], palette(), scenes);
+    let bytes = vox_bytes(vec![one_voxel(0), one_voxel(1)], palette(), scenes);
     assert!(bytes.len() < 4096);
     let start = std::time::Instant::now();
     let err = read_vox_bytes(&bytes, Path::new("bomb.vox")).unwrap_err();
@@ -181,7 +167,7 @@ fn vox_groups_listing_a_child_twice_thirty_deep_are_refused() {
 fn two_models_at(a: &str, b: &str) -> Vec<u8> {
     let scenes =
         vec![transform(1, "0 0 0"), group(vec![2, 4]), transform(3, a), shape(0), transform(5, b), shape(1)];
-    vox(vec![one_voxel(0), one_voxel(1)], palette(), scenes)
+    vox_bytes(vec![one_voxel(0), one_voxel(1)], palette(), scenes)
 }
 
 #[test]
@@ -214,7 +200,7 @@ fn vox_colour_index_zero_is_empty_space() {
         size: Size { x: 2, y: 1, z: 1 },
         voxels: vec![Voxel { x: 0, y: 0, z: 0, i: 4 }, Voxel { x: 1, y: 0, z: 0, i: 4 }],
     };
-    let mut bytes = vox(vec![model], palette(), Vec::new());
+    let mut bytes = vox_bytes(vec![model], palette(), Vec::new());
     let xyzi = bytes.windows(4).position(|w| w == b"XYZI").unwrap();
     assert_eq!(bytes[xyzi + 12 + 4 + 3], 5);
     bytes[xyzi + 12 + 4 + 3] = 0;
@@ -226,10 +212,11 @@ fn vox_colour_index_zero_is_empty_space() {
 #[test]
 fn vox_colour_index_past_a_short_palette_is_refused() {
     let short = vec![Color { r: 1, g: 2, b: 3, a: 255 }; 8];
-    let ok = vox(vec![one_voxel(7)], short.clone(), Vec::new());
+    let ok = vox_bytes(vec![one_voxel(7)], short.clone(), Vec::new());
     let loaded = read_vox_bytes(&ok, Path::new("s.vox")).unwrap();
     assert_eq!(loaded.palette.unwrap().colors[8], [1, 2, 3, 255]);
-    let err = read_vox_bytes(&vox(vec![one_voxel(20)], short, Vec::new()), Path::new("s.vox")).unwrap_err();
+    let err =
+        read_vox_bytes(&vox_bytes(vec![one_voxel(20)], short, Vec::new()), Path::new("s.vox")).unwrap_err();
     assert!(
         err.to_string().contains("colour index 21 has no entry in the file's palette of 8 colours"),
         "{err}"

@@ -12,7 +12,11 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, EdgeId, SurfelId, VertexData};
 
-use crate::{IntegralInvariant, Interrupt, NormalError, NormalEstimator, NormalField};
+use crate::error::NormalError;
+use crate::estimator::NormalEstimator;
+use crate::field::NormalField;
+use crate::ii::IntegralInvariant;
+use crate::interrupt::Interrupt;
 
 mod linear;
 

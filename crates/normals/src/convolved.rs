@@ -7,8 +7,12 @@ use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, RegionId, SurfelId};
 
+use crate::error::NormalError;
+use crate::estimator::NormalEstimator;
+use crate::field::NormalField;
+use crate::ii::default_radius;
+use crate::interrupt::Interrupt;
 use crate::sides::combine_sides;
-use crate::{default_radius, Interrupt, NormalError, NormalEstimator, NormalField};
 
 /// Trivial normals convolved over the surface: each surfel's normal is the normalized,
 /// distance-weighted average of the trivial normals of the surfels within distance `t`
@@ -23,7 +27,7 @@ use crate::{default_radius, Interrupt, NormalError, NormalEstimator, NormalField
 /// `t`). Sheets that are close in space but far apart on the surface do not mix.
 ///
 /// **Multi-label volumes** (the paper's sec. 3.1): as for
-/// [`IntegralInvariant`](crate::IntegralInvariant), each of a surfel's two regions is
+/// [`IntegralInvariant`](crate::ii::IntegralInvariant), each of a surfel's two regions is
 /// treated as the shape: the average runs over that region's boundary only (surfels with
 /// that region on one side, trivial normals pointing out of it), and the two directions
 /// are averaged, then oriented like the trivial normal. On a binary volume both

@@ -5,7 +5,10 @@ use glam::{DVec3, Vec3};
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, SurfelId};
 
-use crate::{Interrupt, NormalError, NormalEstimator, NormalField};
+use crate::error::NormalError;
+use crate::estimator::NormalEstimator;
+use crate::field::NormalField;
+use crate::interrupt::Interrupt;
 
 /// No neighbour in a slot of [`QuadGraph`].
 const NONE: u32 = u32::MAX;
@@ -107,7 +110,7 @@ impl QuadGraph {
 /// `previous` normal.
 ///
 /// Why: the fast pipeline re-estimates its field between batches of sweeps from quads that
-/// already follow the shape; [`crate::Refined`]'s discs and feature rule cost more than the
+/// already follow the shape; [`crate::refined::Refined`]'s discs and feature rule cost more than the
 /// sweeps themselves. This rule has no feature rule: creases are rounded over the radius.
 #[derive(Clone, Copy, Debug)]
 pub struct Diffused<'a> {
@@ -202,7 +205,7 @@ mod tests {
     use voxreg_digisurf::LabelVolume;
 
     use super::*;
-    use crate::Trivial;
+    use crate::trivial::Trivial;
 
     fn ball(r: f64) -> DigitalSurface {
         let n = (2.0 * r) as usize + 3;

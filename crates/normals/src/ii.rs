@@ -5,9 +5,12 @@ use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, Surfel};
 
 use crate::eigen::{smallest_eigenvector, symmetric_eigen};
+use crate::error::NormalError;
+use crate::estimator::NormalEstimator;
+use crate::field::NormalField;
+use crate::interrupt::Interrupt;
 use crate::runs::RegionRuns;
 use crate::sides::combine_sides;
-use crate::{Interrupt, NormalError, NormalEstimator, NormalField};
 
 /// The default radius of the ball and convolution estimators, in physical units: the
 /// multigrid rule `r = 3 h^{1/3}`, `h` the largest component of `spacing` (3 voxels at

@@ -49,6 +49,8 @@ mod at;
 mod convolved;
 mod diffused;
 mod eigen;
+mod error;
+mod estimator;
 mod field;
 mod ii;
 mod interrupt;
@@ -60,6 +62,8 @@ mod trivial;
 pub use at::{AmbrosioTortorelli, AtInfo, AtLinearSolver, AtParams, AtSolver, FeatureField};
 pub use convolved::ConvolvedTrivial;
 pub use diffused::{Diffused, QuadGraph};
+pub use error::NormalError;
+pub use estimator::NormalEstimator;
 pub use field::NormalField;
 pub use ii::{default_radius, multigrid_radius, IntegralInvariant, MAX_DEFAULT_RADIUS_VOXELS};
 pub use interrupt::Interrupt;
@@ -67,42 +71,3 @@ pub use refined::{
     anisotropic_fit_weight, FeatureRamp, ProbeHints, Refined, FEATURE_RAMP_DEG, JUNCTION_DISC_FACTOR,
 };
 pub use trivial::Trivial;
-
-use voxreg_digisurf::DigitalSurface;
-
-/// What can go wrong when estimating normals.
-#[derive(Debug, thiserror::Error, Clone, PartialEq)]
-pub enum NormalError {
-    /// A parameter is out of its valid range.
-    #[error("invalid parameter: {0}")]
-    InvalidParameter(String),
-    /// A linear solve failed (e.g. a factorization of a matrix that is not positive
-    /// definite).
-    #[error("linear solver failed: {0}")]
-    Solver(String),
-    /// The caller raised the estimate's [`Interrupt`].
-    #[error("interrupted")]
-    Interrupted,
-}
-
-/// A way of estimating one normal per surfel.
-pub trait NormalEstimator {
-    /// A short name (`"trivial"`, `"ii"`, ...), used in reports.
-    fn name(&self) -> &'static str;
-
-    /// The normal field of `surface`: one unit vector per surfel, in surfel order
-    /// ([`NormalEstimator::estimate_interruptible`] never interrupted).
-    fn estimate(&self, surface: &DigitalSurface) -> Result<NormalField, NormalError> {
-        self.estimate_interruptible(surface, &Interrupt::never())
-    }
-
-    /// [`NormalEstimator::estimate`], returning [`NormalError::Interrupted`] soon after
-    /// `interrupt` is raised (from another thread) instead of finishing. The estimators
-    /// of this crate poll it inside their loops over surfels or iterations (the trivial
-    /// one, which has none, before starting).
-    fn estimate_interruptible(
-        &self,
-        surface: &DigitalSurface,
-        interrupt: &Interrupt,
-    ) -> Result<NormalField, NormalError>;
-}

@@ -9,7 +9,10 @@ use thread_local::ThreadLocal;
 use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
 
 use crate::eigen::symmetric_eigen;
-use crate::{Interrupt, NormalError, NormalEstimator, NormalField};
+use crate::error::NormalError;
+use crate::estimator::NormalEstimator;
+use crate::field::NormalField;
+use crate::interrupt::Interrupt;
 
 /// Normals re-estimated from positions of the surface's vertices (typically a
 /// regularized surface): for each surfel `f`, the normalized, weighted average of the

@@ -2,7 +2,10 @@
 
 use voxreg_digisurf::DigitalSurface;
 
-use crate::{Interrupt, NormalError, NormalEstimator, NormalField};
+use crate::error::NormalError;
+use crate::estimator::NormalEstimator;
+use crate::field::NormalField;
+use crate::interrupt::Interrupt;
 
 /// The trivial normal: each surfel's axis, oriented from its lower region to its
 /// higher one (outward for a solid surrounded by background).

@@ -5,6 +5,8 @@
 //!   shrinking as the grid refines, multi-label configurations known by symmetry.
 //! - [`at`]: the Ambrosio-Tortorelli estimator against shapes with known normals and
 //!   creases.
+//! - [`interrupt`]: every estimator stops at a raised interrupt.
 
 mod accuracy;
 mod at;
+mod interrupt;

@@ -9,7 +9,7 @@ use voxreg_regularize::{regularize_block as run_block, Block};
 
 use crate::error::{no_panic, Error};
 use crate::params;
-use crate::run::{on_pool, threads_arg};
+use crate::run::{on_pool, report_json, threads_arg};
 use crate::volume;
 
 /// The core of `voxreg.dask`'s per-chunk task: `labels` are the voxels from global index
@@ -40,12 +40,7 @@ pub(crate) fn regularize_block<'py>(
             no_panic(|| run_block(&volume, &block, &params).map_err(|e| Error::regularize("", &e)))
         })
     })??;
-    let report = match &mesh.report {
-        Some(r) => Some(
-            serde_json::to_string(r).map_err(|e| Error::new(crate::error::Kind::Voxreg, e.to_string()))?,
-        ),
-        None => None,
-    };
+    let report = mesh.report.as_ref().map(report_json).transpose()?;
     let n = mesh.vertex_ids.len();
     let m = mesh.quads.len();
     let dict = PyDict::new(py);

@@ -10,7 +10,7 @@ use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
 use voxreg_io::{Material, Palette};
-use voxreg_regularize::{Event, Output, Regularizer, Run, Stage};
+use voxreg_regularize::{Event, Output, Regularizer, Report, Run, Stage};
 
 use crate::error::{panic_error, Error, Result};
 use crate::mesh::{Part, Surface};
@@ -209,13 +209,17 @@ fn aborted(payload: Box<dyn Any + Send>, callback_error: Option<PyErr>) -> PyErr
     }
 }
 
+/// A run's report as the JSON string the Python layer parses.
+pub(crate) fn report_json(report: &Report) -> Result<String> {
+    serde_json::to_string(report).map_err(|e| Error::new(crate::error::Kind::Voxreg, e.to_string()))
+}
+
 /// The result dict: the whole mesh's arrays, the report (JSON), the CLI's summary line and
 /// the surface handle for sub-meshes and writing.
 fn finish<'py>(py: Python<'py>, out: Output, palette: Option<Palette>) -> PyResult<Bound<'py, PyDict>> {
     let r = &out.report;
     let summary = r.summary();
-    let report =
-        serde_json::to_string(r).map_err(|e| Error::new(crate::error::Kind::Voxreg, e.to_string()))?;
+    let report = report_json(r)?;
     let converged = r.converged();
     let surface =
         Surface { surface: Arc::clone(&out.surface), positions: Arc::new(out.positions.into_vec()), palette };

@@ -25,7 +25,7 @@ pub struct Output {
     pub normals: NormalField,
     /// The attachment targets of the last solve (the input positions unless re-centred).
     pub targets: VertexData<DVec3>,
-    /// The Ambrosio-Tortorelli feature field (per vertex) with [`crate::Estimator::At`].
+    /// The Ambrosio-Tortorelli feature field (per vertex) with [`crate::params::Estimator::At`].
     pub features: Option<FeatureField>,
     /// What was done: parameters, counts, timings, energies, every solve's report.
     pub report: Report,
@@ -90,7 +90,7 @@ pub struct Run<'a> {
     /// solver's tolerance. The iterative solvers use the starts (the bounded one projects
     /// them into its boxes, which may have changed); the direct solver is exact and
     /// ignores them. A started round of the conjugate gradient reports its first iterate
-    /// before the new energy's multigrid setup ([`crate::CgInfo::quick_start_iterations`]).
+    /// before the new energy's multigrid setup ([`crate::info::CgInfo::quick_start_iterations`]).
     /// Default: none.
     pub warm: &'a [Vec<DVec3>],
     /// Called at each stage and solver iteration. Default: none.
@@ -156,7 +156,7 @@ pub struct Regularizer {
     surface: Arc<DigitalSurface>,
     surface_seconds: f64,
     solver: Option<(SolverParams, Solver)>,
-    normals: Option<(crate::NormalsParams, crate::params::EstimatedNormals)>,
+    normals: Option<(crate::params::NormalsParams, crate::params::EstimatedNormals)>,
     /// The re-centring's inputs that depend on the surface alone (the vertices outside
     /// digital plateaus, the surfels' sample weights, the plateaus' multipliers).
     recentring: Option<RecentringInputs>,

@@ -363,19 +363,26 @@ impl Stencil {
                     }
                 }
                 let mut d = [a + fair, a + fair, a + fair, 0.0, 0.0, 0.0];
-                for s in self.faces(i) {
-                    let n = c.normals[s.face as usize];
-                    let b = 2.0 * c.beta.get(s.face as usize);
-                    d[0] += b * n.x * n.x;
-                    d[1] += b * n.y * n.y;
-                    d[2] += b * n.z * n.z;
-                    d[3] += b * n.x * n.y;
-                    d[4] += b * n.x * n.z;
-                    d[5] += b * n.y * n.z;
-                }
+                self.add_alignment_block(c, i, 2.0, &mut d);
                 d
             })
             .collect()
+    }
+
+    /// Adds `scale beta_f n_f n_f^T` for each face `f` around vertex `v` to the symmetric
+    /// block `d` (`[xx, yy, zz, xy, xz, yz]`): the alignment term's part of a diagonal
+    /// block (`scale` 2) or of its majorant (`scale` 4).
+    pub(crate) fn add_alignment_block(&self, c: &Coefficients<'_>, v: usize, scale: f64, d: &mut [f64; 6]) {
+        for s in self.faces(v) {
+            let n = c.normals[s.face as usize];
+            let b = scale * c.beta.get(s.face as usize);
+            d[0] += b * n.x * n.x;
+            d[1] += b * n.y * n.y;
+            d[2] += b * n.z * n.z;
+            d[3] += b * n.x * n.y;
+            d[4] += b * n.x * n.z;
+            d[5] += b * n.y * n.z;
+        }
     }
 }
 

@@ -9,7 +9,10 @@ use voxreg_regularize::{
 };
 use voxreg_testkit::Lcg;
 
-/// A tiny deterministic generator (tests must not depend on a seed source).
+mod common;
+use common::{pinched, random_normals, three_labels_open};
+
+/// The voxels within `r` of the centre of a cube of side `2r + 3`.
 fn ball(r: f64) -> LabelVolume {
     let n = (2.0 * r) as usize + 3;
     let c = (n as f64 - 1.0) / 2.0;
@@ -19,36 +22,37 @@ fn ball(r: f64) -> LabelVolume {
     })
 }
 
-/// Three labels meeting along junction lines, no background: open interfaces.
-fn three_labels_open() -> LabelVolume {
-    LabelVolume::from_fn([6, 6, 5], |[x, y, z]| {
-        if x + z / 2 < 3 {
-            1
-        } else if y < 3 {
-            2
-        } else {
-            3
+/// `g` (the gradient at `p`) agrees with central differences of the energy at every
+/// `step`-th vertex.
+fn assert_gradient_matches_differences(
+    name: &str,
+    energy: &Energy<'_>,
+    p: &[DVec3],
+    g: &[DVec3],
+    step: usize,
+) {
+    let h = 1e-5;
+    for v in (0..p.len()).step_by(step) {
+        for k in 0..3 {
+            let mut plus = p.to_vec();
+            plus[v][k] += h;
+            let mut minus = p.to_vec();
+            minus[v][k] -= h;
+            let fd = (energy.terms(&plus).total - energy.terms(&minus).total) / (2.0 * h);
+            assert!(
+                (fd - g[v][k]).abs() < 1e-6 * (1.0 + fd.abs()),
+                "{name}: vertex {v} axis {k}: {fd} vs {}",
+                g[v][k]
+            );
         }
-    })
-    .with_background(None)
-}
-
-/// Random unit normals (not the trivial ones), to exercise all couplings.
-fn random_normals(s: &DigitalSurface, rng: &mut Lcg) -> NormalField {
-    NormalField::new(s.surfels().iter().map(|sf| sf.normal() + 0.7 * rng.vec3(-0.5, 0.5)).collect())
+    }
 }
 
 fn cases() -> Vec<(&'static str, DigitalSurface)> {
     vec![
         ("ball", DigitalSurface::from_volume(&ball(3.2)).unwrap()),
         ("open multi-label", DigitalSurface::from_volume(&three_labels_open()).unwrap()),
-        (
-            "pinched",
-            DigitalSurface::from_volume(&LabelVolume::from_fn([2, 2, 2], |[x, y, z]| {
-                u32::from(x == y && y == z)
-            }))
-            .unwrap(),
-        ),
+        ("pinched", pinched()),
     ]
 }
 
@@ -62,21 +66,7 @@ fn gradient_matches_finite_differences() {
             Energy::new(&s, &normals, &input, EnergyParams { alpha: 0.3, beta: 1.1, gamma: 0.7 }).unwrap();
         let p: Vec<DVec3> = input.iter().map(|q| *q + 0.3 * rng.vec3(-0.5, 0.5)).collect();
         let g = energy.gradient(&p);
-        let h = 1e-5;
-        for v in (0..p.len()).step_by(3) {
-            for k in 0..3 {
-                let mut plus = p.clone();
-                plus[v][k] += h;
-                let mut minus = p.clone();
-                minus[v][k] -= h;
-                let fd = (energy.terms(&plus).total - energy.terms(&minus).total) / (2.0 * h);
-                assert!(
-                    (fd - g[v][k]).abs() < 1e-6 * (1.0 + fd.abs()),
-                    "{name}: vertex {v} axis {k}: {fd} vs {}",
-                    g[v][k]
-                );
-            }
-        }
+        assert_gradient_matches_differences(name, &energy, &p, &g, 3);
     }
 }
 
@@ -251,21 +241,7 @@ fn weighted_and_masked_energy_is_consistent() {
         let energy = Energy::new(&s, &normals, &input, params).unwrap().with_weights(&weights).unwrap();
         let p: Vec<DVec3> = input.iter().map(|q| *q + 0.3 * rng.vec3(-0.5, 0.5)).collect();
         let g = energy.gradient(&p);
-        let h = 1e-5;
-        for v in 0..p.len() {
-            for k in 0..3 {
-                let mut plus = p.clone();
-                plus[v][k] += h;
-                let mut minus = p.clone();
-                minus[v][k] -= h;
-                let fd = (energy.terms(&plus).total - energy.terms(&minus).total) / (2.0 * h);
-                assert!(
-                    (fd - g[v][k]).abs() < 1e-6 * (1.0 + fd.abs()),
-                    "{name}: vertex {v} axis {k}: {fd} vs {}",
-                    g[v][k]
-                );
-            }
-        }
+        assert_gradient_matches_differences(name, &energy, &p, &g, 1);
         let op = Operator::assemble(&OperatorPattern::new(&s).unwrap(), &energy);
         let flat: Vec<f64> = p.iter().flat_map(|v| v.to_array()).collect();
         let hp = op.apply(&flat);

@@ -9,6 +9,9 @@ use voxreg_regularize::{
 };
 use voxreg_testkit::{digitize, Torus};
 
+mod common;
+use common::max_distance;
+
 fn torus() -> LabelVolume {
     digitize(&Torus { major: 11.0, minor: 4.3 }, 1.0)
 }
@@ -49,10 +52,6 @@ fn raise_points(r: &mut Regularizer, params: &Params, warm: &[Vec<DVec3>]) -> Ve
             k % 4 == 0 || (k > 0 && labels[k - 1] != labels[k]) || (k > 1 && labels[k - 2] != labels[k - 1])
         })
         .collect()
-}
-
-fn max_distance(a: &[DVec3], b: &[DVec3]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (*x - *y).length()).fold(0.0, f64::max)
 }
 
 /// Every stage of `params`' pipeline stops at once when interrupted, on a fresh

@@ -12,10 +12,8 @@ use voxreg_regularize::{
 };
 use voxreg_testkit::{digitize, true_normals, Lcg, Sphere, Torus};
 
-/// A tiny deterministic generator (tests must not depend on a seed source).
-fn random_normals(s: &DigitalSurface, rng: &mut Lcg) -> NormalField {
-    NormalField::new(s.surfels().iter().map(|sf| sf.normal() + 0.7 * rng.vec3(-0.5, 0.5)).collect())
-}
+mod common;
+use common::{max_distance, pinched, random_normals, three_labels_open};
 
 fn random_weights(s: &DigitalSurface, rng: &mut Lcg) -> Weights {
     Weights {
@@ -26,10 +24,6 @@ fn random_weights(s: &DigitalSurface, rng: &mut Lcg) -> Weights {
     }
 }
 
-fn max_distance(a: &[DVec3], b: &[DVec3]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (*x - *y).length()).fold(0.0, f64::max)
-}
-
 fn quads(s: &DigitalSurface) -> Vec<[u32; 4]> {
     s.surfels().iter().map(|f| f.vertices.map(|v| v.0)).collect()
 }
@@ -38,32 +32,12 @@ fn exact(energy: &Energy<'_>) -> Vec<DVec3> {
     DirectSolver::for_surface(energy.surface()).unwrap().solve(energy).unwrap().0
 }
 
-/// Three labels meeting along junction lines, no background: open interfaces.
-fn three_labels_open() -> LabelVolume {
-    LabelVolume::from_fn([6, 6, 5], |[x, y, z]| {
-        if x + z / 2 < 3 {
-            1
-        } else if y < 3 {
-            2
-        } else {
-            3
-        }
-    })
-    .with_background(None)
-}
-
 fn cases() -> Vec<(&'static str, DigitalSurface)> {
     vec![
         ("ball", DigitalSurface::from_volume(&digitize(&Sphere { radius: 4.2 }, 1.0)).unwrap()),
         ("open multi-label", DigitalSurface::from_volume(&three_labels_open()).unwrap()),
         ("torus", DigitalSurface::from_volume(&digitize(&Torus { major: 5.0, minor: 2.0 }, 1.0)).unwrap()),
-        (
-            "pinched",
-            DigitalSurface::from_volume(&LabelVolume::from_fn([2, 2, 2], |[x, y, z]| {
-                u32::from(x == y && y == z)
-            }))
-            .unwrap(),
-        ),
+        ("pinched", pinched()),
     ]
 }
 

@@ -8,9 +8,8 @@ use voxreg_regularize::{
 };
 use voxreg_testkit::{digitize, Sphere, Torus};
 
-fn max_distance(a: &[DVec3], b: &[DVec3]) -> f64 {
-    a.iter().zip(b).map(|(x, y)| (*x - *y).length()).fold(0.0, f64::max)
-}
+mod common;
+use common::max_distance;
 
 fn iterations(out: &Output) -> usize {
     out.report.solves.iter().map(|s| s.iterations()).sum()

@@ -14,7 +14,7 @@ pub const BUNDLED_VOX_MODELS: [&str; 6] = [
 /// translated by `offset` (`"x y z"`, the scene graph's `_t`), for readers' tests of scenes
 /// far apart or corrupted.
 pub fn two_model_vox(offset: &str) -> Vec<u8> {
-    use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+    use dot_vox::{Color, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
     let model = || Model { size: Size { x: 1, y: 1, z: 1 }, voxels: vec![Voxel { x: 0, y: 0, z: 0, i: 1 }] };
     let transform = |child: u32, t: &str| {
         let mut frame = dot_vox::Dict::new();
@@ -38,11 +38,21 @@ pub fn two_model_vox(offset: &str) -> Vec<u8> {
         transform(5, offset),
         shape(1),
     ];
-    let data = DotVoxData {
+    vox_bytes(vec![model(), model()], vec![Color { r: 1, g: 2, b: 3, a: 255 }; 256], scenes)
+}
+
+/// A MagicaVoxel `.vox` file's bytes (version 150, the default index map, no materials
+/// nor layers) of `models`, `palette` and the scene graph `scenes`.
+pub fn vox_bytes(
+    models: Vec<dot_vox::Model>,
+    palette: Vec<dot_vox::Color>,
+    scenes: Vec<dot_vox::SceneNode>,
+) -> Vec<u8> {
+    let data = dot_vox::DotVoxData {
         version: 150,
         index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
-        models: vec![model(), model()],
-        palette: vec![Color { r: 1, g: 2, b: 3, a: 255 }; 256],
+        models,
+        palette,
         materials: Vec::new(),
         scenes,
         layers: Vec::new(),
@@ -92,4 +102,39 @@ pub fn odd_names_seg_nrrd() -> Vec<u8> {
         }
     }
     bytes
+}
+
+/// The names of the entries of `dir`, sorted.
+pub fn dir_names(dir: &std::path::Path) -> Vec<String> {
+    let mut names: Vec<String> = std::fs::read_dir(dir)
+        .expect("a readable directory")
+        .map(|e| e.expect("a directory entry").file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    names
+}
+
+/// Runs the Khronos glTF validator (`tools/gltf-validate`, installed with `npm ci` on
+/// first use) on `files`: its report, one line a file; `None` when node is missing
+/// outside CI (in CI, node is required).
+pub fn validate_gltf(files: &[std::path::PathBuf]) -> Option<String> {
+    use std::process::Command;
+    let tool = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/gltf-validate");
+    let have_node = Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
+    if !have_node {
+        assert!(std::env::var_os("CI").is_none(), "CI needs node for the glTF validator");
+        return None;
+    }
+    if !tool.join("node_modules/gltf-validator").exists() {
+        let ok = Command::new("npm")
+            .args(["ci", "--silent", "--prefix"])
+            .arg(&tool)
+            .status()
+            .is_ok_and(|s| s.success());
+        assert!(ok, "npm ci in tools/gltf-validate failed");
+    }
+    let out = Command::new("node").arg(tool.join("validate.mjs")).args(files).output().expect("node runs");
+    let report = String::from_utf8_lossy(&out.stdout).into_owned();
+    assert!(out.status.success(), "validator: {report}{}", String::from_utf8_lossy(&out.stderr));
+    Some(report)
 }

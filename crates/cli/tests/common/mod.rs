@@ -4,6 +4,8 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+pub(crate) use voxreg_testkit::validate_gltf;
+
 /// A file of the repository's `data/` folder.
 pub(crate) fn data(name: &str) -> PathBuf {
     Path::new(env!("CARGO_MANIFEST_DIR")).join("../../data").join(name)
@@ -24,24 +26,34 @@ pub(crate) fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
-/// Runs the Khronos validator on `files`; `None` when node is missing outside CI.
-pub(crate) fn validate_gltf(files: &[PathBuf]) -> Option<String> {
-    let tool = Path::new(env!("CARGO_MANIFEST_DIR")).join("../../tools/gltf-validate");
-    let have_node = Command::new("node").arg("--version").output().is_ok_and(|o| o.status.success());
-    if !have_node {
-        assert!(std::env::var_os("CI").is_none(), "CI needs node for the glTF validator");
-        return None;
+/// A path as a command-line argument.
+pub(crate) fn s(p: &Path) -> &str {
+    p.to_str().unwrap()
+}
+
+/// Checks that the run `out` of `voxreg args` exited 1 with one error line holding every
+/// one of `needles`; its standard error.
+pub(crate) fn one_error(args: &[&str], out: &Output, needles: &[&str]) -> String {
+    let err = stderr(out);
+    assert_eq!(out.status.code(), Some(1), "voxreg {args:?} (killed by a signal if None): {err}");
+    let errors: Vec<&str> = err.lines().filter(|l| l.starts_with("error:")).collect();
+    assert_eq!(errors.len(), 1, "voxreg {args:?}: not one error line: {err}");
+    for n in needles {
+        assert!(err.contains(n), "voxreg {args:?}: '{n}' not in {err}");
     }
-    if !tool.join("node_modules/gltf-validator").exists() {
-        let ok = Command::new("npm")
-            .args(["ci", "--silent", "--prefix"])
-            .arg(&tool)
-            .status()
-            .is_ok_and(|s| s.success());
-        assert!(ok, "npm ci in tools/gltf-validate failed");
+    err
+}
+
+/// Waits for `child` at most `secs` seconds, then kills it; its exit code.
+#[cfg(unix)]
+pub(crate) fn wait_code(child: &mut std::process::Child, secs: u64) -> Option<i32> {
+    let start = std::time::Instant::now();
+    while start.elapsed().as_secs() < secs {
+        if let Some(status) = child.try_wait().unwrap() {
+            return status.code();
+        }
+        std::thread::sleep(std::time::Duration::from_millis(20));
     }
-    let out = Command::new("node").arg(tool.join("validate.mjs")).args(files).output().unwrap();
-    let report = String::from_utf8_lossy(&out.stdout).into_owned();
-    assert!(out.status.success(), "validator: {report}{}", String::from_utf8_lossy(&out.stderr));
-    Some(report)
+    let _ = child.kill();
+    panic!("voxreg did not exit within {secs} s of the signal");
 }

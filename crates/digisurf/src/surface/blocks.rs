@@ -5,11 +5,11 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
-use super::scan::{face_corners, outside_of, range_face_count, range_faces, RawFace, MAX_SURFELS};
-use super::{Surfel, NONE};
+use super::scan::{oriented_surfel, outside_of, range_face_count, range_faces, RawFace, MAX_SURFELS};
+use super::NONE;
 use crate::{
-    BlockVolume, DigitalSurface, InterfaceId, LabelView, LabelVolume, RegionId, RegionMap, Regions,
-    SurfaceError, VertexId,
+    BlockVolume, DigitalSurface, InterfaceId, LabelView, LabelVolume, RegionMap, Regions, SurfaceError,
+    VertexId,
 };
 
 impl DigitalSurface {
@@ -58,14 +58,7 @@ impl DigitalSurface {
         let mut vertex_of: HashMap<[u32; 3], u32> = HashMap::with_capacity(faces.len());
         let mut interface_of_pair: HashMap<(u32, u32), u32> = HashMap::new();
         for f in faces {
-            let [a, b] = f.regions;
-            let [la, lb] = f.labels;
-            let axis = f.axis as usize;
-            let flipped = a > b;
-            let (inner, outer, li, lo) = if flipped { (b, a, lb, la) } else { (a, b, la, lb) };
-            let corners = face_corners(f.cell, axis, flipped);
-            let mut vertices = [VertexId(0); 4];
-            for (slot, c) in vertices.iter_mut().zip(corners) {
+            let mut surfel = oriented_surfel(f.cell, f.axis as usize, f.regions, f.labels, |c| {
                 let next = vertex_corners.len() as u32;
                 let id = *vertex_of.entry(c).or_insert(next);
                 if id == next {
@@ -74,19 +67,12 @@ impl DigitalSurface {
                     }
                     vertex_corners.push(c);
                 }
-                *slot = VertexId(id);
-            }
+                Ok(VertexId(id))
+            })?;
             let n = interface_of_pair.len() as u32;
-            let interface = *interface_of_pair.entry((inner, outer)).or_insert(n);
-            surfels.push(Surfel {
-                cell: f.cell,
-                axis: axis as u8,
-                flipped,
-                regions: [RegionId(inner), RegionId(outer)],
-                labels: [li, lo],
-                vertices,
-                interface: InterfaceId(interface),
-            });
+            let pair = (surfel.regions[0].0, surfel.regions[1].0);
+            surfel.interface = InterfaceId(*interface_of_pair.entry(pair).or_insert(n));
+            surfels.push(surfel);
         }
         drop(vertex_of);
         let closed = [[false; 2]; 3];

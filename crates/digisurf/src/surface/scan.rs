@@ -303,14 +303,8 @@ impl Scan {
         if self.surfels.len() >= MAX_SURFELS {
             return Err(SurfaceError::TooLarge(format!("more than {MAX_SURFELS} surfels")));
         }
-        let flipped = a > b;
-        let (inner, outer, li, lo) = if flipped { (b, a, lb, la) } else { (a, b, la, lb) };
-        let corners = face_corners(cell, axis, flipped);
-        let mut vertices = [VertexId(0); 4];
-        for (slot, c) in vertices.iter_mut().zip(corners) {
-            *slot = self.vertex(c, k)?;
-        }
-        let pair = (inner, outer);
+        let mut surfel = oriented_surfel(cell, axis, [a, b], [la, lb], |c| self.vertex(c, k))?;
+        let pair = (surfel.regions[0].0, surfel.regions[1].0);
         let interface = if self.last_pair.0 == pair {
             self.last_pair.1
         } else {
@@ -319,17 +313,37 @@ impl Scan {
             self.last_pair = (pair, id);
             id
         };
-        self.surfels.push(Surfel {
-            cell,
-            axis: axis as u8,
-            flipped,
-            regions: [RegionId(inner), RegionId(outer)],
-            labels: [li, lo],
-            vertices,
-            interface: InterfaceId(interface),
-        });
+        surfel.interface = InterfaceId(interface);
+        self.surfels.push(surfel);
         Ok(())
     }
+}
+
+/// The surfel of the face of `cell` normal to `axis` between regions `[a, b]` with labels
+/// `[la, lb]` (the negative side's first), oriented from the smaller region to the larger:
+/// `vertex` numbers its corners in order; its interface is left to the caller (`0`).
+pub(super) fn oriented_surfel(
+    cell: [u32; 3],
+    axis: usize,
+    [a, b]: [u32; 2],
+    [la, lb]: [u32; 2],
+    mut vertex: impl FnMut([u32; 3]) -> Result<VertexId, SurfaceError>,
+) -> Result<Surfel, SurfaceError> {
+    let flipped = a > b;
+    let (inner, outer, li, lo) = if flipped { (b, a, lb, la) } else { (a, b, la, lb) };
+    let mut vertices = [VertexId(0); 4];
+    for (slot, c) in vertices.iter_mut().zip(face_corners(cell, axis, flipped)) {
+        *slot = vertex(c)?;
+    }
+    Ok(Surfel {
+        cell,
+        axis: axis as u8,
+        flipped,
+        regions: [RegionId(inner), RegionId(outer)],
+        labels: [li, lo],
+        vertices,
+        interface: InterfaceId(0),
+    })
 }
 
 /// The faces of every slab `k` in `0..=nz`, in scan order (see [`slab_faces`]), each slab's
@@ -509,7 +523,7 @@ fn for_differences(a: &[u32], b: &[u32], mut f: impl FnMut(usize, u32, u32)) {
 /// The lattice corners of the face of `cell` normal to `axis`, in the order that orients
 /// its surfel from the inner region to the outer (`flipped`: the face's regions are in the
 /// opposite order).
-pub(super) fn face_corners(cell: [u32; 3], axis: usize, flipped: bool) -> [[u32; 3]; 4] {
+fn face_corners(cell: [u32; 3], axis: usize, flipped: bool) -> [[u32; 3]; 4] {
     let (u, v) = ((axis + 1) % 3, (axis + 2) % 3);
     let mut cu = cell;
     cu[u] += 1;

@@ -6,7 +6,7 @@ use base64::Engine;
 use flate2::read::ZlibDecoder;
 
 use super::Codec;
-use crate::Endian;
+use crate::samples::Endian;
 
 /// A source of binary bytes.
 pub(super) trait Source {

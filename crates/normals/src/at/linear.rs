@@ -11,7 +11,7 @@ use faer::sparse::{SparseColMatRef, SymbolicSparseColMat};
 use faer::{Conj, MatMut, Side};
 use rayon::prelude::*;
 
-use crate::NormalError;
+use crate::error::NormalError;
 
 /// Rows per parallel task in the matrix-vector products.
 const ROWS_PER_TASK: usize = 8192;

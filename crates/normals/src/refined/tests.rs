@@ -181,7 +181,7 @@ fn the_wide_disc_probe_changes_no_normal() {
         let surface = DigitalSurface::from_volume(volume).unwrap();
         let positions: Vec<DVec3> =
             surface.positions().iter().map(|p| *p + 0.2 * rng.vec3(-1.0, 1.0)).collect();
-        let field = crate::Trivial.estimate(&surface).unwrap();
+        let field = crate::trivial::Trivial.estimate(&surface).unwrap();
         let near = near_junction_surfels(&surface);
         assert!(near.iter().any(|&n| n));
         let never = Interrupt::never();

@@ -119,16 +119,7 @@ pub(super) fn fine_majorant(stencil: &Stencil, coef: &Coefficients<'_>) -> Vec<[
             }
             let a = coef.alpha.get(i) + 2.0 * fair;
             let mut d = [a, a, a, 0.0, 0.0, 0.0];
-            for s in stencil.faces(i) {
-                let n = coef.normals[s.face as usize];
-                let b = 4.0 * coef.beta.get(s.face as usize);
-                d[0] += b * n.x * n.x;
-                d[1] += b * n.y * n.y;
-                d[2] += b * n.z * n.z;
-                d[3] += b * n.x * n.y;
-                d[4] += b * n.x * n.z;
-                d[5] += b * n.y * n.z;
-            }
+            stencil.add_alignment_block(coef, i, 4.0, &mut d);
             d
         })
         .collect()

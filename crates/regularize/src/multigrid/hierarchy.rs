@@ -13,6 +13,7 @@ use super::fine::{fine_majorant, inverse_blocks, FineNumbers};
 use super::parts::{Aggregation, Rows};
 use crate::error::RegularizeError;
 use crate::stencil::{Coefficients, Stencil};
+use voxreg_digisurf::union_find_root;
 use voxreg_normals::Interrupt;
 
 /// Settings of the multigrid preconditioner.
@@ -70,19 +71,11 @@ fn aggregate(
     let n = cells.len();
     // Union-find within each cell, the smaller index the root: deterministic components.
     let mut root: Vec<u32> = (0..n as u32).collect();
-    fn find(root: &mut [u32], mut i: u32) -> u32 {
-        while root[i as usize] != i {
-            let up = root[root[i as usize] as usize];
-            root[i as usize] = up;
-            i = up;
-        }
-        i
-    }
     for i in 0..n {
         let ki = key(&cells[i]);
         neighbours.each(i, |j| {
             if (j as usize) > i && key(&cells[j as usize]) == ki {
-                let (a, b) = (find(&mut root, i as u32), find(&mut root, j));
+                let (a, b) = (union_find_root(&mut root, i as u32), union_find_root(&mut root, j));
                 if a != b {
                     root[a.max(b) as usize] = a.min(b);
                 }
@@ -90,7 +83,7 @@ fn aggregate(
         });
     }
     let mut order: Vec<(u64, u32)> =
-        (0..n as u32).map(|i| (key(&cells[i as usize]), find(&mut root, i))).collect();
+        (0..n as u32).map(|i| (key(&cells[i as usize]), union_find_root(&mut root, i))).collect();
     drop(root);
     // Sorting (cell, component) pairs with each node's index: the members of an aggregate
     // in increasing order, aggregates by cell, then by their smallest member.
