@@ -26,7 +26,7 @@ mod files;
 mod labelled;
 mod rng;
 
-pub use files::{npy_bytes, odd_names_seg_nrrd, two_model_vox, BUNDLED_VOX_MODELS, ODD_NAMES};
+pub use files::{npy_bytes, odd_names_seg_nrrd, two_model_vox, vox_scene, BUNDLED_VOX_MODELS, ODD_NAMES};
 
 pub use labelled::{
     digitize_labels, label_fidelity, vertex_labels, JunctionKind, LabelFidelity, LabelShape, QuarteredBall,
