@@ -13,11 +13,14 @@ use crate::args::InputArgs;
 /// (`voxreg_io::read_input`), with the errors in the options' names.
 /// Also returns the palette and the unit of the spacing, where the file has them.
 pub(crate) fn read_input(args: &InputArgs) -> Result<(LabelVolume, Option<Palette>, Option<String>)> {
-    read_input_from(args, None)
+    match voxreg_io::read_input(&args.input, &options(args)) {
+        Ok(input) => Ok((input.volume, input.palette, input.units)),
+        Err(e) => Err(input_error(args, e)),
+    }
 }
 
 /// The options of `args` as `voxreg_io` takes them.
-fn options(args: &InputArgs) -> InputOptions<'_> {
+pub(crate) fn options(args: &InputArgs) -> InputOptions<'_> {
     InputOptions {
         dims: args.dims,
         dtype: args.dtype,
@@ -34,26 +37,8 @@ fn options(args: &InputArgs) -> InputOptions<'_> {
     }
 }
 
-/// [`read_input`] of INPUT's contents held in memory (a file dropped on the viewer's
-/// page): nothing else is read (`voxreg_io::read_input_bytes`).
-pub(crate) fn read_input_from(
-    args: &InputArgs,
-    bytes: Option<&[u8]>,
-) -> Result<(LabelVolume, Option<Palette>, Option<String>)> {
-    let options = options(args);
-    let path = &args.input;
-    let read = match bytes {
-        Some(b) => voxreg_io::read_input_bytes(b, path, &options),
-        None => voxreg_io::read_input(path, &options),
-    };
-    match read {
-        Ok(input) => Ok((input.volume, input.palette, input.units)),
-        Err(e) => Err(input_error(args, e)),
-    }
-}
-
 /// An [`InputError`] in the options' names.
-fn input_error(args: &InputArgs, e: InputError) -> anyhow::Error {
+pub(crate) fn input_error(args: &InputArgs, e: InputError) -> anyhow::Error {
     let path = &args.input;
     match e {
         InputError::RawNeedsDims(_) => {

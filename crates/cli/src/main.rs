@@ -18,9 +18,9 @@ mod view;
 
 use anyhow::{Context, Result};
 use clap::Parser as _;
-use voxreg_io::{write_ply_with_vertex_scalar, write_volume, Outputs, QuadMesh};
+use voxreg_io::{write_ply_with_vertex_scalar, write_volume, write_volume_blocks, Outputs, QuadMesh};
 use voxreg_regularize::Run;
-use voxreg_upscale::{upscale, UpscaleParams};
+use voxreg_upscale::{upscale, upscale_blocks, UpscaleParams};
 
 use crate::args::{Cli, Command, RegularizeArgs};
 use crate::input::Source;
@@ -126,12 +126,9 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     let params = args.params(input::voxel_art(&args.input))?;
     let stages = Stages::new(args.quiet);
     let path = &args.input.input;
-    // An upscale writes a dense volume: its input is read dense; a mesh's input, as blocks
-    // where it is a MagicaVoxel scene of models far apart.
-    let ((source, palette, _units), read) = stages.run("read volume", || match product {
-        Product::Volume { .. } => input::read_input(&args.input).map(|(v, p, u)| (Source::Dense(v), p, u)),
-        _ => input::read_source(&args.input),
-    })?;
+    // As blocks where INPUT is a MagicaVoxel scene of models far apart (an upscale of it
+    // then upscales block by block).
+    let ((source, palette, _units), read) = stages.run("read volume", || input::read_source(&args.input))?;
     output::check_volume(args, product, &source)?;
     output::check_library(args, product, palette.is_some())?;
     let (mut regularizer, _) = stages.run("digital surface", || {
@@ -152,8 +149,8 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     // volume, its memory goes back before the solves (the run's peak).
     let labels =
         args.report.as_ref().map(|_| report::named_labels(&source, palette.as_ref())).unwrap_or_default();
-    let volume = match (product, source) {
-        (Product::Volume { .. }, Source::Dense(volume)) => Some(volume),
+    let volume = match product {
+        Product::Volume { .. } => Some(source),
         _ => None,
     };
     // One run: the initial normals need not outlive it.
@@ -191,14 +188,23 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         }
         Product::Volume { factor } => {
             let volume = volume.as_ref().expect("the input volume is kept for an upscale");
+            let params = UpscaleParams { factor };
             let (fine, secs) = stages.run(&format!("upscale x{factor}"), || {
-                upscale(surface, &out.positions, volume, &UpscaleParams { factor })
-                    .with_context(|| format!("{}: cannot upscale", path.display()))
+                match volume {
+                    Source::Dense(v) => upscale(surface, &out.positions, v, &params).map(Source::Dense),
+                    Source::Blocks(v) => {
+                        upscale_blocks(surface, &out.positions, v, &params).map(Source::Blocks)
+                    }
+                }
+                .with_context(|| format!("{}: cannot upscale", path.display()))
             })?;
             io.upscale = Some(secs);
             output::check_upscaled(args, volume, &fine, factor)?;
             let ((), secs) = stages.run("write volume", || {
-                Ok(outputs.write(&args.output, |p| write_volume(p, &fine, palette.as_ref()))?)
+                Ok(outputs.write(&args.output, |p| match &fine {
+                    Source::Dense(v) => write_volume(p, v, palette.as_ref()),
+                    Source::Blocks(v) => write_volume_blocks(p, v, palette.as_ref()),
+                })?)
             })?;
             io.write = secs;
             args.output.display().to_string()

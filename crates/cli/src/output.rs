@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Result};
 use glam::DVec3;
-use voxreg_digisurf::{DigitalSurface, InterfaceId, LabelVolume, Patch, PatchParams, RegionId};
+use voxreg_digisurf::{DigitalSurface, InterfaceId, Patch, PatchParams, RegionId};
 use voxreg_io::{file_kind, named_interface_name, named_region_name, MeshBatch, Outputs, Palette, QuadMesh};
 
 use crate::args::{GeodesicOptions, RegularizeArgs, Split};
@@ -258,10 +258,27 @@ pub(crate) fn check_volume(args: &RegularizeArgs, product: Product<'_>, volume: 
     }
     if let Product::Volume { factor } = product {
         let fine = volume.dims().map(|d| d as u128 * factor as u128);
-        let voxels = fine.iter().product::<u128>();
+        let vox = args.output.extension().is_some_and(|e| e.eq_ignore_ascii_case("vox"));
+        let (voxels, what) = match volume {
+            // Block by block into a .vox scene: the blocks' boxes, grown by a voxel on each
+            // side (the smooth surface leaves the staircase by less).
+            Source::Blocks(v) if vox => {
+                let grown: u128 = v
+                    .blocks()
+                    .iter()
+                    .map(|b| {
+                        b.labels.shape().iter().map(|&d| (d as u128 + 2) * factor as u128).product::<u128>()
+                    })
+                    .sum();
+                (grown, format!("upscaling x{factor} to {grown} voxels in blocks"))
+            }
+            _ => {
+                let voxels = fine.iter().product::<u128>();
+                (voxels, format!("upscaling x{factor} to {}x{}x{} voxels", fine[0], fine[1], fine[2]))
+            }
+        };
         // The upscaled labels, the per-column buffers they are gathered from, and the
         // written file's bytes.
-        let what = format!("upscaling x{factor} to {}x{}x{} voxels", fine[0], fine[1], fine[2]);
         voxreg_io::check_memory(input, &what, voxels * 9)?;
     }
     Ok(())
@@ -271,13 +288,19 @@ pub(crate) fn check_volume(args: &RegularizeArgs, product: Product<'_>, volume: 
 /// solid voxels the input has at the finer resolution (thin parts collapsed).
 pub(crate) fn check_upscaled(
     args: &RegularizeArgs,
-    coarse: &LabelVolume,
-    fine: &LabelVolume,
+    coarse: &Source,
+    fine: &Source,
     factor: usize,
 ) -> Result<()> {
-    let solid = |v: &LabelVolume| {
-        let b = v.background();
-        v.labels().iter().filter(|&&l| Some(l) != b).count() as u128
+    let solid = |v: &Source| match v {
+        Source::Dense(v) => {
+            let b = v.background();
+            v.labels().iter().filter(|&&l| Some(l) != b).count() as u128
+        }
+        Source::Blocks(v) => {
+            let b = v.background();
+            v.blocks().iter().map(|k| k.labels.iter().filter(|&&l| l != b).count() as u128).sum()
+        }
     };
     let (before, after) = (solid(coarse) * (factor as u128).pow(3), solid(fine));
     if after * 2 < before {

@@ -10,13 +10,16 @@ use crate::args::{RegularizeArgs, ViewArgs};
 use crate::input;
 
 /// Reads `args.input` with the options (from `bytes`, its contents, where given: nothing
-/// else is read), and the parameters of its first solve.
+/// else is read; a MagicaVoxel scene of models far apart as blocks), and the parameters
+/// of its first solve.
 fn load(args: &RegularizeArgs, bytes: Option<&[u8]>) -> Result<Loaded> {
     let voxel_art = input::voxel_art(&args.input);
     let preset = args.preset(voxel_art);
     // Checked now, so that a bad option fails before the viewer starts.
     args.params(voxel_art)?;
-    let (volume, palette, _units) = input::read_input_from(&args.input, bytes)?;
+    // A MagicaVoxel scene of models far apart as blocks, as `voxreg regularize` reads it.
+    let (volume, palette) = voxreg_view::read_volume(&args.input.input, bytes, &input::options(&args.input))
+        .map_err(|e| input::input_error(&args.input, e))?;
     let path = &args.input.input;
     let name =
         path.file_name().map_or_else(|| path.display().to_string(), |n| n.to_string_lossy().into_owned());

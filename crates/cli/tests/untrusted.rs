@@ -120,6 +120,33 @@ fn vox_models_far_apart_are_regularized_from_their_own_boxes_under_ulimit() {
 }
 
 #[test]
+fn vox_models_far_apart_upscale_block_by_block_under_ulimit() {
+    // Two two-voxel models 2,000 voxels apart along each axis: x2 is a 4004 x 4002 x 4002
+    // lattice (256 GiB of labels made dense), written as a .vox scene of its blocks.
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("apart.vox");
+    std::fs::write(&path, vox_scene(&[[2, 1, 1]; 2], &["0 0 0", "2000 2000 2000"])).unwrap();
+    let fine = dir.path().join("fine.vox");
+    let start = Instant::now();
+    let out = limited(&["upscale", s(&path), "--factor", "2", "-o", s(&fine), "-q"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+    assert!(start.elapsed() < Duration::from_secs(20), "{:?}", start.elapsed());
+    let bytes = std::fs::read(&fine).unwrap();
+    let scene = voxreg_io::read_vox_scene_bytes(&bytes, &fine, &Default::default()).unwrap();
+    assert_eq!(scene.volume.dims(), [4004, 4002, 4002]);
+    let solid: u64 = scene.volume.label_counts().iter().filter(|c| c.0 != 0).map(|c| c.1).sum();
+    // Each model's 2 x 8 sub-voxels, less what the smooth surface rounds off.
+    assert!((16..=32).contains(&solid), "{solid}");
+    // Its lattice made dense (a .vol) is refused before the solve, in one line.
+    let vol = dir.path().join("fine.vol");
+    refused(
+        &["upscale", s(&path), "-o", s(&vol), "-q"],
+        &["apart.vox: upscaling x2 to 4004x4002x4002 voxels"],
+    );
+    assert!(!vol.exists());
+}
+
+#[test]
 fn a_gzip_nrrd_skipping_gigabytes_reads_under_ulimit() {
     // 2.5 GiB of zeros to skip, from 40 gzip members of 64 MiB (2.6 MB): inflated and
     // dropped, never held.

@@ -178,5 +178,5 @@ pub use vox::{
 };
 pub use vti::{read_vti, read_vti_bytes};
 pub use vtp::write_vtp;
-pub use write_volume::{write_vol, write_volume, write_vox, VOX_MAX_MODEL};
+pub use write_volume::{write_vol, write_volume, write_volume_blocks, write_vox, VOX_MAX_MODEL};
 pub use zarr::{is_zarr, read_zarr, read_zarr_entries};

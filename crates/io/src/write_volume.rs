@@ -4,7 +4,7 @@ use std::io::{self, Write};
 use std::path::Path;
 
 use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
-use voxreg_digisurf::LabelVolume;
+use voxreg_digisurf::{BlockVolume, LabelVolume};
 
 use crate::error::IoError;
 use crate::files::lowercase_extension;
@@ -42,21 +42,91 @@ pub fn write_vox(path: &Path, volume: &LabelVolume, palette: Option<&Palette>) -
     if volume.is_empty() {
         return Err(IoError::unsupported(path, "an empty volume has no .vox model"));
     }
-    let dims = volume.dims();
-    let blocks: Vec<Vec<usize>> =
-        dims.iter().map(|&d| (0..d.div_ceil(VOX_MAX_MODEL)).map(|b| b * VOX_MAX_MODEL).collect()).collect();
     let mut models = Vec::new();
     let mut placements = Vec::new();
-    for &z0 in &blocks[2] {
-        for &y0 in &blocks[1] {
-            for &x0 in &blocks[0] {
+    split_models(volume.labels(), [0; 3], &mut models, &mut placements);
+    write_models(path, models, placements, palette)
+}
+
+/// Writes the blocks of `volume` (a scene of objects far apart) as [`write_volume`] does:
+/// `.vox`, each block split into models of at most [`VOX_MAX_MODEL`] voxels per axis and
+/// placed where it lies, a model of the lattice's empty corners only where no block
+/// reaches them (reading the file back gives the volume's labels, dense, or as blocks
+/// with [`read_vox_scene_bytes`](crate::read_vox_scene_bytes)); `.vol`, the volume made
+/// dense (its whole lattice: the caller checks that it fits in memory).
+pub fn write_volume_blocks(
+    path: &Path,
+    volume: &BlockVolume,
+    palette: Option<&Palette>,
+) -> Result<(), IoError> {
+    if volume.background() != 0 {
+        return Err(IoError::unsupported(path, "blocks are written with background 0 only"));
+    }
+    match lowercase_extension(path).as_deref() {
+        Some("vox") => {}
+        Some("vol") => {
+            let dense =
+                volume.to_dense().map_err(|source| IoError::Volume { path: path.to_path_buf(), source })?;
+            return write_vol(path, &dense);
+        }
+        _ => {
+            return Err(IoError::UnsupportedExtension { path: path.to_path_buf(), expected: ".vox or .vol" })
+        }
+    }
+    for b in volume.blocks() {
+        if let Some(l) = b.labels.iter().find(|&&l| l > 255) {
+            return Err(IoError::unsupported(
+                path,
+                format!("label {l} does not fit a .vox colour index (0..=255)"),
+            ));
+        }
+    }
+    if volume.is_empty() {
+        return Err(IoError::unsupported(path, "an empty volume has no .vox model"));
+    }
+    let mut models = Vec::new();
+    let mut placements = Vec::new();
+    for b in volume.blocks() {
+        split_models(&b.labels, b.offset, &mut models, &mut placements);
+    }
+    // The lattice's extent: its first and last voxels, as empty models where no block
+    // holds them.
+    let dims = volume.dims();
+    for corner in [[0; 3], dims.map(|d| d - 1)] {
+        let held = volume.blocks().iter().any(|b| {
+            let (lo, hi) = b.bounds();
+            (0..3).all(|k| lo[k] <= corner[k] && corner[k] < hi[k])
+        });
+        if !held {
+            let empty = ndarray::Array3::zeros((1, 1, 1));
+            split_models(&empty, corner, &mut models, &mut placements);
+        }
+    }
+    write_models(path, models, placements, palette)
+}
+
+/// `labels` (voxel `[0, 0, 0]` at lattice position `offset`) as models of at most
+/// [`VOX_MAX_MODEL`] voxels per axis, and each model's scene translation.
+fn split_models(
+    labels: &ndarray::Array3<u32>,
+    offset: [usize; 3],
+    models: &mut Vec<Model>,
+    placements: &mut Vec<[i64; 3]>,
+) {
+    let dims = labels.dim();
+    let dims = [dims.0, dims.1, dims.2];
+    let starts: Vec<Vec<usize>> =
+        dims.iter().map(|&d| (0..d.div_ceil(VOX_MAX_MODEL)).map(|b| b * VOX_MAX_MODEL).collect()).collect();
+    for &z0 in &starts[2] {
+        for &y0 in &starts[1] {
+            for &x0 in &starts[0] {
                 let lo = [x0, y0, z0];
                 let size = [0, 1, 2].map(|k| (dims[k] - lo[k]).min(VOX_MAX_MODEL));
                 let mut voxels = Vec::new();
                 for z in 0..size[2] {
                     for y in 0..size[1] {
                         for x in 0..size[0] {
-                            let l = volume.labels()[[lo[0] + x, lo[1] + y, lo[2] + z]];
+                            let l = labels[[lo[0] + x, lo[1] + y, lo[2] + z]];
                             if l != 0 {
                                 voxels.push(Voxel { x: x as u8, y: y as u8, z: z as u8, i: (l - 1) as u8 });
                             }
@@ -68,10 +138,19 @@ pub fn write_vox(path: &Path, volume: &LabelVolume, palette: Option<&Palette>) -
                     voxels,
                 });
                 // MagicaVoxel places a model's voxel floor(size / 2) at the translation.
-                placements.push([0, 1, 2].map(|k| (lo[k] + size[k] / 2) as i64));
+                placements.push([0, 1, 2].map(|k| (offset[k] + lo[k] + size[k] / 2) as i64));
             }
         }
     }
+}
+
+/// Writes `models` placed by `placements` (a scene graph unless there is one model).
+fn write_models(
+    path: &Path,
+    models: Vec<Model>,
+    placements: Vec<[i64; 3]>,
+    palette: Option<&Palette>,
+) -> Result<(), IoError> {
     let mut scenes = Vec::new();
     if models.len() > 1 {
         let n = models.len() as u32;
@@ -179,6 +258,26 @@ mod tests {
             let back = read_vox(&path).unwrap().volume;
             assert_eq!(back.dims(), dims);
             assert_eq!(back.labels(), v.labels(), "{dims:?}");
+        }
+    }
+
+    #[test]
+    fn blocks_round_trip_through_a_vox_scene() {
+        use voxreg_digisurf::{Block, BlockVolume};
+        let dir = tempfile::tempdir().unwrap();
+        let block = |offset: [usize; 3], dims: [usize; 3]| Block {
+            offset,
+            labels: random_volume(dims).labels().to_owned(),
+        };
+        // A block over two models along x, one alone far off, the lattice's corners empty.
+        let blocks = vec![block([3, 2, 1], [300, 3, 2]), block([900, 40, 50], [2, 3, 4])];
+        let volume = BlockVolume::new([1000, 50, 60], blocks, 0).unwrap();
+        for name in ["b.vox", "b.vol"] {
+            let path = dir.path().join(name);
+            write_volume_blocks(&path, &volume, None).unwrap();
+            let back = crate::read_volume(&path).unwrap().volume;
+            assert_eq!(back.dims(), volume.dims(), "{name}");
+            assert_eq!(back.labels(), volume.to_dense().unwrap().labels(), "{name}");
         }
     }
 

@@ -62,6 +62,55 @@ pub fn vox_bytes(
     bytes
 }
 
+/// A MagicaVoxel `.vox` scene's bytes: models of `sizes` (each full, of colour index 1,
+/// then 2, ...) in one group, placed by the translations `at` (`"x y z"`, the scene
+/// graph's `_t`): scenes of models far apart, touching or overlapping.
+pub fn vox_scene(sizes: &[[u32; 3]], at: &[&str]) -> Vec<u8> {
+    use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+    let model = |k: usize, [x, y, z]: [u32; 3]| Model {
+        size: Size { x, y, z },
+        voxels: (0..x * y * z)
+            .map(|i| Voxel { x: (i % x) as u8, y: (i / x % y) as u8, z: (i / x / y) as u8, i: k as u8 })
+            .collect(),
+    };
+    let transform = |child: u32, t: &str| {
+        let mut frame = dot_vox::Dict::new();
+        frame.insert("_t".into(), t.into());
+        SceneNode::Transform {
+            attributes: dot_vox::Dict::new(),
+            frames: vec![Frame::new(frame)],
+            child,
+            layer_id: 0,
+        }
+    };
+    let mut scenes = vec![
+        transform(1, "0 0 0"),
+        SceneNode::Group {
+            attributes: dot_vox::Dict::new(),
+            children: (0..at.len() as u32).map(|k| 2 + 2 * k).collect(),
+        },
+    ];
+    for (k, t) in at.iter().enumerate() {
+        scenes.push(transform(3 + 2 * k as u32, t));
+        scenes.push(SceneNode::Shape {
+            attributes: dot_vox::Dict::new(),
+            models: vec![ShapeModel { model_id: k as u32, attributes: dot_vox::Dict::new() }],
+        });
+    }
+    let data = DotVoxData {
+        version: 150,
+        index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
+        models: sizes.iter().enumerate().map(|(k, &m)| model(k, m)).collect(),
+        palette: (0..256u32).map(|i| Color { r: i as u8, g: 255 - i as u8, b: 3, a: 255 }).collect(),
+        materials: Vec::new(),
+        scenes,
+        layers: Vec::new(),
+    };
+    let mut bytes = Vec::new();
+    data.write_vox(&mut bytes).expect("writing to memory");
+    bytes
+}
+
 /// A version-1 `.npy` file's bytes: `descr` (`'<u4'`, `'|u1'`, `'<f4'`), shape `(X, Y, Z)`
 /// in C order (z fastest), then `data` (after the header, if `data` is empty: a writer
 /// can stream the values after it).

@@ -27,8 +27,8 @@ mod labelled;
 mod rng;
 
 pub use files::{
-    dir_names, npy_bytes, odd_names_seg_nrrd, two_model_vox, validate_gltf, vox_bytes, BUNDLED_VOX_MODELS,
-    ODD_NAMES,
+    dir_names, npy_bytes, odd_names_seg_nrrd, two_model_vox, validate_gltf, vox_bytes, vox_scene,
+    BUNDLED_VOX_MODELS, ODD_NAMES,
 };
 
 pub use labelled::{

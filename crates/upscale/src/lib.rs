@@ -33,8 +33,9 @@
 //! ```
 
 use glam::{DVec2, DVec3};
+use ndarray::{Array3, Axis, ShapeBuilder, Slice};
 use rayon::prelude::*;
-use voxreg_digisurf::{DigitalSurface, LabelVolume, SurfaceError};
+use voxreg_digisurf::{Block, BlockVolume, DigitalSurface, LabelVolume, SurfaceError, Voxel};
 
 /// Parameters of [`upscale`].
 #[derive(Copy, Clone, Debug, PartialEq, Eq)]
@@ -60,9 +61,9 @@ pub enum UpscaleError {
     Volume(#[from] SurfaceError),
 }
 
-/// One crossing of a fine column by a boundary triangle.
+/// One crossing of a fine column (`i + fine_x * j`) by a boundary triangle.
 struct Crossing {
-    column: u32,
+    column: u64,
     z: f64,
 }
 
@@ -91,123 +92,292 @@ pub fn upscale(
     volume: &LabelVolume,
     params: &UpscaleParams,
 ) -> Result<LabelVolume, UpscaleError> {
-    let k = params.factor;
-    if !(1..=16).contains(&k) {
-        return Err(UpscaleError::Invalid(format!("factor {k}: must be in 1..=16")));
-    }
-    if positions.len() != surface.num_vertices() {
-        return Err(UpscaleError::Invalid(format!(
-            "{} positions for {} vertices",
-            positions.len(),
-            surface.num_vertices()
-        )));
-    }
     let Some(background) = volume.background() else {
         return Err(UpscaleError::Invalid("upscaling needs a volume with a background".into()));
     };
-    let background_region = surface.regions().background();
-    let dims = volume.dims();
-    let fine = dims.map(|d| d * k);
+    let lattice = Lattice::new(surface, positions, volume.dims(), volume.spacing(), volume.origin(), params)?;
+    let fine = lattice.fine;
     if fine.iter().map(|&d| d as u128).product::<u128>() > (1u128 << 32) {
         return Err(UpscaleError::Invalid(format!(
             "{}x{}x{} voxels is too large",
             fine[0], fine[1], fine[2]
         )));
     }
-    let h = volume.spacing() / k as f64;
-    // Fine voxel i has its centre at corner0 + (i + 1/2) h, corner0 the volume's min corner.
-    let corner0 = volume.origin() - 0.5 * volume.spacing();
-    let centre = |i: [usize; 3]| corner0 + (DVec3::new(i[0] as f64, i[1] as f64, i[2] as f64) + 0.5) * h;
+    let prepared = Prepared::new(surface, positions, &lattice, background);
+    let labels = prepared.fill(&lattice, [0; 3], fine, &|v| volume.label(v));
+    let out = LabelVolume::from_x_fastest(fine, labels)?
+        .with_spacing(lattice.h)?
+        .with_origin(lattice.corner0 + 0.5 * lattice.h)?
+        .with_background(Some(0));
+    Ok(out)
+}
 
-    // Crossings of the fine columns by the triangles bounding the solid.
-    let boundary: Vec<usize> = surface
-        .surfels()
-        .iter()
-        .enumerate()
-        .filter(|(_, s)| Some(s.regions[1]) == background_region && s.labels[0] != background)
-        .map(|(i, _)| i)
-        .collect();
-    let mut crossings: Vec<Crossing> = boundary
-        .par_iter()
-        .flat_map_iter(|&s| {
-            let q = surface.surfels()[s].vertices.map(|v| positions[v.index()]);
-            let mut out = Vec::new();
-            for tri in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
-                let mut p = tri.map(|v| DVec2::new(v.x, v.y));
-                let mut z = tri.map(|v| v.z);
-                let area = (p[1] - p[0]).perp_dot(p[2] - p[0]);
-                if area == 0.0 {
-                    continue; // vertical in projection: no column crosses its interior
-                }
-                if area < 0.0 {
-                    p.swap(1, 2);
-                    z.swap(1, 2);
-                }
-                let lo = p[0].min(p[1]).min(p[2]);
-                let hi = p[0].max(p[1]).max(p[2]);
-                let i0 = (((lo.x - corner0.x) / h.x - 0.5).ceil().max(0.0)) as usize;
-                let j0 = (((lo.y - corner0.y) / h.y - 0.5).ceil().max(0.0)) as usize;
-                let i1 = (((hi.x - corner0.x) / h.x - 0.5).floor()).min(fine[0] as f64 - 1.0);
-                let j1 = (((hi.y - corner0.y) / h.y - 0.5).floor()).min(fine[1] as f64 - 1.0);
-                if i1 < 0.0 || j1 < 0.0 {
-                    continue;
-                }
-                for j in j0..=j1 as usize {
-                    for i in i0..=i1 as usize {
-                        let c = centre([i, j, 0]);
-                        let pc = DVec2::new(c.x, c.y);
-                        let mut w = [0.0; 3];
-                        let mut inside = true;
-                        for e in 0..3 {
-                            let (v, top_left) = edge(p[e], p[(e + 1) % 3], pc);
-                            if v < 0.0 || (v == 0.0 && !top_left) {
-                                inside = false;
-                                break;
-                            }
-                            w[(e + 2) % 3] = v;
-                        }
-                        if inside {
-                            let sum = w[0] + w[1] + w[2];
-                            let zc = (w[0] * z[0] + w[1] * z[1] + w[2] * z[2]) / sum;
-                            out.push(Crossing { column: (i + fine[0] * j) as u32, z: zc });
-                        }
+/// [`upscale`] of a volume given as blocks (a scene of models far apart), block by block:
+/// the result holds the fine voxels of a box around each block's regularized surface
+/// (boxes merged where they come within a voxel of each other), and its lattice is the
+/// finer lattice of `volume`. Its voxels are those of [`upscale`] on `volume` made dense,
+/// everywhere (outside the boxes, that upscale is background: a block's solid boundary
+/// crosses each column outside its box an even number of times on each side of a
+/// centre), for the memory and time of the boxes alone. `surface` is `volume`'s
+/// ([`DigitalSurface::from_blocks`]).
+pub fn upscale_blocks(
+    surface: &DigitalSurface,
+    positions: &[DVec3],
+    volume: &BlockVolume,
+    params: &UpscaleParams,
+) -> Result<BlockVolume, UpscaleError> {
+    let background = volume.background();
+    let lattice = Lattice::new(surface, positions, volume.dims(), volume.spacing(), volume.origin(), params)?;
+    let prepared = Prepared::new(surface, positions, &lattice, background);
+    let boxes = merged(prepared.block_boxes(surface, positions, &lattice, volume));
+    let stored: u128 =
+        boxes.iter().map(|(lo, hi)| (0..3).map(|a| (hi[a] - lo[a]) as u128).product::<u128>()).sum();
+    if stored > (1u128 << 32) {
+        let f = lattice.fine;
+        return Err(UpscaleError::Invalid(format!(
+            "{stored} voxels in blocks of a {}x{}x{} lattice is too large",
+            f[0], f[1], f[2]
+        )));
+    }
+    let k = lattice.k;
+    let dims = lattice.dims;
+    let mut blocks = Vec::with_capacity(boxes.len());
+    for (lo, hi) in boxes {
+        // The source voxels of the box's fine voxels and their neighbours, dense.
+        let slo = lo.map(|l| (l / k).saturating_sub(1));
+        let shi = [0, 1, 2].map(|a| ((hi[a] - 1) / k + 2).min(dims[a]));
+        let mut window = Array3::from_elem((shi[0] - slo[0], shi[1] - slo[1], shi[2] - slo[2]), background);
+        for b in volume.blocks() {
+            let (blo, bhi) = b.bounds();
+            let (clo, chi) = ([0, 1, 2].map(|a| blo[a].max(slo[a])), [0, 1, 2].map(|a| bhi[a].min(shi[a])));
+            if (0..3).any(|a| clo[a] >= chi[a]) {
+                continue;
+            }
+            let (mut to, mut from) = (window.view_mut(), b.labels.view());
+            for a in 0..3 {
+                to.slice_axis_inplace(Axis(a), Slice::from(clo[a] - slo[a]..chi[a] - slo[a]));
+                from.slice_axis_inplace(Axis(a), Slice::from(clo[a] - blo[a]..chi[a] - blo[a]));
+            }
+            to.assign(&from);
+        }
+        let source = |v: Voxel| -> Option<u32> {
+            if (0..3).any(|a| v[a] < 0 || v[a] as usize >= dims[a]) {
+                return None;
+            }
+            let w = [0, 1, 2].map(|a| (v[a] as usize).wrapping_sub(slo[a]));
+            match window.get(w) {
+                Some(&l) => Some(l),
+                None => Some(volume.label(v)),
+            }
+        };
+        let labels = prepared.fill(&lattice, lo, hi, &source);
+        if labels.iter().all(|&l| l == 0) {
+            continue;
+        }
+        let shape = (hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]).f();
+        let labels =
+            Array3::from_shape_vec(shape, labels).map_err(|e| UpscaleError::Invalid(e.to_string()))?;
+        blocks.push(Block { offset: lo, labels });
+    }
+    let out = BlockVolume::new(lattice.fine, blocks, 0)?
+        .with_spacing(lattice.h)?
+        .with_origin(lattice.corner0 + 0.5 * lattice.h)?;
+    Ok(out)
+}
+
+/// Boxes `[lo, hi)` merged into their bounding boxes until every two are one voxel apart
+/// along some axis (a [`BlockVolume`]'s blocks).
+fn merged(mut boxes: Vec<([usize; 3], [usize; 3])>) -> Vec<([usize; 3], [usize; 3])> {
+    let touch = |a: &([usize; 3], [usize; 3]), b: &([usize; 3], [usize; 3])| {
+        (0..3).all(|k| b.0[k] <= a.1[k] && a.0[k] <= b.1[k])
+    };
+    loop {
+        boxes.sort_unstable();
+        let mut out: Vec<([usize; 3], [usize; 3])> = Vec::with_capacity(boxes.len());
+        let mut changed = false;
+        'next: for b in boxes {
+            // Sorted by their low x: a box can only touch the kept ones that reach it.
+            for kept in out.iter_mut().rev() {
+                if touch(kept, &b) {
+                    for k in 0..3 {
+                        kept.0[k] = kept.0[k].min(b.0[k]);
+                        kept.1[k] = kept.1[k].max(b.1[k]);
                     }
+                    changed = true;
+                    continue 'next;
                 }
             }
-            out.into_iter()
-        })
-        .collect();
-    crossings.par_sort_unstable_by(|a, b| a.column.cmp(&b.column).then(a.z.total_cmp(&b.z)));
+            out.push(b);
+        }
+        boxes = out;
+        if !changed {
+            return boxes;
+        }
+    }
+}
 
-    // Quads near each source voxel, for labels near the surface: bucket the regularized
-    // quad centres by the source voxel that holds them.
-    let cell_of = |p: DVec3| -> Option<[usize; 3]> {
-        let c = ((p - corner0) / volume.spacing()).floor();
-        (0..3).all(|a| c[a] >= 0.0 && (c[a] as usize) < dims[a]).then_some([
+/// The fine lattice of an upscale.
+struct Lattice {
+    k: usize,
+    /// The source lattice's dimensions and voxel size.
+    dims: [usize; 3],
+    spacing: DVec3,
+    /// The fine lattice's dimensions and voxel size.
+    fine: [usize; 3],
+    h: DVec3,
+    /// The volume's min corner (fine voxel `i` has its centre at `corner0 + (i + 1/2) h`).
+    corner0: DVec3,
+}
+
+impl Lattice {
+    fn new(
+        surface: &DigitalSurface,
+        positions: &[DVec3],
+        dims: [usize; 3],
+        spacing: DVec3,
+        origin: DVec3,
+        params: &UpscaleParams,
+    ) -> Result<Lattice, UpscaleError> {
+        let k = params.factor;
+        if !(1..=16).contains(&k) {
+            return Err(UpscaleError::Invalid(format!("factor {k}: must be in 1..=16")));
+        }
+        if positions.len() != surface.num_vertices() {
+            return Err(UpscaleError::Invalid(format!(
+                "{} positions for {} vertices",
+                positions.len(),
+                surface.num_vertices()
+            )));
+        }
+        let fine = dims.map(|d| d * k);
+        Ok(Lattice { k, dims, spacing, fine, h: spacing / k as f64, corner0: origin - 0.5 * spacing })
+    }
+
+    fn centre(&self, i: [usize; 3]) -> DVec3 {
+        self.corner0 + (DVec3::new(i[0] as f64, i[1] as f64, i[2] as f64) + 0.5) * self.h
+    }
+
+    /// The source voxel holding `p`, if in the lattice.
+    fn cell_of(&self, p: DVec3) -> Option<[usize; 3]> {
+        let c = ((p - self.corner0) / self.spacing).floor();
+        (0..3).all(|a| c[a] >= 0.0 && (c[a] as usize) < self.dims[a]).then_some([
             c.x as usize,
             c.y as usize,
             c.z as usize,
         ])
-    };
-    let mut bucket_of: Vec<(usize, u32)> = boundary
-        .iter()
-        .filter_map(|&s| {
+    }
+
+    /// The source voxel's index, x fastest.
+    fn key(&self, v: [usize; 3]) -> u64 {
+        v[0] as u64 + self.dims[0] as u64 * (v[1] as u64 + self.dims[1] as u64 * v[2] as u64)
+    }
+}
+
+/// What the fill reads: the triangles' crossings of the fine columns, and the quads near
+/// each source voxel.
+struct Prepared<'a> {
+    surface: &'a DigitalSurface,
+    positions: &'a [DVec3],
+    background: u32,
+    /// The quads bounding the solid (the background on their outer side).
+    boundary: Vec<usize>,
+    /// Sorted by column, then height.
+    crossings: Vec<Crossing>,
+    /// `(source voxel key, quad)`, sorted: the quads whose centre each source voxel holds.
+    bucket_of: Vec<(u64, u32)>,
+}
+
+impl<'a> Prepared<'a> {
+    fn new(surface: &'a DigitalSurface, positions: &'a [DVec3], lattice: &Lattice, background: u32) -> Self {
+        let background_region = surface.regions().background();
+        let (fine, h, corner0) = (lattice.fine, lattice.h, lattice.corner0);
+        // Crossings of the fine columns by the triangles bounding the solid.
+        let boundary: Vec<usize> = surface
+            .surfels()
+            .iter()
+            .enumerate()
+            .filter(|(_, s)| Some(s.regions[1]) == background_region && s.labels[0] != background)
+            .map(|(i, _)| i)
+            .collect();
+        let mut crossings: Vec<Crossing> = boundary
+            .par_iter()
+            .flat_map_iter(|&s| {
+                let q = surface.surfels()[s].vertices.map(|v| positions[v.index()]);
+                let mut out = Vec::new();
+                for tri in [[q[0], q[1], q[2]], [q[0], q[2], q[3]]] {
+                    let mut p = tri.map(|v| DVec2::new(v.x, v.y));
+                    let mut z = tri.map(|v| v.z);
+                    let area = (p[1] - p[0]).perp_dot(p[2] - p[0]);
+                    if area == 0.0 {
+                        continue; // vertical in projection: no column crosses its interior
+                    }
+                    if area < 0.0 {
+                        p.swap(1, 2);
+                        z.swap(1, 2);
+                    }
+                    let lo = p[0].min(p[1]).min(p[2]);
+                    let hi = p[0].max(p[1]).max(p[2]);
+                    let i0 = (((lo.x - corner0.x) / h.x - 0.5).ceil().max(0.0)) as usize;
+                    let j0 = (((lo.y - corner0.y) / h.y - 0.5).ceil().max(0.0)) as usize;
+                    let i1 = (((hi.x - corner0.x) / h.x - 0.5).floor()).min(fine[0] as f64 - 1.0);
+                    let j1 = (((hi.y - corner0.y) / h.y - 0.5).floor()).min(fine[1] as f64 - 1.0);
+                    if i1 < 0.0 || j1 < 0.0 {
+                        continue;
+                    }
+                    for j in j0..=j1 as usize {
+                        for i in i0..=i1 as usize {
+                            let c = lattice.centre([i, j, 0]);
+                            let pc = DVec2::new(c.x, c.y);
+                            let mut w = [0.0; 3];
+                            let mut inside = true;
+                            for e in 0..3 {
+                                let (v, top_left) = edge(p[e], p[(e + 1) % 3], pc);
+                                if v < 0.0 || (v == 0.0 && !top_left) {
+                                    inside = false;
+                                    break;
+                                }
+                                w[(e + 2) % 3] = v;
+                            }
+                            if inside {
+                                let sum = w[0] + w[1] + w[2];
+                                let zc = (w[0] * z[0] + w[1] * z[1] + w[2] * z[2]) / sum;
+                                out.push(Crossing { column: i as u64 + fine[0] as u64 * j as u64, z: zc });
+                            }
+                        }
+                    }
+                }
+                out.into_iter()
+            })
+            .collect();
+        crossings.par_sort_unstable_by(|a, b| a.column.cmp(&b.column).then(a.z.total_cmp(&b.z)));
+        // Quads near each source voxel, for labels near the surface: bucket the regularized
+        // quad centres by the source voxel that holds them.
+        let quad_centre = |s: usize| {
             let q = surface.surfels()[s].vertices.map(|v| positions[v.index()]);
-            let c = (q[0] + q[1] + q[2] + q[3]) / 4.0;
-            cell_of(c).map(|v| (v[0] + dims[0] * (v[1] + dims[1] * v[2]), s as u32))
-        })
-        .collect();
-    bucket_of.sort_unstable();
-    let quad_centre = |s: usize| {
-        let q = surface.surfels()[s].vertices.map(|v| positions[v.index()]);
+            (q[0] + q[1] + q[2] + q[3]) / 4.0
+        };
+        let mut bucket_of: Vec<(u64, u32)> = boundary
+            .iter()
+            .filter_map(|&s| lattice.cell_of(quad_centre(s)).map(|v| (lattice.key(v), s as u32)))
+            .collect();
+        bucket_of.sort_unstable();
+        Prepared { surface, positions, background, boundary, crossings, bucket_of }
+    }
+
+    fn quad_centre(&self, s: usize) -> DVec3 {
+        let q = self.surface.surfels()[s].vertices.map(|v| self.positions[v.index()]);
         (q[0] + q[1] + q[2] + q[3]) / 4.0
-    };
-    let label_at = |p: DVec3| -> u32 {
-        let Some(v) = cell_of(p) else { return 0 };
-        let solid = |x: i64, y: i64, z: i64| volume.label([x, y, z]).is_some_and(|l| l != background);
+    }
+
+    /// The label of a fine voxel inside the smooth surface, centred at `p`; `source`
+    /// gives the source volume's labels (`None` outside its lattice).
+    fn label_at(&self, lattice: &Lattice, p: DVec3, source: &impl Fn(Voxel) -> Option<u32>) -> u32 {
+        let background = self.background;
+        let dims = lattice.dims;
+        let Some(v) = lattice.cell_of(p) else { return 0 };
         let [x, y, z] = v.map(|c| c as i64);
-        if solid(x, y, z) {
-            return volume.labels()[v];
+        if let Some(l) = source([x, y, z]).filter(|&l| l != background) {
+            return l;
         }
         let mut best: Option<(f64, u32)> = None;
         for dz in -1..=1i64 {
@@ -217,15 +387,15 @@ pub fn upscale(
                     if (0..3).any(|a| n[a] < 0 || n[a] as usize >= dims[a]) {
                         continue;
                     }
-                    let key = n[0] as usize + dims[0] * (n[1] as usize + dims[1] * n[2] as usize);
-                    let start = bucket_of.partition_point(|e| e.0 < key);
-                    for &(kk, s) in &bucket_of[start..] {
+                    let key = lattice.key(n.map(|c| c as usize));
+                    let start = self.bucket_of.partition_point(|e| e.0 < key);
+                    for &(kk, s) in &self.bucket_of[start..] {
                         if kk != key {
                             break;
                         }
-                        let d = (quad_centre(s as usize) - p).length_squared();
+                        let d = (self.quad_centre(s as usize) - p).length_squared();
                         if best.is_none_or(|b| d < b.0) {
-                            best = Some((d, surface.surfels()[s as usize].labels[0]));
+                            best = Some((d, self.surface.surfels()[s as usize].labels[0]));
                         }
                     }
                 }
@@ -239,9 +409,7 @@ pub fn upscale(
                 for dz in -1..=1i64 {
                     for dy in -1..=1i64 {
                         for dx in -1..=1i64 {
-                            if let Some(l) =
-                                volume.label([x + dx, y + dy, z + dz]).filter(|&l| l != background)
-                            {
+                            if let Some(l) = source([x + dx, y + dy, z + dz]).filter(|&l| l != background) {
                                 let d = dx * dx + dy * dy + dz * dz;
                                 if best.is_none_or(|b| d < b.0) {
                                     best = Some((d, l));
@@ -253,42 +421,99 @@ pub fn upscale(
                 best.map_or(background, |b| b.1)
             }
         }
-    };
-
-    // Fill each column by parity, in parallel over columns.
-    let columns = fine[0] * fine[1];
-    let starts: Vec<usize> =
-        (0..=columns).map(|c| crossings.partition_point(|x| (x.column as usize) < c)).collect();
-    let column_labels: Vec<Vec<u32>> = (0..columns)
-        .into_par_iter()
-        .map(|c| {
-            let (i, j) = (c % fine[0], c / fine[0]);
-            let zs = &crossings[starts[c]..starts[c + 1]];
-            let mut out = vec![0u32; fine[2]];
-            let mut below = 0;
-            for (kz, slot) in out.iter_mut().enumerate() {
-                let p = centre([i, j, kz]);
-                while below < zs.len() && zs[below].z < p.z {
-                    below += 1;
-                }
-                if below % 2 == 1 {
-                    *slot = label_at(p);
-                }
-            }
-            out
-        })
-        .collect();
-    let mut labels = vec![0u32; fine[0] * fine[1] * fine[2]];
-    for (c, col) in column_labels.iter().enumerate() {
-        for (kz, &l) in col.iter().enumerate() {
-            labels[c + columns * kz] = l;
-        }
     }
-    let out = LabelVolume::from_x_fastest(fine, labels)?
-        .with_spacing(h)?
-        .with_origin(corner0 + 0.5 * h)?
-        .with_background(Some(0));
-    Ok(out)
+
+    /// The fine voxels of the box `[lo, hi)`, `x` fastest: inside by parity of the
+    /// crossings below each centre (all of its column's), labelled by [`Self::label_at`].
+    fn fill(
+        &self,
+        lattice: &Lattice,
+        lo: [usize; 3],
+        hi: [usize; 3],
+        source: &(impl Fn(Voxel) -> Option<u32> + Sync),
+    ) -> Vec<u32> {
+        let size = [0, 1, 2].map(|a| hi[a] - lo[a]);
+        let columns = size[0] * size[1];
+        // In parallel over columns.
+        let column_labels: Vec<Vec<u32>> = (0..columns)
+            .into_par_iter()
+            .map(|c| {
+                let (i, j) = (lo[0] + c % size[0], lo[1] + c / size[0]);
+                let column = i as u64 + lattice.fine[0] as u64 * j as u64;
+                let start = self.crossings.partition_point(|x| x.column < column);
+                let end = start + self.crossings[start..].partition_point(|x| x.column == column);
+                let zs = &self.crossings[start..end];
+                let mut out = vec![0u32; size[2]];
+                let mut below = 0;
+                for (kz, slot) in out.iter_mut().enumerate() {
+                    let p = lattice.centre([i, j, lo[2] + kz]);
+                    while below < zs.len() && zs[below].z < p.z {
+                        below += 1;
+                    }
+                    if below % 2 == 1 {
+                        *slot = self.label_at(lattice, p, source);
+                    }
+                }
+                out
+            })
+            .collect();
+        let mut labels = vec![0u32; columns * size[2]];
+        for (c, col) in column_labels.iter().enumerate() {
+            for (kz, &l) in col.iter().enumerate() {
+                labels[c + columns * kz] = l;
+            }
+        }
+        labels
+    }
+
+    /// The fine boxes `[lo, hi)` around each block's quads bounding the solid (their
+    /// regularized positions, with a fine voxel to spare), within the lattice: a block's
+    /// quads bounding the solid bound its solid voxels, a closed surface, which crosses
+    /// each column an even number of times; outside its box, all of them on one side of
+    /// a centre, so that no fine voxel outside every box is inside.
+    fn block_boxes(
+        &self,
+        surface: &DigitalSurface,
+        positions: &[DVec3],
+        lattice: &Lattice,
+        volume: &BlockVolume,
+    ) -> Vec<([usize; 3], [usize; 3])> {
+        // Blocks share no lattice corner, so each connected part of the surface lies in
+        // one block: the one holding the solid voxel of any of its quads.
+        let mut block_of_part: std::collections::HashMap<u32, usize> = Default::default();
+        let mut bounds: std::collections::BTreeMap<usize, (DVec3, DVec3)> = Default::default();
+        for &s in &self.boundary {
+            let part = surface.surfel_component(voxreg_digisurf::SurfelId(s as u32));
+            let block = *block_of_part.entry(part).or_insert_with(|| {
+                let v = surface.surfels()[s].voxels()[0];
+                volume
+                    .blocks()
+                    .iter()
+                    .position(|b| {
+                        let (lo, hi) = b.bounds();
+                        (0..3).all(|a| v[a] >= lo[a] as i64 && v[a] < hi[a] as i64)
+                    })
+                    .unwrap_or(usize::MAX)
+            });
+            let e = bounds.entry(block).or_insert((DVec3::INFINITY, DVec3::NEG_INFINITY));
+            for v in surface.surfels()[s].vertices {
+                let p = positions[v.index()];
+                e.0 = e.0.min(p);
+                e.1 = e.1.max(p);
+            }
+        }
+        bounds
+            .into_values()
+            .map(|(min, max)| {
+                let lo = ((min - lattice.corner0) / lattice.h).floor() - 1.0;
+                let hi = ((max - lattice.corner0) / lattice.h).ceil() + 1.0;
+                let lo = [0, 1, 2].map(|a| lo[a].clamp(0.0, lattice.fine[a] as f64) as usize);
+                let hi = [0, 1, 2].map(|a| hi[a].clamp(0.0, lattice.fine[a] as f64) as usize);
+                (lo, hi)
+            })
+            .filter(|(lo, hi)| (0..3).all(|a| lo[a] < hi[a]))
+            .collect()
+    }
 }
 
 #[cfg(test)]

@@ -20,6 +20,9 @@
 //!
 //! - [`Viewer::bind`], [`Viewer::open`], [`Viewer::serve`]: listen, queue the first input
 //!   ([`Loaded`]), answer requests; [`StopHandle`] stops it.
+//! - [`read_volume`]: an input read as the command line reads it, a MagicaVoxel scene of
+//!   models far apart as blocks ([`Volume::Blocks`]): such a scene opens, is meshed and
+//!   edited within the memory of its models' boxes, not of their bounding box.
 //! - [`Tuning`]: the page's parameter panel, a [`Preset`](voxreg_regularize::Preset) and
 //!   the library's [`Overrides`](voxreg_regularize::Overrides), resolved into
 //!   [`Params`](voxreg_regularize::Params) as the command line resolves its options, and
@@ -46,7 +49,7 @@
 //! # let volume = voxreg_digisurf::LabelVolume::from_fn([3, 3, 3], |_| 1);
 //! let loaded = Loaded {
 //!     name: "ball.vol".into(),
-//!     volume,
+//!     volume: volume.into(),
 //!     palette: None,
 //!     preset: Preset::Default,
 //!     overrides: Overrides::default(),
@@ -73,7 +76,7 @@ mod server;
 mod session;
 mod tuning;
 
-pub use model::Loaded;
+pub use model::{read_volume, Loaded, Volume};
 pub use server::{Loader, StopHandle, Viewer};
 pub use tuning::Tuning;
 

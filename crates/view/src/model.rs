@@ -1,18 +1,73 @@
 //! What the page draws of one surface: its quads, face groups and colours, the staircase
 //! positions, and the arrays the server sends as little-endian binary.
 
+use std::path::Path;
+
 use serde::Serialize;
-use voxreg_digisurf::{DigitalSurface, LabelVolume};
-use voxreg_io::{interface_name, Palette, QuadMesh};
+use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelVolume};
+use voxreg_io::{interface_name, InputError, InputOptions, Palette, QuadMesh};
 use voxreg_regularize::{Overrides, Preset};
+
+/// The voxels of an input: every voxel stored, or (a MagicaVoxel scene of models far
+/// apart) blocks in a lattice of background, whose surface is that of the volume made
+/// dense, id for id, for the memory and time of the blocks alone.
+#[derive(Clone, Debug)]
+pub enum Volume {
+    /// Every voxel stored.
+    Dense(LabelVolume),
+    /// The models' own boxes ([`voxreg_io::read_sparse_input`]).
+    Blocks(BlockVolume),
+}
+
+impl From<LabelVolume> for Volume {
+    fn from(v: LabelVolume) -> Volume {
+        Volume::Dense(v)
+    }
+}
+
+impl From<BlockVolume> for Volume {
+    fn from(v: BlockVolume) -> Volume {
+        Volume::Blocks(v)
+    }
+}
+
+impl Volume {
+    /// Number of voxels of the lattice along x, y and z.
+    pub fn dims(&self) -> [usize; 3] {
+        match self {
+            Volume::Dense(v) => v.dims(),
+            Volume::Blocks(v) => v.dims(),
+        }
+    }
+}
+
+/// Reads an input as `voxreg regularize` does ([`voxreg_io::read_input`] with `options`),
+/// from `bytes` where given (an upload: `path` only names it, nothing else is read): as
+/// blocks where it is a MagicaVoxel scene of models far apart
+/// ([`voxreg_io::read_sparse_input`]), so that such a scene opens within the memory of its
+/// models' boxes, else dense. Returns the volume and the file's palette, if any.
+pub fn read_volume(
+    path: &Path,
+    bytes: Option<&[u8]>,
+    options: &InputOptions<'_>,
+) -> Result<(Volume, Option<Palette>), InputError> {
+    if let Some(scene) = voxreg_io::read_sparse_input(path, bytes, options)? {
+        return Ok((Volume::Blocks(scene.volume), Some(scene.palette)));
+    }
+    let input = match bytes {
+        Some(b) => voxreg_io::read_input_bytes(b, path, options)?,
+        None => voxreg_io::read_input(path, options)?,
+    };
+    Ok((Volume::Dense(input.volume), input.palette))
+}
 
 /// An input the viewer shows: the volume, its palette, and the parameters to start from.
 #[derive(Clone, Debug)]
 pub struct Loaded {
     /// The file name shown on the page and in the equivalent command line.
     pub name: String,
-    /// The labelled volume.
-    pub volume: LabelVolume,
+    /// The labelled volume, dense or as blocks ([`read_volume`]).
+    pub volume: Volume,
     /// The `.vox` palette (colours of the labels), if any.
     pub palette: Option<Palette>,
     /// The preset of the first solve.

@@ -9,14 +9,14 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
 
 use glam::DVec3;
-use voxreg_digisurf::{LabelVolume, RegionMap};
+use voxreg_digisurf::{Block, BlockVolume, RegionMap, SurfaceError};
 use voxreg_io::{Palette, QuadMesh};
 use voxreg_regularize::{Interrupt, Output, Params, RegularizeError, Regularizer, Run, Stage};
 
 use crate::levels::Levels;
 use crate::model::{f32_bytes, Model};
 use crate::tuning::Tuning;
-use crate::Loaded;
+use crate::{Loaded, Volume};
 
 /// The least time between two streamed iterates (the first of a run is sent at once).
 const FRAME_INTERVAL: Duration = Duration::from_millis(60);
@@ -371,14 +371,24 @@ fn apply_edit(shared: &Shared, c: &mut Current, edit: &Edit) -> Result<(), Strin
         ));
     };
     let at = [index[0], index[1], index[2]];
-    let labels = c.loaded.volume.labels_mut();
-    let before = labels[at];
-    labels[at] = label;
-    let regularizer = match build(&c.loaded.volume, &c.regions, &c.loaded.name) {
-        Ok(r) => r,
-        Err(e) => {
-            c.loaded.volume.labels_mut()[at] = before;
-            return Err(e);
+    let regularizer = match &mut c.loaded.volume {
+        Volume::Dense(volume) => {
+            let before = volume.labels()[at];
+            volume.labels_mut()[at] = label;
+            let built = build(&c.loaded.volume, &c.regions, &c.loaded.name);
+            if built.is_err() {
+                if let Volume::Dense(volume) = &mut c.loaded.volume {
+                    volume.labels_mut()[at] = before;
+                }
+            }
+            built?
+        }
+        Volume::Blocks(volume) => {
+            let edited =
+                Volume::Blocks(with_label(volume, at, label).map_err(|e| format!("{}: {e}", c.loaded.name))?);
+            let built = build(&edited, &c.regions, &c.loaded.name)?;
+            c.loaded.volume = edited;
+            built
         }
     };
     let new = Arc::clone(regularizer.surface());
@@ -407,20 +417,100 @@ fn apply_edit(shared: &Shared, c: &mut Current, edit: &Edit) -> Result<(), Strin
 /// lower, above [`voxreg_regularize::BYTES_PER_SURFEL_CLAMPED`].
 const SESSION_BYTES_PER_SURFEL: u64 = 2_700;
 
+/// What a session keeps per `(y, z)` line of a blocks volume's lattice beyond its surface:
+/// the integral-invariant normals' runs along x (an offset, a run, a region, a flag and a
+/// queue entry per line; the command line counts the same). A dense volume holds more
+/// voxels than lines.
+const BYTES_PER_LINE: u64 = 32;
+
 /// The regularizer of `volume`, refused up front (as the CLI does) when a session on it
-/// would not fit the memory limit; the error is the page's one-line message.
-fn build(volume: &LabelVolume, regions: &RegionMap, name: &str) -> Result<Regularizer, String> {
-    let surfels = voxreg_digisurf::DigitalSurface::count_surfels(volume, regions)
-        .map_err(|e| format!("{name}: {e}"))?;
-    let bytes =
-        surfels.saturating_mul(SESSION_BYTES_PER_SURFEL).saturating_add(voxreg_regularize::BYTES_FIXED);
+/// would not fit the memory limit; the error is the page's one-line message. Blocks are
+/// built as blocks ([`Regularizer::from_blocks`]): the memory of the models' boxes.
+fn build(volume: &Volume, regions: &RegionMap, name: &str) -> Result<Regularizer, String> {
+    let (surfels, lines) = match volume {
+        Volume::Dense(v) => (voxreg_digisurf::DigitalSurface::count_surfels(v, regions), 0),
+        Volume::Blocks(v) => {
+            let [_, ny, nz] = v.dims().map(|d| d as u64);
+            let lines = ny.saturating_mul(nz).saturating_mul(BYTES_PER_LINE);
+            (voxreg_digisurf::DigitalSurface::count_surfels_of_blocks(v, regions), lines)
+        }
+    };
+    let surfels = surfels.map_err(|e| format!("{name}: {e}"))?;
+    let bytes = surfels
+        .saturating_mul(SESSION_BYTES_PER_SURFEL)
+        .saturating_add(voxreg_regularize::BYTES_FIXED)
+        .saturating_add(lines);
     voxreg_io::check_memory(
         std::path::Path::new(name),
         &format!("the regularization of its {surfels} surfels"),
         u128::from(bytes),
     )
     .map_err(|e| e.to_string())?;
-    Regularizer::from_volume(volume, regions).map_err(|e| format!("{name}: {e}"))
+    match volume {
+        Volume::Dense(v) => Regularizer::from_volume(v, regions),
+        Volume::Blocks(v) => Regularizer::from_blocks(v, regions),
+    }
+    .map_err(|e| format!("{name}: {e}"))
+}
+
+/// `volume` with voxel `at` set to `label`: inside a block, that block's voxel; outside
+/// every block, a new one-voxel block, merged with the blocks it touches (and so on) into
+/// their bounding box, so that the blocks stay one voxel apart. The voxels stay those of
+/// the volume made dense with `at` set.
+fn with_label(volume: &BlockVolume, at: [usize; 3], label: u32) -> Result<BlockVolume, SurfaceError> {
+    let mut blocks = volume.blocks().to_vec();
+    let inside = |b: &Block| {
+        let (lo, hi) = b.bounds();
+        (0..3).all(|k| lo[k] <= at[k] && at[k] < hi[k])
+    };
+    if let Some(b) = blocks.iter_mut().find(|b| inside(b)) {
+        let o = b.offset;
+        b.labels[[at[0] - o[0], at[1] - o[1], at[2] - o[2]]] = label;
+    } else if label != volume.background() {
+        let mut new = Block { offset: at, labels: ndarray::Array3::from_elem((1, 1, 1), label) };
+        loop {
+            let (lo, hi) = new.bounds();
+            let touching: Vec<usize> = (0..blocks.len())
+                .filter(|&i| {
+                    let (blo, bhi) = blocks[i].bounds();
+                    (0..3).all(|k| blo[k] <= hi[k] && lo[k] <= bhi[k])
+                })
+                .collect();
+            if touching.is_empty() {
+                break;
+            }
+            let (mut mlo, mut mhi) = (lo, hi);
+            for &i in &touching {
+                let (blo, bhi) = blocks[i].bounds();
+                for k in 0..3 {
+                    mlo[k] = mlo[k].min(blo[k]);
+                    mhi[k] = mhi[k].max(bhi[k]);
+                }
+            }
+            let shape = (mhi[0] - mlo[0], mhi[1] - mlo[1], mhi[2] - mlo[2]);
+            let mut labels = ndarray::Array3::from_elem(shape, volume.background());
+            let mut parts = vec![new];
+            for &i in touching.iter().rev() {
+                parts.push(blocks.swap_remove(i));
+            }
+            for part in &parts {
+                let (plo, phi) = part.bounds();
+                let mut view = labels.view_mut();
+                for k in 0..3 {
+                    view.slice_axis_inplace(
+                        ndarray::Axis(k),
+                        ndarray::Slice::from(plo[k] - mlo[k]..phi[k] - mlo[k]),
+                    );
+                }
+                view.assign(&part.labels);
+            }
+            new = Block { offset: mlo, labels };
+        }
+        blocks.push(new);
+    }
+    BlockVolume::new(volume.dims(), blocks, volume.background())?
+        .with_spacing(volume.spacing())?
+        .with_origin(volume.origin())
 }
 
 /// Publishes the current surface, drawn at `positions` (a voxel edit: the last result
@@ -617,14 +707,58 @@ pub(crate) fn mesh_file(state: &State, ext: &str, level: usize) -> Result<Vec<u8
 mod tests {
     use super::*;
 
+    use voxreg_digisurf::LabelVolume;
+
     #[test]
     fn a_surface_over_the_memory_limit_is_refused_before_it_is_built() {
-        let volume = LabelVolume::from_fn([8, 8, 8], |[x, y, z]| u32::from((x + y + z) % 2 == 0));
+        let volume: Volume =
+            LabelVolume::from_fn([8, 8, 8], |[x, y, z]| u32::from((x + y + z) % 2 == 0)).into();
         let regions = RegionMap::per_label();
         let message =
             voxreg_io::with_max_memory(1 << 20, || build(&volume, &regions, "noise.vox")).unwrap_err();
         assert!(message.starts_with("noise.vox: the regularization of its"), "{message}");
         assert!(message.contains("memory limit"), "{message}");
         assert!(build(&volume, &regions, "noise.vox").is_ok());
+    }
+
+    /// Edits of a blocks volume give the voxels of the dense volume edited alike, the
+    /// blocks one voxel apart: inside a block, next to one (merged into it), bridging two
+    /// (all three merged), and alone.
+    #[test]
+    fn block_edits_are_the_dense_edits() {
+        let block = |offset: [usize; 3], dims: (usize, usize, usize), label: u32| Block {
+            offset,
+            labels: ndarray::Array3::from_shape_fn(dims, |(x, y, z)| label + ((x + y + z) % 2) as u32),
+        };
+        let blocks = vec![
+            block([0, 0, 0], (2, 2, 2), 1),
+            block([3, 0, 0], (2, 1, 2), 3),
+            block([0, 4, 4], (1, 1, 1), 5),
+        ];
+        let mut volume = BlockVolume::new([6, 6, 6], blocks, 0)
+            .unwrap()
+            .with_spacing(glam::DVec3::new(1.0, 2.0, 0.5))
+            .unwrap()
+            .with_origin(glam::DVec3::splat(-3.0))
+            .unwrap();
+        let mut dense = volume.to_dense().unwrap();
+        for (at, label) in
+            [([1, 1, 1], 0), ([2, 0, 0], 7), ([2, 0, 1], 0), ([5, 5, 5], 9), ([0, 3, 4], 2), ([4, 4, 0], 0)]
+        {
+            volume = with_label(&volume, at, label).unwrap();
+            dense.labels_mut()[at] = label;
+            assert_eq!(volume.to_dense().unwrap(), dense, "{at:?} {label}");
+        }
+        // [2, 0, 0] joined the first two blocks, [0, 3, 4] the third; [5, 5, 5] is alone.
+        assert_eq!(
+            volume.blocks().len(),
+            3,
+            "{:?}",
+            volume.blocks().iter().map(Block::bounds).collect::<Vec<_>>()
+        );
+        let regions = RegionMap::per_label();
+        let a = build(&Volume::Blocks(volume), &regions, "s.vox").unwrap();
+        let b = build(&Volume::Dense(dense), &regions, "s.vox").unwrap();
+        assert_eq!(a.surface().surfels(), b.surface().surfels());
     }
 }

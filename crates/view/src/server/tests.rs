@@ -21,7 +21,7 @@ fn ball(name: &str) -> Loaded {
     });
     Loaded {
         name: name.into(),
-        volume,
+        volume: volume.into(),
         palette: None,
         preset: Preset::Papers,
         overrides: Overrides::default(),
@@ -34,7 +34,7 @@ fn load(name: &str, bytes: &[u8]) -> Result<Loaded, String> {
         .map_err(|e| e.to_string())?;
     Ok(Loaded {
         name: name.to_string(),
-        volume: v.volume,
+        volume: v.volume.into(),
         palette: v.palette,
         preset: Preset::Papers,
         overrides: Overrides::default(),
@@ -492,7 +492,7 @@ fn a_newer_solve_stops_the_running_one() {
     overrides.solver = Some(SolverChoice::Cg);
     let r = start_with(Loaded {
         name: "big.vol".into(),
-        volume,
+        volume: volume.into(),
         palette: None,
         preset: Preset::Default,
         overrides,
@@ -523,7 +523,7 @@ fn a_re_solve_of_the_same_surface_starts_from_the_last_result() {
     let (copy, base) = (volume.clone(), overrides.clone());
     let r = start_with(Loaded {
         name: "ball.vol".into(),
-        volume,
+        volume: volume.into(),
         palette: None,
         preset: Preset::Papers,
         overrides,
@@ -582,7 +582,7 @@ fn a_voxel_art_re_solve_starts_from_the_last_result() {
     .with_background(Some(0));
     let r = start_with(Loaded {
         name: "art.vox".into(),
-        volume,
+        volume: volume.into(),
         palette: None,
         preset: Preset::VoxelArt,
         overrides: Overrides::default(),
@@ -642,7 +642,7 @@ fn adding_a_voxel_outside_the_volume_is_refused_with_a_message() {
     let volume = LabelVolume::from_fn([3, 3, 3], |_| 1).with_background(Some(0));
     let r = start_with(Loaded {
         name: "cube.vol".into(),
-        volume,
+        volume: volume.into(),
         palette: None,
         preset: Preset::Papers,
         overrides: Overrides::default(),
