@@ -61,9 +61,21 @@ pub(crate) fn input_error(args: &InputArgs, e: InputError) -> anyhow::Error {
 
 /// What a regularization keeps per `(y, z)` line of the lattice beyond the surface: the
 /// integral-invariant normals' runs along x (an offset, a run, a region, a flag and a
-/// queue entry per line). Counted for blocks, whose lattice may hold far more lines
-/// than surfels; a dense volume holds more voxels than lines.
+/// queue entry per line), unless the lattice holds 16 times more lines than surfels (then
+/// they keep the lines the surfels touch only). Counted for blocks, whose lattice may
+/// hold far more lines than surfels; a dense volume holds more voxels than lines.
 const BYTES_PER_LINE: u64 = 32;
+
+/// The bytes of the lines of a lattice of `ny * nz` lines around `surfels` surfels
+/// ([`BYTES_PER_LINE`]).
+fn line_bytes(surfels: u64, ny: u64, nz: u64) -> u64 {
+    let lines = ny.saturating_mul(nz);
+    if u128::from(surfels) * 16 < u128::from(lines) {
+        0
+    } else {
+        lines.saturating_mul(BYTES_PER_LINE)
+    }
+}
 
 /// An input volume: dense, or (a MagicaVoxel scene of models far apart) blocks in a
 /// lattice of empty space, whose surface is that of the volume made dense.
@@ -142,8 +154,7 @@ impl Source {
             Source::Blocks(v) => DigitalSurface::count_surfels_of_blocks(v, &params.regions)
                 .map(|s| {
                     let [_, ny, nz] = v.dims().map(|d| d as u64);
-                    let lines = ny.saturating_mul(nz).saturating_mul(BYTES_PER_LINE);
-                    (s, voxreg_regularize::estimated_bytes(s, params).saturating_add(lines))
+                    (s, voxreg_regularize::estimated_bytes(s, params).saturating_add(line_bytes(s, ny, nz)))
                 })
                 .map_err(Into::into),
         };

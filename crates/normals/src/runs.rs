@@ -32,10 +32,23 @@ pub(crate) struct RegionRuns {
     outside: u32,
     /// The open sides `[axis][low, high]`, beyond which lies [`VOID`].
     open: [[bool; 2]; 3],
-    /// Line `y + ny z` owns runs `offsets[line]..offsets[line + 1]`.
-    offsets: Vec<usize>,
+    /// Which runs each line owns.
+    lines: Lines,
     /// The runs, line after line.
     runs: Vec<Run>,
+}
+
+/// Where each line's runs are.
+#[derive(Clone, Debug)]
+enum Lines {
+    /// Line `y + ny z` owns runs `offsets[line]..offsets[line + 1]`.
+    Dense { offsets: Vec<usize> },
+    /// Only the lines surfels touch (`keys`, sorted) own runs, `offsets[i]..offsets[i + 1]`
+    /// for `keys[i]`; any other line is uniform, of the region of the nearest touched
+    /// line below it in y (no surfel between them), or of the outside below the domain:
+    /// `single[region]`, a run of its own. For closed domains whose lattice holds far more
+    /// lines than surfels (scenes of objects far apart): memory of the surface's size.
+    Sparse { keys: Vec<u64>, offsets: Vec<usize>, single: Vec<Run> },
 }
 
 /// Voxels `start..` (up to the next run's start, or the end of the line) of one region.
@@ -48,11 +61,25 @@ pub(crate) struct Run {
 }
 
 impl RegionRuns {
-    /// The runs of the regions of `surface`'s volume.
+    /// The runs of the regions of `surface`'s volume: per line of the lattice, or (a
+    /// closed domain with many more lines than surfels) per line the surfels touch.
     pub(crate) fn new(surface: &DigitalSurface) -> Self {
+        let [_, ny, nz] = surface.dims();
+        let sparse = (surface.num_surfels() as u128) * 16 < (ny as u128) * (nz as u128);
+        Self::with_layout(surface, sparse)
+    }
+
+    /// [`RegionRuns::new`], per touched line if `sparse` and the domain is closed.
+    fn with_layout(surface: &DigitalSurface, sparse: bool) -> Self {
         let [nx, ny, nz] = surface.dims();
         let nlines = ny * nz;
         let line = |y: u32, z: u32| y as usize + ny * z as usize;
+        let open = surface.open_sides();
+        let outside = match surface.regions().background() {
+            Some(r) if open.iter().flatten().any(|&o| !o) => r.0,
+            _ => VOID,
+        };
+        let closed = outside != VOID && !open.iter().flatten().any(|&o| o);
 
         // Surfels perpendicular to x, by line then x: (key, region before, region after).
         let mut crossings: Vec<(u64, u32, u32)> = surface
@@ -67,6 +94,10 @@ impl RegionRuns {
             })
             .collect();
         crossings.sort_unstable_by_key(|c| c.0);
+        let dims = [nx as i64, ny as i64, nz as i64];
+        if sparse && closed {
+            return Self::sparse(surface, dims, outside, open, &crossings);
+        }
 
         // Uniform lines: their region from any surfel perpendicular to y or z touching them.
         let mut uniform = vec![UNKNOWN; nlines];
@@ -137,12 +168,68 @@ impl RegionRuns {
                 visit(l + ny);
             }
         }
-        let open = surface.open_sides();
-        let outside = match surface.regions().background() {
-            Some(r) if open.iter().flatten().any(|&o| !o) => r.0,
-            _ => VOID,
-        };
-        RegionRuns { dims: [nx as i64, ny as i64, nz as i64], outside, open, offsets, runs }
+        RegionRuns { dims, outside, open, lines: Lines::Dense { offsets }, runs }
+    }
+
+    /// The runs of the lines surfels touch ([`Lines::Sparse`]), from `crossings` (the
+    /// surfels perpendicular to x, sorted as in [`RegionRuns::with_layout`]).
+    fn sparse(
+        surface: &DigitalSurface,
+        dims: [i64; 3],
+        outside: u32,
+        open: [[bool; 2]; 3],
+        crossings: &[(u64, u32, u32)],
+    ) -> Self {
+        let [nx, ny, nz] = dims.map(|d| d as u64);
+        // The lines touched by surfels perpendicular to y or z, and their region.
+        let mut marks: Vec<(u64, u32)> = Vec::new();
+        for s in surface.surfels().iter().filter(|s| s.axis != 0) {
+            let (inner, outer) = (s.regions[0].0, s.regions[1].0);
+            let (neg, pos) = if s.flipped { (outer, inner) } else { (inner, outer) };
+            let (y, z) = (u64::from(s.cell[1]), u64::from(s.cell[2]));
+            let (dy, dz) = if s.axis == 1 { (1, 0) } else { (0, 1) };
+            if y < ny && z < nz {
+                marks.push((y + ny * z, pos));
+            }
+            if y >= dy && z >= dz {
+                marks.push(((y - dy) + ny * (z - dz), neg));
+            }
+        }
+        marks.sort_unstable_by_key(|m| m.0);
+        marks.dedup_by_key(|m| m.0);
+        let (mut keys, mut offsets, mut runs) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut c, mut m) = (0, 0);
+        while c < crossings.len() || m < marks.len() {
+            let cl = crossings.get(c).map_or(u64::MAX, |x| x.0 >> 32);
+            let ml = marks.get(m).map_or(u64::MAX, |x| x.0);
+            let l = cl.min(ml);
+            keys.push(l);
+            offsets.push(runs.len());
+            if cl == l {
+                let first = c;
+                while c < crossings.len() && crossings[c].0 >> 32 == l {
+                    c += 1;
+                }
+                let here = &crossings[first..c];
+                if here[0].0 as u32 > 0 {
+                    runs.push(Run { start: 0, region: here[0].1 });
+                }
+                for &(key, _, pos) in here {
+                    if u64::from(key as u32) < nx {
+                        runs.push(Run { start: key as u32, region: pos });
+                    }
+                }
+            } else {
+                runs.push(Run { start: 0, region: marks[m].1 });
+            }
+            if ml == l {
+                m += 1;
+            }
+        }
+        offsets.push(runs.len());
+        let regions = surface.regions().len().max(outside as usize + 1);
+        let single = (0..regions as u32).map(|region| Run { start: 0, region }).collect();
+        RegionRuns { dims, outside, open, lines: Lines::Sparse { keys, offsets, single }, runs }
     }
 
     /// The region beyond the domain at line `(y, z)`, below it in x (`Some(0)`), above it
@@ -171,7 +258,22 @@ impl RegionRuns {
             return None;
         }
         let l = (y + ny * z) as usize;
-        Some(&self.runs[self.offsets[l]..self.offsets[l + 1]])
+        match &self.lines {
+            Lines::Dense { offsets } => Some(&self.runs[offsets[l]..offsets[l + 1]]),
+            Lines::Sparse { keys, offsets, single } => {
+                let i = keys.partition_point(|&k| k < l as u64);
+                if keys.get(i) == Some(&(l as u64)) {
+                    return Some(&self.runs[offsets[i]..offsets[i + 1]]);
+                }
+                // Untouched lines down to the nearest touched one, or to the outside: no
+                // surfel between any two of them.
+                let region = match i.checked_sub(1) {
+                    Some(j) if keys[j] >= (ny * z) as u64 => self.runs[offsets[j]].region,
+                    _ => self.outside,
+                };
+                Some(&single[region as usize..=region as usize])
+            }
+        }
     }
 
     /// The region of all voxels `a..=b` of line `(y, z)` if they share one (outside the
@@ -283,7 +385,12 @@ mod tests {
 
     fn check(volume: &LabelVolume, map: &RegionMap) {
         let surface = DigitalSurface::new(volume, map).unwrap();
-        let runs = RegionRuns::new(&surface);
+        for sparse in [false, true] {
+            check_layout(volume, &surface, &RegionRuns::with_layout(&surface, sparse));
+        }
+    }
+
+    fn check_layout(volume: &LabelVolume, surface: &DigitalSurface, runs: &RegionRuns) {
         let [nx, ny, nz] = volume.dims().map(|d| d as i64);
         for z in -1..=nz {
             for y in -1..=ny {

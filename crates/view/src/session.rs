@@ -419,8 +419,9 @@ const SESSION_BYTES_PER_SURFEL: u64 = 2_700;
 
 /// What a session keeps per `(y, z)` line of a blocks volume's lattice beyond its surface:
 /// the integral-invariant normals' runs along x (an offset, a run, a region, a flag and a
-/// queue entry per line; the command line counts the same). A dense volume holds more
-/// voxels than lines.
+/// queue entry per line), unless the lattice holds 16 times more lines than surfels (then
+/// only the lines the surfels touch; the command line counts the same). A dense volume
+/// holds more voxels than lines.
 const BYTES_PER_LINE: u64 = 32;
 
 /// The regularizer of `volume`, refused up front (as the CLI does) when a session on it
@@ -431,11 +432,12 @@ fn build(volume: &Volume, regions: &RegionMap, name: &str) -> Result<Regularizer
         Volume::Dense(v) => (voxreg_digisurf::DigitalSurface::count_surfels(v, regions), 0),
         Volume::Blocks(v) => {
             let [_, ny, nz] = v.dims().map(|d| d as u64);
-            let lines = ny.saturating_mul(nz).saturating_mul(BYTES_PER_LINE);
-            (voxreg_digisurf::DigitalSurface::count_surfels_of_blocks(v, regions), lines)
+            (voxreg_digisurf::DigitalSurface::count_surfels_of_blocks(v, regions), ny.saturating_mul(nz))
         }
     };
     let surfels = surfels.map_err(|e| format!("{name}: {e}"))?;
+    let lines =
+        if u128::from(surfels) * 16 < u128::from(lines) { 0 } else { lines.saturating_mul(BYTES_PER_LINE) };
     let bytes = surfels
         .saturating_mul(SESSION_BYTES_PER_SURFEL)
         .saturating_add(voxreg_regularize::BYTES_FIXED)
