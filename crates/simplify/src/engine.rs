@@ -216,7 +216,7 @@ fn shared_meet(s: ([u32; 3], [DVec3; 3]), t: ([u32; 3], [DVec3; 3])) -> bool {
             for (e, opp, x1, x2) in [(s1, s2, t1, t2), (s2, s1, t1, t2), (t1, t2, s1, s2), (t2, t1, s1, s2)] {
                 let n = (e - p).cross(opp - p);
                 let len = n.length();
-                if !(len > 0.0) {
+                if len.is_nan() || len <= 0.0 {
                     continue;
                 }
                 let r = p + n * ((e - p).length() / len);
