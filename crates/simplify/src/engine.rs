@@ -805,40 +805,56 @@ impl<'m> Engine<'m> {
             sc.tested.clear();
             sc.tested.extend(sc.after[changed..].iter().map(|(tri, _, _)| (*tri, tri.map(at))));
             let star_v = &self.vtris[v as usize];
-            let mut hit = false;
-            for (tri, p3) in &sc.tested {
-                let (lo, hi) = (p3[0].min(p3[1]).min(p3[2]), p3[0].max(p3[1]).max(p3[2]));
-                hit = grid.any(lo, hi, |s| {
-                    if !self.tri_alive[s as usize] || star_u.contains(&s) || (moves && star_v.contains(&s)) {
+            // One query over the box of all the changed triangles: each triangle near
+            // them is fetched once and tested against those whose boxes its box meets
+            // (triangles that share a corner always do).
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            for (_, p3) in &sc.tested {
+                lo = lo.min(p3[0].min(p3[1]).min(p3[2]));
+                hi = hi.max(p3[0].max(p3[1]).max(p3[2]));
+            }
+            let tested = &sc.tested;
+            let mut hit = !tested.is_empty()
+                && grid.any(lo, hi, |s| {
+                    if !self.tri_alive[s as usize] {
                         return false;
                     }
                     let st = self.tris[s as usize];
                     let q = st.map(|x| self.pos[x as usize]);
-                    if st.iter().any(|x| tri.contains(x)) {
-                        // Shared corners: the others strictly on one side of the plane
-                        // meet it only at the shared ones.
-                        let mut others = [DVec3::ZERO; 3];
-                        let mut n = 0;
-                        for (k, x) in st.iter().enumerate() {
-                            if !tri.contains(x) {
-                                others[n] = q[k];
-                                n += 1;
-                            }
+                    let mut excluded = None;
+                    for (tri, p3) in tested {
+                        if !boxes_meet(p3, &q) {
+                            continue;
                         }
-                        if n > 0 && strictly_one_side(p3, &others[..n]) {
+                        if *excluded
+                            .get_or_insert_with(|| star_u.contains(&s) || (moves && star_v.contains(&s)))
+                        {
                             return false;
                         }
-                        return shared_meet((*tri, *p3), (st, q));
+                        let meet = if st.iter().any(|x| tri.contains(x)) {
+                            // Shared corners: the others strictly on one side of the plane
+                            // meet it only at the shared ones.
+                            let mut others = [DVec3::ZERO; 3];
+                            let mut n = 0;
+                            for (k, x) in st.iter().enumerate() {
+                                if !tri.contains(x) {
+                                    others[n] = q[k];
+                                    n += 1;
+                                }
+                            }
+                            !(n > 0 && strictly_one_side(p3, &others[..n]))
+                                && shared_meet((*tri, *p3), (st, q))
+                        } else {
+                            !strictly_one_side(p3, &q)
+                                && !strictly_one_side(&q, p3)
+                                && triangles_intersect(p3, &q)
+                        };
+                        if meet {
+                            return true;
+                        }
                     }
-                    boxes_meet(p3, &q)
-                        && !strictly_one_side(p3, &q)
-                        && !strictly_one_side(&q, p3)
-                        && triangles_intersect(p3, &q)
+                    false
                 });
-                if hit {
-                    break;
-                }
-            }
             // The changed triangles among themselves (all around `v`).
             if !hit {
                 'pairs: for (i, (a, pa)) in sc.tested.iter().enumerate() {
