@@ -83,6 +83,8 @@ struct Scratch {
     pool: Vec<u32>,
     tested: Vec<([u32; 3], [DVec3; 3])>,
     ring: Vec<u32>,
+    /// The boxes of the triangles in `tested`.
+    boxes: Vec<(DVec3, DVec3)>,
     /// The new star's triangles' corners, centres and radii.
     spheres: Vec<([DVec3; 3], DVec3, f64)>,
     /// A lower bound of a point's distance to each of them.
@@ -809,11 +811,14 @@ impl<'m> Engine<'m> {
             // them is fetched once and tested against those whose boxes its box meets
             // (triangles that share a corner always do).
             let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            sc.boxes.clear();
             for (_, p3) in &sc.tested {
-                lo = lo.min(p3[0].min(p3[1]).min(p3[2]));
-                hi = hi.max(p3[0].max(p3[1]).max(p3[2]));
+                let b = (p3[0].min(p3[1]).min(p3[2]), p3[0].max(p3[1]).max(p3[2]));
+                lo = lo.min(b.0);
+                hi = hi.max(b.1);
+                sc.boxes.push(b);
             }
-            let tested = &sc.tested;
+            let (tested, boxes) = (&sc.tested, &sc.boxes);
             let mut hit = !tested.is_empty()
                 && grid.any(lo, hi, |s| {
                     if !self.tri_alive[s as usize] {
@@ -821,9 +826,10 @@ impl<'m> Engine<'m> {
                     }
                     let st = self.tris[s as usize];
                     let q = st.map(|x| self.pos[x as usize]);
+                    let (qlo, qhi) = (q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
                     let mut excluded = None;
-                    for (tri, p3) in tested {
-                        if !boxes_meet(p3, &q) {
+                    for ((tri, p3), (blo, bhi)) in tested.iter().zip(boxes) {
+                        if blo.cmpgt(qhi).any() || qlo.cmpgt(*bhi).any() {
                             continue;
                         }
                         if *excluded
