@@ -5,6 +5,7 @@ use std::cmp::Reverse;
 use std::collections::BinaryHeap;
 
 use glam::DVec3;
+use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 use voxreg_io::QuadMesh;
 use voxreg_quality::{point_triangle_distance, triangles_intersect, triangles_meet_off_shared};
@@ -82,6 +83,12 @@ struct Scratch {
     pool: Vec<u32>,
     tested: Vec<([u32; 3], [DVec3; 3])>,
     ring: Vec<u32>,
+    /// The boxes of the triangles in `tested`.
+    boxes: Vec<(DVec3, DVec3)>,
+    /// The new star's triangles' corners, centres and radii.
+    spheres: Vec<([DVec3; 3], DVec3, f64)>,
+    /// A lower bound of a point's distance to each of them.
+    bounds: Vec<f64>,
 }
 
 pub(crate) struct Engine<'m> {
@@ -177,6 +184,55 @@ fn strictly_one_side(t: &[DVec3; 3], q: &[DVec3]) -> bool {
     true
 }
 
+/// Whether triangles `s` and `t` (corner ids and positions) that share corners meet off
+/// the shared corners and the segment between them, as [`triangles_meet_off_shared`]
+/// decides, settling first without allocation the common cases with exact orientations:
+/// two shared corners with the other two off a common plane (they meet only on the shared
+/// edge), or one shared corner `p` with a plane through `p` and an edge of one triangle
+/// that has that triangle's third corner strictly on one side and the other triangle's
+/// two other corners strictly on the other (then they meet only at `p`).
+fn shared_meet(s: ([u32; 3], [DVec3; 3]), t: ([u32; 3], [DVec3; 3])) -> bool {
+    let o3 = |a: DVec3, b: DVec3, c: DVec3, d: DVec3| {
+        let k = |p: DVec3| robust::Coord3D { x: p.x, y: p.y, z: p.z };
+        robust::orient3d(k(a), k(b), k(c), k(d))
+    };
+    let in_t = |x: u32| t.0.contains(&x);
+    let shared = s.0.iter().filter(|&&x| in_t(x)).count();
+    let distinct = |x: [u32; 3]| x[0] != x[1] && x[1] != x[2] && x[0] != x[2];
+    if distinct(s.0) && distinct(t.0) {
+        if shared == 2 {
+            let (i, j) = (
+                (0..3).find(|&k| !in_t(s.0[k])).expect("one not shared"),
+                (0..3).find(|&k| !s.0.contains(&t.0[k])).expect("one not shared"),
+            );
+            let (p, q) = (s.1[(i + 1) % 3], s.1[(i + 2) % 3]);
+            if o3(p, q, s.1[i], t.1[j]) != 0.0 {
+                return false;
+            }
+        } else if shared == 1 {
+            let i = (0..3).find(|&k| in_t(s.0[k])).expect("one shared");
+            let j = (0..3).find(|&k| t.0[k] == s.0[i]).expect("one shared");
+            let p = s.1[i];
+            let (s1, s2) = (s.1[(i + 1) % 3], s.1[(i + 2) % 3]);
+            let (t1, t2) = (t.1[(j + 1) % 3], t.1[(j + 2) % 3]);
+            for (e, opp, x1, x2) in [(s1, s2, t1, t2), (s2, s1, t1, t2), (t1, t2, s1, s2), (t2, t1, s1, s2)] {
+                let n = (e - p).cross(opp - p);
+                let len = n.length();
+                if len.is_nan() || len <= 0.0 {
+                    continue;
+                }
+                let r = p + n * ((e - p).length() / len);
+                let side = o3(p, e, r, opp);
+                if side != 0.0 && o3(p, e, r, x1) * side < 0.0 && o3(p, e, r, x2) * side < 0.0 {
+                    return false;
+                }
+            }
+        }
+    }
+    let with_ids = |x: ([u32; 3], [DVec3; 3])| [(x.0[0], x.1[0]), (x.0[1], x.1[1]), (x.0[2], x.1[2])];
+    triangles_meet_off_shared(with_ids(s), with_ids(t))
+}
+
 fn is_feature(sig: &Signature) -> bool {
     !(sig.len() == 2 && sig[0].0 == sig[1].0 && sig[0].1 != sig[1].1)
 }
@@ -232,6 +288,22 @@ impl<'m> Engine<'m> {
         (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]))
     }
 
+    /// The box of the vertices of the triangles alive.
+    fn bounds(&self) -> (DVec3, DVec3) {
+        let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+        for (v, p) in self.pos.iter().enumerate() {
+            if !self.vtris[v].is_empty() {
+                lo = lo.min(*p);
+                hi = hi.max(*p);
+            }
+        }
+        if lo.x > hi.x {
+            (DVec3::ZERO, DVec3::ZERO)
+        } else {
+            (lo, hi)
+        }
+    }
+
     fn neighbours(&self, v: u32) -> Vec<u32> {
         let mut n = Vec::new();
         self.neighbours_into(v, &mut n);
@@ -265,11 +337,11 @@ impl<'m> Engine<'m> {
         );
     }
 
-    /// Sets the class of `v`, and adds the line quadrics of its feature edges.
-    fn classify(&mut self, v: u32, mean_edge: f64) {
-        let star = self.vtris[v as usize].clone();
+    /// The class of `v`, and `q` plus the line quadrics of its feature edges.
+    fn classify(&self, v: u32, mean_edge: f64, mut q: Quadric) -> (Class, Quadric) {
+        let star = &self.vtris[v as usize];
         if star.is_empty() {
-            return;
+            return (Class::Corner, q);
         }
         let nbrs = self.neighbours(v);
         let mut features: Vec<(u32, Signature)> = Vec::new();
@@ -292,15 +364,14 @@ impl<'m> Engine<'m> {
             let d = self.pos[*w as usize] - self.pos[v as usize];
             let len = d.length();
             if len > 0.0 {
-                let q = Quadric::line(self.pos[v as usize], d / len, len / mean_edge);
-                self.quadric[v as usize].add(&q);
+                q.add(&Quadric::line(self.pos[v as usize], d / len, len / mean_edge));
             }
         }
         let roots: Vec<usize> = (0..star.len()).map(|i| uf.find(i)).collect();
         let mut sectors = roots.clone();
         sectors.sort_unstable();
         sectors.dedup();
-        self.class[v as usize] = match features.len() {
+        let class = match features.len() {
             0 if sectors.len() == 1 => Class::Interior,
             2 if features[0].1 == reversed(&features[1].1) && sectors.len() == features[0].1.len() => {
                 // Each sector must run from one feature edge to the other.
@@ -322,6 +393,7 @@ impl<'m> Engine<'m> {
             }
             _ => Class::Corner,
         };
+        (class, q)
     }
 
     /// Where `v` goes when `u` collapses into it, and the collapse's cost.
@@ -428,16 +500,36 @@ impl<'m> Engine<'m> {
         if self.alive <= goal {
             return;
         }
-        self.heap.clear();
-        let all: Vec<u32> = (0..self.pos.len() as u32).collect();
-        for v in 0..self.pos.len() as u32 {
-            if self.class[v as usize] != Class::Corner && !self.vtris[v as usize].is_empty() {
-                // Every vertex queues its own collapses; a corner's neighbours queue
-                // theirs into it.
-                self.push_vertex(v, &all);
-            }
-        }
-        drop(all);
+        // Every vertex queues its own collapses; a corner's neighbours queue theirs into
+        // it. The costs are computed in parallel; the queue's order is a total order on
+        // its entries, so it does not depend on how they were gathered.
+        let this = &*self;
+        let entries: Vec<Reverse<Candidate>> = (0..self.pos.len() as u32)
+            .into_par_iter()
+            .filter(|&v| this.class[v as usize] != Class::Corner && !this.vtris[v as usize].is_empty())
+            .fold(
+                || (Vec::new(), Vec::new()),
+                |(mut out, mut nb): (Vec<Reverse<Candidate>>, Vec<u32>), v| {
+                    this.neighbours_into(v, &mut nb);
+                    for &y in &nb {
+                        let c = this.place(v, y).1;
+                        out.push(Reverse((
+                            c.to_bits(),
+                            v,
+                            y,
+                            this.version[v as usize],
+                            this.version[y as usize],
+                        )));
+                    }
+                    (out, nb)
+                },
+            )
+            .map(|(out, _)| out)
+            .reduce(Vec::new, |mut a, mut b| {
+                a.append(&mut b);
+                a
+            });
+        self.heap = BinaryHeap::from(entries);
         let mut limit = 2 * self.heap.len() + 1024;
         while self.alive > goal {
             if self.grid.is_some() && 2 * self.alive < self.grid_built_at {
@@ -476,7 +568,8 @@ impl<'m> Engine<'m> {
             }
         }
         let mean_edge = if count > 0 { (sum / count as f64).max(1e-300) } else { 1.0 };
-        let mut grid = Grid::new(2.0 * mean_edge, self.tris.len());
+        let (lo, hi) = self.bounds();
+        let mut grid = Grid::new(lo, hi, 2.0 * mean_edge, self.tris.len());
         for (t, tri) in self.tris.iter().enumerate() {
             if self.tri_alive[t] {
                 let (lo, hi) = self.tri_box(tri);
@@ -666,13 +759,40 @@ impl<'m> Engine<'m> {
                 }
             }
         }
+        // Each point goes to the first triangle (in the star's order) at the least
+        // distance. A triangle's bounding sphere bounds its distance from below, so only
+        // the triangles whose bound is within the nearest sphere's triangle's distance
+        // can hold the least one: the others are skipped, with a margin far above
+        // rounding.
+        sc.spheres.clear();
+        sc.spheres.extend(sc.after.iter().map(|(tri, _, _)| {
+            let q = tri.map(at);
+            let c = (q[0] + q[1] + q[2]) / 3.0;
+            let r = q.iter().map(|x| x.distance(c)).fold(0.0, f64::max);
+            (q, c, r)
+        }));
         for &x in &sc.pool {
             let pp = self.input.positions[x as usize];
+            sc.bounds.clear();
+            let (mut near, mut lb_near) = (0, f64::INFINITY);
+            for (i, (_, c, r)) in sc.spheres.iter().enumerate() {
+                let dc = pp.distance(*c);
+                let lb = dc - r - 1e-9 * (dc + r);
+                sc.bounds.push(lb);
+                if lb < lb_near {
+                    (near, lb_near) = (i, lb);
+                }
+            }
+            let d_near = point_triangle_distance(pp, sc.spheres[near].0);
+            let ub = if d_near.is_nan() { f64::INFINITY } else { d_near };
             let mut best = (f64::INFINITY, NONE);
-            for (tri, _, t) in &sc.after {
-                let d = point_triangle_distance(pp, tri.map(at));
+            for (i, (q, _, _)) in sc.spheres.iter().enumerate() {
+                if sc.bounds[i] > ub {
+                    continue;
+                }
+                let d = if i == near { d_near } else { point_triangle_distance(pp, *q) };
                 if d < best.0 {
-                    best = (d, *t);
+                    best = (d, sc.after[i].2);
                 }
             }
             if best.0.is_nan() || best.0 > self.max_error {
@@ -687,45 +807,62 @@ impl<'m> Engine<'m> {
             sc.tested.clear();
             sc.tested.extend(sc.after[changed..].iter().map(|(tri, _, _)| (*tri, tri.map(at))));
             let star_v = &self.vtris[v as usize];
-            let mut hit = false;
-            for (tri, p3) in &sc.tested {
-                let (lo, hi) = (p3[0].min(p3[1]).min(p3[2]), p3[0].max(p3[1]).max(p3[2]));
-                hit = grid.any(lo, hi, |s| {
-                    if !self.tri_alive[s as usize] || star_u.contains(&s) || (moves && star_v.contains(&s)) {
+            // One query over the box of all the changed triangles: each triangle near
+            // them is fetched once and tested against those whose boxes its box meets
+            // (triangles that share a corner always do).
+            let (mut lo, mut hi) = (DVec3::INFINITY, DVec3::NEG_INFINITY);
+            sc.boxes.clear();
+            for (_, p3) in &sc.tested {
+                let b = (p3[0].min(p3[1]).min(p3[2]), p3[0].max(p3[1]).max(p3[2]));
+                lo = lo.min(b.0);
+                hi = hi.max(b.1);
+                sc.boxes.push(b);
+            }
+            let (tested, boxes) = (&sc.tested, &sc.boxes);
+            let mut hit = !tested.is_empty()
+                && grid.any(lo, hi, |s| {
+                    if !self.tri_alive[s as usize] {
                         return false;
                     }
                     let st = self.tris[s as usize];
                     let q = st.map(|x| self.pos[x as usize]);
-                    if st.iter().any(|x| tri.contains(x)) {
-                        // Shared corners: the others strictly on one side of the plane
-                        // meet it only at the shared ones.
-                        let mut others = [DVec3::ZERO; 3];
-                        let mut n = 0;
-                        for (k, x) in st.iter().enumerate() {
-                            if !tri.contains(x) {
-                                others[n] = q[k];
-                                n += 1;
-                            }
+                    let (qlo, qhi) = (q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
+                    let mut excluded = None;
+                    for ((tri, p3), (blo, bhi)) in tested.iter().zip(boxes) {
+                        if blo.cmpgt(qhi).any() || qlo.cmpgt(*bhi).any() {
+                            continue;
                         }
-                        if n > 0 && strictly_one_side(p3, &others[..n]) {
+                        if *excluded
+                            .get_or_insert_with(|| star_u.contains(&s) || (moves && star_v.contains(&s)))
+                        {
                             return false;
                         }
-                        let with_ids =
-                            |t: [u32; 3], p: [DVec3; 3]| [(t[0], p[0]), (t[1], p[1]), (t[2], p[2])];
-                        return triangles_meet_off_shared(with_ids(*tri, *p3), with_ids(st, q));
+                        let meet = if st.iter().any(|x| tri.contains(x)) {
+                            // Shared corners: the others strictly on one side of the plane
+                            // meet it only at the shared ones.
+                            let mut others = [DVec3::ZERO; 3];
+                            let mut n = 0;
+                            for (k, x) in st.iter().enumerate() {
+                                if !tri.contains(x) {
+                                    others[n] = q[k];
+                                    n += 1;
+                                }
+                            }
+                            !(n > 0 && strictly_one_side(p3, &others[..n]))
+                                && shared_meet((*tri, *p3), (st, q))
+                        } else {
+                            !strictly_one_side(p3, &q)
+                                && !strictly_one_side(&q, p3)
+                                && triangles_intersect(p3, &q)
+                        };
+                        if meet {
+                            return true;
+                        }
                     }
-                    boxes_meet(p3, &q)
-                        && !strictly_one_side(p3, &q)
-                        && !strictly_one_side(&q, p3)
-                        && triangles_intersect(p3, &q)
+                    false
                 });
-                if hit {
-                    break;
-                }
-            }
             // The changed triangles among themselves (all around `v`).
             if !hit {
-                let with_ids = |t: [u32; 3], p: [DVec3; 3]| [(t[0], p[0]), (t[1], p[1]), (t[2], p[2])];
                 'pairs: for (i, (a, pa)) in sc.tested.iter().enumerate() {
                     for (b, pb) in &sc.tested[i + 1..] {
                         let mut others = [DVec3::ZERO; 3];
@@ -739,7 +876,7 @@ impl<'m> Engine<'m> {
                         if n > 0 && strictly_one_side(pa, &others[..n]) {
                             continue;
                         }
-                        if triangles_meet_off_shared(with_ids(*a, *pa), with_ids(*b, *pb)) {
+                        if shared_meet((*a, *pa), (*b, *pb)) {
                             hit = true;
                             break 'pairs;
                         }
@@ -782,6 +919,9 @@ impl<'m> Engine<'m> {
             }
         }
         if let Some(grid) = self.grid.as_mut() {
+            for &t in removed {
+                grid.remove(t);
+            }
             let changed: &[u32] = &self.vtris[v as usize];
             for &t in changed {
                 if moves || modified.iter().any(|m| m.0 == t) {

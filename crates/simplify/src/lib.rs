@@ -25,8 +25,9 @@
 //! from its first vertex), ordered by quadric error, with a volume-preserving placement
 //! where both ends are inside one patch (corners and line vertices stay where they are),
 //! then a re-pairing of the triangles into quads within each patch (greedy by quad
-//! quality, then augmenting paths). Everything runs on one thread in a fixed
-//! order: the output does not depend on the thread count. See
+//! quality, then augmenting paths). The collapses run on one thread in a fixed order;
+//! the setup, the queue's costs and the pairing's scores are computed in parallel into
+//! ordered results: the output does not depend on the thread count. See
 //! `docs/design/simplification.md`.
 
 mod engine;

@@ -1,6 +1,7 @@
 //! Pairing triangles into quads: greedy by quad quality, within one patch.
 
 use glam::DVec3;
+use rayon::prelude::*;
 
 /// An output face: a triangle left alone, or a quad with one of its two triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
@@ -55,8 +56,10 @@ pub(crate) fn pair(
             edges.push((a.min(b), a.max(b), i as u32, k as u8));
         }
     }
-    edges.sort_unstable();
-    let mut candidates: Vec<(u64, u32, u32, [u32; 4])> = Vec::new();
+    edges.par_sort_unstable();
+    // The pairs of triangles of one patch at an edge with no other, running it in
+    // opposite directions; then their scores, in parallel.
+    let mut pairs: Vec<(u32, u32, [u32; 4])> = Vec::new();
     let mut i = 0;
     while i < edges.len() {
         let mut j = i + 1;
@@ -70,14 +73,21 @@ pub(crate) fn pair(
             let (a, b, x) = (s1[k1], s1[(k1 + 1) % 3], s1[(k1 + 2) % 3]);
             if keys[t1 as usize] == keys[t2 as usize] && s2[k2] == b && s2[(k2 + 1) % 3] == a {
                 let y = s2[(k2 + 2) % 3];
-                if let Some(score) = score(pos, a, b, x, y, max_dihedral_deg) {
-                    candidates.push((score.to_bits(), t1.min(t2), t1.max(t2), [a, y, b, x]));
-                }
+                pairs.push((t1.min(t2), t1.max(t2), [a, y, b, x]));
             }
         }
         i = j;
     }
-    candidates.sort_unstable();
+    drop(edges);
+    let mut candidates: Vec<(u64, u32, u32, [u32; 4])> = pairs
+        .par_iter()
+        .filter_map(|&(t1, t2, q)| {
+            let [a, y, b, x] = q;
+            score(pos, a, b, x, y, max_dihedral_deg).map(|s| (s.to_bits(), t1, t2, q))
+        })
+        .collect();
+    drop(pairs);
+    candidates.par_sort_unstable();
     // Greedy, best quads first; then augmenting paths, so that a triangle left alone by
     // the greedy pass is paired by re-pairing a chain of its neighbours.
     let mut mate = vec![NO_MATE; tris.len()];

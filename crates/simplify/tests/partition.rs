@@ -351,6 +351,25 @@ fn output_is_deterministic_and_carries_materials() {
 }
 
 #[test]
+fn levels_do_not_depend_on_the_thread_count() {
+    let input = regularized(&blob_volume([16, 16, 16], 4, 5));
+    let targets = voxreg_simplify::pyramid_targets(4, 4.0, 0.5);
+    let run = |threads: usize| {
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(threads).build().unwrap();
+        pool.install(|| simplify_levels(&input, &targets, &Options::default()).unwrap())
+    };
+    let one = run(1);
+    assert!(one[1].stats.triangles_left < one[0].stats.triangles_left);
+    for threads in [2, 3] {
+        let many = run(threads);
+        for (a, b) in one.iter().zip(&many) {
+            assert_eq!(a.mesh, b.mesh, "{threads} threads");
+            assert_eq!(a.stats, b.stats, "{threads} threads");
+        }
+    }
+}
+
+#[test]
 fn bad_input_and_targets_are_errors() {
     let input = staircase(&blob_volume([6, 6, 6], 1, 1));
     let o = Options::default();

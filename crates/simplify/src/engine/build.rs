@@ -124,22 +124,29 @@ impl<'m> Engine<'m> {
             tri_key,
             vtris,
         };
-        // Plane quadrics, weighted by area relative to the mean, so costs are squared
-        // lengths.
-        for t in 0..nt {
-            let p = engine.tris[t].map(|v| engine.pos[v as usize]);
-            let nrm = tri_normal(p);
-            let len = nrm.length();
-            if len <= 0.0 {
-                continue;
-            }
-            let q = Quadric::plane(p[0], nrm / len, 0.5 * len / mean_area);
-            for &v in &engine.tris[t] {
-                engine.quadric[v as usize].add(&q);
-            }
-        }
-        for v in 0..n as u32 {
-            engine.classify(v, mean_edge);
+        // Per vertex, in parallel: the plane quadrics of its triangles (in the order of
+        // its triangles, so the sums do not depend on the thread count), weighted by area
+        // relative to the mean so that costs are squared lengths; then its class and its
+        // line quadrics.
+        let e = &engine;
+        let classified: Vec<(Class, Quadric)> = (0..n as u32)
+            .into_par_iter()
+            .map(|v| {
+                let mut q = Quadric::default();
+                for &t in &e.vtris[v as usize] {
+                    let p = e.tris[t as usize].map(|x| e.pos[x as usize]);
+                    let nrm = tri_normal(p);
+                    let len = nrm.length();
+                    if len > 0.0 {
+                        q.add(&Quadric::plane(p[0], nrm / len, 0.5 * len / mean_area));
+                    }
+                }
+                e.classify(v, mean_edge, q)
+            })
+            .collect();
+        for (v, (class, q)) in classified.into_iter().enumerate() {
+            engine.class[v] = class;
+            engine.quadric[v] = q;
         }
         let mut region_ids: FxHashMap<u32, u32> = FxHashMap::default();
         for k in &engine.keys {
@@ -161,34 +168,49 @@ impl<'m> Engine<'m> {
             engine.patch_area[k].0 += 0.5 * tri_normal(p).length();
         }
         if options.check_intersections {
-            let mut grid = Grid::new(2.0 * mean_edge, nt);
+            let (lo, hi) = engine.bounds();
+            let mut grid = Grid::new(lo, hi, 2.0 * mean_edge, nt);
             for t in 0..nt {
                 let (lo, hi) = engine.tri_box(&engine.tris[t]);
                 grid.insert(t as u32, lo, hi);
             }
-            for t in 0..nt {
-                let tri = engine.tris[t];
-                let p = tri.map(|x| engine.pos[x as usize]);
-                let (lo, hi) = engine.tri_box(&tri);
-                let mut hits = Vec::new();
-                grid.any(lo, hi, |s| {
-                    let st = engine.tris[s as usize];
-                    if s as usize > t && !st.iter().any(|x| tri.contains(x)) {
-                        let q = st.map(|x| engine.pos[x as usize]);
-                        if boxes_meet(&p, &q)
-                            && !strictly_one_side(&p, &q)
-                            && !strictly_one_side(&q, &p)
-                            && triangles_intersect(&p, &q)
-                        {
-                            hits.push(s as usize);
+            // Each triangle against those after it that share no vertex with it, in
+            // parallel (each pair tested once; the set of pairs found does not depend on
+            // the order).
+            let e = &engine;
+            let pairs: Vec<(usize, usize)> = (0..nt)
+                .into_par_iter()
+                .fold(
+                    || (Vec::new(), Vec::new()),
+                    |(mut hits, mut near): (Vec<(usize, usize)>, Vec<u32>), t| {
+                        let tri = e.tris[t];
+                        let p = tri.map(|x| e.pos[x as usize]);
+                        let (lo, hi) = e.tri_box(&tri);
+                        grid.candidates_into(lo, hi, &mut near);
+                        for &s in &near {
+                            let st = e.tris[s as usize];
+                            if s as usize > t && !st.iter().any(|x| tri.contains(x)) {
+                                let q = st.map(|x| e.pos[x as usize]);
+                                if boxes_meet(&p, &q)
+                                    && !strictly_one_side(&p, &q)
+                                    && !strictly_one_side(&q, &p)
+                                    && triangles_intersect(&p, &q)
+                                {
+                                    hits.push((t, s as usize));
+                                }
+                            }
                         }
-                    }
-                    false
+                        (hits, near)
+                    },
+                )
+                .map(|(hits, _)| hits)
+                .reduce(Vec::new, |mut a, mut b| {
+                    a.append(&mut b);
+                    a
                 });
-                for s in hits {
-                    engine.frozen[s] = tri_face[s];
-                    engine.frozen[t] = tri_face[t];
-                }
+            for (t, s) in pairs {
+                engine.frozen[s] = tri_face[s];
+                engine.frozen[t] = tri_face[t];
             }
             // Both triangles of a frozen face.
             for t in 0..nt {
