@@ -266,7 +266,8 @@ impl Hierarchy {
         let factor_seconds = t.elapsed().as_secs_f64();
         lap("coarsest factor");
         // Work vectors of the same sizes are reused as they are: every cycle writes each
-        // entry before reading it.
+        // entry before reading it. The fine level's residual and scratch are made at their
+        // first use: the conjugate gradient lends its own (`Vcycle::apply_in`).
         let sizes: Vec<usize> = std::iter::once(stencil.len()).chain(levels.iter().map(|l| l.n)).collect();
         let works = if spare_works.iter().map(|w| w.x.len()).eq(sizes.iter().copied()) {
             spare_works
@@ -274,7 +275,14 @@ impl Hierarchy {
             drop(spare_works);
             let work =
                 |n: usize| Work { r: vec![Vec3A::ZERO; n], x: vec![Vec3A::ZERO; n], t: vec![Vec3A::ZERO; n] };
-            sizes.iter().map(|&n| work(n)).collect()
+            sizes
+                .iter()
+                .enumerate()
+                .map(|(l, &n)| match l {
+                    0 => Work { r: Vec::new(), x: vec![Vec3A::ZERO; n], t: Vec::new() },
+                    _ => work(n),
+                })
+                .collect()
         };
         let fine = FineNumbers::new(stencil, coef, spare_fine);
         Ok(Vcycle {
