@@ -225,8 +225,6 @@ impl Hierarchy {
         let lap = |what: &str| {
             tracing::trace!(stage = what, ms = clock.elapsed().as_secs_f64() * 1e3, "multigrid setup");
         };
-        let fine_smoother = fine_majorant(stencil, coef);
-        lap("fine majorant");
         let mut levels = Vec::with_capacity(self.aggregations.len());
         let mut rows: Option<Rows> = None;
         for (l, agg) in self.aggregations.iter().enumerate() {
@@ -285,9 +283,14 @@ impl Hierarchy {
                 .collect()
         };
         let fine = FineNumbers::new(stencil, coef, spare_fine);
+        // The fine majorant (48 bytes a vertex) made only now, not held through the
+        // coarse levels' construction (the setup's peak).
+        let fine_smoother =
+            inverse_blocks(&fine_majorant(stencil, coef), self.params.damping, spare_smoother);
+        lap("fine smoother");
         Ok(Vcycle {
             fine,
-            fine_smoother: inverse_blocks(&fine_smoother, self.params.damping, spare_smoother),
+            fine_smoother,
             face_smoother: Vec::new(),
             face_levels: None,
             majorant: Vec::new(),
