@@ -28,7 +28,29 @@ use crate::output::Product;
 use crate::progress::Stages;
 use crate::report::{CliReport, IoTimes};
 
+/// glibc's allocator raises its threshold for giving a large block its own mapping to
+/// the size of the largest such block freed (up to 32 MiB); the blocks below it then come
+/// from heaps that keep freed memory resident (about 9% of a 1.5M-surfel run's peak). The
+/// threshold is read from the environment at start, and setting it keeps it fixed: the
+/// command runs itself again once with glibc's default of 128 KiB set, unless it is set
+/// already (or the run cannot be replaced, when it goes on as it is).
+#[cfg(all(target_os = "linux", target_env = "gnu"))]
+fn fix_allocator_threshold() {
+    use std::os::unix::process::CommandExt as _;
+    const THRESHOLD: &str = "MALLOC_MMAP_THRESHOLD_";
+    if std::env::var_os(THRESHOLD).is_some() {
+        return;
+    }
+    let Ok(exe) = std::env::current_exe() else { return };
+    let mut args = std::env::args_os();
+    let arg0 = args.next().unwrap_or_else(|| exe.clone().into_os_string());
+    // `exec` returns only when the process could not be replaced.
+    let _ = std::process::Command::new(exe).arg0(arg0).args(args).env(THRESHOLD, "131072").exec();
+}
+
 fn main() -> std::process::ExitCode {
+    #[cfg(all(target_os = "linux", target_env = "gnu"))]
+    fix_allocator_threshold();
     let cli = match Cli::try_parse() {
         Ok(cli) => cli,
         Err(e) => return usage_error(&e),

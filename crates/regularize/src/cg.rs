@@ -129,6 +129,7 @@ struct Buffers {
     /// (one vector fewer held during the solve).
     z: Vec<DVec3>,
     p: Vec<DVec3>,
+    /// `H p`, and the preconditioner's scratch once the update has taken it in.
     q: Vec<DVec3>,
 }
 
@@ -284,7 +285,7 @@ impl CgSolver {
         let mut restarts = 0;
         let mut interrupted = false;
         'outer: while rnorm > guaranteed && iterations < self.params.max_iterations {
-            prepared.pre.apply(stencil, &b.r, &mut b.z);
+            prepared.pre.apply_in(stencil, &b.r, &mut b.z, &mut b.q);
             scale_add(&mut b.p, 0.0, &b.z);
             let mut rz = dot(&b.r, &b.z);
             loop {
@@ -343,7 +344,7 @@ impl CgSolver {
                     self.setup.renew(&mut prepared, &self.interrupt)?;
                     continue 'outer;
                 }
-                prepared.pre.apply(stencil, &b.r, &mut b.z);
+                prepared.pre.apply_in(stencil, &b.r, &mut b.z, &mut b.q);
                 let rz_new = dot(&b.r, &b.z);
                 scale_add(&mut b.p, rz_new / rz, &b.z);
                 rz = rz_new;

@@ -119,6 +119,9 @@ impl Setup {
             self.structure_seconds += t.elapsed().as_secs_f64();
         }
         let t = Instant::now();
+        if let Some(v) = self.kept.as_mut() {
+            v.release_shared();
+        }
         let coef = self.stencil.coefficients(energy);
         let kept = match self.kept.take() {
             Some(mut v) if quick && self.preconditioner == Preconditioner::Multigrid => {
@@ -248,6 +251,16 @@ impl Pre {
                 )
             }
             Pre::Multigrid(v) => v.apply(stencil, r, z),
+        }
+    }
+
+    /// [`Pre::apply`] where `spare` (one vector of the solver's) is free during the
+    /// application: the multigrid cycle keeps its fine level's work in it and in `z`
+    /// ([`Vcycle::apply_in`]), the same result with less memory held.
+    pub(crate) fn apply_in(&mut self, stencil: &Stencil, r: &[DVec3], z: &mut [DVec3], spare: &mut [DVec3]) {
+        match self {
+            Pre::Multigrid(v) => v.apply_in(stencil, r, z, spare),
+            _ => self.apply(stencil, r, z),
         }
     }
 

@@ -5,6 +5,8 @@
 //! connectivity and the normals once instead of the `~13` 3x3 blocks per vertex of the
 //! assembled operator: about 3 times fewer bytes per product, and no assembly.
 
+use std::sync::Arc;
+
 use glam::DVec3;
 use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, VertexId};
@@ -78,12 +80,13 @@ pub(crate) struct Coefficients<'a> {
     pub(crate) alpha: PerItem<'a>,
     /// Per face, `beta_f`.
     pub(crate) beta: PerItem<'a>,
-    /// Per vertex, `gamma_i / |S_i|`, or 0 without fairness term.
-    pub(crate) fair: Vec<f64>,
+    /// Per vertex, `gamma_i / |S_i|`, or 0 without fairness term (shared with the
+    /// multigrid cycle's fine level, which reads it in `f32`).
+    pub(crate) fair: Arc<[f64]>,
     /// Per face, `sqrt(beta_f) n_f`: the product reads one vector per face slot instead
     /// of each face's normal and weight and a square root. Kept per face, not per slot
-    /// (a quad has four), for a quarter of the bytes.
-    pub(crate) face_normals: Vec<DVec3>,
+    /// (a quad has four), for a quarter of the bytes; shared like `fair`.
+    pub(crate) face_normals: Arc<[DVec3]>,
 }
 
 /// One value for all items, or a global weight times each item's multiplier (the
@@ -234,7 +237,7 @@ impl Stencil {
             None => PerItem::Uniform(energy.params().beta),
         };
         let surface = energy.surface();
-        let fair = (0..n)
+        let fair: Vec<f64> = (0..n)
             .into_par_iter()
             .map(|v| {
                 let deg = self.fair_neighbours(v).len();
@@ -246,8 +249,9 @@ impl Stencil {
             })
             .collect();
         let normals = energy.normals();
-        let face_normals = normals.par_iter().enumerate().map(|(f, n)| beta.get(f).sqrt() * *n).collect();
-        Coefficients { normals, alpha, beta, fair, face_normals }
+        let face_normals: Vec<DVec3> =
+            normals.par_iter().enumerate().map(|(f, n)| beta.get(f).sqrt() * *n).collect();
+        Coefficients { normals, alpha, beta, fair: Arc::from(fair), face_normals: Arc::from(face_normals) }
     }
 
     /// `y = H x`, or `y = (H - diag(alpha)) x` when `with_alpha` is false (the part of

@@ -57,7 +57,7 @@ impl Weights {
         check("gamma", self.gamma.as_deref(), surface.num_vertices(), false)?;
         if let Some(m) = &self.fairness {
             if m.offsets.len() != surface.num_vertices() + 1
-                || *m.offsets.last().unwrap_or(&0) != m.keep.len()
+                || *m.offsets.last().unwrap_or(&0) as usize != m.keep.len()
             {
                 return Err(RegularizeError::SizeMismatch("the fairness mask is not of this surface".into()));
             }
@@ -84,7 +84,9 @@ impl Weights {
 /// Cloning one is cheap: the per-round weights of a run share it.
 #[derive(Clone, Debug, PartialEq, Eq)]
 pub struct FairnessMask {
-    offsets: Arc<[usize]>,
+    /// Where each vertex's flags start in `keep` (`u32`: a surface's neighbour slots, two
+    /// per edge, number below `2^32`).
+    offsets: Arc<[u32]>,
     keep: Arc<[bool]>,
 }
 
@@ -100,11 +102,14 @@ impl FairnessMask {
         }
         let n = surface.num_vertices();
         let mut offsets = Vec::with_capacity(n + 1);
-        offsets.push(0);
+        offsets.push(0u32);
         for v in 0..n {
-            offsets.push(offsets[v] + surface.vertex_neighbours(VertexId(v as u32)).len());
+            let end = offsets[v] as usize + surface.vertex_neighbours(VertexId(v as u32)).len();
+            offsets.push(u32::try_from(end).map_err(|_| {
+                RegularizeError::OutOfMemory(format!("{end} neighbour slots, more than 2^32"))
+            })?);
         }
-        let mut keep = vec![true; offsets[n]];
+        let mut keep = vec![true; offsets[n] as usize];
         for (e, edge) in surface.edges().iter().enumerate() {
             if !cut[e] {
                 continue;
@@ -112,7 +117,7 @@ impl FairnessMask {
             let [a, b] = edge.vertices;
             for (v, w) in [(a, b), (b, a)] {
                 if let Ok(slot) = surface.vertex_neighbours(v).binary_search(&w) {
-                    keep[offsets[v.index()] + slot] = false;
+                    keep[offsets[v.index()] as usize + slot] = false;
                 }
             }
         }
@@ -155,12 +160,15 @@ impl FairnessMask {
     /// order) enters `v`'s barycenter.
     #[inline]
     pub fn keeps(&self, v: VertexId, slot: usize) -> bool {
-        self.keep[self.offsets[v.index()] + slot]
+        self.keep[self.offsets[v.index()] as usize + slot]
     }
 
     /// Number of vertices whose barycenter loses at least one neighbour.
     pub fn num_affected_vertices(&self) -> usize {
-        self.offsets.windows(2).filter(|w| self.keep[w[0]..w[1]].iter().any(|&k| !k)).count()
+        self.offsets
+            .windows(2)
+            .filter(|w| self.keep[w[0] as usize..w[1] as usize].iter().any(|&k| !k))
+            .count()
     }
 
     /// The neighbours of `v` that enter its barycenter.
@@ -169,7 +177,7 @@ impl FairnessMask {
         surface: &'s DigitalSurface,
         v: VertexId,
     ) -> impl Iterator<Item = VertexId> + 's {
-        let keep = &self.keep[self.offsets[v.index()]..self.offsets[v.index() + 1]];
+        let keep = &self.keep[self.offsets[v.index()] as usize..self.offsets[v.index() + 1] as usize];
         surface.vertex_neighbours(v).iter().zip(keep).filter(|(_, &k)| k).map(|(w, _)| *w)
     }
 }

@@ -8,7 +8,7 @@ use rayon::prelude::*;
 
 use super::coarse::{Coarsest, Level, Work};
 use super::fine::{fine_majorant, inverse_blocks, masked, FineNumbers};
-use super::parts::{block_mul, Aggregation, Block, Rows, FACE};
+use super::parts::{block_mul, Aggregation, Block, Rows, Stored, FACE};
 use crate::stencil::{Coefficients, Stencil, CHUNK};
 
 /// The coarse levels of a face's operator ([`Vcycle::set_face`]).
@@ -47,21 +47,21 @@ pub(crate) struct Vcycle {
 }
 
 /// `x = m r` (or `x += m r` with `add`), masked by `face` when given.
-fn smooth(m: &[Block], r: &[Vec3A], x: &mut [Vec3A], add: bool, face: Option<&[Vec3A]>) {
+fn smooth<R: Stored>(m: &[Block], r: &[R], x: &mut [Vec3A], add: bool, face: Option<&[Vec3A]>) {
     x.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(m.par_chunks(CHUNK)).enumerate().for_each(
         |(k, ((x, r), m))| {
             for i in 0..x.len() {
-                let d = block_mul(&m[i], r[i]);
+                let d = block_mul(&m[i], r[i].get());
                 x[i] = masked(face, k * CHUNK + i, if add { x[i] + d } else { d });
             }
         },
     );
 }
 
-fn restrict(agg: &Aggregation, fine: &[Vec3A], coarse: &mut [Vec3A]) {
+fn restrict<R: Stored>(agg: &Aggregation, fine: &[R], coarse: &mut [Vec3A]) {
     coarse.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
         for (o, c) in out.iter_mut().enumerate() {
-            *c = agg.members(k * CHUNK + o).iter().map(|&i| fine[i as usize]).sum();
+            *c = agg.members(k * CHUNK + o).iter().map(|&i| fine[i as usize].get()).sum();
         }
     });
 }
@@ -92,7 +92,7 @@ impl Vcycle {
         });
         face + 24 * (self.fine_smoother.len() + self.face_smoother.len())
             + 48 * self.majorant.len()
-            + self.fine.bytes()
+            + self.fine.own_bytes()
             + agg
             + levels
             + works
@@ -115,6 +115,12 @@ impl Vcycle {
         );
         self.fine = FineNumbers::new(stencil, coef, std::mem::take(&mut self.fine));
         self.forget_face();
+    }
+
+    /// Lets go of the numbers the fine level shares with its solve's coefficients: a kept
+    /// cycle, before the next solve's coefficients are made (it gets theirs).
+    pub(crate) fn release_shared(&mut self) {
+        self.fine.release_shared();
     }
 
     /// Drops the face's levels, smoother and majorant ([`Vcycle::set_face`]): once the
@@ -140,7 +146,15 @@ impl Vcycle {
 
     /// `z = V(r)`: one symmetric V-cycle, in `f32`.
     pub(crate) fn apply(&mut self, stencil: &Stencil, r: &[DVec3], z: &mut [DVec3]) {
-        self.apply_on_face(stencil, r, z, None);
+        self.cycle(stencil, r, z, None, None);
+    }
+
+    /// [`Vcycle::apply`] with the fine level's residual kept in `z` (until the output
+    /// replaces it) and its product's scratch in `spare`, a vector of the caller's that
+    /// is free during the cycle (the conjugate gradient's `H p`): the same numbers, and
+    /// two `f32` vectors fewer held at the solve's peak.
+    pub(crate) fn apply_in(&mut self, stencil: &Stencil, r: &[DVec3], z: &mut [DVec3], spare: &mut [DVec3]) {
+        self.cycle(stencil, r, z, None, Some(spare));
     }
 
     /// [`Vcycle::apply`] for the operator restricted to a face (the coordinates where
@@ -157,7 +171,19 @@ impl Vcycle {
         z: &mut [DVec3],
         face: Option<&[Vec3A]>,
     ) {
-        let steps = self.steps;
+        self.cycle(stencil, r, z, face, None);
+    }
+
+    /// The cycle, on `face` where given; the fine level's residual and scratch in `z` and
+    /// `spare` where given, else in the cycle's own vectors (made at their first use).
+    fn cycle(
+        &mut self,
+        stencil: &Stencil,
+        r: &[DVec3],
+        z: &mut [DVec3],
+        face: Option<&[Vec3A]>,
+        spare: Option<&mut [DVec3]>,
+    ) {
         let mut works = std::mem::take(&mut self.works);
         let (fine, rest) = works.split_at_mut(1);
         let w = &mut fine[0];
@@ -183,31 +209,76 @@ impl Vcycle {
                 }
             });
         } else {
-            for s in 0..steps {
-                self.fine.residual(stencil, &w.x, &b, &mut w.r, &mut w.t, face);
-                if s + 1 < steps {
-                    smooth(smoother, &w.r, &mut w.x, true, face);
+            let Work { x, r: own_r, t: own_t } = w;
+            // The last post-smoothing step and the output in `f64`, in the residual's pass.
+            match spare {
+                Some(t) if t.len() == x.len() => {
+                    self.fine_correction(stencil, &b, smoother, x, &mut *z, &mut *t, rest, face);
+                    let x = &*x;
+                    let out = |i: usize, res: Vec3A| {
+                        masked(face, i, x[i] + block_mul(&smoother[i], res)).as_dvec3()
+                    };
+                    self.fine.residual_map(stencil, x, &b, z, t, face, out);
+                }
+                _ => {
+                    if own_r.len() != x.len() {
+                        *own_r = vec![Vec3A::ZERO; x.len()];
+                        *own_t = vec![Vec3A::ZERO; x.len()];
+                    }
+                    self.fine_correction(
+                        stencil,
+                        &b,
+                        smoother,
+                        x,
+                        own_r.as_mut_slice(),
+                        own_t.as_mut_slice(),
+                        rest,
+                        face,
+                    );
+                    let x = &*x;
+                    let out = |i: usize, res: Vec3A| {
+                        masked(face, i, x[i] + block_mul(&smoother[i], res)).as_dvec3()
+                    };
+                    self.fine.residual_map(stencil, x, &b, z, own_t.as_mut_slice(), face, out);
                 }
             }
-            restrict(&self.aggregations[0], &w.r, &mut rest[0].r);
-            match (face, &self.face_levels) {
-                (Some(_), Some(f)) => self.coarse_cycle(&f.levels, f.coarsest.as_ref(), 0, rest),
-                _ => self.coarse_cycle(&self.levels, self.coarsest.as_ref(), 0, rest),
-            }
-            prolong_add(&self.aggregations[0].parent, &rest[0].x, &mut w.x, face);
-            for _ in 1..steps {
-                self.fine.residual(stencil, &w.x, &b, &mut w.r, &mut w.t, face);
-                smooth(smoother, &w.r, &mut w.x, true, face);
-            }
-            // The last post-smoothing step and the output in `f64`, in the residual's pass.
-            let Work { x, t, .. } = w;
-            let x = &*x;
-            self.fine.residual_map(stencil, x, &b, z, t, face, |i, r| {
-                masked(face, i, x[i] + block_mul(&smoother[i], r)).as_dvec3()
-            });
         }
         self.face_smoother = face_smoother;
         self.works = works;
+    }
+
+    /// The fine level's part of the cycle between the pre-smoothing and the last
+    /// post-smoothing step: residual, coarse correction, and the other smoothing steps,
+    /// on `x`, with the residual in `res` and the product's scratch in `t`.
+    #[allow(clippy::too_many_arguments)]
+    fn fine_correction<R: Stored, T: Stored>(
+        &self,
+        stencil: &Stencil,
+        b: &(impl Fn(usize) -> Vec3A + Sync),
+        smoother: &[Block],
+        x: &mut [Vec3A],
+        res: &mut [R],
+        t: &mut [T],
+        rest: &mut [Work],
+        face: Option<&[Vec3A]>,
+    ) {
+        let steps = self.steps;
+        for s in 0..steps {
+            self.fine.residual(stencil, x, b, res, t, face);
+            if s + 1 < steps {
+                smooth(smoother, res, x, true, face);
+            }
+        }
+        restrict(&self.aggregations[0], res, &mut rest[0].r);
+        match (face, &self.face_levels) {
+            (Some(_), Some(f)) => self.coarse_cycle(&f.levels, f.coarsest.as_ref(), 0, rest),
+            _ => self.coarse_cycle(&self.levels, self.coarsest.as_ref(), 0, rest),
+        }
+        prolong_add(&self.aggregations[0].parent, &rest[0].x, x, face);
+        for _ in 1..steps {
+            self.fine.residual(stencil, x, b, res, t, face);
+            smooth(smoother, res, x, true, face);
+        }
     }
 
     /// Solves approximately on coarse level `l + 1` (`works[l]`): `x = V(r)`.

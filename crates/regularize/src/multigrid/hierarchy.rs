@@ -218,8 +218,6 @@ impl Hierarchy {
         let lap = |what: &str| {
             tracing::trace!(stage = what, ms = clock.elapsed().as_secs_f64() * 1e3, "multigrid setup");
         };
-        let fine_smoother = fine_majorant(stencil, coef);
-        lap("fine majorant");
         let mut levels = Vec::with_capacity(self.aggregations.len());
         let mut rows: Option<Rows> = None;
         for (l, agg) in self.aggregations.iter().enumerate() {
@@ -259,7 +257,8 @@ impl Hierarchy {
         let factor_seconds = t.elapsed().as_secs_f64();
         lap("coarsest factor");
         // Work vectors of the same sizes are reused as they are: every cycle writes each
-        // entry before reading it.
+        // entry before reading it. The fine level's residual and scratch are made at their
+        // first use: the conjugate gradient lends its own (`Vcycle::apply_in`).
         let sizes: Vec<usize> = std::iter::once(stencil.len()).chain(levels.iter().map(|l| l.n)).collect();
         let works = if spare_works.iter().map(|w| w.x.len()).eq(sizes.iter().copied()) {
             spare_works
@@ -267,12 +266,24 @@ impl Hierarchy {
             drop(spare_works);
             let work =
                 |n: usize| Work { r: vec![Vec3A::ZERO; n], x: vec![Vec3A::ZERO; n], t: vec![Vec3A::ZERO; n] };
-            sizes.iter().map(|&n| work(n)).collect()
+            sizes
+                .iter()
+                .enumerate()
+                .map(|(l, &n)| match l {
+                    0 => Work { r: Vec::new(), x: vec![Vec3A::ZERO; n], t: Vec::new() },
+                    _ => work(n),
+                })
+                .collect()
         };
         let fine = FineNumbers::new(stencil, coef, spare_fine);
+        // The fine majorant (48 bytes a vertex) made only now, not held through the
+        // coarse levels' construction (the setup's peak).
+        let fine_smoother =
+            inverse_blocks(&fine_majorant(stencil, coef), self.params.damping, spare_smoother);
+        lap("fine smoother");
         Ok(Vcycle {
             fine,
-            fine_smoother: inverse_blocks(&fine_smoother, self.params.damping, spare_smoother),
+            fine_smoother,
             face_smoother: Vec::new(),
             face_levels: None,
             majorant: Vec::new(),

@@ -1,7 +1,7 @@
 //! The pieces the other parts share: aggregations, `f32` blocks, and the rows of an
 //! operator under construction.
 
-use glam::Vec3A;
+use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 
 use crate::stencil::CHUNK;
@@ -23,6 +23,38 @@ impl Aggregation {
 
     pub(super) fn members(&self, a: usize) -> &[u32] {
         &self.members[self.offsets[a] as usize..self.offsets[a + 1] as usize]
+    }
+}
+
+/// How a cycle's `f32` 3-vector is stored: in `f32` ([`Vec3A`]), or in an `f64` vector
+/// ([`DVec3`]) lent by the caller. `f32` to `f64` and back is exact, so the cycle's
+/// numbers are the same either way.
+pub(super) trait Stored: Copy + Send + Sync {
+    fn get(self) -> Vec3A;
+    fn put(v: Vec3A) -> Self;
+}
+
+impl Stored for Vec3A {
+    #[inline(always)]
+    fn get(self) -> Vec3A {
+        self
+    }
+
+    #[inline(always)]
+    fn put(v: Vec3A) -> Self {
+        v
+    }
+}
+
+impl Stored for DVec3 {
+    #[inline(always)]
+    fn get(self) -> Vec3A {
+        self.as_vec3a()
+    }
+
+    #[inline(always)]
+    fn put(v: Vec3A) -> Self {
+        v.as_dvec3()
     }
 }
 
