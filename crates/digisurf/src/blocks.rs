@@ -4,7 +4,8 @@
 use glam::DVec3;
 use ndarray::{Array3, ShapeBuilder};
 
-use crate::{LabelVolume, SurfaceError, Voxel};
+use crate::error::SurfaceError;
+use crate::volume::{LabelVolume, Voxel};
 
 /// One block of a [`BlockVolume`]: dense labels whose voxel `[0, 0, 0]` is voxel
 /// `offset` of the volume.
@@ -32,7 +33,7 @@ impl Block {
 /// by one voxel towards each other do not overlap), so no voxel face and no lattice
 /// corner is shared by two blocks: the digital surface of the volume is the union of the
 /// blocks' surfaces, each against the background, and
-/// [`DigitalSurface::from_blocks`](crate::DigitalSurface::from_blocks) builds it equal, id
+/// [`DigitalSurface::from_blocks`](crate::surface::DigitalSurface::from_blocks) builds it equal, id
 /// for id, to that of the volume made dense ([`BlockVolume::to_dense`]).
 ///
 /// The embedding (spacing, origin: the centre of voxel `[0, 0, 0]`) is that of
@@ -150,7 +151,7 @@ impl BlockVolume {
     pub fn label_counts(&self) -> Vec<(u32, u64)> {
         let mut counts: Vec<(u32, u64)> = Vec::new();
         for b in &self.blocks {
-            let view = crate::LabelView::from_view(b.labels.view());
+            let view = crate::volume::LabelView::from_view(b.labels.view());
             counts.extend(view.label_counts());
         }
         let outside = self.len().saturating_sub(self.block_voxels() as u128);

@@ -3,7 +3,7 @@
 use std::marker::PhantomData;
 use std::ops::{Deref, DerefMut, Index, IndexMut};
 
-use crate::{EdgeId, SurfelId, VertexId};
+use crate::ids::{EdgeId, SurfelId, VertexId};
 
 /// A typed index of the complex's cells.
 pub trait Id: Copy {

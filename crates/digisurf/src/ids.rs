@@ -33,6 +33,6 @@ id_type!(
     InterfaceId
 );
 id_type!(
-    /// Index of a region (a set of labels). See [`crate::Regions`] for the ordering.
+    /// Index of a region (a set of labels). See `Regions` for the ordering.
     RegionId
 );

@@ -1,8 +1,10 @@
 //! Parts of the digital surface as meshes of their own: one interface, or the closed
 //! surface of one region, optionally made 2-manifold by splitting pinches.
 
+use crate::ids::{InterfaceId, RegionId, SurfelId, VertexId};
+use crate::surface::DigitalSurface;
 use crate::union_find::union_find_root as find;
-use crate::{DigitalSurface, InterfaceId, RegionId, SurfelId, VertexId, Voxel};
+use crate::volume::Voxel;
 
 const NONE: u32 = u32::MAX;
 
@@ -228,7 +230,7 @@ fn union(parent: &mut [u32], a: u32, b: u32) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::LabelVolume;
+    use crate::volume::LabelVolume;
 
     /// `(vertices, faces, faces per undirected edge)` of a patch.
     fn shape(p: &Patch) -> (usize, usize, Vec<usize>) {

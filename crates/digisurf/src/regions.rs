@@ -1,6 +1,8 @@
 //! Regions: sets of labels that count as one material.
 
-use crate::{LabelStorage, LabelVolume, RegionId, SurfaceError};
+use crate::error::SurfaceError;
+use crate::ids::RegionId;
+use crate::volume::{LabelStorage, LabelVolume};
 
 /// How labels are grouped into regions.
 ///

@@ -9,11 +9,11 @@ use rayon::prelude::*;
 use crate::csr::split_lengths;
 use crate::csr::Lists;
 use crate::data::VertexData;
+use crate::error::SurfaceError;
+use crate::ids::{EdgeId, InterfaceId, RegionId, SurfelId, VertexId};
+use crate::regions::{RegionMap, Regions};
 use crate::union_find::union_find_root;
-use crate::{
-    EdgeId, InterfaceId, LabelStorage, LabelView, LabelVolume, RegionId, RegionMap, Regions, SurfaceError,
-    SurfelId, VertexId, Voxel,
-};
+use crate::volume::{LabelStorage, LabelView, LabelVolume, Voxel};
 
 mod blocks;
 mod scan;
@@ -179,7 +179,7 @@ impl DigitalSurface {
     /// Cost: one pass over the voxels (linear), memory for the slab being scanned plus
     /// the complex itself (proportional to the number of surfels). Fails with
     /// [`SurfaceError::Empty`] when no surfel separates two regions. The volume may own
-    /// or borrow its labels (a [`LabelView`](crate::LabelView)); either is read in place.
+    /// or borrow its labels (a [`LabelView`](crate::volume::LabelView)); either is read in place.
     pub fn new<S: LabelStorage>(volume: &LabelVolume<S>, map: &RegionMap) -> Result<Self, SurfaceError> {
         Self::of_view(&volume.view(), map)
     }

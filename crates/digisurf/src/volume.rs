@@ -6,7 +6,7 @@ use ndarray::{
 };
 use rayon::prelude::*;
 
-use crate::SurfaceError;
+use crate::error::SurfaceError;
 
 /// A voxel's integer coordinates `[x, y, z]`. Coordinates may lie outside the
 /// volume (e.g. `-1`) when they name the outside of the domain.
@@ -435,7 +435,8 @@ mod tests {
 
     #[test]
     fn borrowed_labels_make_the_owned_surface() {
-        use crate::{DigitalSurface, RegionMap};
+        use crate::regions::RegionMap;
+        use crate::surface::DigitalSurface;
         // Two labels in a ball-ish blob, stored x fastest.
         let owned = LabelVolume::from_fn([7, 6, 5], |[x, y, z]| {
             let d = (x as i64 - 3).pow(2) + (y as i64 - 3).pow(2) + (z as i64 - 2).pow(2);

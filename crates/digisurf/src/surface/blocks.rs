@@ -7,10 +7,12 @@ use rayon::prelude::*;
 
 use super::scan::{oriented_surfel, outside_of, range_face_count, range_faces, RawFace, MAX_SURFELS};
 use super::NONE;
-use crate::{
-    BlockVolume, DigitalSurface, InterfaceId, LabelView, LabelVolume, RegionMap, Regions, SurfaceError,
-    VertexId,
-};
+use crate::blocks::BlockVolume;
+use crate::error::SurfaceError;
+use crate::ids::{InterfaceId, VertexId};
+use crate::regions::{RegionMap, Regions};
+use crate::surface::DigitalSurface;
+use crate::volume::{LabelView, LabelVolume};
 
 impl DigitalSurface {
     /// The digital surface of `volume`, with labels grouped into regions by `map`: the
@@ -121,7 +123,7 @@ mod tests {
     use proptest::prelude::*;
 
     use super::*;
-    use crate::Block;
+    use crate::blocks::Block;
 
     /// Every part of the two surfaces the crate exposes, id for id.
     fn assert_same(a: &DigitalSurface, b: &DigitalSurface) {
@@ -142,10 +144,13 @@ mod tests {
             assert_eq!(a.vertex_surfels(v), b.vertex_surfels(v));
         }
         for e in 0..a.num_edges() {
-            assert_eq!(a.edge_surfels(crate::EdgeId(e as u32)), b.edge_surfels(crate::EdgeId(e as u32)));
+            assert_eq!(
+                a.edge_surfels(crate::ids::EdgeId(e as u32)),
+                b.edge_surfels(crate::ids::EdgeId(e as u32))
+            );
         }
         for s in 0..a.num_surfels() {
-            let s = crate::SurfelId(s as u32);
+            let s = crate::ids::SurfelId(s as u32);
             assert_eq!(a.surfel_edges(s), b.surfel_edges(s));
             assert_eq!(a.surfel_component(s), b.surfel_component(s));
         }

@@ -9,7 +9,10 @@ use std::collections::HashMap;
 use rayon::prelude::*;
 
 use super::{Surfel, NONE};
-use crate::{InterfaceId, LabelView, RegionId, Regions, SurfaceError, VertexId};
+use crate::error::SurfaceError;
+use crate::ids::{InterfaceId, RegionId, VertexId};
+use crate::regions::Regions;
+use crate::volume::LabelView;
 
 /// A face between two voxels of different regions, found by the parallel slab pass.
 pub(super) struct RawFace {
