@@ -12,7 +12,7 @@ use voxreg_quality::{point_triangle_distance, triangles_intersect, triangles_mee
 
 use crate::grid::Grid;
 use crate::quadric::Quadric;
-use crate::{Options, Simplified, SimplifyError, Stats, Target};
+use crate::types::{Options, Simplified, SimplifyError, Stats, Target};
 
 mod build;
 

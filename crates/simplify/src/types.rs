@@ -1,0 +1,90 @@
+//! What the simplifier is asked for and what it answers: targets, options, results, errors.
+
+use voxreg_io::QuadMesh;
+
+/// How far one level of detail may go.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Target {
+    /// Stop once the triangles left are at most this fraction of the input's triangles
+    /// (a quad counts two): about the fraction of faces left once the triangles are paired
+    /// into quads again. `None`: as far as `max_error` allows.
+    pub ratio: Option<f64>,
+    /// The largest distance allowed from any input vertex to the output faces, in the
+    /// positions' units. Collapses that would break it are refused, so the ratio may not
+    /// be reached.
+    pub max_error: f64,
+}
+
+/// How collapses are judged and faces rebuilt.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Options {
+    /// A collapse may turn no triangle's normal by more than this angle, in degrees.
+    pub max_normal_change_deg: f64,
+    /// A collapse may make no triangle of quality (`4 sqrt(3) area / sum of squared edge
+    /// lengths`, 1 for an equilateral one) below this bound, unless it was lower already.
+    pub min_triangle_quality: f64,
+    /// Refuse collapses whose new triangles intersect a triangle they share no vertex
+    /// with (exact tests against a grid of the triangles).
+    pub check_intersections: bool,
+    /// Pair the triangles into quads where a good pair exists (else the output is
+    /// triangles only, written as quads repeating their last vertex).
+    pub quads: bool,
+    /// A pair of triangles makes a quad only if the angle between their normals is at
+    /// most this, in degrees.
+    pub max_quad_dihedral_deg: f64,
+}
+
+impl Default for Options {
+    fn default() -> Self {
+        Options {
+            max_normal_change_deg: 40.0,
+            min_triangle_quality: 0.1,
+            check_intersections: true,
+            quads: true,
+            max_quad_dihedral_deg: 45.0,
+        }
+    }
+}
+
+/// A simplified mesh and what was done.
+#[derive(Clone, Debug)]
+pub struct Simplified {
+    /// The mesh: quads, and triangles as quads repeating their last vertex; the input's
+    /// labels, groups (same names, same order), materials and label names.
+    pub mesh: QuadMesh,
+    /// Counts and the distance reached.
+    pub stats: Stats,
+}
+
+/// What a simplification did.
+#[derive(Clone, Copy, Debug, Default, PartialEq)]
+pub struct Stats {
+    /// Faces of the input.
+    pub input_faces: usize,
+    /// Triangles of the input (a quad counts two).
+    pub input_triangles: usize,
+    /// Triangles left after the collapses.
+    pub triangles_left: usize,
+    /// Faces of the output.
+    pub faces: usize,
+    /// Output faces that are quads.
+    pub quads: usize,
+    /// The largest distance of an input vertex to the output face that answers for it:
+    /// every input vertex lies at most this far from the output.
+    pub error_bound: f64,
+    /// Vertices that never move (line end points, meeting points of lines, pinches).
+    pub corners: usize,
+    /// Vertices on one feature line.
+    pub line_vertices: usize,
+}
+
+/// Why a mesh cannot be simplified.
+#[derive(Debug, thiserror::Error, PartialEq)]
+pub enum SimplifyError {
+    /// The mesh is inconsistent.
+    #[error("invalid mesh: {0}")]
+    InvalidMesh(String),
+    /// The targets are out of range or not nested.
+    #[error("invalid simplification target: {0}")]
+    InvalidTarget(String),
+}
