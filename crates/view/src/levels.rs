@@ -16,7 +16,7 @@ use voxreg_io::{Palette, QuadMesh};
 use voxreg_simplify::{pyramid_targets, simplify_levels, Options, Simplified};
 
 use crate::model::{f32_bytes, Model};
-use crate::session::{panic_message, result_mesh, Shared, State};
+use crate::session::{panic_message, result_mesh, Levels, Shared, State};
 
 /// The levels of the pyramid, the full surface included (as `--lod 4`).
 pub(crate) const LEVELS: usize = 4;
@@ -27,25 +27,6 @@ const FACTOR: f64 = 4.0;
 /// The distance bound of level 1, in voxels (the command line's default `--max-error`);
 /// it doubles with each level.
 const MAX_ERROR_VOXELS: f64 = 0.5;
-
-/// The pyramid of one result, or why it could not be computed.
-#[derive(Debug)]
-pub(crate) struct Levels {
-    /// The frame of the result simplified ([`State::frame`] when it was published).
-    pub(crate) frame: u64,
-    /// The [`LEVELS`] levels, level 0 first.
-    pub(crate) result: Result<Vec<Simplified>, String>,
-    /// Milliseconds the simplification took.
-    pub(crate) ms: f64,
-}
-
-impl Levels {
-    /// The levels, if they simplify the result shown in `state`.
-    pub(crate) fn of(state: &State) -> Option<&[Simplified]> {
-        let levels = state.levels.as_ref().filter(|l| l.frame == state.frame && state.frame_final)?;
-        levels.result.as_deref().ok()
-    }
-}
 
 /// The level the page should draw: the chosen one once it is computed for the result
 /// shown, else the full surface.

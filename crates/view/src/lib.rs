@@ -70,20 +70,14 @@
 //!
 //! None.
 
+mod error;
 mod levels;
 mod model;
 mod server;
 mod session;
 mod tuning;
 
+pub use error::ViewError;
 pub use model::{read_volume, Loaded, Volume};
 pub use server::{Loader, StopHandle, Viewer};
 pub use tuning::Tuning;
-
-/// What can go wrong starting the viewer.
-#[derive(Debug, thiserror::Error)]
-pub enum ViewError {
-    /// The port cannot be listened on (in use, or not permitted).
-    #[error("cannot listen on 127.0.0.1:{0}: {1}")]
-    Bind(u16, String),
-}

@@ -18,12 +18,13 @@ use std::time::Duration;
 
 use serde_json::json;
 
-use crate::levels::{level_bytes, Levels, LEVELS};
-use crate::session::{mesh_file, panic_message, Edit, Job, Shared};
+use crate::levels::{level_bytes, LEVELS};
+use crate::session::{mesh_file, panic_message, Edit, Job, Levels, Shared};
 use voxreg_regularize::Preset;
 
+use crate::error::ViewError;
+use crate::model::Loaded;
 use crate::tuning::Tuning;
-use crate::{Loaded, ViewError};
 
 /// Reads a file dropped on the page, from its name (whose extension says the format) and
 /// its contents, held in memory: the command line's reading, with its options, and

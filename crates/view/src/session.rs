@@ -7,16 +7,16 @@ use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::mpsc::{Receiver, Sender};
 use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::{Duration, Instant};
+use voxreg_simplify::Simplified;
 
 use glam::DVec3;
 use voxreg_digisurf::{Block, BlockVolume, RegionMap, SurfaceError};
 use voxreg_io::{Palette, QuadMesh};
 use voxreg_regularize::{Interrupt, Output, Params, RegularizeError, Regularizer, Run, Stage};
 
-use crate::levels::Levels;
 use crate::model::{f32_bytes, Model};
+use crate::model::{Loaded, Volume};
 use crate::tuning::Tuning;
-use crate::{Loaded, Volume};
 
 /// The least time between two streamed iterates (the first of a run is sent at once).
 const FRAME_INTERVAL: Duration = Duration::from_millis(60);
@@ -60,6 +60,25 @@ pub(crate) struct Finished {
     pub(crate) summary: String,
 }
 
+/// The pyramid of one result, or why it could not be computed.
+#[derive(Debug)]
+pub(crate) struct Levels {
+    /// The frame of the result simplified ([`State::frame`] when it was published).
+    pub(crate) frame: u64,
+    /// The levels of the pyramid, level 0 first.
+    pub(crate) result: Result<Vec<Simplified>, String>,
+    /// Milliseconds the simplification took.
+    pub(crate) ms: f64,
+}
+
+impl Levels {
+    /// The levels, if they simplify the result shown in `state`.
+    pub(crate) fn of(state: &State) -> Option<&[Simplified]> {
+        let levels = state.levels.as_ref().filter(|l| l.frame == state.frame && state.frame_final)?;
+        levels.result.as_deref().ok()
+    }
+}
+
 /// What the page sees; `version` grows on every change (the event stream sends each).
 #[derive(Debug, Default)]
 pub(crate) struct State {
@@ -96,7 +115,7 @@ pub(crate) struct State {
     /// its view), and the milliseconds the edit's new surface took to build.
     pub(crate) edited: bool,
     pub(crate) edit_ms: Option<f64>,
-    /// The level of detail the page chose (0: the full surface; see [`crate::levels`]).
+    /// The level of detail the page chose (0: the full surface).
     pub(crate) level: usize,
     /// The levels of detail of a result, once computed (dropped when a new run starts).
     pub(crate) levels: Option<Arc<Levels>>,

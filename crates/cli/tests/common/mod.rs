@@ -4,6 +4,7 @@
 use std::path::{Path, PathBuf};
 use std::process::{Command, Output};
 
+#[allow(unused_imports)]
 pub(crate) use voxreg_testkit::validate_gltf;
 
 /// A file of the repository's `data/` folder.

@@ -731,7 +731,7 @@ fn a_level_of_detail_is_served_closed_per_region_and_a_new_run_replaces_it() {
     });
     let r = start_with(Loaded {
         name: "halves.vol".into(),
-        volume,
+        volume: volume.into(),
         palette: None,
         preset: Preset::Default,
         overrides: Overrides::default(),
