@@ -10,7 +10,7 @@ pub enum NormalError {
     /// definite).
     #[error("linear solver failed: {0}")]
     Solver(String),
-    /// The caller raised the estimate's [`Interrupt`].
+    /// The caller raised the estimate's `Interrupt`.
     #[error("interrupted")]
     Interrupted,
 }

@@ -1,7 +1,7 @@
 //! Normal estimators on digital surfaces.
 //!
 //! A [`NormalField`] holds one unit direction per surfel of a
-//! [`DigitalSurface`]. Estimators implement the small
+//! [`DigitalSurface`](voxreg_digisurf::DigitalSurface). Estimators implement the small
 //! [`NormalEstimator`] trait so callers (the CLI, xtask) can loop over them:
 //!
 //! - [`Trivial`]: the surfel's own axis, oriented from its lower region to its higher one.
