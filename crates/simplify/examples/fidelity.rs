@@ -11,6 +11,8 @@
 //! MAX_ERROR)`) made once more from the full surface: its time, and per level the faces,
 //! the quad fraction and the distance bound.
 
+mod common;
+
 use std::collections::BTreeMap;
 use std::time::Instant;
 
@@ -108,18 +110,7 @@ fn main() {
     let ratio: f64 = args.get(1).map_or(0.1, |s| s.parse().expect("RATIO"));
     let max_error: f64 = args.get(2).map_or(0.5, |s| s.parse().expect("MAX_ERROR"));
     let levels: usize = args.get(3).map_or(0, |s| s.parse().expect("LEVELS"));
-    let loaded = voxreg_io::read_volume(std::path::Path::new(path)).unwrap_or_else(|e| {
-        eprintln!("{path}: {e}");
-        std::process::exit(1);
-    });
-    let t0 = Instant::now();
-    let out = voxreg_regularize::regularize(&loaded.volume, &voxreg_regularize::Params::default())
-        .unwrap_or_else(|e| {
-            eprintln!("{path}: {e}");
-            std::process::exit(1);
-        });
-    let regularize_s = t0.elapsed().as_secs_f64();
-    let full = QuadMesh::from_surface(&out.surface, &out.positions);
+    let (loaded, full, regularize_s) = common::regularized_mesh(path);
     let t1 = Instant::now();
     let s = simplify(&full, Target { ratio: Some(ratio), max_error }, &Options::default()).expect("simplify");
     let simplify_s = t1.elapsed().as_secs_f64();

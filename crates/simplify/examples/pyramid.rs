@@ -7,6 +7,8 @@
 //! faces, the quad fraction, the distance bound and a hash of the mesh (equal hashes at
 //! different thread counts show the output does not depend on them).
 
+mod common;
+
 use std::hash::{Hash, Hasher};
 use std::time::Instant;
 
@@ -30,19 +32,7 @@ fn main() {
         std::process::exit(1);
     };
     let levels: usize = args.get(1).map_or(4, |s| s.parse().expect("LEVELS"));
-    let loaded = voxreg_io::read_volume(std::path::Path::new(path)).unwrap_or_else(|e| {
-        eprintln!("{path}: {e}");
-        std::process::exit(1);
-    });
-    let t0 = Instant::now();
-    let out = voxreg_regularize::regularize(&loaded.volume, &voxreg_regularize::Params::default())
-        .unwrap_or_else(|e| {
-            eprintln!("{path}: {e}");
-            std::process::exit(1);
-        });
-    let regularize_s = t0.elapsed().as_secs_f64();
-    let full = QuadMesh::from_surface(&out.surface, &out.positions);
-    drop(out);
+    let (_, full, regularize_s) = common::regularized_mesh(path);
     let t1 = Instant::now();
     let l = simplify_levels(&full, &pyramid_targets(levels, 4.0, 0.5), &Options::default()).expect("pyramid");
     let pyramid_s = t1.elapsed().as_secs_f64();
