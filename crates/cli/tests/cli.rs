@@ -256,24 +256,25 @@ fn regularize_with_each_normal_estimator_records_it_in_the_report() {
     // the stage's alternations).
     assert!(run(&["--normals", "at"])["at"]["sharpen_iterations"].as_u64().unwrap() > 0);
     assert_eq!(run(&["--normals", "at", "--sharpen", "0"])["at"]["sharpen_iterations"].as_u64(), Some(0));
-    let out = voxreg(&[
-        "regularize",
-        input.to_str().unwrap(),
-        "-o",
-        obj.to_str().unwrap(),
-        "--normals",
-        "at",
-        "--sharpen-threshold=-1",
-    ]);
-    assert!(!out.status.success());
-    assert!(stderr(&out).contains("--sharpen-threshold must be finite and positive"), "{}", stderr(&out));
+    regularize_fails(
+        &input,
+        &obj,
+        &["--normals", "at", "--sharpen-threshold=-1"],
+        "--sharpen-threshold must be finite and positive",
+    );
 
-    let out = voxreg(&["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--radius=0"]);
-    assert!(!out.status.success());
-    assert!(stderr(&out).contains("--radius must be finite and positive"), "{}", stderr(&out));
-    let out =
-        voxreg(&["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--normals", "pca"]);
-    assert!(!out.status.success());
+    regularize_fails(&input, &obj, &["--radius=0"], "--radius must be finite and positive");
+    regularize_fails(&input, &obj, &["--normals", "pca"], "");
+}
+
+/// Checks that `voxreg regularize input -o obj extra...` fails with `message` in its
+/// standard error.
+fn regularize_fails(input: &Path, obj: &Path, extra: &[&str], message: &str) {
+    let mut args = vec!["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap()];
+    args.extend(extra);
+    let out = voxreg(&args);
+    assert!(!out.status.success(), "voxreg {args:?} succeeded");
+    assert!(stderr(&out).contains(message), "voxreg {args:?}: '{message}' not in {}", stderr(&out));
 }
 
 /// The `feature` values of a PLY written by `--features`, checking its header.
@@ -450,17 +451,7 @@ fn clamped_output_stays_in_cubes_and_passes_the_check() {
     assert!(out.status.success(), "{}", stderr(&out));
     assert!(String::from_utf8_lossy(&out.stdout).contains(" 0 self-intersecting face pairs"));
     // Clamping needs the descent.
-    let out = voxreg(&[
-        "regularize",
-        input.to_str().unwrap(),
-        "-o",
-        obj.to_str().unwrap(),
-        "--clamp",
-        "--solver",
-        "cg",
-    ]);
-    assert!(!out.status.success());
-    assert!(stderr(&out).contains("--clamp needs the bounded solver"), "{}", stderr(&out));
+    regularize_fails(&input, &obj, &["--clamp", "--solver", "cg"], "--clamp needs the bounded solver");
 }
 
 /// `voxreg check` on the OBJ file `obj`, which must fail: its standard output and error.
