@@ -14,8 +14,19 @@ pub const BUNDLED_VOX_MODELS: [&str; 6] = [
 /// translated by `offset` (`"x y z"`, the scene graph's `_t`), for readers' tests of scenes
 /// far apart or corrupted.
 pub fn two_model_vox(offset: &str) -> Vec<u8> {
-    use dot_vox::{Color, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+    use dot_vox::{Color, Model, Size, Voxel};
     let model = || Model { size: Size { x: 1, y: 1, z: 1 }, voxels: vec![Voxel { x: 0, y: 0, z: 0, i: 1 }] };
+    vox_bytes(
+        vec![model(), model()],
+        vec![Color { r: 1, g: 2, b: 3, a: 255 }; 256],
+        group_scene(&["0 0 0", offset]),
+    )
+}
+
+/// A scene graph of one group holding one model each, model `k` placed by the translation
+/// `at[k]` (`"x y z"`, the scene graph's `_t`).
+fn group_scene(at: &[&str]) -> Vec<dot_vox::SceneNode> {
+    use dot_vox::{Frame, SceneNode, ShapeModel};
     let transform = |child: u32, t: &str| {
         let mut frame = dot_vox::Dict::new();
         frame.insert("_t".into(), t.into());
@@ -26,19 +37,21 @@ pub fn two_model_vox(offset: &str) -> Vec<u8> {
             layer_id: 0,
         }
     };
-    let shape = |model_id| SceneNode::Shape {
-        attributes: dot_vox::Dict::new(),
-        models: vec![ShapeModel { model_id, attributes: dot_vox::Dict::new() }],
-    };
-    let scenes = vec![
+    let mut scenes = vec![
         transform(1, "0 0 0"),
-        SceneNode::Group { attributes: dot_vox::Dict::new(), children: vec![2, 4] },
-        transform(3, "0 0 0"),
-        shape(0),
-        transform(5, offset),
-        shape(1),
+        SceneNode::Group {
+            attributes: dot_vox::Dict::new(),
+            children: (0..at.len() as u32).map(|k| 2 + 2 * k).collect(),
+        },
     ];
-    vox_bytes(vec![model(), model()], vec![Color { r: 1, g: 2, b: 3, a: 255 }; 256], scenes)
+    for (k, t) in at.iter().enumerate() {
+        scenes.push(transform(3 + 2 * k as u32, t));
+        scenes.push(SceneNode::Shape {
+            attributes: dot_vox::Dict::new(),
+            models: vec![ShapeModel { model_id: k as u32, attributes: dot_vox::Dict::new() }],
+        });
+    }
+    scenes
 }
 
 /// A MagicaVoxel `.vox` file's bytes (version 150, the default index map, no materials
@@ -66,49 +79,18 @@ pub fn vox_bytes(
 /// then 2, ...) in one group, placed by the translations `at` (`"x y z"`, the scene
 /// graph's `_t`): scenes of models far apart, touching or overlapping.
 pub fn vox_scene(sizes: &[[u32; 3]], at: &[&str]) -> Vec<u8> {
-    use dot_vox::{Color, DotVoxData, Frame, Model, SceneNode, ShapeModel, Size, Voxel};
+    use dot_vox::{Color, Model, Size, Voxel};
     let model = |k: usize, [x, y, z]: [u32; 3]| Model {
         size: Size { x, y, z },
         voxels: (0..x * y * z)
             .map(|i| Voxel { x: (i % x) as u8, y: (i / x % y) as u8, z: (i / x / y) as u8, i: k as u8 })
             .collect(),
     };
-    let transform = |child: u32, t: &str| {
-        let mut frame = dot_vox::Dict::new();
-        frame.insert("_t".into(), t.into());
-        SceneNode::Transform {
-            attributes: dot_vox::Dict::new(),
-            frames: vec![Frame::new(frame)],
-            child,
-            layer_id: 0,
-        }
-    };
-    let mut scenes = vec![
-        transform(1, "0 0 0"),
-        SceneNode::Group {
-            attributes: dot_vox::Dict::new(),
-            children: (0..at.len() as u32).map(|k| 2 + 2 * k).collect(),
-        },
-    ];
-    for (k, t) in at.iter().enumerate() {
-        scenes.push(transform(3 + 2 * k as u32, t));
-        scenes.push(SceneNode::Shape {
-            attributes: dot_vox::Dict::new(),
-            models: vec![ShapeModel { model_id: k as u32, attributes: dot_vox::Dict::new() }],
-        });
-    }
-    let data = DotVoxData {
-        version: 150,
-        index_map: dot_vox::DEFAULT_INDEX_MAP.to_vec(),
-        models: sizes.iter().enumerate().map(|(k, &m)| model(k, m)).collect(),
-        palette: (0..256u32).map(|i| Color { r: i as u8, g: 255 - i as u8, b: 3, a: 255 }).collect(),
-        materials: Vec::new(),
-        scenes,
-        layers: Vec::new(),
-    };
-    let mut bytes = Vec::new();
-    data.write_vox(&mut bytes).expect("writing to memory");
-    bytes
+    vox_bytes(
+        sizes.iter().enumerate().map(|(k, &m)| model(k, m)).collect(),
+        (0..256u32).map(|i| Color { r: i as u8, g: 255 - i as u8, b: 3, a: 255 }).collect(),
+        group_scene(at),
+    )
 }
 
 /// A version-1 `.npy` file's bytes: `descr` (`'<u4'`, `'|u1'`, `'<f4'`), shape `(X, Y, Z)`
