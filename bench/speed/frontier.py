@@ -47,7 +47,7 @@ import time
 import numpy as np
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from vs_vtk import surface_nets_filter  # noqa: E402  (the same SurfaceNets3D set-up)
+from vs_vtk import read_vti, surface_nets_filter  # noqa: E402  (the same SurfaceNets3D set-up and reader)
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
 WORK = os.path.join(ROOT, "target", "bench")
@@ -355,20 +355,7 @@ def load_volume(path):
     """(labels (X, Y, Z), spacing, origin) of a .npy or .vti volume."""
     if path.endswith(".npy"):
         return np.load(path), (1, 1, 1), (0, 0, 0)
-    from vtkmodules.util.numpy_support import vtk_to_numpy
-    from vtkmodules.vtkIOXML import vtkXMLImageDataReader
-
-    r = vtkXMLImageDataReader()
-    r.SetFileName(path)
-    r.Update()
-    img = r.GetOutput()
-    dims = img.GetDimensions()
-    scalars = img.GetPointData().GetScalars()
-    if scalars is None:
-        scalars = img.GetCellData().GetScalars()
-        dims = tuple(max(d - 1, 1) for d in dims)
-    a = vtk_to_numpy(scalars)
-    return a.reshape(dims[::-1]).transpose(2, 1, 0), img.GetSpacing(), img.GetOrigin()
+    return read_vti(path)
 
 
 # --- the run -----------------------------------------------------------------------------

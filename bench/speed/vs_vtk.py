@@ -56,6 +56,25 @@ def read_vol(path):
     return a.reshape(dims[::-1]).transpose(2, 1, 0)
 
 
+def read_vti(path):
+    """A VTK image data file's scalars (point data, else cell data: one label per voxel) as an
+    (X, Y, Z) array, with its spacing and origin."""
+    from vtkmodules.util.numpy_support import vtk_to_numpy
+    from vtkmodules.vtkIOXML import vtkXMLImageDataReader
+
+    r = vtkXMLImageDataReader()
+    r.SetFileName(path)
+    r.Update()
+    img = r.GetOutput()
+    dims = img.GetDimensions()
+    scalars = img.GetPointData().GetScalars()
+    if scalars is None:
+        scalars = img.GetCellData().GetScalars()
+        dims = tuple(max(d - 1, 1) for d in dims)
+    a = vtk_to_numpy(scalars)
+    return a.reshape(dims[::-1]).transpose(2, 1, 0), img.GetSpacing(), img.GetOrigin()
+
+
 def load_labels(path):
     """The volume as an (X, Y, Z) integer array and its background label (None: none)."""
     import numpy as np
@@ -65,20 +84,7 @@ def load_labels(path):
     if path.endswith(".vol"):
         return read_vol(path), 0
     if path.endswith(".vti"):
-        from vtkmodules.util.numpy_support import vtk_to_numpy
-        from vtkmodules.vtkIOXML import vtkXMLImageDataReader
-
-        r = vtkXMLImageDataReader()
-        r.SetFileName(path)
-        r.Update()
-        img = r.GetOutput()
-        dims = img.GetDimensions()
-        scalars = img.GetPointData().GetScalars()
-        if scalars is None:  # cell data: one label per voxel
-            scalars = img.GetCellData().GetScalars()
-            dims = tuple(max(d - 1, 1) for d in dims)
-        a = vtk_to_numpy(scalars)
-        return a.reshape(dims[::-1]).transpose(2, 1, 0), None
+        return read_vti(path)[0], None
     raise SystemExit(f"{path}: unsupported input for the SurfaceNets side")
 
 

@@ -4,7 +4,7 @@ use std::collections::HashMap;
 use std::path::Path;
 
 mod common;
-use common::{data, stderr, voxreg};
+use common::{data, regularize_ok, report_of, s, stderr, voxreg};
 
 /// Parses the quads of an OBJ file.
 fn obj_quads(path: &Path) -> (usize, Vec<[usize; 4]>, Vec<String>) {
@@ -55,18 +55,9 @@ fn regularize_writes_a_closed_quad_mesh_and_a_report() {
     let dir = tempfile::tempdir().unwrap();
     let obj = dir.path().join("cat.obj");
     let report = dir.path().join("report.json");
-    let out = voxreg(&[
-        "regularize",
-        data("cat10.vol").to_str().unwrap(),
-        "-o",
-        obj.to_str().unwrap(),
-        "--report",
-        report.to_str().unwrap(),
-        "--quiet",
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    let out = regularize_ok(&data("cat10.vol"), &obj, &["--report", s(&report), "--quiet"]);
     assert!(stderr(&out).is_empty(), "--quiet printed: {}", stderr(&out));
-    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    let r = report_of(&report);
     let (vertices, quads, groups) = obj_quads(&obj);
     assert_eq!(quads.len() as u64, r["counts"]["surfels"].as_u64().unwrap());
     assert_eq!(vertices as u64, r["counts"]["vertices"].as_u64().unwrap());
@@ -110,8 +101,7 @@ fn regularize_writes_a_closed_quad_mesh_and_a_report() {
 fn regularize_a_vox_model_to_ply() {
     let dir = tempfile::tempdir().unwrap();
     let ply = dir.path().join("army.ply");
-    let out = voxreg(&["regularize", data("chr_army1.vox").to_str().unwrap(), "-o", ply.to_str().unwrap()]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    let out = regularize_ok(&data("chr_army1.vox"), &ply, &[]);
     let bytes = std::fs::read(&ply).unwrap();
     assert!(bytes.starts_with(b"ply\nformat binary_little_endian 1.0\n"));
     assert!(stderr(&out).contains("400 quads"), "{}", stderr(&out));
@@ -121,17 +111,7 @@ fn regularize_a_vox_model_to_ply() {
 fn threshold_makes_a_binary_volume() {
     let dir = tempfile::tempdir().unwrap();
     let obj = dir.path().join("b.obj");
-    let input = data("bunny-32.vol");
-    let out = voxreg(&[
-        "regularize",
-        input.to_str().unwrap(),
-        "--threshold",
-        "0",
-        "-o",
-        obj.to_str().unwrap(),
-        "-q",
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    regularize_ok(&data("bunny-32.vol"), &obj, &["--threshold", "0", "-q"]);
     let (_, _, groups) = obj_quads(&obj);
     assert_eq!(groups, vec!["interface_1_0"]);
 }
@@ -193,9 +173,7 @@ fn bad_input_is_a_clear_error_and_writes_nothing() {
 fn vox_to_coloured_gltf() {
     let dir = tempfile::tempdir().unwrap();
     let glb = dir.path().join("army.glb");
-    let out =
-        voxreg(&["regularize", data("chr_army1.vox").to_str().unwrap(), "-o", glb.to_str().unwrap(), "-q"]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    regularize_ok(&data("chr_army1.vox"), &glb, &["-q"]);
     let bytes = std::fs::read(&glb).unwrap();
     assert_eq!(&bytes[..4], b"glTF");
     // The JSON chunk names one material per visible colour of the model.
@@ -226,13 +204,8 @@ fn regularize_with_each_normal_estimator_records_it_in_the_report() {
     let report = dir.path().join("report.json");
     let input = data("cat10.vol");
     let run = |extra: &[&str]| {
-        let mut args = vec!["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap()];
-        args.extend(["--report", report.to_str().unwrap(), "-q"]);
-        args.extend(extra);
-        let out = voxreg(&args);
-        assert!(out.status.success(), "{extra:?}: {}", stderr(&out));
-        let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-        r["normals"].clone()
+        regularize_ok(&input, &obj, &[&["--report", s(&report), "-q"], extra].concat());
+        report_of(&report)["normals"].clone()
     };
     // The default: integral invariant normals at the multigrid radius (3 at unit spacing).
     let p = run(&[]);
@@ -270,8 +243,7 @@ fn regularize_with_each_normal_estimator_records_it_in_the_report() {
 /// Checks that `voxreg regularize input -o obj extra...` fails with `message` in its
 /// standard error.
 fn regularize_fails(input: &Path, obj: &Path, extra: &[&str], message: &str) {
-    let mut args = vec!["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap()];
-    args.extend(extra);
+    let args = [&["regularize", s(input), "-o", s(obj)], extra].concat();
     let out = voxreg(&args);
     assert!(!out.status.success(), "voxreg {args:?} succeeded");
     assert!(stderr(&out).contains(message), "voxreg {args:?}: '{message}' not in {}", stderr(&out));
@@ -300,9 +272,8 @@ fn features_writes_the_at_feature_field() {
     let obj = dir.path().join("cat.obj");
     let ply = dir.path().join("features.ply");
     let input = data("cat10.vol");
-    let (i, o, f) = (input.to_str().unwrap(), obj.to_str().unwrap(), ply.to_str().unwrap());
-    let out = voxreg(&["regularize", i, "-o", o, "-q", "--normals", "at", "--features", f]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    let f = s(&ply);
+    regularize_ok(&input, &obj, &["-q", "--normals", "at", "--features", f]);
     let (vertices, _, _) = obj_quads(&obj);
     let v = ply_features(&ply);
     assert_eq!(v.len(), vertices);
@@ -320,11 +291,7 @@ fn features_writes_the_at_feature_field() {
         (vec!["--normals", "at", "--features", "features.obj"], "expected .ply"),
     ] {
         let other = dir.path().join("other.obj");
-        let mut args = vec!["regularize", i, "-o", other.to_str().unwrap(), "-q"];
-        args.extend(extra);
-        let out = voxreg(&args);
-        assert!(!out.status.success());
-        assert!(stderr(&out).contains(message), "{}", stderr(&out));
+        regularize_fails(&input, &other, &[&["-q"], &extra[..]].concat(), message);
         assert!(!ply.exists() && !other.exists());
     }
 }
@@ -349,23 +316,12 @@ fn every_solver_reaches_the_same_surface_and_reports_itself() {
     let run = |solver: &str, extra: &[&str]| {
         let obj = dir.path().join(format!("{solver}.obj"));
         let report = dir.path().join(format!("{solver}.json"));
-        let mut args = vec![
-            "regularize",
-            input.to_str().unwrap(),
-            "-o",
-            obj.to_str().unwrap(),
-            "--report",
-            report.to_str().unwrap(),
-            "--quiet",
-            "--solver",
-            solver,
-        ];
-        let extra: Vec<&str> = extra.to_vec();
-        args.extend(extra);
-        let out = voxreg(&args);
-        assert!(out.status.success(), "{solver}: {}", stderr(&out));
-        let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
-        (obj_positions(&obj), r)
+        regularize_ok(
+            &input,
+            &obj,
+            &[&["--report", s(&report), "--quiet", "--solver", solver], extra].concat(),
+        );
+        (obj_positions(&obj), report_of(&report))
     };
     let (exact, r) = run("direct", &[]);
     assert_eq!(last_solve(&r)["solver"], "direct");
@@ -393,11 +349,8 @@ fn the_fast_preset_runs_its_sweeps() {
     let dir = tempfile::tempdir().unwrap();
     let obj = dir.path().join("fast.obj");
     let report = dir.path().join("fast.json");
-    let input = data("cat10.vol");
-    let args = ["regularize", input.to_str().unwrap(), "-o", obj.to_str().unwrap(), "--report"];
-    let out = voxreg(&[&args[..], &[report.to_str().unwrap(), "--preset", "fast", "--quiet"]].concat());
-    assert!(out.status.success(), "{}", stderr(&out));
-    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    regularize_ok(&data("cat10.vol"), &obj, &["--report", s(&report), "--preset", "fast", "--quiet"]);
+    let r = report_of(&report);
     let solves = r["solves"].as_array().unwrap();
     assert_eq!(solves.len(), 4);
     assert!(solves.iter().all(|s| s["solver"] == "sweeps" && s["iterations"] == 8), "{solves:?}");
@@ -413,35 +366,14 @@ fn clamped_output_stays_in_cubes_and_passes_the_check() {
     let report = dir.path().join("clamped.json");
     let free = dir.path().join("free.obj");
     let input = data("cat10.vol");
-    let out = voxreg(&[
-        "regularize",
-        input.to_str().unwrap(),
-        "-o",
-        obj.to_str().unwrap(),
-        "--report",
-        report.to_str().unwrap(),
-        "--clamp",
-        "--alpha",
-        "1e-4",
-        "--quiet",
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
-    let r: serde_json::Value = serde_json::from_str(&std::fs::read_to_string(&report).unwrap()).unwrap();
+    regularize_ok(&input, &obj, &["--report", s(&report), "--clamp", "--alpha", "1e-4", "--quiet"]);
+    let r = report_of(&report);
     let r = last_solve(&r);
     assert_eq!(r["solver"], "bounded");
     assert_eq!(r["clamp"], 0.01);
     assert!(r["clamped_vertices"].as_u64().is_some());
     // Against the staircase (the regularization with an overwhelming attachment).
-    let out = voxreg(&[
-        "regularize",
-        input.to_str().unwrap(),
-        "-o",
-        free.to_str().unwrap(),
-        "--alpha",
-        "1e9",
-        "--quiet",
-    ]);
-    assert!(out.status.success(), "{}", stderr(&out));
+    regularize_ok(&input, &free, &["--alpha", "1e9", "--quiet"]);
     for (a, b) in obj_positions(&obj).iter().zip(&obj_positions(&free)) {
         for k in 0..3 {
             assert!((a[k] - b[k]).abs() <= 0.495 + 1e-6, "{a:?} left the cube of {b:?}");

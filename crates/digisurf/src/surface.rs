@@ -18,7 +18,7 @@ use crate::volume::{LabelStorage, LabelView, LabelVolume, Voxel};
 mod blocks;
 mod scan;
 
-use scan::{all_faces, outside_of, range_face_count, Scan};
+use scan::{all_faces, outside_of, range_faces, Scan};
 
 const NONE: u32 = u32::MAX;
 
@@ -303,7 +303,7 @@ impl DigitalSurface {
         (0..tasks)
             .into_par_iter()
             .map(|t| {
-                range_face_count(
+                range_faces::<u64>(
                     volume,
                     &regions,
                     &outside,

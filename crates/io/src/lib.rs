@@ -126,6 +126,8 @@ mod read_mesh;
 mod samples;
 mod size;
 mod stl;
+#[cfg(test)]
+mod testing;
 mod tiff;
 mod vol;
 mod volume;

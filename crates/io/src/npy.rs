@@ -407,10 +407,7 @@ mod tests {
             (npy("{'descr: '|u1'}", &[]), "header"),
             (npy("['descr']", &[]), "expected '{'"),
         ];
-        for (bytes, expected) in cases {
-            let text = message(&bytes);
-            assert!(text.contains(expected), "expected '{expected}' in '{text}'");
-        }
+        crate::testing::assert_refused(&cases, message);
         let nan: Vec<u8> = [f32::NAN, 1.0].iter().flat_map(|v| v.to_le_bytes()).collect();
         let text = message(&npy("{'descr': '<f4', 'fortran_order': False, 'shape': (1, 2, 1), }", &nan));
         assert!(text.contains("grey level NaN at voxel [0, 0, 0]"), "{text}");

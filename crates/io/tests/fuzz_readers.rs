@@ -20,6 +20,7 @@ use voxreg_io::{
     read_raw_bytes, read_tiff_bytes, read_vol_bytes, read_vox_bytes, read_vti_bytes, read_zarr_entries,
     DataType, Endian, IoError, RawSpec,
 };
+use voxreg_testkit::Xorshift;
 
 fn data(name: &str) -> Vec<u8> {
     std::fs::read(Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../data")).join(name)).unwrap()
@@ -50,22 +51,6 @@ fn readers() -> Vec<(&'static str, Reader)> {
     ]
 }
 
-/// Xorshift64*: small, fast, deterministic.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
-
 /// Boundary values written over header numbers.
 const NUMBERS: &[&str] = &[
     "0",
@@ -85,7 +70,7 @@ const NUMBERS: &[&str] = &[
 ];
 
 /// One random corruption of `seed`.
-fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
+fn mutate(seed: &[u8], rng: &mut Xorshift) -> Vec<u8> {
     let mut b = seed.to_vec();
     for _ in 0..1 + rng.below(3) {
         match rng.below(7) {
@@ -101,7 +86,7 @@ fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
             2 => {
                 let i = rng.below(b.len() + 1);
                 let n = 1 + rng.below(16);
-                let bytes: Vec<u8> = (0..n).map(|_| rng.next() as u8).collect();
+                let bytes: Vec<u8> = (0..n).map(|_| rng.next_u64() as u8).collect();
                 b.splice(i..i, bytes);
             }
             3 if !b.is_empty() => {
@@ -368,7 +353,7 @@ fn mutated_inputs_never_panic() {
             if !(name == "vox" && s == 1) {
                 assert!(read(seed).is_ok(), "{name} seed {s}: {:?}", read(seed).unwrap_err());
             }
-            let mut rng = Rng(0x9e37_79b9_7f4a_7c15 ^ ((s as u64 + 1) << 32) ^ name.len() as u64);
+            let mut rng = Xorshift::new(0x9e37_79b9_7f4a_7c15 ^ ((s as u64 + 1) << 32) ^ name.len() as u64);
             for i in 0..iterations / seeds.len() {
                 let bytes = mutate(seed, &mut rng);
                 check(name, read, &bytes, &format!("seed {s} mutation {i}"));

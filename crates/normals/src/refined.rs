@@ -138,18 +138,8 @@ impl Refined<'_> {
         let blend = anisotropic_fit_weight(surface.spacing());
         let near = near_junction_surfels(surface);
         interrupt.check()?;
-        let field = refined_interruptible(
-            surface,
-            self.positions,
-            self.previous,
-            self.radius,
-            self.feature_angle_deg,
-            blend,
-            &near,
-            true,
-            Some(&mut hints.wide),
-            interrupt,
-        );
+        let field =
+            refined_interruptible(self, surface, blend, &near, true, Some(&mut hints.wide), interrupt);
         // A raised interrupt left the surfels after it unestimated.
         interrupt.check()?;
         Ok(field)
@@ -318,34 +308,8 @@ fn junction_surfels(surface: &DigitalSurface) -> Vec<bool> {
     surface.surfels().par_iter().map(|s| s.vertices.iter().any(|v| junction[v.index()])).collect()
 }
 
-/// [`refined_interruptible`] never interrupted.
-#[cfg(test)]
-fn refined(
-    surface: &DigitalSurface,
-    positions: &[DVec3],
-    field: &NormalField,
-    radius: f64,
-    feature_angle_deg: f64,
-    blend: f64,
-    near_junction: &[bool],
-) -> NormalField {
-    let never = Interrupt::never();
-    refined_interruptible(
-        surface,
-        positions,
-        field,
-        radius,
-        feature_angle_deg,
-        blend,
-        near_junction,
-        true,
-        None,
-        &never,
-    )
-}
-
-/// The estimate; once `interrupt` is raised, the surfels not yet done keep `field`'s
-/// normal (the caller reports the interruption). With `probe`, a wide disc is searched
+/// `estimator`'s estimate; once `interrupt` is raised, the surfels not yet done keep the
+/// previous field's normal (the caller reports the interruption). With `probe`, a wide disc is searched
 /// only where a plain search first finds another interface's interior within its reach,
 /// and that search only where such an interior quad near enough is within the feature
 /// angle by a per-cell bound on the normals ([`InteriorNormals`]). Where none is, its
@@ -354,19 +318,16 @@ fn refined(
 /// surfels marked search their wide disc without the probe (the same estimate: the probe
 /// only skips searches whose share would be 0), and each surfel's mark becomes whether
 /// its wide disc's share was positive.
-#[allow(clippy::too_many_arguments)]
 fn refined_interruptible(
+    estimator: &Refined<'_>,
     surface: &DigitalSurface,
-    positions: &[DVec3],
-    field: &NormalField,
-    radius: f64,
-    feature_angle_deg: f64,
     blend: f64,
     near_junction: &[bool],
     probe: bool,
     mut hints: Option<&mut Vec<bool>>,
     interrupt: &Interrupt,
 ) -> NormalField {
+    let Refined { positions, previous: field, radius, feature_angle_deg } = *estimator;
     let n = surface.num_surfels();
     let h = surface.spacing().max_element();
     let r = radius * h;

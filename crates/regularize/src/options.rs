@@ -544,27 +544,9 @@ mod tests {
     }
 
     #[test]
-    fn overrides_apply_over_the_preset_as_the_former_front_ends_did() {
-        let mut o = Overrides::default();
-        o.alpha = Some(0.02);
-        o.normals = Some(Estimator::Convolved);
-        o.radius = Some(2.5);
-        o.refine = Some(1);
-        o.solver = Some(SolverChoice::Cg);
-        o.tolerance = Some(1e-4);
-        o.preserve_size = Some(false);
-        o.regions = Some(Regions::Spec("solid".into()));
-        let p = resolve(&o, Preset::Default).unwrap();
-        let mut q = Params::default();
-        q.energy.alpha = 0.02;
-        q.normals.estimator = Estimator::Convolved;
-        q.normals.radius = Some(2.5);
-        q.refinement_mut().rounds = 1;
-        q.solver = q.solver.with_tolerance(1e-4);
-        q.solver.choice = SolverChoice::Cg;
-        q.mode.fidelity_mut().unwrap().recentring = None;
-        q.regions = RegionMap::single_solid();
-        assert_eq!(p, q);
+    fn clamping_and_smoothness_set_the_mode() {
+        // The other overrides are checked against the former mapping, preset by preset, in
+        // `tests/options.rs`.
         // The boxes: on at the preset's margin, off, or by smoothness.
         let clamp = |c| {
             let mut o = Overrides::default();

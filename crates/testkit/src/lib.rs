@@ -1,5 +1,5 @@
 //! Dev-only test kit: analytic shapes with known surfaces and normals, their Gauss
-//! digitizations, error metrics, a deterministic random generator ([`Lcg`]) and small
+//! digitizations, error metrics, deterministic random generators ([`Lcg`], [`Xorshift`]) and small
 //! input files written byte by byte. Shared by tests, benches and xtask.
 //!
 //! A shape is an implicit function `f` (inside where `f <= 0`). [`digitize`] makes the
@@ -35,7 +35,7 @@ pub use labelled::{
     digitize_labels, label_fidelity, vertex_labels, JunctionKind, LabelFidelity, LabelShape, QuarteredBall,
     Solid, SplitBall, Stat, TouchingBalls,
 };
-pub use rng::Lcg;
+pub use rng::{Lcg, Xorshift};
 
 use glam::DVec3;
 use rayon::prelude::*;

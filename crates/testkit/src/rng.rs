@@ -1,4 +1,4 @@
-//! A small deterministic pseudo-random generator for tests (no seed source, no dependency).
+//! Small deterministic pseudo-random generators for tests (no seed source, no dependency).
 
 use glam::DVec3;
 
@@ -68,6 +68,45 @@ impl Lcg {
     }
 }
 
+/// Marsaglia's xorshift64 followed by Vigna's multiplication (xorshift64*): the mutation
+/// tests' generator, so that a seed picks the same corruptions in every test and fuzz
+/// replay.
+///
+/// Each call shifts the state (`^= >> 12`, `^= << 25`, `^= >> 27`) and returns it times
+/// `0x2545_f491_4f6c_dd1d`. The state must not start at 0 (it would stay 0).
+///
+/// ```
+/// use voxreg_testkit::Xorshift;
+///
+/// let mut rng = Xorshift::new(0x9e37_79b9_7f4a_7c15);
+/// assert_eq!(rng.next_u64(), 0x0d83_b3e2_9a21_487a);
+/// assert!(rng.below(7) < 7);
+/// ```
+#[derive(Clone, Debug)]
+pub struct Xorshift {
+    state: u64,
+}
+
+impl Xorshift {
+    /// A generator whose state starts at `seed` (not 0).
+    pub fn new(seed: u64) -> Self {
+        Xorshift { state: seed }
+    }
+
+    /// The next number (all 64 bits).
+    pub fn next_u64(&mut self) -> u64 {
+        self.state ^= self.state >> 12;
+        self.state ^= self.state << 25;
+        self.state ^= self.state >> 27;
+        self.state.wrapping_mul(0x2545_f491_4f6c_dd1d)
+    }
+
+    /// [`Xorshift::next_u64`] modulo `n`, in `[0, n)`; 0 when `n` is 0.
+    pub fn below(&mut self, n: usize) -> usize {
+        (self.next_u64() % n.max(1) as u64) as usize
+    }
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -96,5 +135,18 @@ mod tests {
             let v = rng.vec3(-0.5, 0.5);
             assert!(v.abs().max_element() <= 0.5);
         }
+    }
+
+    #[test]
+    fn xorshift_keeps_the_mutation_tests_sequence() {
+        // The outputs of the generator the reader and request mutation tests had inline.
+        let mut rng = Xorshift::new(0x9e37_79b9_7f4a_7c15);
+        let first: Vec<u64> = (0..4).map(|_| rng.next_u64()).collect();
+        assert_eq!(
+            first,
+            [0x0d83_b3e2_9a21_487a, 0x54c4_4c79_f1fe_9d67, 0xa845_f342_007a_0e78, 0x7d6e_0b87_8a79_4779]
+        );
+        let below: Vec<usize> = (0..8).map(|i| rng.below([0, 1, 7, 1000][i % 4])).collect();
+        assert_eq!(below, [0, 0, 2, 144, 0, 0, 4, 761]);
     }
 }

@@ -7,25 +7,12 @@
 use std::panic::AssertUnwindSafe;
 use std::path::Path;
 
+use voxreg_testkit::Xorshift;
 use voxreg_view::Viewer;
 
-/// A viewer that refuses uploads and is stopped (waits end at once), as in the target.
-fn viewer() -> Viewer {
-    let refuse = |name: &str, _: &[u8]| Err(format!("{name}: uploads are not read while fuzzing"));
-    let viewer = Viewer::bind(0, Box::new(refuse)).unwrap();
-    viewer.stop_handle().stop();
-    viewer
-}
-
-/// `data` with `{HOST}` and `{TOKEN}` replaced (the fuzz target's placeholders).
-fn substituted(viewer: &Viewer, data: &[u8]) -> Vec<u8> {
-    let text = String::from_utf8_lossy(data);
-    if !text.contains("{HOST}") && !text.contains("{TOKEN}") {
-        return data.to_vec();
-    }
-    let host = format!("127.0.0.1:{}", viewer.addr().port());
-    text.replace("{HOST}", &host).replace("{TOKEN}", viewer.token()).into_bytes()
-}
+#[path = "../../../fuzz/fuzz_targets/request_case.rs"]
+mod request_case;
+use request_case::{substituted, viewer};
 
 fn seeds() -> Vec<(String, Vec<u8>)> {
     let dir = Path::new(concat!(env!("CARGO_MANIFEST_DIR"), "/../../fuzz/seeds/request"));
@@ -72,23 +59,7 @@ fn the_seeds_get_their_answers() {
     }
 }
 
-/// Xorshift64*: small, fast, deterministic.
-struct Rng(u64);
-
-impl Rng {
-    fn next(&mut self) -> u64 {
-        self.0 ^= self.0 >> 12;
-        self.0 ^= self.0 << 25;
-        self.0 ^= self.0 >> 27;
-        self.0.wrapping_mul(0x2545_f491_4f6c_dd1d)
-    }
-
-    fn below(&mut self, n: usize) -> usize {
-        (self.next() % n.max(1) as u64) as usize
-    }
-}
-
-fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
+fn mutate(seed: &[u8], rng: &mut Xorshift) -> Vec<u8> {
     let mut b = seed.to_vec();
     for _ in 0..1 + rng.below(4) {
         let at = rng.below(b.len() + 1);
@@ -97,7 +68,7 @@ fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
                 let i = at.min(b.len() - 1);
                 b[i] ^= 1 << rng.below(8);
             }
-            1 => b.insert(at, rng.next() as u8),
+            1 => b.insert(at, rng.next_u64() as u8),
             2 if at < b.len() => {
                 b.remove(at);
             }
@@ -128,7 +99,7 @@ fn mutate(seed: &[u8], rng: &mut Rng) -> Vec<u8> {
 #[test]
 fn mutated_requests_are_answered_or_dropped_never_a_panic() {
     let viewer = viewer();
-    let mut rng = Rng(0x9e37_79b9_7f4a_7c15);
+    let mut rng = Xorshift::new(0x9e37_79b9_7f4a_7c15);
     for (name, seed) in seeds() {
         let seed = substituted(&viewer, &seed);
         for i in 0..300 {

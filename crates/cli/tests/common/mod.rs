@@ -58,3 +58,17 @@ pub(crate) fn wait_code(child: &mut std::process::Child, secs: u64) -> Option<i3
     let _ = child.kill();
     panic!("voxreg did not exit within {secs} s of the signal");
 }
+
+/// Runs `voxreg regularize input -o output extra...`, which must succeed; its output.
+pub(crate) fn regularize_ok(input: &Path, output: &Path, extra: &[&str]) -> Output {
+    let mut args = vec!["regularize", s(input), "-o", s(output)];
+    args.extend(extra);
+    let out = voxreg(&args);
+    assert!(out.status.success(), "voxreg {args:?}: {}", stderr(&out));
+    out
+}
+
+/// The JSON of a `--report` file.
+pub(crate) fn report_of(path: &Path) -> serde_json::Value {
+    serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+}

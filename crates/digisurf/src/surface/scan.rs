@@ -78,38 +78,54 @@ pub(super) fn check_regions(rs: &[u32], ls: &[u32]) -> Result<(), SurfaceError> 
     }
 }
 
-/// The faces of slabs `range`, one list per slab (see [`slab_faces`]), with rolling layers.
-pub(super) fn range_faces(
-    volume: &LabelView<'_>,
-    regions: &Regions,
-    outside: &Outside,
-    range: std::ops::Range<usize>,
-) -> Result<Vec<Vec<RawFace>>, SurfaceError> {
-    let mut out = Vec::with_capacity(range.len());
-    scan_slabs(volume, regions, outside, range, |prev, cur, k| {
-        let mut faces = Vec::new();
-        slab_faces(volume.dims(), outside, k, prev, cur, |f| {
-            if f.is_inner() {
-                faces.push(f);
-            }
-        });
-        out.push(faces);
-    })?;
-    Ok(out)
+/// What [`range_faces`] gathers of the inner faces of a range of slabs.
+pub(super) trait SlabSink: Default {
+    /// Starts the next slab.
+    fn slab(&mut self);
+    /// Takes an inner face of the current slab.
+    fn face(&mut self, face: RawFace);
 }
 
-/// The number of faces in slabs `range`, without storing them.
-pub(super) fn range_face_count(
+/// The faces, one list per slab.
+impl SlabSink for Vec<Vec<RawFace>> {
+    fn slab(&mut self) {
+        self.push(Vec::new());
+    }
+
+    fn face(&mut self, face: RawFace) {
+        if let Some(faces) = self.last_mut() {
+            faces.push(face);
+        }
+    }
+}
+
+/// Their number only, without storing them.
+impl SlabSink for u64 {
+    fn slab(&mut self) {}
+
+    fn face(&mut self, _: RawFace) {
+        *self += 1;
+    }
+}
+
+/// The inner faces of slabs `range` (see [`slab_faces`]), with rolling layers: one list
+/// per slab as a `Vec<Vec<RawFace>>`, or their number as a `u64`.
+pub(super) fn range_faces<S: SlabSink>(
     volume: &LabelView<'_>,
     regions: &Regions,
     outside: &Outside,
     range: std::ops::Range<usize>,
-) -> Result<u64, SurfaceError> {
-    let mut n = 0u64;
+) -> Result<S, SurfaceError> {
+    let mut out = S::default();
     scan_slabs(volume, regions, outside, range, |prev, cur, k| {
-        slab_faces(volume.dims(), outside, k, prev, cur, |f| n += u64::from(f.is_inner()));
+        out.slab();
+        slab_faces(volume.dims(), outside, k, prev, cur, |f| {
+            if f.is_inner() {
+                out.face(f);
+            }
+        });
     })?;
-    Ok(n)
+    Ok(out)
 }
 
 /// Calls `visit(previous layer, current layer, k)` for each slab `k` of `range`, with
@@ -384,7 +400,7 @@ pub(super) fn all_faces(
     let found: Vec<Vec<Vec<RawFace>>> = (0..tasks)
         .into_par_iter()
         .map(|t| {
-            range_faces(
+            range_faces::<Vec<Vec<RawFace>>>(
                 volume,
                 regions,
                 outside,

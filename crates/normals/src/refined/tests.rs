@@ -88,6 +88,16 @@ fn reference(surface: &DigitalSurface, positions: &[DVec3], field: &NormalField,
         .collect()
 }
 
+/// [`refined_interruptible`] with the probe, never interrupted.
+fn refined(
+    estimator: Refined<'_>,
+    surface: &DigitalSurface,
+    blend: f64,
+    near_junction: &[bool],
+) -> NormalField {
+    refined_interruptible(&estimator, surface, blend, near_junction, true, None, &Interrupt::never())
+}
+
 #[test]
 fn matches_the_reference_disc_search() {
     let mut rng = Lcg::new(7);
@@ -136,7 +146,12 @@ fn the_fit_removes_the_tilt_of_uneven_discs_on_thick_slices() {
             sphere_error(
                 &surface,
                 &on_sphere,
-                &refined(&surface, &on_sphere, &start, 3.0, 90.0, blend, &no_junction),
+                &refined(
+                    Refined { positions: &on_sphere, previous: &start, radius: 3.0, feature_angle_deg: 90.0 },
+                    &surface,
+                    blend,
+                    &no_junction,
+                ),
             )
         });
         eprintln!("spacing {spacing}: plain mean {plain:.3} deg, fit {fit:.3} deg");
@@ -156,11 +171,10 @@ fn cubic_voxels_take_the_plain_mean() {
     let mut rng = Lcg::new(11);
     let positions: Vec<DVec3> = surface.positions().iter().map(|p| *p + 0.2 * rng.vec3(-1.0, 1.0)).collect();
     let field = NormalField::new(surface.surfels().iter().map(|s| s.normal()).collect());
-    let estimated = Refined { positions: &positions, previous: &field, radius: 3.0, feature_angle_deg: 30.0 }
-        .estimate(&surface)
-        .unwrap();
+    let estimator = Refined { positions: &positions, previous: &field, radius: 3.0, feature_angle_deg: 30.0 };
+    let estimated = estimator.estimate(&surface).unwrap();
     let no_junction = vec![false; surface.num_surfels()];
-    assert_eq!(estimated, refined(&surface, &positions, &field, 3.0, 30.0, 0.0, &no_junction));
+    assert_eq!(estimated, refined(estimator, &surface, 0.0, &no_junction));
 }
 
 #[test]
@@ -186,7 +200,9 @@ fn the_wide_disc_probe_changes_no_normal() {
         assert!(near.iter().any(|&n| n));
         let never = Interrupt::never();
         let run = |probe: bool, hints: Option<&mut Vec<bool>>| {
-            refined_interruptible(&surface, &positions, &field, 3.0, 30.0, 0.0, &near, probe, hints, &never)
+            let estimator =
+                Refined { positions: &positions, previous: &field, radius: 3.0, feature_angle_deg: 30.0 };
+            refined_interruptible(&estimator, &surface, 0.0, &near, probe, hints, &never)
         };
         let plain = run(false, None);
         assert_eq!(run(true, None), plain);
@@ -242,7 +258,9 @@ fn quads_near_a_junction_take_the_interior_of_their_surface() {
     assert!(near.iter().any(|&n| n) && near.iter().any(|&n| !n));
     let none = vec![false; surface.num_surfels()];
     let [plain, interior] = [&none, &near].map(|mask| {
-        let field = refined(&surface, &exact, &previous, 3.0, 30.0, 0.0, mask);
+        let estimator =
+            Refined { positions: &exact, previous: &previous, radius: 3.0, feature_angle_deg: 30.0 };
+        let field = refined(estimator, &surface, 0.0, mask);
         let errors: Vec<f64> = (0..surface.num_surfels())
             .filter(|&s| near[s])
             .map(|s| field.as_slice()[s].dot(truth[s]).min(1.0).acos().to_degrees())

@@ -23,9 +23,10 @@ quadratic energy (attachment to the voxels, alignment with estimated normals, fa
 from __future__ import annotations
 
 import os
-from typing import Any, Callable, Dict, Optional, Sequence, Tuple, Union
+from typing import Any, Callable, Dict, Optional, Sequence, Tuple, TypedDict, Union, cast
 
 import numpy as np
+import numpy.typing as npt
 
 from . import _voxreg
 from ._errors import InputError, IoError, ParameterError, VoxregError, label_argument
@@ -44,6 +45,19 @@ __all__ = [
 ]
 
 __version__: str = _voxreg.__version__
+
+
+class MeshReport(TypedDict):
+    """What :func:`check` counts (see there)."""
+
+    faces: int
+    intersecting_pairs: int
+    invalid_faces: int
+    folded_quads: int
+    folded_pairs: int
+    first_intersection: Optional[Tuple[int, int]]
+    clean: bool
+    mean_angle_deg: float
 
 
 def _triple(name: str, value: Any) -> Tuple[float, float, float]:
@@ -101,7 +115,7 @@ def _labels(labels: Any) -> np.ndarray:
 
 
 def regularize(
-    labels: Any,
+    labels: npt.ArrayLike,
     spacing: Sequence[float] = (1.0, 1.0, 1.0),
     origin: Sequence[float] = (0.0, 0.0, 0.0),
     background: Optional[int] = 0,
@@ -272,7 +286,7 @@ def read(
     spacing: Optional[Sequence[float]] = None,
     keep_labels: Optional[Sequence[int]] = None,
     background: Optional[int] = None,
-) -> Tuple[np.ndarray, Dict[str, Any]]:
+) -> Tuple[npt.NDArray[np.uint32], Dict[str, Any]]:
     """Reads a voxel file as the ``voxreg`` command does.
 
     Formats by extension: .vol, .longvol, .pgm3d (DGtal), .vox (MagicaVoxel), .nii,
@@ -326,7 +340,7 @@ def read(
                         label_argument("background", background))
 
 
-def check(mesh: Union[Mesh, Tuple[Any, Any]]) -> Dict[str, Any]:
+def check(mesh: Union[Mesh, Tuple[npt.ArrayLike, npt.ArrayLike]]) -> MeshReport:
     """Counts the self-intersections and folds of a quad mesh (``voxreg check``).
 
     Quads are split into two triangles; faces may touch only along the edges and at the
@@ -343,11 +357,14 @@ def check(mesh: Union[Mesh, Tuple[Any, Any]]) -> Dict[str, Any]:
         ``faces``, ``intersecting_pairs`` (self-intersecting face pairs),
         ``invalid_faces`` (with a NaN or infinite vertex), ``folded_quads``,
         ``folded_pairs`` (folded adjacent pairs), ``first_intersection`` (a pair of face
-        indices, or None) and ``clean`` (none of these).
+        indices, or None), ``clean`` (none of these) and ``mean_angle_deg`` (the mean
+        angle between edge-adjacent quads, in degrees).
     """
+    vertices: npt.ArrayLike
+    quads: npt.ArrayLike
     if isinstance(mesh, Mesh):
         vertices, quads = mesh.vertices, mesh.quads
     else:
         vertices, quads = mesh
-    return _voxreg.check(np.ascontiguousarray(vertices, dtype=np.float64),
-                         np.ascontiguousarray(quads, dtype=np.int64))
+    return cast(MeshReport, _voxreg.check(np.ascontiguousarray(vertices, dtype=np.float64),
+                                          np.ascontiguousarray(quads, dtype=np.int64)))

@@ -7,6 +7,7 @@ import os
 from typing import Any, Dict, List, Optional, Tuple
 
 import numpy as np
+import numpy.typing as npt
 
 from . import _voxreg
 from ._errors import InputError, ParameterError, VoxregError
@@ -39,12 +40,19 @@ class Mesh:
         Sub-meshes share their parent's.
     """
 
+    vertices: npt.NDArray[np.float64]
+    quads: npt.NDArray[np.int64]
+    labels: npt.NDArray[np.uint32]
+    colors: Optional[npt.NDArray[np.uint8]]
+    report: Dict[str, Any]
+    label_names: Dict[int, str]
+
     def __init__(
         self,
-        vertices: Any,
-        quads: Any,
-        labels: Any,
-        colors: Any = None,
+        vertices: npt.ArrayLike,
+        quads: npt.ArrayLike,
+        labels: npt.ArrayLike,
+        colors: Optional[npt.ArrayLike] = None,
         report: Optional[Dict[str, Any]] = None,
         *,
         _surface: Any = None,
@@ -58,7 +66,7 @@ class Mesh:
         self.labels = np.asarray(labels, dtype=np.uint32)
         self.colors = None if colors is None else np.asarray(colors, dtype=np.uint8)
         self.report = {} if report is None else report
-        self.label_names: Dict[int, str] = dict(label_names or {})
+        self.label_names = dict(label_names or {})
         self._surface = _surface
         self._part = _part
         self._groups = _groups or []
@@ -101,9 +109,9 @@ class Mesh:
         first appearance."""
         if self._surface is not None:
             names = {name: pair for name, pair, _ in self._surface.interfaces()}
-            return [tuple(int(x) for x in names[name]) for name, _ in self._groups]
+            return [(int(names[name][0]), int(names[name][1])) for name, _ in self._groups]
         _, first = np.unique(self.labels, axis=0, return_index=True)
-        return [tuple(int(x) for x in self.labels[i]) for i in sorted(first)]
+        return [(int(self.labels[i][0]), int(self.labels[i][1])) for i in sorted(first)]
 
     def interface(self, a: int, b: int, manifold: bool = False) -> "Mesh":
         """The interface between the regions of labels ``a`` and ``b`` (either order), as
@@ -263,7 +271,7 @@ class Mesh:
 
     # Conversions -----------------------------------------------------------------------
 
-    def triangles(self) -> np.ndarray:
+    def triangles(self) -> npt.NDArray[np.int64]:
         """The quads split along their first diagonal: (2m, 3) int64, quad ``i`` giving
         triangles ``2i`` (vertices 0, 1, 2) and ``2i + 1`` (0, 2, 3)."""
         q = self.quads
