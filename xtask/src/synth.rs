@@ -10,7 +10,6 @@
 //! all; every organ touches its neighbours along triple and quadruple junctions, and
 //! the skin touches the outermost organs.
 
-use std::io::Write;
 use std::path::PathBuf;
 
 use anyhow::{bail, Context, Result};
