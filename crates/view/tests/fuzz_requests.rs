@@ -8,7 +8,6 @@ use std::panic::AssertUnwindSafe;
 use std::path::Path;
 
 use voxreg_testkit::Xorshift;
-use voxreg_view::Viewer;
 
 #[path = "../../../fuzz/fuzz_targets/request_case.rs"]
 mod request_case;
