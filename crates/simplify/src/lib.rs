@@ -72,6 +72,9 @@ pub fn simplify_levels(
     let mut out = Vec::with_capacity(targets.len());
     for t in targets {
         engine.run(t);
+        if options.quads {
+            engine.flip_for_quads();
+        }
         out.push(engine.snapshot());
     }
     Ok(out)
