@@ -62,8 +62,8 @@ pub(super) struct Flip {
 impl Engine<'_> {
     /// Flips edges inside patches where that lets more triangles pair into quads: the
     /// triangles are matched (best quads first, then augmenting paths, as the pairing
-    /// does); then, for each triangle left alone in turn, the edges of it and of its
-    /// neighbours are tried in order, and a flip that passes every check is kept where
+    /// does); then, for each triangle left alone in turn, the edges of it and of the
+    /// triangles nearest it inside its patch (four in all) are tried in order, and a flip that passes every check is kept where
     /// the matching then grows (an augmenting path from a triangle it left alone), and
     /// undone otherwise. Sequential and in a fixed order: the result does not depend on the
     /// thread count.
