@@ -9,8 +9,8 @@ use super::{
     VOLUME_TOLERANCE,
 };
 
-/// How many passes of flips are made at most.
-const FLIP_PASSES: usize = 2;
+/// How many passes of flips are made at most (a second one finds hardly any).
+const FLIP_PASSES: usize = 1;
 
 /// How many triangles one augmenting-path search visits at most.
 const MAX_SEARCH: usize = 64;
@@ -148,6 +148,9 @@ impl Engine<'_> {
                     if m.mate[t as usize] != NONE {
                         break;
                     }
+                    if !self.flip_could_pair(t1, k) {
+                        continue;
+                    }
                     let Some(f) = self.plan_flip(t1, k) else { continue };
                     let [t1, t2] = f.t;
                     let undo = self.apply_flip_undoable(f);
@@ -181,6 +184,28 @@ impl Engine<'_> {
                 break;
             }
         }
+    }
+
+    /// Whether, after the flip of edge `k` of `t1`, each of the two new triangles would
+    /// make an acceptable quad with a neighbour (the other new one included): a flip
+    /// that leaves one of them with none cannot let the matching grow.
+    fn flip_could_pair(&self, t1: u32, k: usize) -> bool {
+        let Some((t2, y)) = self.across(t1, k) else { return false };
+        let s1 = self.tris[t1 as usize];
+        let (a, b, x) = (s1[k], s1[(k + 1) % 3], s1[(k + 2) % 3]);
+        let s2 = self.tris[t2 as usize];
+        let j = s2.iter().position(|&w| w == b).expect("across");
+        let dih = self.options.max_quad_dihedral_deg;
+        let quad = |t: u32, e: usize, p: u32, q: u32, r: u32| {
+            // New triangle (p, q, r) across the old edge e of t, which runs q -> p.
+            self.across(t, e).is_some_and(|(_, w)| crate::pair::score(&self.pos, p, q, r, w, dih).is_some())
+        };
+        let together = crate::pair::score(&self.pos, x, y, b, a, dih).is_some();
+        // n1 = (x, a, y): edges x -> a (t1's edge (k + 2)) and a -> y (t2's edge j + 1).
+        let n1 = together || quad(t1, (k + 2) % 3, x, a, y) || quad(t2, (j + 1) % 3, a, y, x);
+        // n2 = (y, b, x): edges y -> b (t2's edge j + 2) and b -> x (t1's edge k + 1).
+        let n2 = together || quad(t2, (j + 2) % 3, y, b, x) || quad(t1, (k + 1) % 3, b, x, y);
+        n1 && n2
     }
 
     /// The triangle across edge `k` of `t` and the score of their quad, where they pair.
