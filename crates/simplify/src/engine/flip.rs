@@ -63,10 +63,10 @@ impl Engine<'_> {
     /// Flips edges inside patches where that lets more triangles pair into quads: the
     /// triangles are matched (best quads first, then augmenting paths, as the pairing
     /// does); then, for each triangle left alone in turn, the edges of it and of the
-    /// triangles nearest it inside its patch (four in all) are tried in order, and a flip that passes every check is kept where
-    /// the matching then grows (an augmenting path from a triangle it left alone), and
-    /// undone otherwise. Sequential and in a fixed order: the result does not depend on the
-    /// thread count.
+    /// triangles nearest it inside its patch (four in all) are tried in order, and a flip
+    /// that passes every check is kept where the matching then grows (an augmenting path
+    /// from a triangle it left alone), and undone otherwise. Sequential and in a fixed
+    /// order: the result does not depend on the thread count.
     pub(crate) fn flip_for_quads(&mut self) {
         if self.alive == self.input_triangles {
             return;
@@ -197,7 +197,7 @@ impl Engine<'_> {
         let j = s2.iter().position(|&w| w == b).expect("across");
         let dih = self.options.max_quad_dihedral_deg;
         let quad = |t: u32, e: usize, p: u32, q: u32, r: u32| {
-            // New triangle (p, q, r) across the old edge e of t, which runs q -> p.
+            // New triangle (p, q, r), its edge p -> q where edge e of t is.
             self.across(t, e).is_some_and(|(_, w)| crate::pair::score(&self.pos, p, q, r, w, dih).is_some())
         };
         let together = crate::pair::score(&self.pos, x, y, b, a, dih).is_some();
