@@ -15,6 +15,7 @@ use crate::quadric::Quadric;
 use crate::types::{Options, Simplified, SimplifyError, Stats, Target};
 
 mod build;
+mod flip;
 
 /// A collapse may move no region's volume (enclosed by its faces) further than this
 /// fraction of its input volume, counting every collapse before it.

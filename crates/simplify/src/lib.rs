@@ -24,8 +24,9 @@
 //! The method is an edge collapse on the triangles (each quad split along the diagonal
 //! from its first vertex), ordered by quadric error, with a volume-preserving placement
 //! where both ends are inside one patch (corners and line vertices stay where they are),
-//! then a re-pairing of the triangles into quads within each patch (greedy by quad
-//! quality, then augmenting paths). The collapses run on one thread in a fixed order;
+//! then edge flips inside patches where they let more triangles pair (each checked as a
+//! collapse is), and a re-pairing of the triangles into quads within each patch (greedy
+//! by quad quality, then augmenting paths). The collapses run on one thread in a fixed order;
 //! the setup, the queue's costs and the pairing's scores are computed in parallel into
 //! ordered results: the output does not depend on the thread count. See
 //! `docs/design/simplification.md`.
@@ -72,6 +73,9 @@ pub fn simplify_levels(
     let mut out = Vec::with_capacity(targets.len());
     for t in targets {
         engine.run(t);
+        if options.quads {
+            engine.flip_for_quads();
+        }
         out.push(engine.snapshot());
     }
     Ok(out)

@@ -199,7 +199,7 @@ fn augment(candidates: &[(u64, u32, u32, [u32; 4])], mate: &mut [u32], frozen: &
 }
 
 /// The score of the quad `[a, y, b, x]` (lower is better), if it is acceptable.
-fn score(pos: &[DVec3], a: u32, b: u32, x: u32, y: u32, max_dihedral_deg: f64) -> Option<f64> {
+pub(crate) fn score(pos: &[DVec3], a: u32, b: u32, x: u32, y: u32, max_dihedral_deg: f64) -> Option<f64> {
     let [pa, pb, px, py] = [a, b, x, y].map(|v| pos[v as usize]);
     let n1 = (pb - pa).cross(px - pa);
     let n2 = (pa - pb).cross(py - pb);

@@ -26,7 +26,8 @@ pub struct Options {
     /// Refuse collapses whose new triangles intersect a triangle they share no vertex
     /// with (exact tests against a grid of the triangles).
     pub check_intersections: bool,
-    /// Pair the triangles into quads where a good pair exists (else the output is
+    /// Pair the triangles into quads where a good pair exists, after flipping edges inside
+    /// patches where that lets more triangles pair (else no flips, and the output is
     /// triangles only, written as quads repeating their last vertex).
     pub quads: bool,
     /// A pair of triangles makes a quad only if the angle between their normals is at

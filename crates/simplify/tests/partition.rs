@@ -386,3 +386,14 @@ fn bad_input_and_targets_are_errors() {
     broken.face_labels.pop();
     assert!(matches!(simplify(&broken, t, &o), Err(SimplifyError::InvalidMesh(_))));
 }
+
+/// Six labels in a blob at a tenth: 62.8% of the faces are quads (58.1% without the flips
+/// that let the matching grow); the bound leaves a margin for changes of the collapses.
+#[test]
+fn a_six_label_blob_at_a_tenth_keeps_its_quad_share() {
+    let input = regularized(&blob_volume([24, 24, 16], 6, 3));
+    let out = simplify(&input, Target { ratio: Some(0.1), max_error: 0.5 }, &Options::default()).unwrap();
+    check(&input, &out, 0.5).unwrap();
+    let s = out.stats;
+    assert!(s.quads as f64 >= 0.60 * s.faces as f64, "{s:?}");
+}
