@@ -500,6 +500,9 @@ impl<'m> Engine<'m> {
         if self.alive <= goal {
             return;
         }
+        // The previous level's queue is rebuilt below: freed first, so that the two are
+        // never held together.
+        self.heap = BinaryHeap::new();
         // Every vertex queues its own collapses; a corner's neighbours queue theirs into
         // it. The costs are computed in parallel; the queue's order is a total order on
         // its entries, so it does not depend on how they were gathered.
@@ -569,6 +572,8 @@ impl<'m> Engine<'m> {
         }
         let mean_edge = if count > 0 { (sum / count as f64).max(1e-300) } else { 1.0 };
         let (lo, hi) = self.bounds();
+        // The old grid is freed before the new one is built.
+        self.grid = None;
         let mut grid = Grid::new(lo, hi, 2.0 * mean_edge, self.tris.len());
         for (t, tri) in self.tris.iter().enumerate() {
             if self.tri_alive[t] {
@@ -827,6 +832,10 @@ impl<'m> Engine<'m> {
                     let st = self.tris[s as usize];
                     let q = st.map(|x| self.pos[x as usize]);
                     let (qlo, qhi) = (q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
+                    // Outside the box of all the changed triangles: outside each one's.
+                    if lo.cmpgt(qhi).any() || qlo.cmpgt(hi).any() {
+                        return false;
+                    }
                     let mut excluded = None;
                     for ((tri, p3), (blo, bhi)) in tested.iter().zip(boxes) {
                         if blo.cmpgt(qhi).any() || qlo.cmpgt(*bhi).any() {
