@@ -532,8 +532,7 @@ impl<'m> Engine<'m> {
                 a.append(&mut b);
                 a
             });
-        self.heap = BinaryHeap::from(entries);
-        let mut limit = 2 * self.heap.len() + 1024;
+        let mut limit = self.set_queue(entries);
         while self.alive > goal {
             if self.grid.is_some() && 2 * self.alive < self.grid_built_at {
                 self.rebuild_grid();
@@ -542,8 +541,7 @@ impl<'m> Engine<'m> {
                 let heap = std::mem::take(&mut self.heap);
                 let mut kept: Vec<Reverse<Candidate>> = heap.into_vec();
                 kept.retain(|c| self.is_current(&c.0));
-                self.heap = BinaryHeap::from(kept);
-                limit = 2 * self.heap.len() + 1024;
+                limit = self.set_queue(kept);
             }
             let Some(Reverse(c)) = self.heap.pop() else { break };
             if !self.is_current(&c) {
@@ -555,6 +553,17 @@ impl<'m> Engine<'m> {
                 self.apply();
             }
         }
+    }
+
+    /// Makes `entries` the queue, with room for half as many again and the pushes of a
+    /// collapse, so that it never grows by doubling; returns the length past which its
+    /// stale entries are dropped (the queue's order is the same whenever they are).
+    fn set_queue(&mut self, mut entries: Vec<Reverse<Candidate>>) -> usize {
+        let limit = entries.len() + entries.len() / 2 + 1024;
+        entries.shrink_to(limit + 1024);
+        entries.reserve_exact(limit + 1024 - entries.len());
+        self.heap = BinaryHeap::from(entries);
+        limit
     }
 
     /// Builds the grid again from the triangles alive, with cells of twice their mean
