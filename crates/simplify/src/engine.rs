@@ -501,6 +501,9 @@ impl<'m> Engine<'m> {
         if self.alive <= goal {
             return;
         }
+        // The previous level's queue is rebuilt below: freed first, so that the two are
+        // never held together.
+        self.heap = BinaryHeap::new();
         // Every vertex queues its own collapses; a corner's neighbours queue theirs into
         // it. The costs are computed in parallel; the queue's order is a total order on
         // its entries, so it does not depend on how they were gathered.
@@ -530,8 +533,7 @@ impl<'m> Engine<'m> {
                 a.append(&mut b);
                 a
             });
-        self.heap = BinaryHeap::from(entries);
-        let mut limit = 2 * self.heap.len() + 1024;
+        let mut limit = self.set_queue(entries);
         while self.alive > goal {
             if self.grid.is_some() && 2 * self.alive < self.grid_built_at {
                 self.rebuild_grid();
@@ -540,8 +542,7 @@ impl<'m> Engine<'m> {
                 let heap = std::mem::take(&mut self.heap);
                 let mut kept: Vec<Reverse<Candidate>> = heap.into_vec();
                 kept.retain(|c| self.is_current(&c.0));
-                self.heap = BinaryHeap::from(kept);
-                limit = 2 * self.heap.len() + 1024;
+                limit = self.set_queue(kept);
             }
             let Some(Reverse(c)) = self.heap.pop() else { break };
             if !self.is_current(&c) {
@@ -553,6 +554,17 @@ impl<'m> Engine<'m> {
                 self.apply();
             }
         }
+    }
+
+    /// Makes `entries` the queue, with room for half as many again and the pushes of a
+    /// collapse, so that it never grows by doubling; returns the length past which its
+    /// stale entries are dropped (the queue's order is the same whenever they are).
+    fn set_queue(&mut self, mut entries: Vec<Reverse<Candidate>>) -> usize {
+        let limit = entries.len() + entries.len() / 2 + 1024;
+        entries.shrink_to(limit + 1024);
+        entries.reserve_exact(limit + 1024 - entries.len());
+        self.heap = BinaryHeap::from(entries);
+        limit
     }
 
     /// Builds the grid again from the triangles alive, with cells of twice their mean
@@ -570,6 +582,8 @@ impl<'m> Engine<'m> {
         }
         let mean_edge = if count > 0 { (sum / count as f64).max(1e-300) } else { 1.0 };
         let (lo, hi) = self.bounds();
+        // The old grid is freed before the new one is built.
+        self.grid = None;
         let mut grid = Grid::new(lo, hi, 2.0 * mean_edge, self.tris.len());
         for (t, tri) in self.tris.iter().enumerate() {
             if self.tri_alive[t] {
@@ -828,6 +842,10 @@ impl<'m> Engine<'m> {
                     let st = self.tris[s as usize];
                     let q = st.map(|x| self.pos[x as usize]);
                     let (qlo, qhi) = (q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
+                    // Outside the box of all the changed triangles: outside each one's.
+                    if lo.cmpgt(qhi).any() || qlo.cmpgt(hi).any() {
+                        return false;
+                    }
                     let mut excluded = None;
                     for ((tri, p3), (blo, bhi)) in tested.iter().zip(boxes) {
                         if blo.cmpgt(qhi).any() || qlo.cmpgt(*bhi).any() {

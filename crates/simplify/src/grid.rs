@@ -60,7 +60,9 @@ impl Grid {
     }
 
     fn range(&self, lo: DVec3, hi: DVec3) -> ([i32; 3], [i32; 3]) {
-        let f = |x: f64, o: f64, n: i32| ((x - o) / self.cell).floor().clamp(0.0, f64::from(n - 1)) as i32;
+        // Clamped first, then truncated: the floor of the clamped value, without a call to
+        // `floor` (the cast saturates, and maps NaN to 0 as the clamp of a NaN floor does).
+        let f = |x: f64, o: f64, n: i32| ((x - o) / self.cell).clamp(0.0, f64::from(n - 1)) as i32;
         let g = |p: DVec3| {
             [
                 f(p.x, self.origin.x, self.dims[0]),

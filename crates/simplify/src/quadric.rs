@@ -55,11 +55,16 @@ impl Quadric {
             DVec3::new(a[1], a[3] + e, a[4]),
             DVec3::new(a[2], a[4], a[5] + e),
         );
-        let det = mat.determinant();
+        // The inverse by cofactors, with the determinant computed once (the same
+        // operations as `DMat3::determinant` and `DMat3::inverse`).
+        let (c0, c1, c2) =
+            (mat.y_axis.cross(mat.z_axis), mat.z_axis.cross(mat.x_axis), mat.x_axis.cross(mat.y_axis));
+        let det = mat.z_axis.dot(c2);
         if !det.is_normal() {
             return None;
         }
-        let inv = mat.inverse();
+        let r = DVec3::splat(det.recip());
+        let inv = DMat3::from_cols(c0 * r, c1 * r, c2 * r).transpose();
         let p0 = inv * (self.b + e * m);
         let ig = inv * g;
         let d = g.dot(ig);
