@@ -173,7 +173,10 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         args.report.as_ref().map(|_| report::named_labels(&source, palette.as_ref())).unwrap_or_default();
     let volume = match product {
         Product::Volume { .. } => Some(source),
-        _ => None,
+        _ => {
+            drop(source);
+            None
+        }
     };
     // One run: the initial normals need not outlive it.
     regularizer.set_keep_normals(false);
