@@ -12,7 +12,7 @@ use glam::Vec3A;
 use rayon::prelude::*;
 
 use super::parts::{
-    block, block_mul, full_mul, refill, scale6, Accumulator, Aggregation, Block, Full, Rows, FACE,
+    block, block_mul, full_mul, refill, scale6, Accumulator, Aggregation, Block, Full, Rows, Stored, FACE,
 };
 use crate::error::RegularizeError;
 use crate::stencil::{Coefficients, Stencil, CHUNK};
@@ -172,20 +172,25 @@ impl Bsr {
         Bsr { offsets, cols, blocks }
     }
 
-    /// [`Bsr::from_rows`] of the whole operator's rows (`W = 10`), in the arrays of `old`
-    /// when it has their pattern (the last solve's level: the pattern depends on the
-    /// surface and hierarchy, seldom on the numbers).
-    pub(super) fn from_rows_reusing(rows: &Rows<10>, old: Bsr) -> Self {
+    /// [`Bsr::from_rows`] of the whole operator's rows (`W = 10`), taken: in the arrays of
+    /// `old` when it has their pattern (the last solve's level: the pattern depends on the
+    /// surface and hierarchy, seldom on the numbers), else with the rows' columns; each
+    /// part of the rows' numbers freed once converted, so that the level's blocks and its
+    /// rows' numbers are never held in full together (the setup's peak).
+    pub(super) fn from_rows_reusing(rows: Rows<10>, old: Bsr) -> Self {
         let same = old.offsets.len() == rows.offsets.len()
             && old.cols == rows.cols
             && old.offsets.iter().zip(&rows.offsets).all(|(&a, &b)| a as usize == b);
-        match old.blocks {
-            Blocks::Sym(mut blocks) if same && blocks.len() == rows.vals.len() => {
-                rows.vals.map_into(&mut blocks, |b| sym_block(full_block(b)));
-                Bsr { offsets: old.offsets, cols: old.cols, blocks: Blocks::Sym(blocks) }
+        let Rows { offsets, cols, vals } = rows;
+        let (offsets, cols, mut blocks) = match old.blocks {
+            Blocks::Sym(blocks) if same && blocks.len() == vals.len() => {
+                drop((offsets, cols));
+                (old.offsets, old.cols, blocks)
             }
-            _ => Self::from_rows(rows),
-        }
+            _ => (offsets.iter().map(|&o| o as u32).collect(), cols, vec![Block::default(); vals.len()]),
+        };
+        vals.map_into_freeing(&mut blocks, |b| sym_block(full_block(b)));
+        Bsr { offsets, cols, blocks: Blocks::Sym(blocks) }
     }
 
     /// Bytes read by one product.
@@ -198,7 +203,7 @@ impl Bsr {
     }
 
     /// `y = b - A x`.
-    pub(super) fn residual(&self, x: &[Vec3A], b: &[Vec3A], y: &mut [Vec3A]) {
+    pub(super) fn residual<S: Stored>(&self, x: &[S], b: &[S], y: &mut [S]) {
         match &self.blocks {
             Blocks::Sym(blocks) => self.residual_with(blocks, block_mul, x, b, y),
             Blocks::Full(blocks) => self.residual_with(blocks, full_mul, x, b, y),
@@ -206,13 +211,13 @@ impl Bsr {
     }
 
     #[inline(always)]
-    fn residual_with<B: Sync>(
+    fn residual_with<B: Sync, S: Stored>(
         &self,
         blocks: &[B],
         mul: impl Fn(&B, Vec3A) -> Vec3A + Sync,
-        x: &[Vec3A],
-        b: &[Vec3A],
-        y: &mut [Vec3A],
+        x: &[S],
+        b: &[S],
+        y: &mut [S],
     ) {
         y.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
             let base = k * CHUNK;
@@ -221,9 +226,9 @@ impl Bsr {
                 let (start, end) = (self.offsets[i] as usize, self.offsets[i + 1] as usize);
                 let mut acc = Vec3A::ZERO;
                 for (m, &c) in blocks[start..end].iter().zip(&self.cols[start..end]) {
-                    acc += mul(m, x[c as usize]);
+                    acc += mul(m, x[c as usize].get());
                 }
-                *yi = b[i] - acc;
+                *yi = S::put(b[i].get() - acc);
             }
         });
     }
@@ -326,8 +331,8 @@ impl Coarsest {
         Ok(Coarsest { symbolic: chol, factor, n })
     }
 
-    pub(super) fn solve(&self, b: &[Vec3A], x: &mut [Vec3A]) {
-        let mut rhs: Vec<f64> = b.iter().flat_map(|v| v.as_dvec3().to_array()).collect();
+    pub(super) fn solve<S: Stored>(&self, b: &[S], x: &mut [S]) {
+        let mut rhs: Vec<f64> = b.iter().flat_map(|v| v.get().as_dvec3().to_array()).collect();
         let par = faer::Par::Seq;
         let mut mem = MemBuffer::new(self.symbolic.solve_in_place_scratch::<f64>(1, par));
         LltRef::new(&self.symbolic, &self.factor).solve_in_place_with_conj(
@@ -337,7 +342,7 @@ impl Coarsest {
             MemStack::new(&mut mem),
         );
         for (xi, v) in x.iter_mut().zip(rhs.chunks_exact(3)) {
-            *xi = Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32);
+            *xi = S::put(Vec3A::new(v[0] as f32, v[1] as f32, v[2] as f32));
         }
     }
 }
@@ -350,9 +355,20 @@ pub(super) struct Level {
     pub(super) n: usize,
 }
 
-#[derive(Debug)]
+/// A level's work vectors, the cycle's own: the fine level's `x` made with the cycle,
+/// the others at their first use (the conjugate gradient lends its own vectors instead,
+/// [`super::Vcycle::apply_in`]).
+#[derive(Debug, Default)]
 pub(super) struct Work {
     pub(super) r: Vec<Vec3A>,
     pub(super) x: Vec<Vec3A>,
     pub(super) t: Vec<Vec3A>,
+}
+
+/// A coarse level's work vectors for one cycle: the cycle's own ([`Work`]) or slices of
+/// vectors lent by its caller (`S` how the values are stored, [`Stored`]).
+pub(super) struct WorkMut<'a, S> {
+    pub(super) r: &'a mut [S],
+    pub(super) x: &'a mut [S],
+    pub(super) t: &'a mut [S],
 }

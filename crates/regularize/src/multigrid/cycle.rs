@@ -6,7 +6,7 @@ use std::sync::Arc;
 use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 
-use super::coarse::{Coarsest, Level, Work};
+use super::coarse::{Coarsest, Level, Work, WorkMut};
 use super::fine::{fine_majorant, inverse_blocks, masked, FineNumbers};
 use super::parts::{block_mul, Aggregation, Block, Rows, Stored, FACE};
 use crate::stencil::{Coefficients, Stencil, CHUNK};
@@ -47,32 +47,58 @@ pub(crate) struct Vcycle {
 }
 
 /// `x = m r` (or `x += m r` with `add`), masked by `face` when given.
-fn smooth<R: Stored>(m: &[Block], r: &[R], x: &mut [Vec3A], add: bool, face: Option<&[Vec3A]>) {
+fn smooth<R: Stored, X: Stored>(m: &[Block], r: &[R], x: &mut [X], add: bool, face: Option<&[Vec3A]>) {
     x.par_chunks_mut(CHUNK).zip(r.par_chunks(CHUNK)).zip(m.par_chunks(CHUNK)).enumerate().for_each(
         |(k, ((x, r), m))| {
             for i in 0..x.len() {
                 let d = block_mul(&m[i], r[i].get());
-                x[i] = masked(face, k * CHUNK + i, if add { x[i] + d } else { d });
+                x[i] = X::put(masked(face, k * CHUNK + i, if add { x[i].get() + d } else { d }));
             }
         },
     );
 }
 
-fn restrict<R: Stored>(agg: &Aggregation, fine: &[R], coarse: &mut [Vec3A]) {
+fn restrict<R: Stored, C: Stored>(agg: &Aggregation, fine: &[R], coarse: &mut [C]) {
     coarse.par_chunks_mut(CHUNK).enumerate().for_each(|(k, out)| {
         for (o, c) in out.iter_mut().enumerate() {
-            *c = agg.members(k * CHUNK + o).iter().map(|&i| fine[i as usize].get()).sum();
+            *c = C::put(agg.members(k * CHUNK + o).iter().map(|&i| fine[i as usize].get()).sum());
         }
     });
 }
 
 /// `fine += P coarse`, masked by `face` when given.
-fn prolong_add(parent: &[u32], coarse: &[Vec3A], fine: &mut [Vec3A], face: Option<&[Vec3A]>) {
+fn prolong_add<C: Stored, F: Stored>(parent: &[u32], coarse: &[C], fine: &mut [F], face: Option<&[Vec3A]>) {
     fine.par_chunks_mut(CHUNK).zip(parent.par_chunks(CHUNK)).enumerate().for_each(|(k, (f, p))| {
         for i in 0..f.len() {
-            f[i] = masked(face, k * CHUNK + i, f[i] + coarse[p[i] as usize]);
+            f[i] = F::put(masked(face, k * CHUNK + i, f[i].get() + coarse[p[i] as usize].get()));
         }
     });
+}
+
+/// Slices of the given vectors, handed out in turn: each from the first vector with room
+/// left for it.
+struct Lender<'a, T> {
+    rooms: Vec<&'a mut [T]>,
+}
+
+impl<'a, T> Lender<'a, T> {
+    /// Whether slices of lengths `lens`, in order, fit in rooms of lengths `rooms`.
+    fn fits(lens: impl Iterator<Item = usize>, mut rooms: Vec<usize>) -> bool {
+        lens.into_iter().all(|n| match rooms.iter_mut().find(|r| **r >= n) {
+            Some(r) => {
+                *r -= n;
+                true
+            }
+            None => false,
+        })
+    }
+
+    fn take(&mut self, n: usize) -> &'a mut [T] {
+        let k = self.rooms.iter().position(|r| r.len() >= n).expect("checked by `Lender::fits`");
+        let (here, rest) = std::mem::take(&mut self.rooms[k]).split_at_mut(n);
+        self.rooms[k] = rest;
+        here
+    }
 }
 
 impl Vcycle {
@@ -213,7 +239,14 @@ impl Vcycle {
             // The last post-smoothing step and the output in `f64`, in the residual's pass.
             match spare {
                 Some(t) if t.len() == x.len() => {
-                    self.fine_correction(stencil, &b, smoother, x, &mut *z, &mut *t, rest, face);
+                    let correct = |res: &mut [DVec3], t: &mut [DVec3], x: &mut [Vec3A]| {
+                        if self.lent_fits(x.len()) {
+                            self.lent_correction(res, t, x, face);
+                        } else {
+                            self.own_correction(&*res, x, rest, face);
+                        }
+                    };
+                    self.fine_correction(stencil, &b, smoother, x, &mut *z, &mut *t, face, correct);
                     let x = &*x;
                     let out = |i: usize, res: Vec3A| {
                         masked(face, i, x[i] + block_mul(&smoother[i], res)).as_dvec3()
@@ -225,6 +258,9 @@ impl Vcycle {
                         *own_r = vec![Vec3A::ZERO; x.len()];
                         *own_t = vec![Vec3A::ZERO; x.len()];
                     }
+                    let correct = |res: &mut [Vec3A], _: &mut [Vec3A], x: &mut [Vec3A]| {
+                        self.own_correction(&*res, x, rest, face)
+                    };
                     self.fine_correction(
                         stencil,
                         &b,
@@ -232,8 +268,8 @@ impl Vcycle {
                         x,
                         own_r.as_mut_slice(),
                         own_t.as_mut_slice(),
-                        rest,
                         face,
+                        correct,
                     );
                     let x = &*x;
                     let out = |i: usize, res: Vec3A| {
@@ -248,8 +284,9 @@ impl Vcycle {
     }
 
     /// The fine level's part of the cycle between the pre-smoothing and the last
-    /// post-smoothing step: residual, coarse correction, and the other smoothing steps,
-    /// on `x`, with the residual in `res` and the product's scratch in `t`.
+    /// post-smoothing step: residual, coarse correction (`correct`, given the residual,
+    /// the scratch and `x`), and the other smoothing steps, on `x`, with the residual in
+    /// `res` and the product's scratch in `t`.
     #[allow(clippy::too_many_arguments)]
     fn fine_correction<R: Stored, T: Stored>(
         &self,
@@ -259,8 +296,8 @@ impl Vcycle {
         x: &mut [Vec3A],
         res: &mut [R],
         t: &mut [T],
-        rest: &mut [Work],
         face: Option<&[Vec3A]>,
+        mut correct: impl FnMut(&mut [R], &mut [T], &mut [Vec3A]),
     ) {
         let steps = self.steps;
         for s in 0..steps {
@@ -269,46 +306,118 @@ impl Vcycle {
                 smooth(smoother, res, x, true, face);
             }
         }
-        restrict(&self.aggregations[0], res, &mut rest[0].r);
-        match (face, &self.face_levels) {
-            (Some(_), Some(f)) => self.coarse_cycle(&f.levels, f.coarsest.as_ref(), 0, rest),
-            _ => self.coarse_cycle(&self.levels, self.coarsest.as_ref(), 0, rest),
-        }
-        prolong_add(&self.aggregations[0].parent, &rest[0].x, x, face);
+        correct(&mut *res, &mut *t, &mut *x);
         for _ in 1..steps {
             self.fine.residual(stencil, x, b, res, t, face);
             smooth(smoother, res, x, true, face);
         }
     }
 
+    /// The coarse levels of the cycle on `face` where given (its own levels where set).
+    fn coarse_of(&self, face: Option<&[Vec3A]>) -> (&[Level], Option<&Coarsest>) {
+        match (face, &self.face_levels) {
+            (Some(_), Some(f)) => (&f.levels, f.coarsest.as_ref()),
+            _ => (&self.levels, self.coarsest.as_ref()),
+        }
+    }
+
+    /// `x += P V(P^T res)` in the cycle's own coarse work vectors (made at their first use).
+    fn own_correction<R: Stored>(
+        &self,
+        res: &[R],
+        x: &mut [Vec3A],
+        rest: &mut [Work],
+        face: Option<&[Vec3A]>,
+    ) {
+        for (w, level) in rest.iter_mut().zip(&self.levels) {
+            if w.x.len() != level.n {
+                *w = Work {
+                    r: vec![Vec3A::ZERO; level.n],
+                    x: vec![Vec3A::ZERO; level.n],
+                    t: vec![Vec3A::ZERO; level.n],
+                };
+            }
+        }
+        let mut works: Vec<WorkMut<'_, Vec3A>> =
+            rest.iter_mut().map(|w| WorkMut { r: &mut w.r, x: &mut w.x, t: &mut w.t }).collect();
+        restrict(&self.aggregations[0], res, works[0].r);
+        let (levels, coarsest) = self.coarse_of(face);
+        self.coarse_cycle(levels, coarsest, 0, &mut works);
+        prolong_add(&self.aggregations[0].parent, works[0].x, x, face);
+    }
+
+    /// The coarse levels' work vectors in order (`r`, `x`, `t` of each, no `t` on the
+    /// coarsest level, which is solved directly), each level's length.
+    fn lent_lengths(&self) -> impl Iterator<Item = usize> + '_ {
+        let last = self.levels.len().saturating_sub(1);
+        self.levels
+            .iter()
+            .enumerate()
+            .flat_map(move |(l, level)| [level.n, level.n, if l == last { 0 } else { level.n }])
+    }
+
+    /// Whether the coarse levels' work vectors fit in two lent vectors of `n` entries, the
+    /// first coarse level's residual in the first (the fine residual, in the second, is
+    /// read while it is written).
+    pub(super) fn lent_fits(&self, n: usize) -> bool {
+        self.levels.first().is_some_and(|first| first.n <= n)
+            && Lender::<DVec3>::fits(self.lent_lengths().skip(1), vec![n - self.levels[0].n, n])
+    }
+
+    /// [`Vcycle::own_correction`] with the coarse levels' work vectors in `t` and `res`,
+    /// the conjugate gradient's vectors that hold the fine level's scratch and residual
+    /// (`f32` values stored in `f64`, exactly): both are free once the residual is
+    /// restricted, until the fine level's next residual.
+    fn lent_correction(&self, res: &mut [DVec3], t: &mut [DVec3], x: &mut [Vec3A], face: Option<&[Vec3A]>) {
+        let (r0, t) = t.split_at_mut(self.levels[0].n);
+        restrict(&self.aggregations[0], &*res, &mut *r0);
+        let mut lender = Lender { rooms: vec![t, res] };
+        let lens: Vec<usize> = self.lent_lengths().collect();
+        let mut works = Vec::with_capacity(self.levels.len());
+        let mut first = Some(r0);
+        for l in lens.chunks_exact(3) {
+            let r = first.take().unwrap_or_else(|| lender.take(l[0]));
+            works.push(WorkMut { r, x: lender.take(l[1]), t: lender.take(l[2]) });
+        }
+        let (levels, coarsest) = self.coarse_of(face);
+        self.coarse_cycle(levels, coarsest, 0, &mut works);
+        prolong_add(&self.aggregations[0].parent, &*works[0].x, x, face);
+    }
+
     /// Solves approximately on coarse level `l + 1` (`works[l]`): `x = V(r)`.
-    fn coarse_cycle(&self, levels: &[Level], coarsest: Option<&Coarsest>, l: usize, works: &mut [Work]) {
+    fn coarse_cycle<S: Stored>(
+        &self,
+        levels: &[Level],
+        coarsest: Option<&Coarsest>,
+        l: usize,
+        works: &mut [WorkMut<'_, S>],
+    ) {
         let last = l + 1 == levels.len();
         if last {
             let w = &mut works[0];
-            coarsest.expect("factored").solve(&w.r, &mut w.x);
+            coarsest.expect("factored").solve(&*w.r, &mut *w.x);
             return;
         }
         let steps = self.coarse_steps;
         let (here, rest) = works.split_at_mut(1);
         let w = &mut here[0];
         let level = &levels[l];
-        smooth(&level.smoother, &w.r, &mut w.x, false, None);
+        smooth(&level.smoother, &*w.r, &mut *w.x, false, None);
         for s in 0..steps {
-            level.matrix.residual(&w.x, &w.r, &mut w.t);
+            level.matrix.residual(&*w.x, &*w.r, &mut *w.t);
             if s + 1 < steps {
-                smooth(&level.smoother, &w.t, &mut w.x, true, None);
+                smooth(&level.smoother, &*w.t, &mut *w.x, true, None);
             }
         }
-        restrict(&self.aggregations[l + 1], &w.t, &mut rest[0].r);
+        restrict(&self.aggregations[l + 1], &*w.t, &mut *rest[0].r);
         self.coarse_cycle(levels, coarsest, l + 1, rest);
         let level = &levels[l];
         let (here, rest) = works.split_at_mut(1);
         let w = &mut here[0];
-        prolong_add(&self.aggregations[l + 1].parent, &rest[0].x, &mut w.x, None);
+        prolong_add(&self.aggregations[l + 1].parent, &*rest[0].x, &mut *w.x, None);
         for _ in 0..steps {
-            level.matrix.residual(&w.x, &w.r, &mut w.t);
-            smooth(&level.smoother, &w.t, &mut w.x, true, None);
+            level.matrix.residual(&*w.x, &*w.r, &mut *w.t);
+            smooth(&level.smoother, &*w.t, &mut *w.x, true, None);
         }
     }
 }

@@ -229,8 +229,8 @@ impl Hierarchy {
             let _ = l;
             if let Some(finer) = rows.take() {
                 let last: &mut Level = levels.last_mut().expect("a previous level");
-                last.matrix = Bsr::from_rows_reusing(&finer, std::mem::take(&mut last.matrix));
                 last.smoother = l1_smoother(&finer, self.params.damping, std::mem::take(&mut last.smoother));
+                last.matrix = Bsr::from_rows_reusing(finer, std::mem::take(&mut last.matrix));
             }
             rows = Some(coarse_rows);
             lap(&format!(
@@ -256,23 +256,17 @@ impl Hierarchy {
         };
         let factor_seconds = t.elapsed().as_secs_f64();
         lap("coarsest factor");
-        // Work vectors of the same sizes are reused as they are: every cycle writes each
-        // entry before reading it. The fine level's residual and scratch are made at their
-        // first use: the conjugate gradient lends its own (`Vcycle::apply_in`).
-        let sizes: Vec<usize> = std::iter::once(stencil.len()).chain(levels.iter().map(|l| l.n)).collect();
-        let works = if spare_works.iter().map(|w| w.x.len()).eq(sizes.iter().copied()) {
+        // Work vectors of the same hierarchy are reused as they are: every cycle writes
+        // each entry before reading it. Only the fine level's `x` is made here; the other
+        // vectors at their first use: the conjugate gradient lends its own
+        // (`Vcycle::apply_in`).
+        let n = stencil.len();
+        let works = if spare_works.len() == levels.len() + 1 && spare_works[0].x.len() == n {
             spare_works
         } else {
             drop(spare_works);
-            let work =
-                |n: usize| Work { r: vec![Vec3A::ZERO; n], x: vec![Vec3A::ZERO; n], t: vec![Vec3A::ZERO; n] };
-            sizes
-                .iter()
-                .enumerate()
-                .map(|(l, &n)| match l {
-                    0 => Work { r: Vec::new(), x: vec![Vec3A::ZERO; n], t: Vec::new() },
-                    _ => work(n),
-                })
+            std::iter::once(Work { x: vec![Vec3A::ZERO; n], ..Default::default() })
+                .chain(levels.iter().map(|_| Work::default()))
                 .collect()
         };
         let fine = FineNumbers::new(stencil, coef, spare_fine);

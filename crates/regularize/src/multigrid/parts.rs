@@ -188,6 +188,21 @@ impl<T> Parts<T> {
         });
     }
 
+    /// [`Parts::map_into`], each part freed once mapped (in parallel within a part).
+    pub(super) fn map_into_freeing<U: Send>(self, out: &mut [U], f: impl Fn(&T) -> U + Sync)
+    where
+        T: Sync,
+    {
+        let mut rest = out;
+        for p in self.parts {
+            let (here, tail) = rest.split_at_mut(p.len());
+            here.par_chunks_mut(CHUNK).zip(p.par_chunks(CHUNK)).for_each(|(o, v)| {
+                o.iter_mut().zip(v).for_each(|(o, v)| *o = f(v));
+            });
+            rest = tail;
+        }
+    }
+
     /// `f(&self[k])` for every entry, in a new vector.
     pub(super) fn map<U: Send + Default + Clone>(&self, f: impl Fn(&T) -> U + Sync) -> Vec<U>
     where

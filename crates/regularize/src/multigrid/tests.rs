@@ -247,3 +247,37 @@ fn updated_face_levels_are_those_built_anew() {
         }
     });
 }
+
+/// The cycle with the conjugate gradient's vectors lent (the fine residual and scratch,
+/// then the coarse levels' work vectors, in `z` and the spare vector, whatever they
+/// held) is the cycle in its own vectors, to the bit; lent, it makes no coarse work
+/// vectors of its own.
+#[test]
+fn a_cycle_in_lent_vectors_is_the_cycle_in_its_own() {
+    on_torus(0.2, 11, |st, c, h, rng| {
+        let n = st.len();
+        for steps in [1, 2] {
+            let params =
+                MultigridParams { smoothing_steps: steps, coarse_smoothing_steps: steps, ..h.params };
+            let h = Hierarchy { aggregations: h.aggregations.clone(), params };
+            let r: Vec<DVec3> = (0..n).map(|_| rng.vec3(-1.0, 1.0)).collect();
+            let mut own = h.numeric(st, c, &Interrupt::never(), None).unwrap();
+            let mut expected = vec![DVec3::ZERO; n];
+            own.apply(st, &r, &mut expected);
+            let mut lent = h.numeric(st, c, &Interrupt::never(), None).unwrap();
+            assert!(lent.lent_fits(n), "the coarse levels fit in the lent vectors");
+            for _ in 0..2 {
+                let mut z: Vec<DVec3> = (0..n).map(|_| rng.vec3(-9.0, 9.0)).collect();
+                let mut spare: Vec<DVec3> = (0..n).map(|_| rng.vec3(-9.0, 9.0)).collect();
+                lent.apply_in(st, &r, &mut z, &mut spare);
+                assert_eq!(z, expected, "{steps} smoothing steps");
+            }
+            assert!(lent.works[1..].iter().all(|w| w.r.is_empty() && w.x.is_empty() && w.t.is_empty()));
+            assert!(own.works[1..].iter().all(|w| !w.x.is_empty()), "the own cycle made its vectors");
+            assert!(
+                lent.memory_bytes() + 40 * own.levels.iter().map(|l| l.n).sum::<usize>()
+                    <= own.memory_bytes()
+            );
+        }
+    });
+}
