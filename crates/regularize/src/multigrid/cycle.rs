@@ -301,14 +301,14 @@ impl Vcycle {
     ) {
         let steps = self.steps;
         for s in 0..steps {
-            self.fine.residual(stencil, x, b, res, t, face);
+            self.fine.residual_map(stencil, x, b, res, t, face, |_, r| R::put(r));
             if s + 1 < steps {
                 smooth(smoother, res, x, true, face);
             }
         }
         correct(&mut *res, &mut *t, &mut *x);
         for _ in 1..steps {
-            self.fine.residual(stencil, x, b, res, t, face);
+            self.fine.residual_map(stencil, x, b, res, t, face, |_, r| R::put(r));
             smooth(smoother, res, x, true, face);
         }
     }

@@ -74,23 +74,11 @@ impl FineNumbers {
         }
     }
 
-    /// `y = b - H x` in `f32`, in the two passes of the `f64` product (`t` is scratch),
-    /// masked by `face` when given; `b(i)` is the right-hand side's entry `i`.
-    pub(super) fn residual<Y: Stored, T: Stored>(
-        &self,
-        stencil: &Stencil,
-        x: &[Vec3A],
-        b: &(impl Fn(usize) -> Vec3A + Sync),
-        y: &mut [Y],
-        t: &mut [T],
-        face: Option<&[Vec3A]>,
-    ) {
-        self.residual_map(stencil, x, b, y, t, face, |_, r| Y::put(r));
-    }
-
-    /// [`FineNumbers::residual`] with `y_i = f(i, (b - H x)_i)`: what is done with each
-    /// residual (a smoothing step, the cycle's output) done in the pass that computes it,
-    /// without writing the residual and reading it back.
+    /// `y_i = f(i, (b - H x)_i)` in `f32`, in the two passes of the `f64` product (`t`
+    /// is scratch), masked by `face` when given; `b(i)` is the right-hand side's entry
+    /// `i`. What is done with each residual (a smoothing step, the cycle's output) is
+    /// done in the pass that computes it, without writing the residual and reading it
+    /// back; `|_, r| Y::put(r)` stores the residual itself.
     #[allow(clippy::too_many_arguments)]
     pub(super) fn residual_map<Y: Send, T: Stored>(
         &self,
