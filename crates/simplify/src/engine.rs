@@ -8,7 +8,7 @@ use glam::DVec3;
 use rayon::prelude::*;
 use rustc_hash::FxHashMap;
 use voxreg_io::QuadMesh;
-use voxreg_quality::{point_triangle_distance, triangles_intersect};
+use voxreg_quality::point_triangle_distance;
 
 use crate::grid::Grid;
 use crate::quadric::Quadric;
@@ -18,7 +18,7 @@ mod build;
 mod flip;
 mod geometry;
 
-use geometry::{boxes_meet, quality, shared_meet, strictly_one_side, tri_normal};
+use geometry::{boxes_meet, meet_off_shared, quality, tri_normal};
 
 /// A collapse may move no region's volume (enclosed by its faces) further than this
 /// fraction of its input volume, counting every collapse before it.
@@ -191,6 +191,27 @@ impl UnionFind {
 }
 
 impl<'m> Engine<'m> {
+    /// Adds `sign` times each change to the running totals: a region's volume when the
+    /// flag is set, a patch's area otherwise.
+    fn add_deltas(&mut self, deltas: &[(bool, u32, f64)], sign: f64) {
+        for &(kind, id, d) in deltas {
+            if kind {
+                self.region_volume[id as usize].1 += sign * d;
+            } else {
+                self.patch_area[id as usize].1 += sign * d;
+            }
+        }
+    }
+
+    /// Moves triangle `t` to the grid cells of its current box, when there is a grid.
+    fn rebox(&mut self, t: u32) {
+        let q = self.tris[t as usize].map(|w| self.pos[w as usize]);
+        if let Some(grid) = self.grid.as_mut() {
+            grid.remove(t);
+            grid.insert(t, q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
+        }
+    }
+
     fn tri_box(&self, t: &[u32; 3]) -> (DVec3, DVec3) {
         let p = t.map(|v| self.pos[v as usize]);
         (p[0].min(p[1]).min(p[2]), p[0].max(p[1]).max(p[2]))
@@ -763,24 +784,7 @@ impl<'m> Engine<'m> {
                         {
                             return false;
                         }
-                        let meet = if st.iter().any(|x| tri.contains(x)) {
-                            // Shared corners: the others strictly on one side of the plane
-                            // meet it only at the shared ones.
-                            let mut others = [DVec3::ZERO; 3];
-                            let mut n = 0;
-                            for (k, x) in st.iter().enumerate() {
-                                if !tri.contains(x) {
-                                    others[n] = q[k];
-                                    n += 1;
-                                }
-                            }
-                            !(n > 0 && strictly_one_side(p3, &others[..n]))
-                                && shared_meet((*tri, *p3), (st, q))
-                        } else {
-                            !strictly_one_side(p3, &q)
-                                && !strictly_one_side(&q, p3)
-                                && triangles_intersect(p3, &q)
-                        };
+                        let meet = meet_off_shared((*tri, *p3), (st, q));
                         if meet {
                             return true;
                         }
@@ -791,18 +795,7 @@ impl<'m> Engine<'m> {
             if !hit {
                 'pairs: for (i, (a, pa)) in sc.tested.iter().enumerate() {
                     for (b, pb) in &sc.tested[i + 1..] {
-                        let mut others = [DVec3::ZERO; 3];
-                        let mut n = 0;
-                        for (k, x) in b.iter().enumerate() {
-                            if !a.contains(x) {
-                                others[n] = pb[k];
-                                n += 1;
-                            }
-                        }
-                        if n > 0 && strictly_one_side(pa, &others[..n]) {
-                            continue;
-                        }
-                        if shared_meet((*a, *pa), (*b, *pb)) {
+                        if meet_off_shared((*a, *pa), (*b, *pb)) {
                             hit = true;
                             break 'pairs;
                         }
@@ -856,13 +849,7 @@ impl<'m> Engine<'m> {
                 }
             }
         }
-        for &(kind, id, d) in deltas {
-            if kind {
-                self.region_volume[id as usize].1 += d;
-            } else {
-                self.patch_area[id as usize].1 += d;
-            }
-        }
+        self.add_deltas(deltas, 1.0);
         for &(x, t, d) in assigned {
             self.points[t as usize].push(x);
             self.error_bound = self.error_bound.max(d);

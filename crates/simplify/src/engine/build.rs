@@ -191,11 +191,7 @@ impl<'m> Engine<'m> {
                             let st = e.tris[s as usize];
                             if s as usize > t && !st.iter().any(|x| tri.contains(x)) {
                                 let q = st.map(|x| e.pos[x as usize]);
-                                if boxes_meet(&p, &q)
-                                    && !strictly_one_side(&p, &q)
-                                    && !strictly_one_side(&q, &p)
-                                    && triangles_intersect(&p, &q)
-                                {
+                                if boxes_meet(&p, &q) && meet_off_shared((tri, p), (st, q)) {
                                     hits.push((t, s as usize));
                                 }
                             }

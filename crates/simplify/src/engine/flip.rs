@@ -2,11 +2,10 @@
 //! checks a collapse makes.
 
 use glam::DVec3;
-use voxreg_quality::{point_triangle_distance, triangles_intersect};
+use voxreg_quality::point_triangle_distance;
 
 use super::{
-    is_feature, quality, shared_meet, strictly_one_side, tri_normal, Engine, AREA_TOLERANCE, NONE,
-    VOLUME_TOLERANCE,
+    is_feature, meet_off_shared, quality, tri_normal, Engine, AREA_TOLERANCE, NONE, VOLUME_TOLERANCE,
 };
 
 /// How many passes of flips are made at most (a second one finds hardly any).
@@ -374,27 +373,13 @@ impl Engine<'_> {
                     if !super::boxes_meet(p3, &q) {
                         continue;
                     }
-                    let meet = if st.iter().any(|w| tri.contains(w)) {
-                        let mut others = [DVec3::ZERO; 3];
-                        let mut n = 0;
-                        for (i, w) in st.iter().enumerate() {
-                            if !tri.contains(w) {
-                                others[n] = q[i];
-                                n += 1;
-                            }
-                        }
-                        !(n > 0 && strictly_one_side(p3, &others[..n])) && shared_meet((*tri, *p3), (st, q))
-                    } else {
-                        !strictly_one_side(p3, &q)
-                            && !strictly_one_side(&q, p3)
-                            && triangles_intersect(p3, &q)
-                    };
+                    let meet = meet_off_shared((*tri, *p3), (st, q));
                     if meet {
                         return None;
                     }
                 }
             }
-            if shared_meet(tested[0], tested[1]) {
+            if meet_off_shared(tested[0], tested[1]) {
                 return None;
             }
         }
@@ -429,20 +414,9 @@ impl Engine<'_> {
         self.points[t1 as usize] = p1;
         self.points[t2 as usize] = p2;
         self.error_bound = u.error_bound;
-        for (kind, id, d) in u.deltas {
-            if kind {
-                self.region_volume[id as usize].1 -= d;
-            } else {
-                self.patch_area[id as usize].1 -= d;
-            }
-        }
-        if let Some(grid) = self.grid.as_mut() {
-            for t in [t1, t2] {
-                grid.remove(t);
-                let q = self.tris[t as usize].map(|w| self.pos[w as usize]);
-                grid.insert(t, q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
-            }
-        }
+        self.add_deltas(&u.deltas, -1.0);
+        self.rebox(t1);
+        self.rebox(t2);
     }
 
     /// Makes a planned flip.
@@ -463,20 +437,9 @@ impl Engine<'_> {
             self.points[t as usize].push(p);
             self.error_bound = self.error_bound.max(d);
         }
-        for (kind, id, d) in f.deltas {
-            if kind {
-                self.region_volume[id as usize].1 += d;
-            } else {
-                self.patch_area[id as usize].1 += d;
-            }
-        }
-        if let Some(grid) = self.grid.as_mut() {
-            for t in [t1, t2] {
-                grid.remove(t);
-                let q = self.tris[t as usize].map(|w| self.pos[w as usize]);
-                grid.insert(t, q[0].min(q[1]).min(q[2]), q[0].max(q[1]).max(q[2]));
-            }
-        }
+        self.add_deltas(&f.deltas, 1.0);
+        self.rebox(t1);
+        self.rebox(t2);
         for v in [a, b, x, y] {
             self.version[v as usize] += 1;
         }

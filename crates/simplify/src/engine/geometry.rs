@@ -2,7 +2,7 @@
 //! overlap, and the filters in front of the exact intersection tests.
 
 use glam::DVec3;
-use voxreg_quality::triangles_meet_off_shared;
+use voxreg_quality::{triangles_intersect, triangles_meet_off_shared};
 
 pub(super) fn tri_normal(p: [DVec3; 3]) -> DVec3 {
     (p[1] - p[0]).cross(p[2] - p[0])
@@ -98,4 +98,24 @@ pub(super) fn shared_meet(s: ([u32; 3], [DVec3; 3]), t: ([u32; 3], [DVec3; 3])) 
     }
     let with_ids = |x: ([u32; 3], [DVec3; 3])| [(x.0[0], x.1[0]), (x.0[1], x.1[1]), (x.0[2], x.1[2])];
     triangles_meet_off_shared(with_ids(s), with_ids(t))
+}
+
+/// Whether triangles `s` and `t` (corner ids and positions) meet anywhere but at their
+/// shared corners and the segment between two shared corners: [`shared_meet`] when they
+/// share a corner, else an exact intersection test; both behind the plane-side filter.
+pub(super) fn meet_off_shared(s: ([u32; 3], [DVec3; 3]), t: ([u32; 3], [DVec3; 3])) -> bool {
+    if t.0.iter().any(|x| s.0.contains(x)) {
+        // The others strictly on one side of `s`'s plane meet it only at the shared ones.
+        let mut others = [DVec3::ZERO; 3];
+        let mut n = 0;
+        for (k, x) in t.0.iter().enumerate() {
+            if !s.0.contains(x) {
+                others[n] = t.1[k];
+                n += 1;
+            }
+        }
+        !(n > 0 && strictly_one_side(&s.1, &others[..n])) && shared_meet(s, t)
+    } else {
+        !strictly_one_side(&s.1, &t.1) && !strictly_one_side(&t.1, &s.1) && triangles_intersect(&s.1, &t.1)
+    }
 }
