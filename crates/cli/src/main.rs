@@ -250,6 +250,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
             output: args.output.display().to_string(),
             labels,
             io,
+            peak_memory: report::peak_memory(),
             run: r,
         };
         report::write_report(&mut outputs, report, &full)?;

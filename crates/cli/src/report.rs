@@ -51,8 +51,21 @@ pub(crate) struct CliReport<'a> {
     #[serde(skip_serializing_if = "Vec::is_empty")]
     pub(crate) labels: Vec<LabelEntry>,
     pub(crate) io: IoTimes,
+    /// The process's peak resident memory so far, in bytes (Linux: `VmHWM`), when the
+    /// system reports it.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub(crate) peak_memory: Option<u64>,
     #[serde(flatten)]
     pub(crate) run: &'a Report,
+}
+
+/// The process's peak resident set size so far (`VmHWM` of `/proc/self/status`), where
+/// the system reports it.
+pub(crate) fn peak_memory() -> Option<u64> {
+    let status = std::fs::read_to_string("/proc/self/status").ok()?;
+    let line = status.lines().find_map(|l| l.strip_prefix("VmHWM:"))?;
+    let kib: u64 = line.trim().strip_suffix("kB")?.trim().parse().ok()?;
+    kib.checked_mul(1024)
 }
 
 /// Stages `report` in `outputs`, committed with the run's other files.
