@@ -193,7 +193,11 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
             .run(Run::new(&params).progress(progress))
             .with_context(|| format!("{}: cannot regularize", path.display()))
     })?;
-    let surface = &out.surface;
+    // The solver's state and the fields the outputs do not use go back before the
+    // outputs are made (a simplification's peak).
+    drop(regularizer);
+    let voxreg_regularize::Output { surface, positions, features, report: r, .. } = out;
+    let surface = &surface;
     let mut io = IoTimes { read, ..Default::default() };
     // Every file of the run is staged, then committed together (or none, on an error).
     let mut outputs = Outputs::new();
@@ -201,9 +205,9 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         Product::Mesh => {
             let (written, secs) = stages.run("write mesh", || {
                 let written =
-                    output::write_meshes(args, &mut outputs, surface, &out.positions, palette.as_ref())?;
-                if let (Some(path), Some(v)) = (&args.features, &out.features) {
-                    let mesh = QuadMesh::from_surface(surface, &out.positions);
+                    output::write_meshes(args, &mut outputs, surface, &positions, palette.as_ref())?;
+                if let (Some(path), Some(v)) = (&args.features, &features) {
+                    let mesh = QuadMesh::from_surface(surface, &positions);
                     outputs
                         .write(path, |p| write_ply_with_vertex_scalar(p, &mesh, "feature", v.as_slice()))?;
                 }
@@ -214,7 +218,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
         }
         Product::Geodesic(opts) => {
             let (written, secs) = stages.run("geodesic distances", || {
-                geodesic::write_distances(args, &mut outputs, opts, surface, &out.positions)
+                geodesic::write_distances(args, &mut outputs, opts, surface, &positions)
             })?;
             io.write = secs;
             written
@@ -224,10 +228,8 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
             let params = UpscaleParams { factor };
             let (fine, secs) = stages.run(&format!("upscale x{factor}"), || {
                 match volume {
-                    Source::Dense(v) => upscale(surface, &out.positions, v, &params).map(Source::Dense),
-                    Source::Blocks(v) => {
-                        upscale_blocks(surface, &out.positions, v, &params).map(Source::Blocks)
-                    }
+                    Source::Dense(v) => upscale(surface, &positions, v, &params).map(Source::Dense),
+                    Source::Blocks(v) => upscale_blocks(surface, &positions, v, &params).map(Source::Blocks),
                 }
                 .with_context(|| format!("{}: cannot upscale", path.display()))
             })?;
@@ -243,7 +245,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
             args.output.display().to_string()
         }
     };
-    let r = &out.report;
+    let r = &r;
     if let Some(report) = &args.report {
         let full = CliReport {
             input: path.display().to_string(),
