@@ -250,7 +250,8 @@ pub(super) fn full_block<const W: usize>(b: &[f32; W]) -> Full {
 /// order), so the products are the same to the bit.
 fn sym_block(m: Full) -> Block {
     debug_assert!(m[1] == m[3] && m[2] == m[6] && m[5] == m[7], "an asymmetric block");
-    [m[0], m[4], m[8], m[3], m[6], m[7]]
+    // [xx, yy, xz, yz, zz, xy], the layout of `Block`.
+    [m[0], m[4], m[6], m[7], m[8], m[3]]
 }
 
 /// Sparse Cholesky of the coarsest level.

@@ -1,7 +1,7 @@
 //! The pieces the other parts share: aggregations, `f32` blocks, and the rows of an
 //! operator under construction.
 
-use glam::{DVec3, Vec3A};
+use glam::{DVec3, Vec3A, Vec3Swizzles, Vec4, Vec4Swizzles};
 use rayon::prelude::*;
 
 use crate::stencil::CHUNK;
@@ -74,12 +74,16 @@ pub(super) fn refill<T: Send>(mut buf: Vec<T>, items: impl IndexedParallelIterat
     }
 }
 
-/// A symmetric 3x3 block `[xx, yy, zz, xy, xz, yz]` in `f32`: 24 bytes, half of three
-/// SIMD columns (the smoothers are streamed once per sweep, so their size is their cost).
+/// A symmetric 3x3 block in `f32`, stored as `[xx, yy, xz, yz, zz, xy]`: 24 bytes, half
+/// of three SIMD columns (the smoothers are streamed once per sweep, so their size is
+/// their cost), in the order that lets [`block_mul`] read it as two overlapping 4-lane
+/// loads.
 pub(super) type Block = [f32; 6];
 
+/// The block of the symmetric `m = [xx, yy, zz, xy, xz, yz]` ([`narrow`]ed).
 pub(super) fn block(m: &[f64; 6]) -> Block {
-    narrow(m)
+    let [xx, yy, zz, xy, xz, yz] = narrow(m);
+    [xx, yy, xz, yz, zz, xy]
 }
 
 /// `m` in `f32`, its entries below `f32::EPSILON^2` times the largest set to zero.
@@ -94,10 +98,16 @@ fn narrow<const N: usize>(m: &[f64; N]) -> [f32; N] {
     m.map(|x| if x.abs() < cut { 0.0 } else { x as f32 })
 }
 
+/// `m v`: with `m = [a, d, c, e, f, b]` (that is `[xx, yy, xz, yz, zz, xy]`), the lanes
+/// `[a x + b y, d y + b x, c x + e y] + [c, e, f] z`, from the loads `[a, d, c, e]` and
+/// `[c, e, f, b]` and four shuffles. Each lane adds the same products in the same order
+/// as the column sum `(col_0 x + col_1 y) + col_2 z`, so the result is that sum's to the
+/// bit.
 #[inline(always)]
 pub(super) fn block_mul(m: &Block, v: Vec3A) -> Vec3A {
-    let [a, d, f, b, c, e] = *m;
-    Vec3A::new(a, b, c) * v.x + Vec3A::new(b, d, e) * v.y + Vec3A::new(c, e, f) * v.z
+    let lo = Vec4::from_array([m[0], m[1], m[2], m[3]]);
+    let hi = Vec4::from_array([m[2], m[3], m[4], m[5]]);
+    Vec3A::from_vec4(lo * v.xyxx() + hi.wwyy() * v.yxyy() + hi * v.zzzz())
 }
 
 /// A general 3x3 block, its columns one after the other, in `f32` (36 bytes: no SIMD
@@ -378,3 +388,24 @@ impl<const W: usize> Accumulator<W> {
 /// `[[0, -b u v^T], [-b v u^T, 0]] <= diag(b u u^T, b v v^T)`. (Masking breaks the sign
 /// structure the whole operator's blocks have; this carries the bound instead.)
 pub(super) const FACE: usize = 18;
+
+#[cfg(test)]
+mod block_tests {
+    use super::*;
+
+    /// The shuffled product is the column sum to the bit, on blocks with mixed signs and
+    /// magnitudes.
+    #[test]
+    fn block_mul_is_the_column_sum_to_the_bit() {
+        let mut rng = voxreg_testkit::Lcg::new(3);
+        for _ in 0..1000 {
+            let mut r = || (rng.next_f64() - 0.5) * 10f64.powi((rng.next_f64() * 12.0) as i32 - 6);
+            let m = [r(), r(), r(), r(), r(), r()];
+            let v = Vec3A::new(r() as f32, r() as f32, r() as f32);
+            let [a, d, f, b, c, e] = m.map(|x| x as f32);
+            let want = Vec3A::new(a, b, c) * v.x + Vec3A::new(b, d, e) * v.y + Vec3A::new(c, e, f) * v.z;
+            let got = block_mul(&block(&m), v);
+            assert_eq!(got.to_array().map(f32::to_bits), want.to_array().map(f32::to_bits), "{m:?} {v:?}");
+        }
+    }
+}
