@@ -10,8 +10,12 @@ use crate::estimator::NormalEstimator;
 use crate::field::NormalField;
 use crate::interrupt::Interrupt;
 
-/// No neighbour in a slot of [`QuadGraph`].
-const NONE: u32 = u32::MAX;
+/// The bits of a [`QuadGraph`] surfel's `info` that count its neighbours (0 to 4).
+const COUNT: u8 = 0b111;
+
+/// The bit of a [`QuadGraph`] surfel's `info` set when one of its edges is a junction
+/// edge (its surfels span two interfaces or more).
+const JUNCTION: u8 = 1 << 7;
 
 /// The bit of a [`QuadGraph`] slot whose neighbour's orientation is the opposite of the
 /// surfel's (surfel ids are below `2^30`).
@@ -33,24 +37,26 @@ const CHUNK: usize = 4096;
 /// interface that shares a region with it on the same side (the sphere across the cut of a
 /// split ball), its orientation flipped where the shared region is on the other side. A
 /// quad is never averaged with one across a crease of the staircase between interfaces.
-/// Built once per surface, 16 bytes a surfel.
+/// Built once per surface, 17 bytes a surfel.
 #[derive(Clone, Debug, Default)]
 pub struct QuadGraph {
+    /// The neighbours first, then the number of surfels (a zero vector of the diffusion)
+    /// in the empty slots: a step reads four slots without a branch.
     nbrs: Vec<[u32; 4]>,
-    /// Per surfel, whether one of its edges is a junction edge (its surfels span two
-    /// interfaces or more).
-    junction: Vec<bool>,
+    /// Per surfel, its number of neighbours ([`COUNT`]) and [`JUNCTION`].
+    info: Vec<u8>,
 }
 
 impl QuadGraph {
     /// The graph of `surface`.
     pub fn new(surface: &DigitalSurface) -> Self {
         let surfels = surface.surfels();
-        let (nbrs, junction) = (0..surfels.len())
+        let none = surfels.len() as u32;
+        let (nbrs, info) = (0..surfels.len())
             .into_par_iter()
             .map(|s| {
                 let me = &surfels[s];
-                let mut out = [NONE; 4];
+                let mut out = [none; 4];
                 let mut k = 0;
                 let mut junction = false;
                 for e in surface.surfel_edges(SurfelId(s as u32)) {
@@ -66,7 +72,9 @@ impl QuadGraph {
                             continue;
                         }
                         found = true;
-                        if other.normal().dot(me.normal()) >= 0.0 && k < 4 && !out.contains(&t.0) {
+                        // Not facing the opposite way: perpendicular, or the same orientation.
+                        let facing = other.axis != me.axis || other.flipped == me.flipped;
+                        if facing && k < 4 && !out[..k].contains(&t.0) {
                             out[k] = t.0;
                             k += 1;
                         }
@@ -88,17 +96,19 @@ impl QuadGraph {
                         } else {
                             continue;
                         };
-                        if sign * other.normal().dot(me.normal()) > 0.0 {
+                        // The same axis: the normals' dot is +1 or -1.
+                        let dot = if other.flipped == me.flipped { 1.0 } else { -1.0 };
+                        if sign * dot > 0.0 {
                             out[k] = t.0 | if sign < 0.0 { FLIP } else { 0 };
                             k += 1;
                             break;
                         }
                     }
                 }
-                (out, junction)
+                (out, k as u8 | if junction { JUNCTION } else { 0 })
             })
             .unzip();
-        QuadGraph { nbrs, junction }
+        QuadGraph { nbrs, info }
     }
 
     /// Number of surfels.
@@ -175,39 +185,46 @@ impl Diffused<'_> {
         let mut u: Vec<Vec3A> = surface
             .surfels()
             .par_iter()
-            .zip(&graph.junction)
-            .map(|(s, &junction)| {
+            .zip(&graph.info)
+            .map(|(s, &info)| {
                 let [a, b, c, d] = s.vertices.map(|v| x[v.index()]);
-                let w = if junction { JUNCTION_SOURCE_WEIGHT } else { 1.0 };
+                let w = if info & JUNCTION != 0 { JUNCTION_SOURCE_WEIGHT } else { 1.0 };
                 (0.5 * w * (c - a).cross(d - b)).as_vec3a()
             })
+            .chain(rayon::iter::once(Vec3A::ZERO))
             .collect();
-        let mut next = vec![Vec3A::ZERO; n];
+        // The empty slots' zero vector at `n`, in both arrays.
+        let mut next = vec![Vec3A::ZERO; n + 1];
+        let scale: [f32; 5] = std::array::from_fn(|c| 1.0 / (1 + c) as f32);
         for _ in 0..Self::steps(self.radius) {
             interrupt.check()?;
-            next.par_chunks_mut(CHUNK).zip(graph.nbrs.par_chunks(CHUNK)).enumerate().for_each(
-                |(chunk, (out, nbrs))| {
+            next[..n]
+                .par_chunks_mut(CHUNK)
+                .zip(graph.nbrs.par_chunks(CHUNK).zip(graph.info.par_chunks(CHUNK)))
+                .enumerate()
+                .for_each(|(chunk, (out, (nbrs, info)))| {
                     let base = chunk * CHUNK;
-                    for (o, (out, nb)) in out.iter_mut().zip(nbrs).enumerate() {
-                        let (mut sum, mut k) = (u[base + o], 1.0f32);
+                    let own = &u[base..base + out.len()];
+                    for (((out, nb), &info), &mine) in out.iter_mut().zip(nbrs).zip(info).zip(own) {
+                        let mut sum = mine;
                         for &t in nb {
-                            if t != NONE {
-                                // The flip bit is the sign bit of an f32: +1 or -1.
-                                let sign = f32::from_bits((t & FLIP) | 1.0f32.to_bits());
-                                sum += sign * u[(t & !FLIP) as usize];
-                                k += 1.0;
-                            }
+                            // The flip bit is the sign bit of an f32: +1 or -1.
+                            let sign = f32::from_bits((t & FLIP) | 1.0f32.to_bits());
+                            sum += sign * u[(t & !FLIP) as usize];
                         }
-                        *out = sum * (1.0 / k);
+                        *out = sum * scale[usize::from(info & COUNT)];
                     }
-                },
-            );
+                });
             std::mem::swap(&mut u, &mut next);
         }
         drop(next);
         let previous = self.previous.as_slice();
         Ok(NormalField::new(
-            u.par_iter().zip(previous).map(|(v, p)| v.as_dvec3().try_normalize().unwrap_or(*p)).collect(),
+            u[..n]
+                .par_iter()
+                .zip(previous)
+                .map(|(v, p)| v.as_dvec3().try_normalize().unwrap_or(*p))
+                .collect(),
         ))
     }
 }
@@ -260,7 +277,9 @@ mod tests {
                 / radial.len() as f64
         };
         let graph = QuadGraph::new(&s);
-        assert!(graph.nbrs.iter().all(|nb| nb.iter().filter(|&&t| t != NONE).count() == 4));
+        assert!(graph.info.iter().all(|i| i & COUNT == 4));
+        let none = s.num_surfels() as u32;
+        assert!(graph.nbrs.iter().all(|nb| !nb.contains(&none)));
         let zero = Diffused { positions: &positions, previous: &trivial, radius: 0.0 }
             .estimate_on(&s, &graph, &Interrupt::never())
             .unwrap();

@@ -101,14 +101,13 @@ pub struct SweepsSolver {
     partials: Vec<(f64, f64)>,
 }
 
-/// `m x` for a symmetric `m` stored as `[xx, yy, zz, xy, xz, yz]`, in `f32`.
+/// `m x` for a symmetric `m` stored as `[xx, yy, zz, xy, xz, yz]`, in `f32`, as three
+/// column products in SIMD lanes.
 #[inline(always)]
 fn sym_mul32(m: &[f32; 6], x: Vec3A) -> Vec3A {
-    Vec3A::new(
-        m[0] * x.x + m[3] * x.y + m[4] * x.z,
-        m[3] * x.x + m[1] * x.y + m[5] * x.z,
-        m[4] * x.x + m[5] * x.y + m[2] * x.z,
-    )
+    Vec3A::new(m[0], m[3], m[4]) * x.x
+        + Vec3A::new(m[3], m[1], m[5]) * x.y
+        + Vec3A::new(m[4], m[5], m[2]) * x.z
 }
 
 impl SweepsSolver {
@@ -269,8 +268,15 @@ impl SweepsSolver {
         let h = self.spacing.min_element();
         let (mut first, mut last, mut last_move) = (f64::NAN, f64::NAN, 0.0);
         let (m, fair, dinv, rhs) = (&self.face_normals[..], &self.fair[..], &self.dinv[..], &self.rhs[..]);
+        // One attachment weight for all vertices unless the energy scales them.
+        let uniform_alpha =
+            energy.weights().is_none_or(|w| w.alpha.is_none()).then(|| energy.alpha_at(0) as f32);
+        let alpha_at = |i: usize| uniform_alpha.unwrap_or_else(|| energy.alpha_at(i) as f32);
         for k in 0..self.params.sweeps {
             self.interrupt.check()?;
+            // The residual's norm is reported for the first and the last sweep, the
+            // largest move for the last.
+            let track = k == 0 || k + 1 == self.params.sweeps;
             let d = &self.disp[..];
             // Pass 1: the fairness residuals t_i = gamma_i / |S_i| (d_i - mean of d_j).
             self.resid.par_chunks_mut(CHUNK).enumerate().for_each(|(chunk, out)| {
@@ -296,10 +302,11 @@ impl SweepsSolver {
                     for (o, out) in next.iter_mut().enumerate() {
                         let i = base + o;
                         let di = d[i];
-                        let mut hx = energy.alpha_at(i) as f32 * di;
+                        let di2 = 2.0 * di;
+                        let mut hx = alpha_at(i) * di;
                         for s in stencil.faces(i) {
                             let m = m[s.face as usize];
-                            hx += (2.0 * di - d[s.prev as usize] - d[s.next as usize]).dot(m) * m;
+                            hx += (di2 - d[s.prev as usize] - d[s.next as usize]).dot(m) * m;
                         }
                         let nb = stencil.fair_neighbours(i);
                         let sum: Vec3A = nb.iter().map(|&j| t[j as usize]).sum();
@@ -307,8 +314,10 @@ impl SweepsSolver {
                         let r = rhs[i] - hx;
                         let step = sym_mul32(&dinv[i], r);
                         *out = di + step;
-                        r2 += f64::from(r.length_squared());
-                        step2 = step2.max(step.length_squared());
+                        if track {
+                            r2 += f64::from(r.length_squared());
+                            step2 = step2.max(step.length_squared());
+                        }
                     }
                     *part = (r2, f64::from(step2));
                 },

@@ -2,6 +2,7 @@
 
 use std::sync::Arc;
 
+use rayon::prelude::*;
 use voxreg_digisurf::{DigitalSurface, EdgeId, SurfelData, VertexData, VertexId};
 
 use crate::error::RegularizeError;
@@ -144,7 +145,7 @@ impl FairnessMask {
         let junction = junction_vertices(surface);
         let cut: Vec<bool> = surface
             .edges()
-            .iter()
+            .par_iter()
             .map(|e| junction[e.vertices[0].index()] != junction[e.vertices[1].index()])
             .collect();
         Self::from_cut_edges(surface, &cut).expect("one flag per edge")
@@ -186,15 +187,21 @@ impl FairnessMask {
 /// or point).
 pub fn junction_vertices(surface: &DigitalSurface) -> Vec<bool> {
     (0..surface.num_vertices())
+        .into_par_iter()
         .map(|v| {
-            let mut regions: Vec<_> = surface
-                .vertex_surfels(VertexId(v as u32))
-                .iter()
-                .flat_map(|s| surface.surfel(*s).regions)
-                .collect();
-            regions.sort_unstable();
-            regions.dedup();
-            regions.len() >= 3
+            // The first two distinct regions met; a third answers.
+            let mut seen: [Option<_>; 2] = [None; 2];
+            for s in surface.vertex_surfels(VertexId(v as u32)) {
+                for r in surface.surfel(*s).regions {
+                    match seen {
+                        [None, _] => seen[0] = Some(r),
+                        [Some(a), None] if a != r => seen[1] = Some(r),
+                        [Some(a), Some(b)] if a != r && b != r => return true,
+                        _ => {}
+                    }
+                }
+            }
+            false
         })
         .collect()
 }
