@@ -28,11 +28,6 @@ const VOLUME_TOLERANCE: f64 = 0.005;
 /// counting every collapse before it.
 const AREA_TOLERANCE: f64 = 0.01;
 
-/// A collapse's cost for each quad it breaks, times its squared length (three times the
-/// length tie-break: among collapses of about equal quadric error, those along a quad's
-/// diagonal go first).
-const PAIR_WEIGHT: f64 = 3e-3;
-
 /// No group or no material.
 pub(crate) const NONE: u32 = u32::MAX;
 
@@ -142,14 +137,6 @@ pub(crate) struct Engine<'m> {
     key_regions: Vec<[u32; 2]>,
     /// Six times each region's input volume, and its change so far.
     region_volume: Vec<(f64, f64)>,
-    /// Per triangle, its partner in the quads the collapses keep (`NONE`: alone): the
-    /// input's quads at first, kept up by [`Engine::repair_pairs`] after each collapse.
-    mate: Vec<u32>,
-    /// Weight, relative to the squared edge length, of each quad a collapse breaks (0:
-    /// no quads are kept).
-    pair_weight: f64,
-    pair_search: crate::blossom::Blossom,
-    pair_path: Vec<(u32, u32)>,
     /// Each patch's input area, and its change so far.
     patch_area: Vec<(f64, f64)>,
 }
@@ -346,34 +333,6 @@ impl<'m> Engine<'m> {
     /// placement). Otherwise `v` stays (corners and lines keep their vertices), and the
     /// cost adds the squared volume change of each region around `u`.
     fn place(&self, u: u32, v: u32) -> (DVec3, f64) {
-        let (p, cost) = self.place_geometric(u, v);
-        (p, cost + self.pair_penalty(u, v))
-    }
-
-    /// The cost of the quads the collapse of `u` into `v` breaks: each triangle it removes
-    /// whose partner stays (alone afterwards) adds `pair_weight` times the squared edge
-    /// length, so that collapses along a quad's diagonal (which remove the quad and keep
-    /// its neighbours' pairs) go first where the geometry is indifferent.
-    fn pair_penalty(&self, u: u32, v: u32) -> f64 {
-        if self.pair_weight == 0.0 {
-            return 0.0;
-        }
-        let mut broken = 0;
-        for &t in &self.vtris[u as usize] {
-            let tri = self.tris[t as usize];
-            let m = self.mate[t as usize];
-            if tri.contains(&v) && m != NONE {
-                let o = self.tris[m as usize];
-                if !(o.contains(&u) && o.contains(&v)) {
-                    broken += 1;
-                }
-            }
-        }
-        let len2 = self.pos[u as usize].distance_squared(self.pos[v as usize]);
-        self.pair_weight * len2 * broken as f64
-    }
-
-    fn place_geometric(&self, u: u32, v: u32) -> (DVec3, f64) {
         let (pu, pv) = (self.pos[u as usize], self.pos[v as usize]);
         let mut q = self.quadric[u as usize];
         q.add(&self.quadric[v as usize]);
@@ -899,9 +858,6 @@ impl<'m> Engine<'m> {
         self.quadric[v as usize].add(&qu);
         self.version[u as usize] += 1;
         self.version[v as usize] += 1;
-        if self.pair_weight != 0.0 {
-            self.repair_pairs(v, removed);
-        }
         // v's collapses are queued anew; those of its neighbours keep their queued costs
         // (only the order depends on them: every check is made again when one is tried),
         // and a neighbour whose collapse was refused queues its own again, as the change

@@ -31,7 +31,6 @@
 //! ordered results: the output does not depend on the thread count. See
 //! `docs/design/simplification.md`.
 
-mod blossom;
 mod engine;
 mod grid;
 mod pair;

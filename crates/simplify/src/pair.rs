@@ -3,8 +3,6 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
-use crate::blossom::Blossom;
-
 /// An output face: a triangle left alone, or a quad with one of its two triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Face {
@@ -123,56 +121,79 @@ pub(crate) fn pair(
 const NO_MATE: u32 = u32::MAX;
 
 /// How many triangles one augmenting-path search visits at most (keeps the pass linear).
-const MAX_SEARCH: usize = 4096;
+const MAX_SEARCH: usize = 256;
 
 /// Grows the matching `mate` (per triangle, the index of its pair in `candidates`) by
-/// augmenting paths: from each triangle left alone, Edmonds' search along alternating
-/// paths (a candidate pair, then a matched pair, odd cycles contracted) to another
-/// triangle left alone; the path's pairs then swap. Searches are bounded (each visits at
-/// most `MAX_SEARCH` triangles), so the matching is maximum wherever its components are
-/// smaller; every pair stays a candidate.
+/// augmenting paths: from each triangle left alone, a breadth-first search along
+/// alternating paths (a candidate pair, then a matched pair) to another triangle left
+/// alone; the path's pairs then swap. Searches are bounded and ignore odd cycles, so
+/// the matching grows but need not become maximum; every pair stays a candidate.
 fn augment(candidates: &[(u64, u32, u32, [u32; 4])], mate: &mut [u32], frozen: &[bool]) {
     let n = mate.len();
-    // Per triangle, up to three (neighbour, candidate) pairs.
-    let mut adj = vec![[(NO_MATE, NO_MATE); 3]; n];
+    let mut adj: Vec<Vec<u32>> = vec![Vec::new(); n];
     for (c, &(_, t1, t2, _)) in candidates.iter().enumerate() {
         if !frozen[t1 as usize] && !frozen[t2 as usize] {
-            for (x, y) in [(t1, t2), (t2, t1)] {
-                if let Some(slot) = adj[x as usize].iter_mut().find(|e| e.0 == NO_MATE) {
-                    *slot = (y, c as u32);
-                }
-            }
+            adj[t1 as usize].push(c as u32);
+            adj[t2 as usize].push(c as u32);
         }
     }
-    let mut partner: Vec<u32> = (0..n)
-        .map(|t| {
-            let c = mate[t];
-            if c == NO_MATE {
-                NO_MATE
-            } else {
-                let (_, a, b, _) = candidates[c as usize];
-                if a as usize == t {
-                    b
-                } else {
-                    a
-                }
-            }
-        })
-        .collect();
-    let mut search = Blossom::new(n);
-    let mut path = Vec::new();
-    for root in 0..n as u32 {
-        if partner[root as usize] != NO_MATE || frozen[root as usize] || adj[root as usize][0].0 == NO_MATE {
+    let other = |c: u32, t: u32| {
+        let (_, a, b, _) = candidates[c as usize];
+        if a == t {
+            b
+        } else {
+            a
+        }
+    };
+    // Per triangle reached: the candidate that reached it from the even side, and a stamp.
+    let mut via = vec![NO_MATE; n];
+    let mut stamp = vec![0u32; n];
+    let mut queue: Vec<u32> = Vec::new();
+    for (root, round) in (0..n).zip(1u32..) {
+        if mate[root] != NO_MATE || frozen[root] || adj[root].is_empty() {
             continue;
         }
-        if search.augmenting_path(&partner, root, MAX_SEARCH, |t| adj[t as usize].map(|e| e.0), &mut path) {
-            for &(a, b) in &path {
-                partner[a as usize] = b;
-                partner[b as usize] = a;
-                let c = adj[a as usize].iter().find(|e| e.0 == b).expect("a candidate").1;
-                mate[a as usize] = c;
-                mate[b as usize] = c;
+        queue.clear();
+        queue.push(root as u32);
+        stamp[root] = round;
+        let mut head = 0;
+        let mut end = None;
+        'search: while head < queue.len() && queue.len() < MAX_SEARCH {
+            let t = queue[head];
+            head += 1;
+            for &c in &adj[t as usize] {
+                let s = other(c, t);
+                if stamp[s as usize] == round {
+                    continue;
+                }
+                stamp[s as usize] = round;
+                via[s as usize] = c;
+                if mate[s as usize] == NO_MATE {
+                    end = Some(s);
+                    break 'search;
+                }
+                // Go on from s's partner.
+                let r = other(mate[s as usize], s);
+                if stamp[r as usize] == round {
+                    continue;
+                }
+                stamp[r as usize] = round;
+                queue.push(r);
             }
+        }
+        // Swap along the path: s takes its via pair, its old partner r goes on back.
+        let Some(mut s) = end else { continue };
+        loop {
+            let c = via[s as usize];
+            let t = other(c, s);
+            let prev = mate[t as usize];
+            mate[s as usize] = c;
+            mate[t as usize] = c;
+            if t as usize == root {
+                break;
+            }
+            s = other(prev, t);
+            let _ = prev;
         }
     }
 }

@@ -75,15 +75,6 @@ impl<'m> Engine<'m> {
                 tri_face.push(f as u32);
             }
         }
-        // The input's quads are the collapses' first pairs.
-        let nt = tris.len();
-        let mut mate = vec![NONE; nt];
-        for t in 1..nt {
-            if tri_face[t] == tri_face[t - 1] {
-                mate[t] = t as u32 - 1;
-                mate[t - 1] = t as u32;
-            }
-        }
         let pos = mesh.positions.clone();
         let mut vtris = vec![Vec::new(); n];
         for (t, tri) in tris.iter().enumerate() {
@@ -115,10 +106,6 @@ impl<'m> Engine<'m> {
             heap: BinaryHeap::new(),
             keys,
             frozen: vec![NONE; nt],
-            mate,
-            pair_weight: if options.quads { PAIR_WEIGHT } else { 0.0 },
-            pair_search: crate::blossom::Blossom::new(nt),
-            pair_path: Vec::new(),
             input: mesh,
             input_triangles: nt,
             error_bound: 0.0,

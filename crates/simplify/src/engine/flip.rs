@@ -4,8 +4,6 @@
 use glam::DVec3;
 use voxreg_quality::point_triangle_distance;
 
-use crate::blossom::Blossom;
-
 use super::{
     is_feature, meet_off_shared, quality, tri_normal, Engine, AREA_TOLERANCE, NONE, VOLUME_TOLERANCE,
 };
@@ -14,10 +12,7 @@ use super::{
 const FLIP_PASSES: usize = 1;
 
 /// How many triangles one augmenting-path search visits at most.
-const MAX_SEARCH: usize = 128;
-
-/// How many triangles one augmenting-path search after a collapse visits at most.
-const REPAIR_SEARCH: usize = 32;
+const MAX_SEARCH: usize = 64;
 
 /// How many triangles around one left alone (itself, its neighbours, then theirs) have
 /// their edges tried.
@@ -27,8 +22,9 @@ const RING: usize = 4;
 struct Matching {
     mate: Vec<u32>,
     log: Vec<(u32, u32)>,
-    search: Blossom,
-    path: Vec<(u32, u32)>,
+    via: Vec<u32>,
+    stamp: Vec<u32>,
+    round: u32,
 }
 
 impl Matching {
@@ -75,8 +71,13 @@ impl Engine<'_> {
             return;
         }
         let n = self.tris.len();
-        let mut m =
-            Matching { mate: vec![NONE; n], log: Vec::new(), search: Blossom::new(n), path: Vec::new() };
+        let mut m = Matching {
+            mate: vec![NONE; n],
+            log: Vec::new(),
+            via: vec![NONE; n],
+            stamp: vec![0; n],
+            round: 0,
+        };
         let mut cands: Vec<(u64, u32, u32)> = Vec::new();
         for t in 0..n as u32 {
             if self.tri_alive[t as usize] {
@@ -215,75 +216,46 @@ impl Engine<'_> {
     }
 
     /// An augmenting path from `root` (left alone) to another triangle left alone, along
-    /// quads, by a bounded Edmonds search (odd cycles contracted); swaps its pairs.
-    /// Whether one was found.
+    /// quads, by a bounded breadth-first search; swaps its pairs. Whether one was found.
     fn augment(&self, m: &mut Matching, root: u32) -> bool {
-        let neighbours = |t: u32| {
-            let mut out = [NONE; 3];
-            for (k, o) in out.iter_mut().enumerate() {
-                if let Some((s, _)) = self.quad_across(t, k) {
-                    *o = s;
+        m.round += 1;
+        let round = m.round;
+        let mut queue = vec![root];
+        m.stamp[root as usize] = round;
+        let mut head = 0;
+        let mut end = None;
+        'search: while head < queue.len() && queue.len() < MAX_SEARCH {
+            let t = queue[head];
+            head += 1;
+            for k in 0..3 {
+                let Some((s, _)) = self.quad_across(t, k) else { continue };
+                if m.stamp[s as usize] == round {
+                    continue;
                 }
-            }
-            out
-        };
-        let mut path = std::mem::take(&mut m.path);
-        let found = m.search.augmenting_path(&m.mate, root, MAX_SEARCH, neighbours, &mut path);
-        for &(a, b) in &path {
-            m.set(a, b);
-            m.set(b, a);
-        }
-        m.path = path;
-        found
-    }
-
-    /// Keeps the collapses' quads after a collapse that removed `removed` and changed the
-    /// star of `v`: the partners of removed triangles are left alone, pairs in the star
-    /// that are no acceptable quad any more are split, and each triangle of the star left
-    /// alone is paired again by a bounded augmenting path where one exists.
-    pub(super) fn repair_pairs(&mut self, v: u32, removed: &[u32]) {
-        for &t in removed {
-            let m = self.mate[t as usize];
-            if m != NONE {
-                self.mate[m as usize] = NONE;
-                self.mate[t as usize] = NONE;
-            }
-        }
-        let mut star = std::mem::take(&mut self.scratch.pool);
-        star.clear();
-        star.extend_from_slice(&self.vtris[v as usize]);
-        for &t in &star {
-            let m = self.mate[t as usize];
-            if m != NONE && !(0..3).any(|k| self.quad_across(t, k).is_some_and(|(s, _)| s == m)) {
-                self.mate[m as usize] = NONE;
-                self.mate[t as usize] = NONE;
-            }
-        }
-        let mut search = std::mem::replace(&mut self.pair_search, crate::blossom::Blossom::new(0));
-        let mut path = std::mem::take(&mut self.pair_path);
-        for &t in &star {
-            if self.mate[t as usize] != NONE || self.frozen[t as usize] != NONE {
-                continue;
-            }
-            let neighbours = |x: u32| {
-                let mut out = [NONE; 3];
-                for (k, o) in out.iter_mut().enumerate() {
-                    if let Some((s, _)) = self.quad_across(x, k) {
-                        *o = s;
-                    }
+                m.stamp[s as usize] = round;
+                m.via[s as usize] = t;
+                let r = m.mate[s as usize];
+                if r == NONE {
+                    end = Some(s);
+                    break 'search;
                 }
-                out
-            };
-            if search.augmenting_path(&self.mate, t, REPAIR_SEARCH, neighbours, &mut path) {
-                for &(a, b) in &path {
-                    self.mate[a as usize] = b;
-                    self.mate[b as usize] = a;
+                if m.stamp[r as usize] != round {
+                    m.stamp[r as usize] = round;
+                    queue.push(r);
                 }
             }
         }
-        self.pair_search = search;
-        self.pair_path = path;
-        self.scratch.pool = star;
+        let Some(mut s) = end else { return false };
+        loop {
+            let t = m.via[s as usize];
+            let prev = m.mate[t as usize];
+            m.set(s, t);
+            m.set(t, s);
+            if t == root {
+                return true;
+            }
+            s = prev;
+        }
     }
 
     /// The triangle across edge `k` of triangle `t1` (from corner `k` to the next) and its
