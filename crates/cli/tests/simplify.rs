@@ -115,3 +115,58 @@ fn every_gltf_level_passes_the_khronos_validator() {
         assert_eq!(report.lines().filter(|l| l.contains(", 0 warnings")).count(), files.len(), "{report}");
     }
 }
+
+/// Ctrl-C during the simplification of `--lod` (after the solves, before any level is
+/// written) exits with 130 and leaves nothing: the signal thread removes the staged
+/// outputs and ends the process, the simplification with it.
+#[cfg(unix)]
+#[test]
+fn sigint_during_the_levels_leaves_nothing() {
+    use std::io::BufRead;
+
+    let dir = tempfile::tempdir().unwrap();
+    let out_dir = dir.path().join("out");
+    std::fs::create_dir(&out_dir).unwrap();
+    let input = data("bunny-64.vol");
+    let out = out_dir.join("b.obj");
+    let report = out_dir.join("r.json");
+    let mut child = std::process::Command::new(env!("CARGO_BIN_EXE_voxreg"))
+        .args([
+            "regularize",
+            common::s(&input),
+            "-o",
+            common::s(&out),
+            "--lod",
+            "4",
+            "--report",
+            common::s(&report),
+        ])
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    // The solver's summary comes once the solves are over; the levels (seconds on
+    // bunny-64) follow.
+    let mut lines = std::io::BufReader::new(child.stderr.take().unwrap()).lines();
+    let mut seen = String::new();
+    for line in lines.by_ref() {
+        let line = line.unwrap();
+        seen.push_str(&line);
+        seen.push('\n');
+        if line.starts_with("cg converged") {
+            break;
+        }
+    }
+    assert!(seen.contains("cg converged"), "{seen}");
+    std::thread::sleep(std::time::Duration::from_millis(300));
+    let killed = std::process::Command::new("kill").args(["-INT", &child.id().to_string()]).status().unwrap();
+    assert!(killed.success());
+    assert_eq!(common::wait_code(&mut child, 20), Some(130), "{seen}");
+    let rest: Vec<String> = lines.map_while(Result::ok).collect();
+    assert!(
+        !rest.iter().any(|l| l.starts_with("write mesh")),
+        "the levels were written before the signal: {rest:?}"
+    );
+    assert!(rest.iter().any(|l| l.contains("interrupted by SIGINT")), "{rest:?}");
+    let left: Vec<_> = std::fs::read_dir(&out_dir).unwrap().map(|e| e.unwrap().file_name()).collect();
+    assert!(left.is_empty(), "SIGINT left {left:?}");
+}

@@ -5,7 +5,9 @@ use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
 use voxreg_io::{FaceGroup, Material, QuadMesh};
-use voxreg_simplify::{simplify_levels, Options, Simplified, SimplifyError, Stats, Target};
+use voxreg_simplify::{
+    simplify_levels_interruptible, Interrupt, Options, Simplified, SimplifyError, Stats, Target,
+};
 
 use crate::error::{no_panic, Error, Result};
 use crate::mesh::{colors_materials, labels_of, positions_of, quads_of, Arrays, PartSpec, Surface};
@@ -21,7 +23,47 @@ fn error_of(e: &SimplifyError) -> Error {
     match e {
         SimplifyError::InvalidMesh(_) => Error::input(e.to_string()),
         SimplifyError::InvalidTarget(_) => Error::parameter(e.to_string()),
+        // Only raised by `interruptible`, which returns the signal's exception instead.
+        SimplifyError::Interrupted => Error::new(crate::error::Kind::Voxreg, e.to_string()),
     }
+}
+
+/// How often the waiting thread runs Python's signal handlers.
+const SIGNAL_POLL: std::time::Duration = std::time::Duration::from_millis(50);
+
+/// Runs `f` on a thread of its own with the GIL released, while the calling thread runs
+/// Python's signal handlers every 50 ms (`check_signals`, which only acts on the main
+/// thread): when one raises (`KeyboardInterrupt` on Ctrl-C), `f`'s interrupt is raised,
+/// `f` is waited for (it returns within milliseconds) and the exception propagates.
+fn interruptible<T: Send>(py: Python<'_>, f: impl FnOnce(&Interrupt) -> Result<T> + Send) -> PyResult<T> {
+    let interrupt = Interrupt::new();
+    std::thread::scope(|scope| {
+        let (tx, rx) = std::sync::mpsc::channel();
+        let flag = &interrupt;
+        scope.spawn(move || {
+            let _ = tx.send(no_panic(|| f(flag)));
+        });
+        let mut rx = Some(rx);
+        loop {
+            let receiver = rx.take().expect("the receiver");
+            let (got, receiver) = py.detach(move || (receiver.recv_timeout(SIGNAL_POLL), receiver));
+            rx = Some(receiver);
+            match got {
+                Ok(result) => return result.map_err(PyErr::from),
+                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
+                    return Err(Error::new(crate::error::Kind::Voxreg, "the simplification stopped").into())
+                }
+                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
+            }
+            if let Err(signal) = py.check_signals() {
+                interrupt.raise();
+                let receiver = rx.take().expect("the receiver");
+                // The scope joins the thread; its result (Interrupted) is dropped.
+                py.detach(move || drop(receiver.recv()));
+                return Err(signal);
+            }
+        }
+    })
 }
 
 fn stats_dict<'py>(py: Python<'py>, s: &Stats) -> PyResult<Bound<'py, PyDict>> {
@@ -46,8 +88,9 @@ fn levels_list<'py>(py: Python<'py>, levels: Vec<(Arrays, Stats)>) -> PyResult<B
     Ok(out)
 }
 
-fn run(mesh: &QuadMesh, targets: &[Target]) -> Result<Vec<(Arrays, Stats)>> {
-    let levels = simplify_levels(mesh, targets, &Options::default()).map_err(|e| error_of(&e))?;
+fn run(mesh: &QuadMesh, targets: &[Target], interrupt: &Interrupt) -> Result<Vec<(Arrays, Stats)>> {
+    let levels = simplify_levels_interruptible(mesh, targets, &Options::default(), interrupt)
+        .map_err(|e| error_of(&e))?;
     Ok(levels.into_iter().map(|Simplified { mesh, stats }| (Arrays::of(&mesh), stats)).collect())
 }
 
@@ -66,7 +109,7 @@ pub(crate) fn simplify_surface<'py>(
     surface.check_part(part)?;
     let targets = targets_of(&targets);
     let surface: &Surface = &surface;
-    let levels = py.detach(|| no_panic(|| run(&surface.quad_mesh(part), &targets)))?;
+    let levels = interruptible(py, |interrupt| run(&surface.quad_mesh(part), &targets, interrupt))?;
     levels_list(py, levels)
 }
 
@@ -114,7 +157,7 @@ pub(crate) fn simplify_arrays<'py>(
             by_id.into_iter().map(|(id, faces)| FaceGroup { name: format!("g{id}"), faces }).collect();
     }
     let targets = targets_of(&targets);
-    let levels = py.detach(|| no_panic(|| run(&mesh, &targets)))?;
+    let levels = interruptible(py, |interrupt| run(&mesh, &targets, interrupt))?;
     levels_list(py, levels)
 }
 

@@ -13,6 +13,7 @@ use voxreg_quality::point_triangle_distance;
 use crate::grid::Grid;
 use crate::quadric::Quadric;
 use crate::types::{Options, Simplified, SimplifyError, Stats, Target};
+use crate::Interrupt;
 
 mod build;
 mod flip;
@@ -97,6 +98,8 @@ struct Scratch {
 
 pub(crate) struct Engine<'m> {
     options: Options,
+    /// Polled in every long loop: once raised, the run returns `Interrupted`.
+    interrupt: Interrupt,
     pos: Vec<DVec3>,
     /// Whether each vertex left its input position (then its input position is answered
     /// for by a triangle, as a removed vertex's is).
@@ -191,6 +194,16 @@ impl UnionFind {
 }
 
 impl<'m> Engine<'m> {
+    /// `Err(Interrupted)` once the caller raised the interrupt.
+    #[inline]
+    fn stop(&self) -> Result<(), SimplifyError> {
+        if self.interrupt.is_raised() {
+            Err(SimplifyError::Interrupted)
+        } else {
+            Ok(())
+        }
+    }
+
     /// Adds `sign` times each change to the running totals: a region's volume when the
     /// flag is set, a patch's area otherwise.
     fn add_deltas(&mut self, deltas: &[(bool, u32, f64)], sign: f64) {
@@ -419,15 +432,16 @@ impl<'m> Engine<'m> {
             && !self.vtris[v as usize].is_empty()
     }
 
-    /// Collapses edges in order of cost until `target` is reached or no collapse passes.
-    pub(crate) fn run(&mut self, target: &Target) {
+    /// Collapses edges in order of cost until `target` is reached or no collapse passes;
+    /// `Interrupted` (the engine then unusable) once the interrupt is raised.
+    pub(crate) fn run(&mut self, target: &Target) -> Result<(), SimplifyError> {
         self.max_error = target.max_error;
         let goal = match target.ratio {
             Some(r) => (r * self.input_triangles as f64).ceil() as usize,
             None => 0,
         };
         if self.alive <= goal {
-            return;
+            return Ok(());
         }
         // The previous level's queue is rebuilt below: freed first, so that the two are
         // never held together.
@@ -442,6 +456,9 @@ impl<'m> Engine<'m> {
             .fold(
                 || (Vec::new(), Vec::new()),
                 |(mut out, mut nb): (Vec<Reverse<Candidate>>, Vec<u32>), v| {
+                    if this.interrupt.is_raised() {
+                        return (out, nb);
+                    }
                     this.neighbours_into(v, &mut nb);
                     for &y in &nb {
                         let c = this.place(v, y).1;
@@ -461,8 +478,10 @@ impl<'m> Engine<'m> {
                 a.append(&mut b);
                 a
             });
+        self.stop()?;
         let mut limit = self.set_queue(entries);
         while self.alive > goal {
+            self.stop()?;
             if self.grid.is_some() && 2 * self.alive < self.grid_built_at {
                 self.rebuild_grid();
             }
@@ -482,6 +501,7 @@ impl<'m> Engine<'m> {
                 self.apply();
             }
         }
+        Ok(())
     }
 
     /// Makes `entries` the queue, with room for half as many again and the pushes of a
@@ -876,8 +896,8 @@ impl<'m> Engine<'m> {
     }
 
     /// The mesh as it is now: triangles paired into quads, vertices renumbered in input
-    /// order.
-    pub(crate) fn snapshot(&self) -> Simplified {
+    /// order; `Interrupted` once the interrupt is raised (the pairing polls it).
+    pub(crate) fn snapshot(&self) -> Result<Simplified, SimplifyError> {
         if self.alive == self.input_triangles {
             let stats = Stats {
                 input_faces: self.input.quads.len(),
@@ -887,7 +907,7 @@ impl<'m> Engine<'m> {
                 quads: self.input.quads.iter().filter(|q| q[3] != q[2] && q[3] != q[0]).count(),
                 ..self.counts()
             };
-            return Simplified { mesh: self.input.clone(), stats };
+            return Ok(Simplified { mesh: self.input.clone(), stats });
         }
         let alive: Vec<u32> = (0..self.tris.len() as u32).filter(|&t| self.tri_alive[t as usize]).collect();
         let tris: Vec<[u32; 3]> = alive.iter().map(|&t| self.tris[t as usize]).collect();
@@ -900,7 +920,9 @@ impl<'m> Engine<'m> {
             &frozen,
             &self.input.quads,
             self.options.quads.then_some(self.options.max_quad_dihedral_deg),
+            &self.interrupt,
         );
+        self.stop()?;
         let mut used = vec![u32::MAX; self.pos.len()];
         for t in &tris {
             for &x in t {
@@ -959,7 +981,7 @@ impl<'m> Engine<'m> {
             quads,
             ..self.counts()
         };
-        Simplified { mesh, stats }
+        Ok(Simplified { mesh, stats })
     }
 
     /// The error bound and the vertex classes' counts.

@@ -40,6 +40,7 @@ mod types;
 use voxreg_io::QuadMesh;
 
 pub use types::{Options, Simplified, SimplifyError, Stats, Target};
+pub use voxreg_normals::Interrupt;
 
 /// Simplifies `mesh` down to `target`, keeping its partition (see the crate's
 /// documentation).
@@ -51,7 +52,22 @@ pub use types::{Options, Simplified, SimplifyError, Stats, Target};
 /// vertices; [`SimplifyError::InvalidTarget`] for a ratio outside `(0, 1]` or a negative
 /// or NaN distance.
 pub fn simplify(mesh: &QuadMesh, target: Target, options: &Options) -> Result<Simplified, SimplifyError> {
-    Ok(simplify_levels(mesh, &[target], options)?.pop().expect("one level"))
+    simplify_interruptible(mesh, target, options, &Interrupt::never())
+}
+
+/// [`simplify`], returning [`SimplifyError::Interrupted`] soon after `interrupt` is
+/// raised (see [`simplify_levels_interruptible`]).
+///
+/// # Errors
+///
+/// As [`simplify`], and [`SimplifyError::Interrupted`].
+pub fn simplify_interruptible(
+    mesh: &QuadMesh,
+    target: Target,
+    options: &Options,
+    interrupt: &Interrupt,
+) -> Result<Simplified, SimplifyError> {
+    Ok(simplify_levels_interruptible(mesh, &[target], options, interrupt)?.pop().expect("one level"))
 }
 
 /// Levels of detail: one simplification run, with a snapshot of the mesh at each target
@@ -68,16 +84,44 @@ pub fn simplify_levels(
     targets: &[Target],
     options: &Options,
 ) -> Result<Vec<Simplified>, SimplifyError> {
+    simplify_levels_interruptible(mesh, targets, options, &Interrupt::never())
+}
+
+/// [`simplify_levels`], stopped early when `interrupt` is raised from another thread:
+/// the run polls it in each of its long loops (the setup's per-vertex and per-triangle
+/// passes, each collapse taken from the queue, each level's queue rebuild, the flips,
+/// the pairing into quads) and then returns [`SimplifyError::Interrupted`], with no
+/// level, within about a collapse or a pass over the triangles' edges (milliseconds).
+/// A flag never raised changes nothing: the levels are those of [`simplify_levels`].
+///
+/// Why a parameter and not a field of [`Options`]: the options describe the result and
+/// stay `Copy` and comparable; the flag is the same [`Interrupt`] the regularizer polls
+/// (re-exported from `voxreg_normals`), so one flag can stop a regularization and the
+/// simplification that follows it.
+///
+/// # Errors
+///
+/// As [`simplify_levels`], and [`SimplifyError::Interrupted`] once `interrupt` is raised
+/// (also when it was raised before the call).
+pub fn simplify_levels_interruptible(
+    mesh: &QuadMesh,
+    targets: &[Target],
+    options: &Options,
+    interrupt: &Interrupt,
+) -> Result<Vec<Simplified>, SimplifyError> {
     check_targets(targets)?;
-    let mut engine = engine::Engine::new(mesh, options)?;
+    let stop = || if interrupt.is_raised() { Err(SimplifyError::Interrupted) } else { Ok(()) };
+    stop()?;
+    let mut engine = engine::Engine::new(mesh, options, interrupt)?;
     let mut out = Vec::with_capacity(targets.len());
     for t in targets {
-        engine.run(t);
+        engine.run(t)?;
         if options.quads {
-            engine.flip_for_quads();
+            engine.flip_for_quads()?;
         }
-        out.push(engine.snapshot());
+        out.push(engine.snapshot()?);
     }
+    stop()?;
     Ok(out)
 }
 

@@ -3,6 +3,8 @@
 use glam::DVec3;
 use rayon::prelude::*;
 
+use crate::Interrupt;
+
 /// An output face: a triangle left alone, or a quad with one of its two triangles.
 #[derive(Clone, Copy, Debug, PartialEq, Eq)]
 pub(crate) enum Face {
@@ -24,7 +26,8 @@ fn angle(a: DVec3, b: DVec3) -> f64 {
 /// is the largest deviation of a corner from 90 degrees plus the dihedral angle. Faces
 /// come out in the order of their lowest triangle. Triangles with a `frozen` input face
 /// (not `u32::MAX`) come out as that face of `input`, once. `max_dihedral_deg` `None`:
-/// no pairs.
+/// no pairs. Once `interrupt` is raised the scores and the augmenting paths are skipped
+/// (the caller discards the faces).
 pub(crate) fn pair(
     pos: &[DVec3],
     tris: &[[u32; 3]],
@@ -32,6 +35,7 @@ pub(crate) fn pair(
     frozen: &[u32],
     input: &[[u32; 4]],
     max_dihedral_deg: Option<f64>,
+    interrupt: &Interrupt,
 ) -> Vec<Face> {
     let mut taken = vec![false; tris.len()];
     let mut faces: Vec<(u32, Face)> = Vec::with_capacity(tris.len());
@@ -82,6 +86,9 @@ pub(crate) fn pair(
     let mut candidates: Vec<(u64, u32, u32, [u32; 4])> = pairs
         .par_iter()
         .filter_map(|&(t1, t2, q)| {
+            if interrupt.is_raised() {
+                return None;
+            }
             let [a, y, b, x] = q;
             score(pos, a, b, x, y, max_dihedral_deg).map(|s| (s.to_bits(), t1, t2, q))
         })
@@ -101,7 +108,7 @@ pub(crate) fn pair(
             mate[t2 as usize] = c as u32;
         }
     }
-    augment(&candidates, &mut mate, &taken);
+    augment(&candidates, &mut mate, &taken, interrupt);
     for (t, &m) in mate.iter().enumerate() {
         if m != NO_MATE {
             let (_, t1, _, q) = candidates[m as usize];
@@ -128,7 +135,12 @@ const MAX_SEARCH: usize = 256;
 /// alternating paths (a candidate pair, then a matched pair) to another triangle left
 /// alone; the path's pairs then swap. Searches are bounded and ignore odd cycles, so
 /// the matching grows but need not become maximum; every pair stays a candidate.
-fn augment(candidates: &[(u64, u32, u32, [u32; 4])], mate: &mut [u32], frozen: &[bool]) {
+fn augment(
+    candidates: &[(u64, u32, u32, [u32; 4])],
+    mate: &mut [u32],
+    frozen: &[bool],
+    interrupt: &Interrupt,
+) {
     let n = mate.len();
     let mut adj: Vec<Vec<u32>> = vec![Vec::new(); n];
     for (c, &(_, t1, t2, _)) in candidates.iter().enumerate() {
@@ -152,6 +164,9 @@ fn augment(candidates: &[(u64, u32, u32, [u32; 4])], mate: &mut [u32], frozen: &
     for (root, round) in (0..n).zip(1u32..) {
         if mate[root] != NO_MATE || frozen[root] || adj[root].is_empty() {
             continue;
+        }
+        if interrupt.is_raised() {
+            return;
         }
         queue.clear();
         queue.push(root as u32);

@@ -88,4 +88,7 @@ pub enum SimplifyError {
     /// The targets are out of range or not nested.
     #[error("invalid simplification target: {0}")]
     InvalidTarget(String),
+    /// The caller raised the run's [`Interrupt`](crate::Interrupt).
+    #[error("interrupted")]
+    Interrupted,
 }

@@ -121,6 +121,9 @@ pub(crate) struct State {
     pub(crate) levels: Option<Arc<Levels>>,
     /// Whether the levels' thread is simplifying a result.
     pub(crate) levels_busy: bool,
+    /// Simplifications stopped because a newer result (or the viewer's end) replaced the
+    /// one they simplified.
+    pub(crate) levels_stopped: u64,
     pub(crate) shutdown: bool,
 }
 
@@ -137,6 +140,9 @@ pub(crate) struct Shared {
     arrival: Mutex<Option<(u64, Instant)>>,
     /// The running job and the interrupt its run polls, raised when a newer job comes.
     running: Mutex<Option<(u64, Interrupt)>>,
+    /// The frame the levels' thread is simplifying and the interrupt its simplification
+    /// polls, raised by a new job, a run's start, a new frame or the viewer's end.
+    levels_running: Mutex<Option<(u64, Interrupt)>>,
 }
 
 impl Shared {
@@ -150,7 +156,27 @@ impl Shared {
         if let Some((_, interrupt)) = &*self.running.lock().unwrap_or_else(|e| e.into_inner()) {
             interrupt.raise();
         }
+        // The result being simplified is about to be replaced.
+        if let Some((_, interrupt)) = &*self.levels_running.lock().unwrap_or_else(|e| e.into_inner()) {
+            interrupt.raise();
+        }
         job
+    }
+
+    /// Registers the levels' simplification of `frame` (`state`: the state, locked by the
+    /// caller); its interrupt, raised already if that frame is no longer shown.
+    pub(crate) fn start_levels(&self, state: &State, frame: u64) -> Interrupt {
+        let interrupt = Interrupt::new();
+        if state.shutdown || state.frame != frame {
+            interrupt.raise();
+        }
+        *self.levels_running.lock().unwrap_or_else(|e| e.into_inner()) = Some((frame, interrupt.clone()));
+        interrupt
+    }
+
+    /// Forgets the levels' simplification once it returned.
+    pub(crate) fn end_levels(&self) {
+        *self.levels_running.lock().unwrap_or_else(|e| e.into_inner()) = None;
     }
 
     /// The interrupt of job `job`'s run, raised already if a newer job came.
@@ -183,6 +209,13 @@ impl Shared {
     pub(crate) fn update(&self, f: impl FnOnce(&mut State)) {
         let mut s = self.lock();
         f(&mut s);
+        // A simplification of a frame no longer shown, or about to be replaced by a run
+        // that started, stops.
+        if let Some((frame, interrupt)) = &*self.levels_running.lock().unwrap_or_else(|e| e.into_inner()) {
+            if s.shutdown || s.busy || s.frame != *frame {
+                interrupt.raise();
+            }
+        }
         s.version += 1;
         drop(s);
         self.changed.notify_all();

@@ -5,7 +5,13 @@
 use super::*;
 
 impl<'m> Engine<'m> {
-    pub(crate) fn new(mesh: &'m QuadMesh, options: &Options) -> Result<Engine<'m>, SimplifyError> {
+    /// The engine of `mesh`; `Interrupted` once `interrupt` is raised (the per-vertex
+    /// and per-triangle passes poll it), which the engine then keeps polling.
+    pub(crate) fn new(
+        mesh: &'m QuadMesh,
+        options: &Options,
+        interrupt: &Interrupt,
+    ) -> Result<Engine<'m>, SimplifyError> {
         let n = mesh.positions.len();
         let bad = |s: String| Err(SimplifyError::InvalidMesh(s));
         if let Some(i) = mesh.positions.iter().position(|p| !p.is_finite()) {
@@ -94,6 +100,7 @@ impl<'m> Engine<'m> {
         let mean_edge = if nt > 0 { (edge_len / (3 * nt) as f64).max(1e-300) } else { 1.0 };
         let mut engine = Engine {
             options: *options,
+            interrupt: interrupt.clone(),
             moved: vec![false; n],
             pos,
             tri_alive: vec![true; nt],
@@ -133,6 +140,9 @@ impl<'m> Engine<'m> {
             .into_par_iter()
             .map(|v| {
                 let mut q = Quadric::default();
+                if e.interrupt.is_raised() {
+                    return (Class::Corner, q);
+                }
                 for &t in &e.vtris[v as usize] {
                     let p = e.tris[t as usize].map(|x| e.pos[x as usize]);
                     let nrm = tri_normal(p);
@@ -144,6 +154,7 @@ impl<'m> Engine<'m> {
                 e.classify(v, mean_edge, q)
             })
             .collect();
+        engine.stop()?;
         for (v, (class, q)) in classified.into_iter().enumerate() {
             engine.class[v] = class;
             engine.quadric[v] = q;
@@ -183,6 +194,9 @@ impl<'m> Engine<'m> {
                 .fold(
                     || (Vec::new(), Vec::new()),
                     |(mut hits, mut near): (Vec<(usize, usize)>, Vec<u32>), t| {
+                        if e.interrupt.is_raised() {
+                            return (hits, near);
+                        }
                         let tri = e.tris[t];
                         let p = tri.map(|x| e.pos[x as usize]);
                         let (lo, hi) = e.tri_box(&tri);
@@ -204,6 +218,7 @@ impl<'m> Engine<'m> {
                     a.append(&mut b);
                     a
                 });
+            engine.stop()?;
             for (t, s) in pairs {
                 engine.frozen[s] = tri_face[s];
                 engine.frozen[t] = tri_face[t];

@@ -5,7 +5,8 @@ use glam::DVec3;
 use voxreg_quality::point_triangle_distance;
 
 use super::{
-    is_feature, meet_off_shared, quality, tri_normal, Engine, AREA_TOLERANCE, NONE, VOLUME_TOLERANCE,
+    is_feature, meet_off_shared, quality, tri_normal, Engine, SimplifyError, AREA_TOLERANCE, NONE,
+    VOLUME_TOLERANCE,
 };
 
 /// How many passes of flips are made at most (a second one finds hardly any).
@@ -65,10 +66,11 @@ impl Engine<'_> {
     /// triangles nearest it inside its patch (four in all) are tried in order, and a flip
     /// that passes every check is kept where the matching then grows (an augmenting path
     /// from a triangle it left alone), and undone otherwise. Sequential and in a fixed
-    /// order: the result does not depend on the thread count.
-    pub(crate) fn flip_for_quads(&mut self) {
+    /// order: the result does not depend on the thread count. `Interrupted` once the
+    /// interrupt is raised (polled per triangle in each pass).
+    pub(crate) fn flip_for_quads(&mut self) -> Result<(), SimplifyError> {
         if self.alive == self.input_triangles {
-            return;
+            return Ok(());
         }
         let n = self.tris.len();
         let mut m = Matching {
@@ -80,6 +82,7 @@ impl Engine<'_> {
         };
         let mut cands: Vec<(u64, u32, u32)> = Vec::new();
         for t in 0..n as u32 {
+            self.stop()?;
             if self.tri_alive[t as usize] {
                 for k in 0..3 {
                     if let Some((s, score)) = self.quad_across(t, k) {
@@ -99,6 +102,7 @@ impl Engine<'_> {
         }
         drop(cands);
         for t in 0..n as u32 {
+            self.stop()?;
             if self.tri_alive[t as usize] && m.mate[t as usize] == NONE && self.frozen[t as usize] == NONE {
                 self.augment(&mut m, t);
             }
@@ -110,6 +114,7 @@ impl Engine<'_> {
         for _ in 0..FLIP_PASSES {
             let mut grown = 0;
             for t in 0..n as u32 {
+                self.stop()?;
                 if !self.tri_alive[t as usize]
                     || m.mate[t as usize] != NONE
                     || self.frozen[t as usize] != NONE
@@ -183,6 +188,7 @@ impl Engine<'_> {
                 break;
             }
         }
+        Ok(())
     }
 
     /// Whether, after the flip of edge `k` of `t1`, each of the two new triangles would
