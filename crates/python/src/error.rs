@@ -49,8 +49,7 @@ impl Error {
             | RegularizeError::InvalidParams(_)
             | RegularizeError::InvalidOption { .. }
             | RegularizeError::NotFinite(_) => Kind::Parameter,
-            // The binding never raises the regularizer's interrupt (it cancels through
-            // the progress callback).
+            // Raised on Ctrl-C, whose KeyboardInterrupt is returned instead.
             RegularizeError::Factorization(_)
             | RegularizeError::OutOfMemory(_)
             | RegularizeError::Interrupted => Kind::Voxreg,

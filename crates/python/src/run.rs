@@ -151,7 +151,9 @@ pub(crate) fn regularize<'py>(
             }
         };
         let volume = &volume;
-        py.detach(move || {
+        // On a thread of its own while this one runs Python's signal handlers: Ctrl-C
+        // raises the run's interrupt.
+        crate::simplify::interruptible(py, move |interrupt| {
             on_pool(threads, move || {
                 catch_unwind(AssertUnwindSafe(|| -> Result<Output> {
                     // Refused before the surface is built, as the CLI refuses it.
@@ -165,6 +167,7 @@ pub(crate) fn regularize<'py>(
                     let mut regularizer = Regularizer::from_volume(volume, &params.regions)
                         .map_err(|e| Error::regularize("labels: no surface to regularize: ", &e))?;
                     regularizer.set_keep_normals(false);
+                    regularizer.set_interrupt(interrupt.clone());
                     regularizer
                         .run(Run::new(params).progress(&mut report))
                         .map_err(|e| Error::regularize("", &e))

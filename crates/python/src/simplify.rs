@@ -35,7 +35,10 @@ const SIGNAL_POLL: std::time::Duration = std::time::Duration::from_millis(50);
 /// Python's signal handlers every 50 ms (`check_signals`, which only acts on the main
 /// thread): when one raises (`KeyboardInterrupt` on Ctrl-C), `f`'s interrupt is raised,
 /// `f` is waited for (it returns within milliseconds) and the exception propagates.
-fn interruptible<T: Send>(py: Python<'_>, f: impl FnOnce(&Interrupt) -> Result<T> + Send) -> PyResult<T> {
+pub(crate) fn interruptible<T: Send>(
+    py: Python<'_>,
+    f: impl FnOnce(&Interrupt) -> Result<T> + Send,
+) -> PyResult<T> {
     let interrupt = Interrupt::new();
     std::thread::scope(|scope| {
         let (tx, rx) = std::sync::mpsc::channel();
