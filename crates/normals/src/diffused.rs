@@ -164,69 +164,99 @@ impl Diffused<'_> {
         graph: &QuadGraph,
         interrupt: &Interrupt,
     ) -> Result<NormalField, NormalError> {
-        let n = surface.num_surfels();
-        if self.positions.len() != surface.num_vertices() || self.previous.len() != n || graph.len() != n {
-            return Err(NormalError::InvalidParameter(format!(
-                "{} positions, {} normals and a graph of {} surfels for a surface of {} vertices and {n} surfels",
-                self.positions.len(),
-                self.previous.len(),
-                graph.len(),
-                surface.num_vertices()
-            )));
-        }
-        if !(self.radius.is_finite() && self.radius >= 0.0) {
-            return Err(NormalError::InvalidParameter(format!(
-                "the diffusion radius must be finite and non-negative, got {}",
-                self.radius
-            )));
-        }
-        interrupt.check()?;
-        let x = self.positions;
-        let mut u: Vec<Vec3A> = surface
-            .surfels()
-            .par_iter()
-            .zip(&graph.info)
-            .map(|(s, &info)| {
-                let [a, b, c, d] = s.vertices.map(|v| x[v.index()]);
-                let w = if info & JUNCTION != 0 { JUNCTION_SOURCE_WEIGHT } else { 1.0 };
-                (0.5 * w * (c - a).cross(d - b)).as_vec3a()
-            })
-            .chain(rayon::iter::once(Vec3A::ZERO))
-            .collect();
-        // The empty slots' zero vector at `n`, in both arrays.
-        let mut next = vec![Vec3A::ZERO; n + 1];
-        let scale: [f32; 5] = std::array::from_fn(|c| 1.0 / (1 + c) as f32);
-        for _ in 0..Self::steps(self.radius) {
-            interrupt.check()?;
-            next[..n]
-                .par_chunks_mut(CHUNK)
-                .zip(graph.nbrs.par_chunks(CHUNK).zip(graph.info.par_chunks(CHUNK)))
-                .enumerate()
-                .for_each(|(chunk, (out, (nbrs, info)))| {
-                    let base = chunk * CHUNK;
-                    let own = &u[base..base + out.len()];
-                    for (((out, nb), &info), &mine) in out.iter_mut().zip(nbrs).zip(info).zip(own) {
-                        let mut sum = mine;
-                        for &t in nb {
-                            // The flip bit is the sign bit of an f32: +1 or -1.
-                            let sign = f32::from_bits((t & FLIP) | 1.0f32.to_bits());
-                            sum += sign * u[(t & !FLIP) as usize];
-                        }
-                        *out = sum * scale[usize::from(info & COUNT)];
-                    }
-                });
-            std::mem::swap(&mut u, &mut next);
-        }
-        drop(next);
+        let u = diffuse(self.positions, self.previous.len(), self.radius, surface, graph, interrupt)?;
         let previous = self.previous.as_slice();
         Ok(NormalField::new(
-            u[..n]
+            u[..previous.len()]
                 .par_iter()
                 .zip(previous)
                 .map(|(v, p)| v.as_dvec3().try_normalize().unwrap_or(*p))
                 .collect(),
         ))
     }
+
+    /// [`Diffused::estimate_on`] with `field` as the previous normals, replaced in place by
+    /// the estimate from `positions` with `radius`: the same normals, without a second
+    /// field alive beside the first (the fast pipeline's peak memory is in its rounds).
+    pub fn update_on(
+        positions: &[DVec3],
+        radius: f64,
+        surface: &DigitalSurface,
+        graph: &QuadGraph,
+        field: &mut NormalField,
+        interrupt: &Interrupt,
+    ) -> Result<(), NormalError> {
+        let u = diffuse(positions, field.len(), radius, surface, graph, interrupt)?;
+        // As `NormalField::new` of the estimate: normalized once more, zero if degenerate.
+        field.normals_mut().par_iter_mut().zip(&u[..]).for_each(|(p, v)| {
+            *p = v.as_dvec3().try_normalize().unwrap_or(*p).try_normalize().unwrap_or(DVec3::ZERO)
+        });
+        Ok(())
+    }
+}
+
+/// The diffused vector areas of [`Diffused`] (one per surfel, then the empty slots' zero
+/// vector), from `positions` and `previous` normals of `surface` (checked against it).
+fn diffuse(
+    positions: &[DVec3],
+    previous: usize,
+    radius: f64,
+    surface: &DigitalSurface,
+    graph: &QuadGraph,
+    interrupt: &Interrupt,
+) -> Result<Vec<Vec3A>, NormalError> {
+    let n = surface.num_surfels();
+    if positions.len() != surface.num_vertices() || previous != n || graph.len() != n {
+        return Err(NormalError::InvalidParameter(format!(
+            "{} positions, {previous} normals and a graph of {} surfels for a surface of {} vertices and {n} surfels",
+            positions.len(),
+            graph.len(),
+            surface.num_vertices()
+        )));
+    }
+    if !(radius.is_finite() && radius >= 0.0) {
+        return Err(NormalError::InvalidParameter(format!(
+            "the diffusion radius must be finite and non-negative, got {radius}"
+        )));
+    }
+    interrupt.check()?;
+    let x = positions;
+    let mut u: Vec<Vec3A> = surface
+        .surfels()
+        .par_iter()
+        .zip(&graph.info)
+        .map(|(s, &info)| {
+            let [a, b, c, d] = s.vertices.map(|v| x[v.index()]);
+            let w = if info & JUNCTION != 0 { JUNCTION_SOURCE_WEIGHT } else { 1.0 };
+            (0.5 * w * (c - a).cross(d - b)).as_vec3a()
+        })
+        .chain(rayon::iter::once(Vec3A::ZERO))
+        .collect();
+    // The empty slots' zero vector at `n`, in both arrays.
+    let mut next = vec![Vec3A::ZERO; n + 1];
+    let scale: [f32; 5] = std::array::from_fn(|c| 1.0 / (1 + c) as f32);
+    for _ in 0..Diffused::steps(radius) {
+        interrupt.check()?;
+        next[..n]
+            .par_chunks_mut(CHUNK)
+            .zip(graph.nbrs.par_chunks(CHUNK).zip(graph.info.par_chunks(CHUNK)))
+            .enumerate()
+            .for_each(|(chunk, (out, (nbrs, info)))| {
+                let base = chunk * CHUNK;
+                let own = &u[base..base + out.len()];
+                for (((out, nb), &info), &mine) in out.iter_mut().zip(nbrs).zip(info).zip(own) {
+                    let mut sum = mine;
+                    for &t in nb {
+                        // The flip bit is the sign bit of an f32: +1 or -1.
+                        let sign = f32::from_bits((t & FLIP) | 1.0f32.to_bits());
+                        sum += sign * u[(t & !FLIP) as usize];
+                    }
+                    *out = sum * scale[usize::from(info & COUNT)];
+                }
+            });
+        std::mem::swap(&mut u, &mut next);
+    }
+    Ok(u)
 }
 
 impl NormalEstimator for Diffused<'_> {

@@ -39,6 +39,11 @@ impl NormalField {
         &self.normals
     }
 
+    /// The normals to overwrite in place; the caller keeps them unit or zero.
+    pub(crate) fn normals_mut(&mut self) -> &mut [DVec3] {
+        &mut self.normals
+    }
+
     /// Largest angle, in degrees, between the directions of `self` and `other`,
     /// orientation ignored (for tests and reports).
     pub fn max_angle_deg(&self, other: &NormalField) -> f64 {

@@ -334,10 +334,10 @@ impl SweepsSolver {
         // the f64 outputs, so that the peak holds them or these, not both.
         self.next = Vec::new();
         self.resid = Vec::new();
-        let x: Vec<DVec3> = self.disp.par_iter().zip(input).map(|(d, p)| *p + d.as_dvec3()).collect();
+        // The displacement in the callback's f64, reported once per solve, then made the
+        // positions in place: the solve's end holds one `f64` vector, not two.
+        let mut x: Vec<DVec3> = self.disp.par_iter().map(|d| d.as_dvec3()).collect();
         if self.params.sweeps > 0 {
-            // The displacement, once per solve, in the callback's f64.
-            let moved: Vec<DVec3> = self.disp.par_iter().map(|d| d.as_dvec3()).collect();
             progress(&Progress {
                 iteration: self.params.sweeps,
                 energy: f64::NAN,
@@ -345,9 +345,10 @@ impl SweepsSolver {
                 relative_gradient: if first > 0.0 { last / first } else { 0.0 },
                 error_bound: f64::INFINITY,
                 error_estimate: last_move,
-                displacement: &moved,
+                displacement: &x,
             });
         }
+        x.par_iter_mut().zip(input).for_each(|(x, p)| *x = *p + *x);
         seconds.solve = t.elapsed().as_secs_f64();
         let memory_bytes = stencil.bytes()
             + 24 * self.dinv.len()

@@ -107,8 +107,7 @@ impl Refine<'_> {
         graph: &QuadGraph,
         interrupt: &Interrupt,
     ) -> Result<(), RegularizeError> {
-        let diffused = Diffused { positions, previous: field, radius: self.refinement.radius };
-        *field = diffused.estimate_on(self.surface, graph, interrupt)?;
+        Diffused::update_on(positions, self.refinement.radius, self.surface, graph, field, interrupt)?;
         Ok(())
     }
 }
