@@ -346,7 +346,11 @@ impl Regularizer {
                 match &mut *solver {
                     // The fast pipeline: the cheap re-estimate alone between the batches.
                     Solver::Sweeps(s) => {
-                        refine.diffused(&positions, &mut field, s.graph(&surface), &interrupt)?
+                        // Its targets stay the lattice's (no re-centring): let go during
+                        // the re-estimate, the pipeline's peak, and made again after it.
+                        drop(std::mem::take(&mut targets));
+                        refine.diffused(&positions, &mut field, s.graph(&surface), &interrupt)?;
+                        targets = surface.positions();
                     }
                     _ => refine.round(round, &positions, &mut field, &mut targets, &interrupt)?,
                 }
