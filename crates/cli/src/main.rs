@@ -245,7 +245,6 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
             args.output.display().to_string()
         }
     };
-    let r = &r;
     if let Some(report) = &args.report {
         let full = CliReport {
             input: path.display().to_string(),
@@ -253,7 +252,7 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
             labels,
             io,
             peak_memory: report::peak_memory(),
-            run: r,
+            run: &r,
         };
         report::write_report(&mut outputs, report, &full)?;
     }

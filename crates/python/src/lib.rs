@@ -12,6 +12,7 @@ mod mesh;
 mod params;
 mod read;
 mod run;
+mod signals;
 mod simplify;
 mod volume;
 

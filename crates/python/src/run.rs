@@ -153,7 +153,7 @@ pub(crate) fn regularize<'py>(
         let volume = &volume;
         // On a thread of its own while this one runs Python's signal handlers: Ctrl-C
         // raises the run's interrupt.
-        crate::simplify::interruptible(py, move |interrupt| {
+        crate::signals::interruptible(py, move |interrupt| {
             on_pool(threads, move || {
                 catch_unwind(AssertUnwindSafe(|| -> Result<Output> {
                     // Refused before the surface is built, as the CLI refuses it.

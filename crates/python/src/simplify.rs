@@ -9,8 +9,9 @@ use voxreg_simplify::{
     simplify_levels_interruptible, Interrupt, Options, Simplified, SimplifyError, Stats, Target,
 };
 
-use crate::error::{no_panic, Error, Result};
+use crate::error::{Error, Result};
 use crate::mesh::{colors_materials, labels_of, positions_of, quads_of, Arrays, PartSpec, Surface};
+use crate::signals::interruptible;
 
 /// A level's target as Python passes it: `(ratio or None, max_error)`.
 pub(crate) type TargetTuple = (Option<f64>, f64);
@@ -23,50 +24,10 @@ fn error_of(e: &SimplifyError) -> Error {
     match e {
         SimplifyError::InvalidMesh(_) => Error::input(e.to_string()),
         SimplifyError::InvalidTarget(_) => Error::parameter(e.to_string()),
-        // Only raised by `interruptible`, which returns the signal's exception instead.
+        // Only raised by `signals::interruptible`, which returns the signal's exception
+        // instead.
         SimplifyError::Interrupted => Error::new(crate::error::Kind::Voxreg, e.to_string()),
     }
-}
-
-/// How often the waiting thread runs Python's signal handlers.
-const SIGNAL_POLL: std::time::Duration = std::time::Duration::from_millis(50);
-
-/// Runs `f` on a thread of its own with the GIL released, while the calling thread runs
-/// Python's signal handlers every 50 ms (`check_signals`, which only acts on the main
-/// thread): when one raises (`KeyboardInterrupt` on Ctrl-C), `f`'s interrupt is raised,
-/// `f` is waited for (it returns within milliseconds) and the exception propagates.
-pub(crate) fn interruptible<T: Send>(
-    py: Python<'_>,
-    f: impl FnOnce(&Interrupt) -> Result<T> + Send,
-) -> PyResult<T> {
-    let interrupt = Interrupt::new();
-    std::thread::scope(|scope| {
-        let (tx, rx) = std::sync::mpsc::channel();
-        let flag = &interrupt;
-        scope.spawn(move || {
-            let _ = tx.send(no_panic(|| f(flag)));
-        });
-        let mut rx = Some(rx);
-        loop {
-            let receiver = rx.take().expect("the receiver");
-            let (got, receiver) = py.detach(move || (receiver.recv_timeout(SIGNAL_POLL), receiver));
-            rx = Some(receiver);
-            match got {
-                Ok(result) => return result.map_err(PyErr::from),
-                Err(std::sync::mpsc::RecvTimeoutError::Disconnected) => {
-                    return Err(Error::new(crate::error::Kind::Voxreg, "the simplification stopped").into())
-                }
-                Err(std::sync::mpsc::RecvTimeoutError::Timeout) => {}
-            }
-            if let Err(signal) = py.check_signals() {
-                interrupt.raise();
-                let receiver = rx.take().expect("the receiver");
-                // The scope joins the thread; its result (Interrupted) is dropped.
-                py.detach(move || drop(receiver.recv()));
-                return Err(signal);
-            }
-        }
-    })
 }
 
 fn stats_dict<'py>(py: Python<'py>, s: &Stats) -> PyResult<Bound<'py, PyDict>> {

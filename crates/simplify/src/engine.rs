@@ -197,11 +197,7 @@ impl<'m> Engine<'m> {
     /// `Err(Interrupted)` once the caller raised the interrupt.
     #[inline]
     fn stop(&self) -> Result<(), SimplifyError> {
-        if self.interrupt.is_raised() {
-            Err(SimplifyError::Interrupted)
-        } else {
-            Ok(())
-        }
+        crate::types::check(&self.interrupt)
     }
 
     /// Adds `sign` times each change to the running totals: a region's volume when the

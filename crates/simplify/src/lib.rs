@@ -110,8 +110,7 @@ pub fn simplify_levels_interruptible(
     interrupt: &Interrupt,
 ) -> Result<Vec<Simplified>, SimplifyError> {
     check_targets(targets)?;
-    let stop = || if interrupt.is_raised() { Err(SimplifyError::Interrupted) } else { Ok(()) };
-    stop()?;
+    types::check(interrupt)?;
     let mut engine = engine::Engine::new(mesh, options, interrupt)?;
     let mut out = Vec::with_capacity(targets.len());
     for t in targets {
@@ -121,7 +120,7 @@ pub fn simplify_levels_interruptible(
         }
         out.push(engine.snapshot()?);
     }
-    stop()?;
+    types::check(interrupt)?;
     Ok(out)
 }
 

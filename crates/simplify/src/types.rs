@@ -92,3 +92,9 @@ pub enum SimplifyError {
     #[error("interrupted")]
     Interrupted,
 }
+
+/// `Err(Interrupted)` once `interrupt` is raised: the shared flag's own check, in this
+/// crate's error.
+pub(crate) fn check(interrupt: &crate::Interrupt) -> Result<(), SimplifyError> {
+    interrupt.check().map_err(|_| SimplifyError::Interrupted)
+}

@@ -67,7 +67,7 @@ pub(crate) fn worker(shared: Arc<Shared>) {
             }
             let (Some(surface), Some(finished)) = (s.surface.clone(), s.finished.clone()) else { continue };
             // Registered with the state locked, so that no change of frame is missed.
-            let interrupt = shared.start_levels(&s, s.frame);
+            let interrupt = shared.start_levels(&s);
             (s.frame, surface, finished, s.palette.clone(), interrupt)
         };
         shared.update(|s| s.levels_busy = true);

@@ -163,14 +163,12 @@ impl Shared {
         job
     }
 
-    /// Registers the levels' simplification of `frame` (`state`: the state, locked by the
-    /// caller); its interrupt, raised already if that frame is no longer shown.
-    pub(crate) fn start_levels(&self, state: &State, frame: u64) -> Interrupt {
+    /// Registers the levels' simplification of the frame shown in `state` (locked by the
+    /// caller, so that no later change of frame is missed); its interrupt.
+    pub(crate) fn start_levels(&self, state: &State) -> Interrupt {
         let interrupt = Interrupt::new();
-        if state.shutdown || state.frame != frame {
-            interrupt.raise();
-        }
-        *self.levels_running.lock().unwrap_or_else(|e| e.into_inner()) = Some((frame, interrupt.clone()));
+        *self.levels_running.lock().unwrap_or_else(|e| e.into_inner()) =
+            Some((state.frame, interrupt.clone()));
         interrupt
     }
 

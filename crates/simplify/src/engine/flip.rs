@@ -410,12 +410,7 @@ impl Engine<'_> {
         let [t1, t2] = u.t;
         let [x, a, y] = self.tris[t1 as usize];
         let b = self.tris[t2 as usize][1];
-        self.tris[t1 as usize] = u.old[0];
-        self.tris[t2 as usize] = u.old[1];
-        self.vtris[y as usize].retain(|&t| t != t1);
-        self.vtris[x as usize].retain(|&t| t != t2);
-        self.vtris[a as usize].push(t2);
-        self.vtris[b as usize].push(t1);
+        self.relink(u.t, u.old, [(y, t1), (x, t2)], [(a, t2), (b, t1)]);
         let [p1, p2] = u.points;
         self.points[t1 as usize] = p1;
         self.points[t2 as usize] = p2;
@@ -430,12 +425,7 @@ impl Engine<'_> {
         let [t1, t2] = f.t;
         let (a, b) = (f.new[0][1], f.new[1][1]);
         let (x, y) = (f.new[0][0], f.new[0][2]);
-        self.tris[t1 as usize] = f.new[0];
-        self.tris[t2 as usize] = f.new[1];
-        self.vtris[a as usize].retain(|&t| t != t2);
-        self.vtris[b as usize].retain(|&t| t != t1);
-        self.vtris[y as usize].push(t1);
-        self.vtris[x as usize].push(t2);
+        self.relink(f.t, f.new, [(a, t2), (b, t1)], [(y, t1), (x, t2)]);
         for t in [t1, t2] {
             self.points[t as usize].clear();
         }
@@ -448,6 +438,20 @@ impl Engine<'_> {
         self.rebox(t2);
         for v in [a, b, x, y] {
             self.version[v as usize] += 1;
+        }
+    }
+
+    /// Gives the pair `t` the corners `tris`, taking each `(vertex, triangle)` of `off`
+    /// out of the vertex's triangles and adding each of `on`, in that order (a flip and
+    /// its undo are the same change with the lists swapped).
+    fn relink(&mut self, t: [u32; 2], tris: [[u32; 3]; 2], off: [(u32, u32); 2], on: [(u32, u32); 2]) {
+        self.tris[t[0] as usize] = tris[0];
+        self.tris[t[1] as usize] = tris[1];
+        for (v, gone) in off {
+            self.vtris[v as usize].retain(|&t| t != gone);
+        }
+        for (v, added) in on {
+            self.vtris[v as usize].push(added);
         }
     }
 }
