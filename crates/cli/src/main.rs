@@ -203,9 +203,9 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     let mut outputs = Outputs::new();
     let written = match product {
         Product::Mesh => {
-            let (written, secs) = stages.run("write mesh", || {
+            let (written, secs) = stages.run_reporting("write mesh", |status| {
                 let written =
-                    output::write_meshes(args, &mut outputs, surface, &positions, palette.as_ref())?;
+                    output::write_meshes(args, &mut outputs, surface, &positions, palette.as_ref(), status)?;
                 if let (Some(path), Some(v)) = (&args.features, &features) {
                     let mesh = QuadMesh::from_surface(surface, &positions);
                     outputs

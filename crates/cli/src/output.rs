@@ -434,13 +434,15 @@ fn untangled<'a>(
 }
 
 /// Stages the regularized surface in `outputs`: one file, or with `--split` a directory
-/// of files. Returns what is written, for the summary line.
+/// of files. Returns what is written, for the summary line; `status` shows how a
+/// simplification goes.
 pub(crate) fn write_meshes(
     args: &RegularizeArgs,
     outputs: &mut Outputs,
     surface: &DigitalSurface,
     positions: &[glam::DVec3],
     palette: Option<&Palette>,
+    status: &dyn Fn(&str),
 ) -> Result<String> {
     let colour = |mut mesh: QuadMesh| {
         if let Some(palette) = palette {
@@ -451,7 +453,7 @@ pub(crate) fn write_meshes(
     };
     if args.split == Split::None {
         let mesh = colour(QuadMesh::from_surface(surface, positions));
-        return crate::simplify::write(args, outputs, mesh, surface.spacing().min_element());
+        return crate::simplify::write(args, outputs, mesh, surface.spacing().min_element(), status);
     }
     let mut batch = MeshBatch::new(&args.output)?;
     for (name, mesh) in split_meshes(args, surface, positions, palette) {

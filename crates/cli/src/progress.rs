@@ -26,10 +26,20 @@ impl Stages {
 
     /// Runs `f` under a spinner showing `message`; returns its result and its seconds.
     pub(crate) fn run<T>(&self, message: &str, f: impl FnOnce() -> Result<T>) -> Result<(T, f64)> {
+        self.run_reporting(message, |_| f())
+    }
+
+    /// [`Stages::run`], where `f` may show what it is doing after `message` (a
+    /// simplification's level and stage) through the function it receives.
+    pub(crate) fn run_reporting<T>(
+        &self,
+        message: &str,
+        f: impl FnOnce(&dyn Fn(&str)) -> Result<T>,
+    ) -> Result<(T, f64)> {
         let bar = spinner(self.quiet);
         bar.set_message(message.to_string());
         let t = Instant::now();
-        let out = f();
+        let out = f(&|detail: &str| bar.set_message(format!("{message}: {detail}")));
         let secs = t.elapsed().as_secs_f64();
         bar.finish_and_clear();
         if !self.quiet && out.is_ok() {

@@ -5,7 +5,7 @@ use std::path::{Path, PathBuf};
 
 use anyhow::{bail, Context, Result};
 use voxreg_io::{write_mesh, Outputs, QuadMesh};
-use voxreg_simplify::{pyramid_targets, simplify_levels, Options, Target};
+use voxreg_simplify::{pyramid_targets, simplify_levels_reporting, Interrupt, Options, Target};
 
 use crate::args::{RegularizeArgs, Split};
 
@@ -52,12 +52,14 @@ pub(crate) fn level_path(path: &Path, k: usize) -> PathBuf {
 
 /// Writes `mesh` to the output as the options say (as it is, simplified, or as levels
 /// of detail), staged in `outputs` to be committed with the run's other files; returns
-/// what was written. `voxel` is the smallest voxel spacing.
+/// what was written. `voxel` is the smallest voxel spacing; `status` shows the
+/// simplification's level, stage and progress.
 pub(crate) fn write(
     args: &RegularizeArgs,
     outputs: &mut Outputs,
     mesh: QuadMesh,
     voxel: f64,
+    status: &dyn Fn(&str),
 ) -> Result<String> {
     let s = &args.simplify;
     let out = &args.output;
@@ -70,8 +72,15 @@ pub(crate) fn write(
         Some(n) => pyramid_targets(n, 4.0, e),
         None => vec![Target { ratio: s.simplify, max_error: e }],
     };
-    let levels = simplify_levels(&mesh, &targets, &Options::default())
-        .with_context(|| format!("{}: cannot simplify", out.display()))?;
+    let mut report = |p: &voxreg_simplify::Progress| {
+        let stage = p.stage.label();
+        let level = if p.levels > 1 { format!("level {}/{} ", p.level + 1, p.levels) } else { String::new() };
+        status(&format!("simplify: {level}{stage} {:.0}%", 100.0 * p.fraction));
+    };
+    // SIGINT ends the process (its staged outputs removed), so no interrupt is needed.
+    let levels =
+        simplify_levels_reporting(&mesh, &targets, &Options::default(), &Interrupt::never(), &mut report)
+            .with_context(|| format!("{}: cannot simplify", out.display()))?;
     if s.lod.is_none() {
         outputs.write(out, |path| write_mesh(path, &levels[0].mesh))?;
         return Ok(out.display().to_string());

@@ -18,7 +18,7 @@ use crate::params;
 use crate::volume;
 
 /// The shortest interval between two progress calls (a stage change always calls).
-const THROTTLE: Duration = Duration::from_millis(50);
+pub(crate) const THROTTLE: Duration = Duration::from_millis(50);
 
 /// The unwinding payload that aborts a run whose progress callback raised.
 struct Cancelled;

@@ -4,13 +4,16 @@
 use numpy::{PyReadonlyArray1, PyReadonlyArray2};
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyList};
+use std::time::Instant;
 use voxreg_io::{FaceGroup, Material, QuadMesh};
+
 use voxreg_simplify::{
-    simplify_levels_interruptible, Interrupt, Options, Simplified, SimplifyError, Stats, Target,
+    simplify_levels_reporting, Interrupt, Options, Progress, Simplified, SimplifyError, Stage, Stats, Target,
 };
 
 use crate::error::{Error, Result};
 use crate::mesh::{colors_materials, labels_of, positions_of, quads_of, Arrays, PartSpec, Surface};
+use crate::run::THROTTLE;
 use crate::signals::interruptible;
 
 /// A level's target as Python passes it: `(ratio or None, max_error)`.
@@ -52,28 +55,105 @@ fn levels_list<'py>(py: Python<'py>, levels: Vec<(Arrays, Stats)>) -> PyResult<B
     Ok(out)
 }
 
-fn run(mesh: &QuadMesh, targets: &[Target], interrupt: &Interrupt) -> Result<Vec<(Arrays, Stats)>> {
-    let levels = simplify_levels_interruptible(mesh, targets, &Options::default(), interrupt)
+/// The share of a run done when a stage of a level is at `p.fraction`: the setup a tenth,
+/// each level an equal share of the rest (its collapses 70%, flips and pairing 15% each).
+fn overall(p: &Progress) -> f64 {
+    let (start, width) = match p.stage {
+        Stage::Setup => return 0.1 * p.fraction,
+        Stage::Collapses => (0.0, 0.7),
+        Stage::Flips => (0.7, 0.15),
+        Stage::Pairing => (0.85, 0.15),
+    };
+    let share = 0.9 / p.levels as f64;
+    (0.1 + share * (p.level as f64 + start + width * p.fraction)).min(1.0)
+}
+
+/// The stage as the callback gets it: `setup`, or `collapses`, `flips`, `pairing` with
+/// `level K/N` before it when there are several levels.
+fn stage_label(p: &Progress) -> String {
+    if p.stage == Stage::Setup || p.levels == 1 {
+        p.stage.label().to_string()
+    } else {
+        format!("level {}/{}: {}", p.level + 1, p.levels, p.stage.label())
+    }
+}
+
+/// Simplifies on the calling (worker) thread, calling `progress(stage, fraction)` with the
+/// GIL at most every 50 ms and at every stage change; an exception it raises is kept in
+/// `failed` and stops the run through `interrupt`.
+fn run(
+    mesh: &QuadMesh,
+    targets: &[Target],
+    interrupt: &Interrupt,
+    progress: Option<&Py<PyAny>>,
+    failed: &mut Option<PyErr>,
+) -> Result<Vec<(Arrays, Stats)>> {
+    let mut last: Option<(String, Instant)> = None;
+    let mut report = |p: &Progress| {
+        let Some(callback) = progress else { return };
+        if failed.is_some() {
+            return;
+        }
+        let label = stage_label(p);
+        let now = Instant::now();
+        let same = last.as_ref().is_some_and(|(l, t)| *l == label && now.duration_since(*t) < THROTTLE);
+        if same && p.fraction < 1.0 {
+            return;
+        }
+        let fraction = overall(p);
+        if let Err(e) = Python::attach(|py| callback.bind(py).call1((label.as_str(), fraction)).map(drop)) {
+            *failed = Some(e);
+            interrupt.raise();
+        }
+        last = Some((label, now));
+    };
+    let levels = simplify_levels_reporting(mesh, targets, &Options::default(), interrupt, &mut report)
         .map_err(|e| error_of(&e))?;
     Ok(levels.into_iter().map(|Simplified { mesh, stats }| (Arrays::of(&mesh), stats)).collect())
+}
+
+/// Runs `work` with Ctrl-C and the progress callback wired: the callback's exception
+/// first, then the run's error; `("done", 1.0)` after a run that completed.
+fn with_progress<T: Send>(
+    py: Python<'_>,
+    progress: Option<Py<PyAny>>,
+    work: impl FnOnce(&Interrupt, Option<&Py<PyAny>>, &mut Option<PyErr>) -> Result<T> + Send,
+) -> PyResult<T> {
+    let mut failed: Option<PyErr> = None;
+    let outcome = {
+        let failed = &mut failed;
+        let progress = progress.as_ref();
+        interruptible(py, move |interrupt| work(interrupt, progress, failed))
+    };
+    if let Some(e) = failed {
+        return Err(e);
+    }
+    let out = outcome?;
+    if let Some(callback) = &progress {
+        callback.bind(py).call1(("done", 1.0))?;
+    }
+    Ok(out)
 }
 
 /// A regularized surface's part (as `Surface.mesh`) simplified to each of `targets`
 /// (`(ratio or None, max_error)`) in turn, one collapse sequence: `[(arrays, stats)]`,
 /// level `k` a simplification of level `k - 1`.
 #[pyfunction]
-#[pyo3(signature = (surface, targets, part=None))]
+#[pyo3(signature = (surface, targets, part=None, progress=None))]
 pub(crate) fn simplify_surface<'py>(
     py: Python<'py>,
     surface: PyRef<'py, Surface>,
     targets: Vec<TargetTuple>,
     part: Option<PartSpec>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
     let part = Surface::part(part)?;
     surface.check_part(part)?;
     let targets = targets_of(&targets);
     let surface: &Surface = &surface;
-    let levels = interruptible(py, |interrupt| run(&surface.quad_mesh(part), &targets, interrupt))?;
+    let levels = with_progress(py, progress, |interrupt, progress, failed| {
+        run(&surface.quad_mesh(part), &targets, interrupt, progress, failed)
+    })?;
     levels_list(py, levels)
 }
 
@@ -81,7 +161,8 @@ pub(crate) fn simplify_surface<'py>(
 /// `groups`: per face a group number (faces of one group, labels and colour form one
 /// patch; negative: none); `colors`: per face RGBA (one material per distinct colour).
 #[pyfunction]
-#[pyo3(signature = (vertices, quads, labels, targets, groups=None, colors=None))]
+#[pyo3(signature = (vertices, quads, labels, targets, groups=None, colors=None, progress=None))]
+#[allow(clippy::too_many_arguments)]
 pub(crate) fn simplify_arrays<'py>(
     py: Python<'py>,
     vertices: PyReadonlyArray2<'py, f64>,
@@ -90,6 +171,7 @@ pub(crate) fn simplify_arrays<'py>(
     targets: Vec<TargetTuple>,
     groups: Option<PyReadonlyArray1<'py, i64>>,
     colors: Option<PyReadonlyArray2<'py, u8>>,
+    progress: Option<Py<PyAny>>,
 ) -> PyResult<Bound<'py, PyList>> {
     let positions = positions_of(&vertices)?;
     let quads = quads_of(&quads, positions.len())?;
@@ -121,7 +203,9 @@ pub(crate) fn simplify_arrays<'py>(
             by_id.into_iter().map(|(id, faces)| FaceGroup { name: format!("g{id}"), faces }).collect();
     }
     let targets = targets_of(&targets);
-    let levels = interruptible(py, |interrupt| run(&mesh, &targets, interrupt))?;
+    let levels = with_progress(py, progress, |interrupt, progress, failed| {
+        run(&mesh, &targets, interrupt, progress, failed)
+    })?;
     levels_list(py, levels)
 }
 

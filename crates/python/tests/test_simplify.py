@@ -182,3 +182,33 @@ def test_ctrl_c_stops_a_simplification_which_releases_the_gil():
     # Another Python thread ran meanwhile: the GIL was released.
     during = [t for t in ticks if start + 0.05 < t < start + 0.45]
     assert len(during) > 20, len(during)
+
+
+def test_progress_reports_the_stages_in_order_and_ends_done(tissue):
+    calls = []
+    levels = tissue.levels(3, progress=lambda stage, fraction: calls.append((stage, fraction)))
+    assert [len(m) for m in levels] == [len(m) for m in tissue.levels(3)]
+    stages = [s for s, _ in calls]
+    assert stages[0] == "setup" and calls[-1] == ("done", 1.0), calls
+    assert "level 2/3: collapses" in stages and "level 3/3: pairing" in stages, stages
+    fractions = [f for _, f in calls]
+    assert all(0.0 <= f <= 1.0 for f in fractions)
+    assert fractions == sorted(fractions), calls
+
+    one = []
+    tissue.simplify(ratio=0.2, progress=lambda s, f: one.append(s))
+    assert one[0] == "setup" and "collapses" in one and "pairing" in one and one[-1] == "done", one
+
+
+def test_an_exception_in_progress_stops_the_simplification(tissue):
+    class Stop(Exception):
+        pass
+
+    def stop(stage, fraction):
+        if stage.endswith("collapses"):
+            raise Stop(stage)
+
+    with pytest.raises(Stop, match="collapses"):
+        tissue.levels(3, progress=stop)
+    with pytest.raises(voxreg.ParameterError, match="progress must be callable"):
+        tissue.simplify(ratio=0.5, progress=3)

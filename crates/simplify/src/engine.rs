@@ -13,6 +13,10 @@ use voxreg_quality::point_triangle_distance;
 use crate::grid::Grid;
 use crate::quadric::Quadric;
 use crate::types::{Options, Simplified, SimplifyError, Stats, Target};
+
+/// The collapses report their progress each time this many more triangles are gone
+/// (about a thousand collapses).
+const PROGRESS_EVERY: usize = 2048;
 use crate::Interrupt;
 
 mod build;
@@ -429,8 +433,14 @@ impl<'m> Engine<'m> {
     }
 
     /// Collapses edges in order of cost until `target` is reached or no collapse passes;
-    /// `Interrupted` (the engine then unusable) once the interrupt is raised.
-    pub(crate) fn run(&mut self, target: &Target) -> Result<(), SimplifyError> {
+    /// `Interrupted` (the engine then unusable) once the interrupt is raised. `progress`
+    /// gets the share of the triangles to remove that are removed, each time
+    /// [`PROGRESS_EVERY`] more are gone.
+    pub(crate) fn run(
+        &mut self,
+        target: &Target,
+        progress: &mut dyn FnMut(f64),
+    ) -> Result<(), SimplifyError> {
         self.max_error = target.max_error;
         let goal = match target.ratio {
             Some(r) => (r * self.input_triangles as f64).ceil() as usize,
@@ -476,7 +486,13 @@ impl<'m> Engine<'m> {
             });
         self.stop()?;
         let mut limit = self.set_queue(entries);
+        let start = self.alive;
+        let mut next_report = start.saturating_sub(PROGRESS_EVERY);
         while self.alive > goal {
+            if self.alive <= next_report {
+                next_report = self.alive.saturating_sub(PROGRESS_EVERY);
+                progress((start - self.alive) as f64 / (start - goal) as f64);
+            }
             self.stop()?;
             if self.grid.is_some() && 2 * self.alive < self.grid_built_at {
                 self.rebuild_grid();

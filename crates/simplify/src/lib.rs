@@ -39,7 +39,7 @@ mod types;
 
 use voxreg_io::QuadMesh;
 
-pub use types::{Options, Simplified, SimplifyError, Stats, Target};
+pub use types::{Options, Progress, Simplified, SimplifyError, Stage, Stats, Target};
 pub use voxreg_normals::Interrupt;
 
 /// Simplifies `mesh` down to `target`, keeping its partition (see the crate's
@@ -109,16 +109,45 @@ pub fn simplify_levels_interruptible(
     options: &Options,
     interrupt: &Interrupt,
 ) -> Result<Vec<Simplified>, SimplifyError> {
+    simplify_levels_reporting(mesh, targets, options, interrupt, &mut |_| {})
+}
+
+/// [`simplify_levels_interruptible`], calling `progress` as it goes: at the start and end
+/// of each stage of each level, and during the collapses about every thousand of them.
+/// The calls are made on the calling thread; what they do cannot change the levels.
+///
+/// # Errors
+///
+/// As [`simplify_levels_interruptible`].
+pub fn simplify_levels_reporting(
+    mesh: &QuadMesh,
+    targets: &[Target],
+    options: &Options,
+    interrupt: &Interrupt,
+    progress: &mut dyn FnMut(&Progress),
+) -> Result<Vec<Simplified>, SimplifyError> {
     check_targets(targets)?;
     types::check(interrupt)?;
+    let levels = targets.len();
+    let mut report = |level: usize, stage: Stage, fraction: f64| {
+        progress(&Progress { level, levels, stage, fraction });
+    };
+    report(0, Stage::Setup, 0.0);
     let mut engine = engine::Engine::new(mesh, options, interrupt)?;
-    let mut out = Vec::with_capacity(targets.len());
-    for t in targets {
-        engine.run(t)?;
+    report(0, Stage::Setup, 1.0);
+    let mut out = Vec::with_capacity(levels);
+    for (level, t) in targets.iter().enumerate() {
+        report(level, Stage::Collapses, 0.0);
+        engine.run(t, &mut |f| report(level, Stage::Collapses, f))?;
+        report(level, Stage::Collapses, 1.0);
         if options.quads {
+            report(level, Stage::Flips, 0.0);
             engine.flip_for_quads()?;
+            report(level, Stage::Flips, 1.0);
         }
+        report(level, Stage::Pairing, 0.0);
         out.push(engine.snapshot()?);
+        report(level, Stage::Pairing, 1.0);
     }
     types::check(interrupt)?;
     Ok(out)

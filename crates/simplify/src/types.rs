@@ -79,6 +79,48 @@ pub struct Stats {
     pub line_vertices: usize,
 }
 
+/// What a simplification reports as it goes (for progress bars): the level being made,
+/// its stage, and how far that stage is.
+#[derive(Clone, Copy, Debug, PartialEq)]
+pub struct Progress {
+    /// The level being made, from 0 (the index of its target).
+    pub level: usize,
+    /// How many levels the run makes.
+    pub levels: usize,
+    /// The stage of that level.
+    pub stage: Stage,
+    /// How far the stage is, from 0 to 1. For the collapses: the share of the triangles
+    /// to remove that are removed (for a target without a ratio, of all the triangles, so
+    /// the stage may end below 1 before its last report of 1).
+    pub fraction: f64,
+}
+
+/// The stages of a simplification, in the order they run (the setup once, the others
+/// once per level).
+#[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]
+pub enum Stage {
+    /// Reading the mesh: its triangles, feature lines, corners, quadrics and grid.
+    Setup,
+    /// The edge collapses.
+    Collapses,
+    /// The edge flips that let more triangles pair.
+    Flips,
+    /// The pairing into quads and the output mesh.
+    Pairing,
+}
+
+impl Stage {
+    /// A short lower-case name: `setup`, `collapses`, `flips`, `pairing`.
+    pub fn label(self) -> &'static str {
+        match self {
+            Stage::Setup => "setup",
+            Stage::Collapses => "collapses",
+            Stage::Flips => "flips",
+            Stage::Pairing => "pairing",
+        }
+    }
+}
+
 /// Why a mesh cannot be simplified.
 #[derive(Debug, thiserror::Error, PartialEq)]
 pub enum SimplifyError {

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 import json
 import os
-from typing import Any, Dict, List, Optional, Tuple
+from typing import Any, Callable, Dict, List, Optional, Tuple
 
 import numpy as np
 import numpy.typing as npt
@@ -173,9 +173,12 @@ class Mesh:
         edges = np.linalg.norm(self.vertices[q[:, 1]] - self.vertices[q[:, 0]], axis=1)
         return 0.5 * float(np.median(edges))
 
-    def _simplified(self, targets: List[Tuple[Optional[float], float]]) -> List["Mesh"]:
+    def _simplified(self, targets: List[Tuple[Optional[float], float]],
+                    progress: Optional[Callable[[str, float], Any]] = None) -> List["Mesh"]:
+        if progress is not None and not callable(progress):
+            raise ParameterError(f"progress must be callable(stage, fraction) or None, got {progress!r}")
         if self._surface is not None:
-            levels = _voxreg.simplify_surface(self._surface, targets, self._part)
+            levels = _voxreg.simplify_surface(self._surface, targets, self._part, progress)
         else:
             colors = None if self.colors is None else np.ascontiguousarray(self.colors, dtype=np.uint8)
             groups = None
@@ -186,7 +189,7 @@ class Mesh:
             levels = _voxreg.simplify_arrays(
                 np.ascontiguousarray(self.vertices, dtype=np.float64),
                 np.ascontiguousarray(self.quads, dtype=np.int64),
-                np.ascontiguousarray(self.labels, dtype=np.uint32), targets, groups, colors)
+                np.ascontiguousarray(self.labels, dtype=np.uint32), targets, groups, colors, progress)
         out = []
         for d, stats in levels:
             report = dict(self.report)
@@ -199,7 +202,8 @@ class Mesh:
             out.append(mesh)
         return out
 
-    def simplify(self, ratio: Optional[float] = None, max_error: Optional[float] = None) -> "Mesh":
+    def simplify(self, ratio: Optional[float] = None, max_error: Optional[float] = None,
+                 progress: Optional[Callable[[str, float], Any]] = None) -> "Mesh":
         """A simplified copy that keeps the partition (``voxreg regularize --simplify``):
         each interface simplified once and shared by its two regions, junction lines
         simplified once, their corners kept, each region closed with its Euler
@@ -215,6 +219,11 @@ class Mesh:
             one, in the mesh's units. Collapses that would break it are refused, so the
             ratio may not be reached. Default: half the smallest voxel spacing for a
             regularized mesh, else half the median edge length.
+        progress : callable(stage: str, fraction: float), default None
+            Called with the stage ("setup", "collapses", "flips", "pairing", then
+            "done") and the fraction of the work done, in [0, 1], at most every 50 ms
+            and at every stage change, with the GIL held, as in :func:`voxreg.regularize`.
+            An exception it raises stops the simplification and propagates.
 
         Returns
         -------
@@ -234,9 +243,10 @@ class Mesh:
         if ratio is not None and not 0.0 < ratio <= 1.0:
             raise ParameterError(f"ratio must be in (0, 1], got {ratio!r}")
         error = self._error(max_error)
-        return self._simplified([(ratio, error)])[0]
+        return self._simplified([(ratio, error)], progress)[0]
 
-    def levels(self, n: int, factor: float = 4.0, max_error: Optional[float] = None) -> List["Mesh"]:
+    def levels(self, n: int, factor: float = 4.0, max_error: Optional[float] = None,
+               progress: Optional[Callable[[str, float], Any]] = None) -> List["Mesh"]:
         """Levels of detail (``voxreg regularize --lod N``): ``n`` meshes, level ``k``
         keeping ``factor**-k`` of the faces within ``max_error * 2**(k - 1)`` of every
         vertex of this mesh (level 0 is this mesh). One collapse sequence: each level
@@ -248,6 +258,9 @@ class Mesh:
         n : int, 1 to 12
         factor : float > 1, default 4
         max_error : float >= 0, default None (half a voxel, as in :meth:`simplify`)
+        progress : callable(stage: str, fraction: float), default None
+            As in :meth:`simplify`; the stages of each level are named
+            "level K/N: collapses" and so on.
 
         Raises
         ------
@@ -259,7 +272,7 @@ class Mesh:
         f = _number("factor", factor)
         if f is None or not f > 1.0 or not np.isfinite(f):
             raise ParameterError(f"factor must be a number above 1, got {factor!r}")
-        return self._simplified(_voxreg.pyramid_targets(int(n), f, self._error(max_error)))
+        return self._simplified(_voxreg.pyramid_targets(int(n), f, self._error(max_error)), progress)
 
     def _error(self, max_error: Optional[float]) -> float:
         e = _number("max_error", max_error)

@@ -55,8 +55,12 @@ def simplify_arrays(
     targets: List[Tuple[Optional[float], float]],
     groups: Optional[npt.NDArray[np.int64]] = None,
     colors: Optional[npt.NDArray[np.uint8]] = None,
+    progress: Optional[Callable[[str, float], Any]] = None,
 ) -> List[Tuple[Dict[str, Any], Dict[str, Any]]]: ...
 def simplify_surface(
-    surface: Surface, targets: List[Tuple[Optional[float], float]], part: _Part = None
+    surface: Surface,
+    targets: List[Tuple[Optional[float], float]],
+    part: _Part = None,
+    progress: Optional[Callable[[str, float], Any]] = None,
 ) -> List[Tuple[Dict[str, Any], Dict[str, Any]]]: ...
 def pyramid_targets(levels: int, factor: float, max_error: float) -> List[Tuple[Optional[float], float]]: ...
