@@ -26,6 +26,7 @@ fn _voxreg(m: &Bound<'_, PyModule>) -> PyResult<()> {
     m.add_function(wrap_pyfunction!(block::regularize_block, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::check, m)?)?;
     m.add_function(wrap_pyfunction!(params::option_names, m)?)?;
+    m.add_function(wrap_pyfunction!(params::preset_halo, m)?)?;
     m.add_function(wrap_pyfunction!(mesh::write_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(simplify::simplify_arrays, m)?)?;
     m.add_function(wrap_pyfunction!(simplify::simplify_surface, m)?)?;

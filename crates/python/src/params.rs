@@ -117,6 +117,12 @@ pub(crate) fn params(preset_name: &str, options: &Bound<'_, PyDict>) -> Result<P
     overrides.resolve(Some(preset), &InputFacts::default()).map_err(|e| Error::regularize("", &e))
 }
 
+/// The halo a chunked run of `preset` reads by default (`Preset::chunk_halo`).
+#[pyfunction]
+pub(crate) fn preset_halo(preset_name: &str) -> Result<usize> {
+    Ok(preset(preset_name)?.chunk_halo())
+}
+
 /// The names of the options (`Overrides` fields), for the parity tests.
 #[pyfunction]
 pub(crate) fn option_names() -> Vec<&'static str> {

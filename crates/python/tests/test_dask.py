@@ -206,3 +206,30 @@ def test_a_task_reads_only_the_store_chunks_of_its_chunk_and_halo(volume, tmp_pa
         want += ["c/{}/{}/{}".format(*c) for c in __import__("itertools").product(*ranges)]
     got = [k for k in keys if k.startswith("c/")]
     assert sorted(got) == sorted(want)
+
+
+def test_each_preset_has_its_default_halo():
+    assert vd.preset_halo() == vd.DEFAULT_HALO == 64
+    assert vd.preset_halo("fast") == 32
+    assert vd.preset_halo("voxel_art") == vd.preset_halo("papers") == 64
+    with pytest.raises(voxreg.ParameterError, match="preset must be one of"):
+        vd.preset_halo("quick")
+
+
+def test_the_fast_preset_stitches_at_its_own_halo(client, tmp_path):
+    # 96 voxels along x in chunks of 32: at the fast preset's halo (32) the middle
+    # chunk's reads stop 32 voxels from its owned range, and its positions are the
+    # whole-volume solve's all the same.
+    volume = tissue(96, seed=5)[:, :40, :40].copy()
+    reference = whole(volume, preset="fast")
+    out = vd.regularize(volume, chunks=(32, 40, 40), preset="fast", out=str(tmp_path), formats=("ply",))
+    import json
+    with open(os.path.join(out, "summary.json")) as f:
+        summary = json.load(f)
+    assert max(t["voxels_read"] for t in summary["tasks"]) == 96 * 40 * 40
+    assert min(t["voxels_read"] for t in summary["tasks"]) == 64 * 40 * 40
+    mesh = vd.regularize(volume, chunks=(32, 40, 40), preset="fast")
+    order = np.argsort(reference["vertex_ids"])
+    assert (mesh.vertex_ids == reference["vertex_ids"][order]).all()
+    deviation = np.linalg.norm(mesh.vertices - reference["positions"][order], axis=1)
+    assert deviation.max() < 1e-4, deviation.max()

@@ -70,6 +70,19 @@ impl Preset {
         }
     }
 
+    /// The halo, in voxels, a chunked run of this preset reads around each chunk by
+    /// default (see [`regularize_block`](crate::regularize_block)): the narrowest of those
+    /// measured whose stitched mesh stays within 1e-2 voxel of the whole-volume solve on
+    /// the synthetic tissues and `channels.vti` (`docs/scale.md`). The fidelity pipeline's
+    /// refinement rounds carry a chunk's cut far (64 voxels); the fast preset's sweeps and
+    /// diffusion steps reach a bounded distance, and 32 voxels leave it within 1e-4.
+    pub fn chunk_halo(self) -> usize {
+        match self {
+            Preset::Fast => 32,
+            Preset::Default | Preset::Papers | Preset::VoxelArt => 64,
+        }
+    }
+
     /// The box margin, in voxels, that [`Clamp::On`] gives under this preset.
     pub fn clamp_margin(self) -> f64 {
         Params::CLAMP_MARGIN

@@ -35,12 +35,20 @@ from . import _voxreg
 from ._errors import ParameterError, label_argument
 from ._mesh import Mesh
 
-#: The halo's default width in voxels: the narrowest of those measured whose stitched mesh
-#: stays within 1e-2 voxel (mean 1e-3) of the whole-volume solve with the default pipeline
-#: on a 256^3 synthetic tissue (the table of ``docs/scale.md``). The cut sides of a chunk's sub-volume close its
-#: surfaces, and the difference reaches far through the refinement rounds and the size
-#: preservation.
+#: The halo's default width in voxels for the default pipeline: the narrowest of those
+#: measured whose stitched mesh stays within 1e-2 voxel (mean 1e-3) of the whole-volume
+#: solve on a 256^3 synthetic tissue (the table of ``docs/scale.md``). The cut sides of a
+#: chunk's sub-volume close its surfaces, and the difference reaches far through the
+#: refinement rounds and the size preservation. Each preset has its own
+#: (:func:`preset_halo`): 32 for ``fast``, whose sweeps reach a bounded distance.
 DEFAULT_HALO = 64
+
+
+def preset_halo(preset: str = "default") -> int:
+    """The halo ``regularize`` reads around each chunk by default under ``preset``: 64
+    voxels for the default pipeline, 32 for ``fast`` (within 1e-4 voxel of the
+    whole-volume solve there; ``docs/scale.md``)."""
+    return int(_voxreg.preset_halo(preset))
 
 #: The keyword arguments of a chunk: the preset and the library's options (those of
 #: ``voxreg.regularize``).
@@ -172,7 +180,7 @@ def _task(source: Any, sliced: bool, index: Tuple[int, int, int], start: Sequenc
     return {"path": path, "stats": stats}
 
 
-def regularize(array: Any, chunks: Union[None, int, Sequence[int]] = None, halo: int = DEFAULT_HALO,
+def regularize(array: Any, chunks: Union[None, int, Sequence[int]] = None, halo: Optional[int] = None,
                out: "Optional[str | os.PathLike[str]]" = None,
                formats: Iterable[str] = ("ply",), scheduler: Any = None,
                spacing: Sequence[float] = (1.0, 1.0, 1.0), origin: Sequence[float] = (0.0, 0.0, 0.0),
@@ -187,14 +195,15 @@ def regularize(array: Any, chunks: Union[None, int, Sequence[int]] = None, halo:
     chunks : int or three ints, default None
         The chunk each task owns, in voxels (one int: the same on every axis, as dask
         takes it): by default the array's own chunks (dask or Zarr), else 64.
-    halo : int >= 2, default DEFAULT_HALO (64)
+    halo : int >= 2, default None (the preset's: 64 voxels, 32 for ``preset="fast"``)
         Voxels read around each chunk. The stitched mesh has the whole-volume mesh's
         quads and vertex ids at any halo; its positions approach the whole-volume solve
-        as the halo grows (within 1e-2 voxel at the default on a synthetic tissue; on a
-        real volume of thin sloping layers, a few hundred vertices in a million up to
-        6e-2). A chunk reads
-        ``(c + 2 halo)^3`` voxels for the ``c^3`` it owns: chunks of 128 to 256 keep that
-        within 8 to 3.4 times; a narrower halo is faster and less exact (docs/scale.md).
+        as the halo grows (default pipeline at 64: within 1e-2 voxel on a synthetic
+        tissue; on a real volume of thin sloping layers, a few hundred vertices in a
+        million up to 6e-2; ``fast`` at 32: within 1e-4 on both). A chunk reads
+        ``(c + 2 halo)^3`` voxels for the ``c^3`` it owns: at halo 64, chunks of 128 to
+        256 keep that within 8 to 3.4 times; a narrower halo is faster and less exact
+        (docs/scale.md).
     out : str or path-like, default None
         A directory: fragments are written to ``out/fragments/`` by the tasks, then
         stitched (``merge``, one fragment in memory at a time) into ``out/label_<L>.ply``
@@ -231,6 +240,8 @@ def regularize(array: Any, chunks: Union[None, int, Sequence[int]] = None, halo:
     if len(dims) != 3:
         raise ParameterError(f"the labels must be three-dimensional, got shape {dims}")
     chunks = _chunks_of(source, chunks)
+    if halo is None:
+        halo = preset_halo(params.get("preset") or "default")
     if int(halo) < 2:
         raise ParameterError(f"halo must be at least 2 voxels, got {halo}")
     formats = tuple(formats)
