@@ -55,19 +55,6 @@ fn levels_list<'py>(py: Python<'py>, levels: Vec<(Arrays, Stats)>) -> PyResult<B
     Ok(out)
 }
 
-/// The share of a run done when a stage of a level is at `p.fraction`: the setup a tenth,
-/// each level an equal share of the rest (its collapses 70%, flips and pairing 15% each).
-fn overall(p: &Progress) -> f64 {
-    let (start, width) = match p.stage {
-        Stage::Setup => return 0.1 * p.fraction,
-        Stage::Collapses => (0.0, 0.7),
-        Stage::Flips => (0.7, 0.15),
-        Stage::Pairing => (0.85, 0.15),
-    };
-    let share = 0.9 / p.levels as f64;
-    (0.1 + share * (p.level as f64 + start + width * p.fraction)).min(1.0)
-}
-
 /// The stage as the callback gets it: `setup`, or `collapses`, `flips`, `pairing` with
 /// `level K/N` before it when there are several levels.
 fn stage_label(p: &Progress) -> String {
@@ -100,7 +87,7 @@ fn run(
         if same && p.fraction < 1.0 {
             return;
         }
-        let fraction = overall(p);
+        let fraction = p.overall();
         if let Err(e) = Python::attach(|py| callback.bind(py).call1((label.as_str(), fraction)).map(drop)) {
             *failed = Some(e);
             interrupt.raise();

@@ -95,6 +95,22 @@ pub struct Progress {
     pub fraction: f64,
 }
 
+impl Progress {
+    /// The share of the whole run done, from 0 to 1, for a single progress bar: the setup
+    /// counts a tenth, each level an equal share of the rest (its collapses 70%, the flips
+    /// and the pairing 15% each). Never decreases from one report to the next.
+    pub fn overall(&self) -> f64 {
+        let (start, width) = match self.stage {
+            Stage::Setup => return 0.1 * self.fraction,
+            Stage::Collapses => (0.0, 0.7),
+            Stage::Flips => (0.7, 0.15),
+            Stage::Pairing => (0.85, 0.15),
+        };
+        let share = 0.9 / self.levels.max(1) as f64;
+        (0.1 + share * (self.level as f64 + start + width * self.fraction)).min(1.0)
+    }
+}
+
 /// The stages of a simplification, in the order they run (the setup once, the others
 /// once per level).
 #[derive(Clone, Copy, Debug, PartialEq, Eq, Hash)]

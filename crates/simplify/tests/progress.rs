@@ -85,4 +85,9 @@ fn progress_reports_every_stage_in_order_and_changes_nothing() {
     assert!(first.len() >= 3, "{first:?}");
     assert!(first.last().unwrap() > &0.5, "{first:?}");
     assert_eq!(Stage::Collapses.label(), "collapses");
+    // One bar for the whole run: from 0 to 1, never back.
+    let overall: Vec<f64> = seen.iter().map(Progress::overall).collect();
+    assert_eq!(overall.first(), Some(&0.0));
+    assert!((overall.last().unwrap() - 1.0).abs() < 1e-12, "{overall:?}");
+    assert!(overall.windows(2).all(|w| w[0] <= w[1]), "{overall:?}");
 }

@@ -484,7 +484,7 @@ function showLevelInfo() {
   const shown = lod ? lod.level : 0, faces = lod ? lod.faces : s.faces;
   let info = `shown: ${shown === 0 ? 'full surface' : `level ${shown} (${levelPart(shown)})`}, ${count(faces)} faces`;
   if (shown > 0 && s.levels_ms != null) info += ` (levels simplified in ${(s.levels_ms / 1000).toFixed(2)} s)`;
-  if (s.level !== shown) info += s.busy ? `; level ${s.level} after the run` : s.levels_busy ? `; simplifying for level ${s.level}…` : '';
+  if (s.level !== shown) info += s.busy ? `; level ${s.level} after the run` : s.levels_busy ? `; simplifying for level ${s.level}: ${Math.round(100 * (s.levels_progress || 0))}%` : '';
   $('level-info').textContent = info;
   // The downloads give the level shown.
   for (const f of ['glb', 'ply', 'obj']) $('get-' + f).href = api(`/api/download?format=${f}${shown ? `&level=${shown}` : ''}`);

@@ -16,7 +16,7 @@ use std::sync::Arc;
 use voxreg_digisurf::DigitalSurface;
 use voxreg_io::{Palette, QuadMesh};
 use voxreg_simplify::{
-    pyramid_targets, simplify_levels_interruptible, Interrupt, Options, Simplified, SimplifyError,
+    pyramid_targets, simplify_levels_reporting, Interrupt, Options, Progress, Simplified, SimplifyError,
 };
 
 use crate::model::{f32_bytes, Model};
@@ -70,10 +70,21 @@ pub(crate) fn worker(shared: Arc<Shared>) {
             let interrupt = shared.start_levels(&s);
             (s.frame, surface, finished, s.palette.clone(), interrupt)
         };
-        shared.update(|s| s.levels_busy = true);
+        shared.update(|s| {
+            s.levels_busy = true;
+            s.levels_progress = 0.0;
+        });
         let t = std::time::Instant::now();
+        let mut percent = 0;
+        let mut report = |p: &Progress| {
+            let now = (p.overall() * 100.0).round() as u32;
+            if now != percent {
+                percent = now;
+                shared.update(|s| s.levels_progress = f64::from(now) / 100.0);
+            }
+        };
         let result = catch_unwind(AssertUnwindSafe(|| {
-            pyramid(&surface, &finished.positions, palette.as_ref(), &interrupt)
+            pyramid(&surface, &finished.positions, palette.as_ref(), &interrupt, &mut report)
         }))
         .unwrap_or_else(|panic| Err(Stop::Failed(format!("internal error: {}", panic_message(&*panic)))));
         shared.end_levels();
@@ -108,16 +119,17 @@ enum Stop {
 }
 
 /// The pyramid of the result at `positions` on `surface`, as the command line computes
-/// it from the mesh it writes, stopped once `interrupt` is raised.
+/// it from the mesh it writes, stopped once `interrupt` is raised; `report` follows it.
 fn pyramid(
     surface: &DigitalSurface,
     positions: &[glam::DVec3],
     palette: Option<&Palette>,
     interrupt: &Interrupt,
+    report: &mut dyn FnMut(&Progress),
 ) -> Result<Vec<Simplified>, Stop> {
     let mesh = result_mesh(surface, positions, palette);
     let targets = pyramid_targets(LEVELS, FACTOR, MAX_ERROR_VOXELS * surface.spacing().min_element());
-    simplify_levels_interruptible(&mesh, &targets, &Options::default(), interrupt).map_err(|e| match e {
+    simplify_levels_reporting(&mesh, &targets, &Options::default(), interrupt, report).map_err(|e| match e {
         SimplifyError::Interrupted => Stop::Interrupted,
         e => Stop::Failed(e.to_string()),
     })
@@ -215,6 +227,8 @@ mod tests {
         let bound = Duration::from_millis(1500);
         let stopped = |n: u64| move |s: &State| s.levels_stopped == n && !s.levels_busy;
         wait(&shared, "the levels' start", limit, |s| s.levels_busy);
+        // The page sees the simplification advance.
+        wait(&shared, "the levels' progress", limit, |s| s.levels_progress > 0.0);
         std::thread::sleep(Duration::from_millis(300));
         // A new run starts and publishes its first iterate.
         shared.update(|s| {
@@ -263,6 +277,7 @@ mod tests {
         thread.join().expect("the levels' thread ends");
         let s = shared.lock();
         assert_eq!(s.levels_stopped, 0);
+        assert_eq!(s.levels_progress, 1.0);
         assert_eq!(Levels::of(&s).map(<[Simplified]>::len), Some(LEVELS));
     }
 }

@@ -615,6 +615,7 @@ impl Viewer {
                 "error_bound": l.stats.error_bound,
             })).collect::<Vec<_>>()),
             "levels_busy": s.levels_busy,
+            "levels_progress": s.levels_progress,
             "levels_stopped": s.levels_stopped,
             "levels_ms": s.levels.as_ref().filter(|l| l.frame == s.frame).map(|l| l.ms),
         })

@@ -121,6 +121,9 @@ pub(crate) struct State {
     pub(crate) levels: Option<Arc<Levels>>,
     /// Whether the levels' thread is simplifying a result.
     pub(crate) levels_busy: bool,
+    /// How far that simplification is, from 0 to 1 (`voxreg_simplify::Progress::overall`,
+    /// updated at each whole percent).
+    pub(crate) levels_progress: f64,
     /// Simplifications stopped because a newer result (or the viewer's end) replaced the
     /// one they simplified.
     pub(crate) levels_stopped: u64,
