@@ -208,11 +208,13 @@ VOXREG = {
     "0 rounds, trivial": ["--refine", "0", "--normals", "trivial"],
     "papers": ["--preset", "papers"],
     "fast": ["--preset", "fast"],
+    "fast, 1 round": ["--preset", "fast", "--refine", "1"],
+    "fast, 0 rounds": ["--preset", "fast", "--refine", "0"],
 }
 SNETS = [0, 16, 32, 64]
-VOLUME_SETTINGS = ["default (3 rounds)", "1 round, tol 1e-2", "0 rounds", "0 rounds, tol 5e-2", "0 rounds, trivial", "fast"]
+VOLUME_SETTINGS = ["default (3 rounds)", "1 round, tol 1e-2", "0 rounds", "0 rounds, tol 5e-2", "0 rounds, trivial", "fast", "fast, 1 round"]
 # --volume-settings short: the default, one solve and one solve from the trivial normals.
-SHORT_VOLUME_SETTINGS = ["default (3 rounds)", "0 rounds", "0 rounds, trivial", "fast"]
+SHORT_VOLUME_SETTINGS = ["default (3 rounds)", "0 rounds", "0 rounds, trivial", "fast", "fast, 1 round"]
 QUICK_SETTINGS = ["default (3 rounds)", "0 rounds", "0 rounds, trivial", "fast"]
 
 # --- running -----------------------------------------------------------------------------
