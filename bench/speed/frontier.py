@@ -190,6 +190,11 @@ SHAPES = {
     "split ball R=20": (lambda: SplitBall(20.0, 0.5), (1, 1, 1)),
     "sphere R=20, (1,1,2.5)": (lambda: Sphere(20.0), (1, 1, 2.5)),
 }
+# --set-aside: shapes kept out of the frontier and of tuning, to confirm a setting on.
+SET_ASIDE = {
+    "split ball R=17 (set aside)": (lambda: SplitBall(17.0, 0.5), (1, 1, 1)),
+    "split ball R=20, cut 6.5 (set aside)": (lambda: SplitBall(20.0, 6.5), (1, 1, 1)),
+}
 
 # --- settings ----------------------------------------------------------------------------
 
@@ -364,7 +369,8 @@ def load_volume(path):
 
 
 def run_shapes(args, exe, tmp, settings, samples):
-    for name, (make, spacing) in SHAPES.items():
+    shapes = {**SHAPES, **SET_ASIDE} if args.set_aside else SHAPES
+    for name, (make, spacing) in shapes.items():
         if args.shapes and not any(s in name for s in args.shapes):
             continue
         shape = make()
@@ -665,6 +671,7 @@ def main():
     ap.add_argument("--json", help="write the raw samples here")
     ap.add_argument("--add-to", help="start from the samples of this JSON file (inputs measured earlier)")
     ap.add_argument("--no-shapes", action="store_true", help="skip the analytic shapes")
+    ap.add_argument("--set-aside", action="store_true", help="also the shapes set aside (SET_ASIDE: split balls of another radius and cut)")
     ap.add_argument("--from-json", nargs="+", help="render the report from these samples (pooled) instead of running")
     ap.add_argument("--command-note", help="with --from-json: the commands that made the samples, for the report")
     ap.add_argument("--md", help="write the Markdown report here (default: print it)")

@@ -3,7 +3,9 @@
 
 use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
-use voxreg_digisurf::{DigitalSurface, SurfelId};
+use std::collections::HashMap;
+
+use voxreg_digisurf::{DigitalSurface, EdgeId, InterfaceId, Surfel, SurfelId};
 
 use crate::error::NormalError;
 use crate::estimator::NormalEstimator;
@@ -52,6 +54,7 @@ impl QuadGraph {
     pub fn new(surface: &DigitalSurface) -> Self {
         let surfels = surface.surfels();
         let none = surfels.len() as u32;
+        let continuations = Continuations::new(surface);
         let (nbrs, info) = (0..surfels.len())
             .into_par_iter()
             .map(|s| {
@@ -84,22 +87,12 @@ impl QuadGraph {
                     }
                     for &t in others {
                         let other = &surfels[t.index()];
-                        if t.index() == s || other.axis != me.axis {
+                        if t.index() == s {
                             continue;
                         }
-                        let [a, b] = me.regions;
-                        let [c, d] = other.regions;
-                        let sign = if a == c || b == d {
-                            1.0
-                        } else if a == d || b == c {
-                            -1.0
-                        } else {
-                            continue;
-                        };
-                        // The same axis: the normals' dot is +1 or -1.
-                        let dot = if other.flipped == me.flipped { 1.0 } else { -1.0 };
-                        if sign * dot > 0.0 {
-                            out[k] = t.0 | if sign < 0.0 { FLIP } else { 0 };
+                        let Some(flip) = continuation(me, other) else { continue };
+                        if continuations.dominant(surface, others, me.interface, other.interface) {
+                            out[k] = t.0 | if flip { FLIP } else { 0 };
                             k += 1;
                             break;
                         }
@@ -125,6 +118,100 @@ impl QuadGraph {
     pub fn memory_bytes(&self) -> usize {
         17 * self.nbrs.len()
     }
+}
+
+/// Whether `b`, a surfel of another interface across an edge of `a`, continues `a`'s
+/// surface there: coplanar (the same axis) and sharing a region with it on the same side,
+/// with `Some(true)` where `b`'s orientation is flipped relative to `a`'s (the shared
+/// region is `a`'s inner and `b`'s outer, or the reverse).
+fn continuation(a: &Surfel, b: &Surfel) -> Option<bool> {
+    if a.axis != b.axis {
+        return None;
+    }
+    let [p, q] = a.regions;
+    let [r, t] = b.regions;
+    let sign = if p == r || q == t {
+        1.0
+    } else if p == t || q == r {
+        -1.0
+    } else {
+        return None;
+    };
+    // The same axis: the normals' dot is +1 or -1.
+    let dot = if a.flipped == b.flipped { 1.0 } else { -1.0 };
+    (sign * dot > 0.0).then_some(sign < 0.0)
+}
+
+/// Per pair of interfaces that meet at a junction edge, the share of their junction edges
+/// at which one continues the other ([`continuation`]: the region between them fills two of
+/// the edge's four voxels).
+///
+/// Why: along a junction curve the staircase makes every pair of its interfaces coplanar
+/// here and there. The pair that continues each other in the geometry (the two caps of a
+/// split ball, whose region between them spans 180 degrees) does so at most of its edges;
+/// the others (a cap and the cut disc, at 90 degrees) only where the digital curve steps.
+/// Linking those would diffuse the disc's normal into the sphere and back, and sink the
+/// junction along the disc's normal.
+struct Continuations(HashMap<(u32, u32), f64>);
+
+impl Continuations {
+    fn new(surface: &DigitalSurface) -> Self {
+        let surfels = surface.surfels();
+        let votes: Vec<((u32, u32), bool)> = (0..surface.num_edges())
+            .into_par_iter()
+            .flat_map_iter(|e| {
+                let others = surface.edge_surfels(EdgeId(e as u32));
+                let mut out = Vec::new();
+                let i0 = others.first().map(|s| surfels[s.index()].interface);
+                if others.iter().all(|s| Some(surfels[s.index()].interface) == i0) {
+                    return out;
+                }
+                for (i, a) in others.iter().enumerate() {
+                    let a = &surfels[a.index()];
+                    for b in &others[..i] {
+                        let b = &surfels[b.index()];
+                        if a.interface == b.interface {
+                            continue;
+                        }
+                        let key = pair(a.interface, b.interface);
+                        let continued = continuation(a, b).is_some();
+                        match out.iter_mut().find(|(k, _)| *k == key) {
+                            Some((_, c)) => *c |= continued,
+                            None => out.push((key, continued)),
+                        }
+                    }
+                }
+                out
+            })
+            .collect();
+        let mut counts: HashMap<(u32, u32), (u32, u32)> = HashMap::new();
+        for (key, continued) in votes {
+            let c = counts.entry(key).or_default();
+            c.0 += u32::from(continued);
+            c.1 += 1;
+        }
+        Continuations(counts.into_iter().map(|(k, (c, n))| (k, f64::from(c) / f64::from(n))).collect())
+    }
+
+    fn share(&self, a: InterfaceId, b: InterfaceId) -> f64 {
+        self.0.get(&pair(a, b)).copied().unwrap_or(0.0)
+    }
+
+    /// Whether the pair `(a, b)` continues each other at least as often as any other pair
+    /// of the interfaces of the junction edge whose surfels are `at`.
+    fn dominant(&self, surface: &DigitalSurface, at: &[SurfelId], a: InterfaceId, b: InterfaceId) -> bool {
+        let mine = self.share(a, b);
+        let interfaces = at.iter().map(|s| surface.surfel(*s).interface);
+        interfaces
+            .clone()
+            .enumerate()
+            .all(|(i, p)| interfaces.clone().take(i).all(|q| p == q || self.share(p, q) <= mine))
+    }
+}
+
+/// The key of an unordered pair of interfaces.
+fn pair(a: InterfaceId, b: InterfaceId) -> (u32, u32) {
+    (a.0.min(b.0), a.0.max(b.0))
 }
 
 /// Normals re-estimated from given vertex positions, cheaply: each quad's vector area
