@@ -415,7 +415,8 @@ impl DigitalSurface {
             .map(|f| SurfelCorners { vertices: f.vertices, code: 2 * f.axis + u8::from(f.flipped) })
             .collect();
         // Each side's edge, numbered within the piece of the side's lower end first.
-        let surfel_edges: Vec<AtomicU32> = (0..4 * self.surfels.len()).map(|_| AtomicU32::new(0)).collect();
+        let surfel_edges: Vec<[AtomicU32; 4]> =
+            (0..self.surfels.len()).map(|_| [0; 4].map(AtomicU32::new)).collect();
         let pieces: Vec<VertexPass> = (0..nv.div_ceil(PIECE))
             .into_par_iter()
             .map(|p| {
@@ -480,16 +481,14 @@ impl DigitalSurface {
                 *dst = (at[2] + end as usize) as u32;
             }
         });
-        self.surfel_edges = surfel_edges
-            .par_chunks(4)
-            .zip(&corners)
-            .map(|(c, vs)| {
-                [0, 1, 2, 3].map(|j| {
-                    let owner = vs.vertices[j].min(vs.vertices[(j + 1) % 4]).index();
-                    EdgeId(c[j].load(Ordering::Relaxed) + edge_bases[owner / PIECE])
-                })
-            })
-            .collect();
+        surfel_edges.par_iter().zip(&corners).for_each(|(c, vs)| {
+            for j in 0..4 {
+                let owner = vs.vertices[j].min(vs.vertices[(j + 1) % 4]).index();
+                c[j].fetch_add(edge_bases[owner / PIECE], Ordering::Relaxed);
+            }
+        });
+        // Same size and alignment: collected in place, no second array.
+        self.surfel_edges = surfel_edges.into_iter().map(|c| c.map(|e| EdgeId(e.into_inner()))).collect();
         self.edges = edges;
         self.edge_surfels = Lists::from_parts(offsets, items);
         self.vertex_neighbours = Lists::from_parts(nbr_offsets, nbrs);
@@ -511,7 +510,7 @@ impl DigitalSurface {
         a: usize,
         corners: &[SurfelCorners],
         out: &mut VertexPass,
-        surfel_edges: &[std::sync::atomic::AtomicU32],
+        surfel_edges: &[[std::sync::atomic::AtomicU32; 4]],
     ) {
         let around = self.vertex_surfels.get(a);
         // A lattice corner has 6 lattice edges, each with at most 4 faces, and 12 faces.
@@ -570,7 +569,8 @@ impl DigitalSurface {
             let e = out.edges.len() as u32;
             for &(slot, _) in group {
                 out.items.push(SurfelId(slot / 4));
-                surfel_edges[slot as usize].store(e, std::sync::atomic::Ordering::Relaxed);
+                surfel_edges[slot as usize / 4][slot as usize % 4]
+                    .store(e, std::sync::atomic::Ordering::Relaxed);
             }
             out.item_ends.push(out.items.len() as u32);
             let kind = self.edge_kind(low, axis, &out.items[first..]);
