@@ -36,6 +36,29 @@ struct VertexPass {
     flags: Vec<(bool, bool)>,
 }
 
+/// A surfel's corners and the lattice directions of its sides, as the vertex pass reads
+/// them at random: a fifth of a [`Surfel`]'s bytes.
+struct SurfelCorners {
+    vertices: [VertexId; 4],
+    /// `2 * axis + flipped`, the row of [`SIDE_DIRECTIONS`].
+    code: u8,
+}
+
+/// The lattice direction (`2 * axis + negative`) of side `j` of a surfel, from its corner `j`
+/// to corner `j + 1`, by the surfel's `2 * axis + flipped`: with `(u, v)` the axes after
+/// `axis`, the corners go `+u, +v, -u, -v` (flipped: `+v, +u, -v, -u`).
+const SIDE_DIRECTIONS: [[u8; 4]; 6] = {
+    let mut t = [[0u8; 4]; 6];
+    let mut axis = 0;
+    while axis < 3 {
+        let (u, v) = (2 * ((axis + 1) % 3) as u8, 2 * ((axis + 2) % 3) as u8);
+        t[2 * axis] = [u, v, u + 1, v + 1];
+        t[2 * axis + 1] = [v, u, v + 1, u + 1];
+        axis += 1;
+    }
+    t
+};
+
 /// A surfel: the square face between two face-adjacent voxels of different regions.
 ///
 /// The face lies in the lattice plane perpendicular to `axis` through lattice
@@ -386,15 +409,34 @@ impl DigitalSurface {
         let nv = self.vertex_corners.len();
         let this = &*self;
         // The surfels' corners alone, a quarter of their records' bytes: read at random.
-        let corners: Vec<[VertexId; 4]> = self.surfels.par_iter().map(|f| f.vertices).collect();
+        let corners: Vec<SurfelCorners> = self
+            .surfels
+            .par_iter()
+            .map(|f| SurfelCorners { vertices: f.vertices, code: 2 * f.axis + u8::from(f.flipped) })
+            .collect();
         // Each side's edge, numbered within the piece of the side's lower end first.
-        let surfel_edges: Vec<AtomicU32> = (0..4 * self.surfels.len()).map(|_| AtomicU32::new(0)).collect();
+        let surfel_edges: Vec<[AtomicU32; 4]> =
+            (0..self.surfels.len()).map(|_| [0; 4].map(AtomicU32::new)).collect();
         let pieces: Vec<VertexPass> = (0..nv.div_ceil(PIECE))
             .into_par_iter()
-            .map_init(Vec::new, |sides, p| {
-                let mut out = VertexPass::default();
-                for a in p * PIECE..((p + 1) * PIECE).min(nv) {
-                    this.vertex_pass(a, &corners, sides, &mut out, &surfel_edges);
+            .map(|p| {
+                let (start, end) = (p * PIECE, ((p + 1) * PIECE).min(nv));
+                // Two sides a surfel at each vertex; on a closed surface, half of them
+                // are items of the vertex's edges (a side's edge is its lower end's), a
+                // quarter edges, half neighbours. A quarter more, for the pieces above.
+                let offsets = this.vertex_surfels.offsets();
+                let sides = 2 * (offsets[end] - offsets[start]) as usize;
+                let (quarter, half) = (sides * 5 / 16 + 16, sides * 5 / 8 + 16);
+                let mut out = VertexPass {
+                    edges: Vec::with_capacity(quarter),
+                    items: Vec::with_capacity(half),
+                    item_ends: Vec::with_capacity(quarter),
+                    neighbours: Vec::with_capacity(half.min(6 * (end - start))),
+                    neighbour_ends: Vec::with_capacity(end - start),
+                    flags: Vec::with_capacity(end - start),
+                };
+                for a in start..end {
+                    this.vertex_pass(a, &corners, &mut out, &surfel_edges);
                 }
                 out
             })
@@ -439,16 +481,14 @@ impl DigitalSurface {
                 *dst = (at[2] + end as usize) as u32;
             }
         });
-        self.surfel_edges = surfel_edges
-            .par_chunks(4)
-            .zip(&corners)
-            .map(|(c, vs)| {
-                [0, 1, 2, 3].map(|j| {
-                    let owner = vs[j].min(vs[(j + 1) % 4]).index();
-                    EdgeId(c[j].load(Ordering::Relaxed) + edge_bases[owner / PIECE])
-                })
-            })
-            .collect();
+        surfel_edges.par_iter().zip(&corners).for_each(|(c, vs)| {
+            for j in 0..4 {
+                let owner = vs.vertices[j].min(vs.vertices[(j + 1) % 4]).index();
+                c[j].fetch_add(edge_bases[owner / PIECE], Ordering::Relaxed);
+            }
+        });
+        // Same size and alignment: collected in place, no second array.
+        self.surfel_edges = surfel_edges.into_iter().map(|c| c.map(|e| EdgeId(e.into_inner()))).collect();
         self.edges = edges;
         self.edge_surfels = Lists::from_parts(offsets, items);
         self.vertex_neighbours = Lists::from_parts(nbr_offsets, nbrs);
@@ -457,72 +497,100 @@ impl DigitalSurface {
     }
 
     /// Vertex `a`'s part of [`DigitalSurface::build_cells`] (`corners`: each surfel's
-    /// vertices), appended to `out`: its sides
-    /// `(other end, slot, index among a's surfels)` sorted (slot `4s + j` is side `j` of
-    /// surfel `s`, from its corner `j` to corner `j + 1`); its neighbours, the distinct other
-    /// ends; its edges, those to higher vertices (a side belongs to its lower end), each
-    /// side's edge numbered within the piece in `surfel_edges`; its fans, its surfels joined
-    /// where two share a side.
+    /// vertices and side directions), appended to `out`: its surfels' sides at `a`
+    /// bucketed by their lattice direction (slot `4s + j` is side `j` of surfel `s`, from
+    /// its corner `j` to corner `j + 1`; a side's bucket holds its surfels in increasing
+    /// order); its neighbours, the other ends of the non-empty buckets, sorted; its edges,
+    /// those to higher vertices (a side belongs to its lower end), each side's edge
+    /// numbered within the piece in `surfel_edges`; its fans, its surfels joined where two
+    /// share a side. The direction gives the edge's axis and lower corner, so no other
+    /// vertex's corner is read and no list of sides is sorted.
     fn vertex_pass(
         &self,
         a: usize,
-        corners: &[[VertexId; 4]],
-        sides: &mut Vec<(u32, u32, u32)>,
+        corners: &[SurfelCorners],
         out: &mut VertexPass,
-        surfel_edges: &[std::sync::atomic::AtomicU32],
+        surfel_edges: &[[std::sync::atomic::AtomicU32; 4]],
     ) {
-        sides.clear();
         let around = self.vertex_surfels.get(a);
+        // A lattice corner has 6 lattice edges, each with at most 4 faces, and 12 faces.
+        let mut ends = [NONE; 6];
+        let mut sizes = [0u8; 6];
+        let mut sides = [[(0u32, 0u8); 4]; 6];
+        debug_assert!(around.len() <= 12);
         for (k, &s) in around.iter().enumerate() {
-            let vs = corners[s.index()];
-            let i = vs.iter().position(|v| v.index() == a).unwrap_or(0);
-            sides.push((vs[(i + 1) % 4].0, 4 * s.0 + i as u32, k as u32));
-            sides.push((vs[(i + 3) % 4].0, 4 * s.0 + ((i + 3) % 4) as u32, k as u32));
+            let c = &corners[s.index()];
+            let i = c.vertices.iter().position(|v| v.index() == a).unwrap_or(0);
+            let dirs = &SIDE_DIRECTIONS[c.code as usize];
+            let (j_prev, i_next) = ((i + 3) % 4, (i + 1) % 4);
+            // Side `i` leaves `a`; side `i - 1` arrives at it (its direction reversed).
+            for (d, slot, end) in [
+                (dirs[i], 4 * s.0 + i as u32, c.vertices[i_next].0),
+                (dirs[j_prev] ^ 1, 4 * s.0 + j_prev as u32, c.vertices[j_prev].0),
+            ] {
+                let d = d as usize;
+                ends[d] = end;
+                sides[d][sizes[d] as usize] = (slot, k as u8);
+                sizes[d] += 1;
+            }
         }
-        sides.sort_unstable();
+        // The non-empty directions by their other end's id.
+        let mut order = [0u8; 6];
+        let mut n = 0;
+        for d in 0..6u8 {
+            if sizes[d as usize] > 0 {
+                let mut at = n;
+                while at > 0 && ends[order[at - 1] as usize] > ends[d as usize] {
+                    order[at] = order[at - 1];
+                    at -= 1;
+                }
+                order[at] = d;
+                n += 1;
+            }
+        }
         let ca = self.vertex_corners[a];
         let open = self.has_open_border();
-        // A lattice corner has 12 faces.
-        let (mut boundary, mut parent) = (false, [0u8; 12]);
-        debug_assert!(around.len() <= parent.len());
-        for (k, p) in parent.iter_mut().enumerate() {
-            *p = k as u8;
-        }
-        fn find(p: &mut [u8], mut x: u8) -> u8 {
-            while p[x as usize] != x {
-                x = p[x as usize];
-            }
-            x
-        }
-        for group in sides.chunk_by(|x, y| x.0 == y.0) {
-            let b = group[0].0;
+        let mut boundary = false;
+        for &d in &order[..n] {
+            let d = d as usize;
+            let (b, group) = (ends[d], &sides[d][..sizes[d] as usize]);
             out.neighbours.push(VertexId(b));
-            for w in group.windows(2) {
-                let (r, t) = (find(&mut parent, w[0].2 as u8), find(&mut parent, w[1].2 as u8));
-                parent[r.max(t) as usize] = r.min(t);
-            }
-            let cb = self.vertex_corners[b as usize];
             if (b as usize) < a && !open {
                 continue;
             }
-            let axis = (0..3).find(|&k| ca[k] != cb[k]).unwrap_or(0);
+            let axis = d / 2;
+            let mut low = ca;
+            low[axis] -= (d & 1) as u32;
             if (b as usize) < a {
-                boundary |= self.on_open_side(ca.min(cb), axis);
+                boundary |= self.on_open_side(low, axis);
                 continue;
             }
             let first = out.items.len();
             let e = out.edges.len() as u32;
-            for &(_, slot, _) in group {
+            for &(slot, _) in group {
                 out.items.push(SurfelId(slot / 4));
-                surfel_edges[slot as usize].store(e, std::sync::atomic::Ordering::Relaxed);
+                surfel_edges[slot as usize / 4][slot as usize % 4]
+                    .store(e, std::sync::atomic::Ordering::Relaxed);
             }
             out.item_ends.push(out.items.len() as u32);
-            let kind = self.edge_kind(ca.min(cb), axis, &out.items[first..]);
+            let kind = self.edge_kind(low, axis, &out.items[first..]);
             boundary |= kind == EdgeKind::Boundary;
             out.edges.push(Edge { vertices: [VertexId(a as u32), VertexId(b)], axis: axis as u8, kind });
         }
         out.neighbour_ends.push(out.neighbours.len() as u32);
-        let pinched = (0..around.len() as u8).filter(|&k| find(&mut parent, k) == k).count() > 1;
+        // The fan of the first surfel: grown through the directions (each joins the
+        // surfels with a side along it) until it stops growing.
+        let masks =
+            [0, 1, 2, 3, 4, 5].map(|d| sides[d][..sizes[d] as usize].iter().fold(0u16, |m, t| m | 1 << t.1));
+        let mut fan = 1u16;
+        loop {
+            let grown = masks.iter().fold(fan, |f, &m| if f & m != 0 { f | m } else { f });
+            if grown == fan {
+                break;
+            }
+            fan = grown;
+        }
+        let pinched = fan.count_ones() as usize != around.len();
         out.flags.push((boundary, pinched));
     }
 

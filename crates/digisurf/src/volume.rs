@@ -348,15 +348,30 @@ struct Tally {
 impl Tally {
     fn of(labels: impl Iterator<Item = u32>) -> Tally {
         let mut t = Tally { dense: Vec::new(), large: Vec::new() };
-        for l in labels {
+        // Counted per run of equal labels (labels come in long runs): one update a run.
+        let mut add = |l: u32, n: u64| {
             if (l as usize) < (1 << 20) {
                 if l as usize >= t.dense.len() {
                     t.dense.resize(l as usize + 1, 0);
                 }
-                t.dense[l as usize] += 1;
+                t.dense[l as usize] += n;
             } else {
-                t.large.push(l);
+                t.large.extend(std::iter::repeat_n(l, n as usize));
             }
+        };
+        let mut run: Option<(u32, u64)> = None;
+        for l in labels {
+            run = match run {
+                Some((r, n)) if r == l => Some((r, n + 1)),
+                Some((r, n)) => {
+                    add(r, n);
+                    Some((l, 1))
+                }
+                None => Some((l, 1)),
+            };
+        }
+        if let Some((r, n)) = run {
+            add(r, n);
         }
         t
     }
