@@ -29,6 +29,10 @@ const VOLUME_TOLERANCE: f64 = 0.005;
 /// counting every collapse before it.
 const AREA_TOLERANCE: f64 = 0.01;
 
+/// Collapses planned together, in parallel, before they are applied in queue order. A
+/// constant, so that the output does not depend on the thread count.
+const BATCH: usize = 32;
+
 /// No group or no material.
 pub(crate) const NONE: u32 = u32::MAX;
 
@@ -75,6 +79,14 @@ struct Plan {
     deltas: Vec<(bool, u32, f64)>,
 }
 
+/// One collapse of a batch: its plan, whether its checks passed, its buffers.
+#[derive(Default)]
+struct Slot {
+    plan: Plan,
+    ok: bool,
+    scratch: Scratch,
+}
+
 /// Reused buffers of the collapse checks, so that a collapse allocates nothing.
 #[derive(Default)]
 struct Scratch {
@@ -87,7 +99,6 @@ struct Scratch {
     sig_b: Signature,
     pool: Vec<u32>,
     tested: Vec<([u32; 3], [DVec3; 3])>,
-    ring: Vec<u32>,
     /// The boxes of the triangles in `tested`.
     boxes: Vec<(DVec3, DVec3)>,
     /// The new star's triangles' corners, centres and radii.
@@ -130,8 +141,9 @@ pub(crate) struct Engine<'m> {
     mean_area: f64,
     max_error: f64,
     cos_normal: f64,
-    plan: Plan,
-    scratch: Scratch,
+    /// Per collapse of a batch, its plan and the buffers of its checks (kept between
+    /// batches, so that a collapse allocates nothing).
+    slots: Vec<Slot>,
     /// Triangles alive when the grid was last built.
     grid_built_at: usize,
     /// Vertices with a refused collapse since they last queued theirs.
@@ -402,22 +414,44 @@ impl<'m> Engine<'m> {
         (pv, q.eval(pv) + tie + penalty)
     }
 
-    /// Queues the collapses along `x`'s edges: `x` into each neighbour, and each
-    /// neighbour not in `both` (sorted) into `x`.
-    fn push_vertex(&mut self, x: u32, both: &[u32]) {
-        let mut nb = std::mem::take(&mut self.scratch.ring);
-        self.neighbours_into(x, &mut nb);
-        for &y in &nb {
+    /// The queue entries of the collapses along `x`'s edges, into `out`: `x` into each
+    /// neighbour, and each neighbour not in `both` (sorted) into `x`.
+    fn entries_of(&self, x: u32, both: &[u32], nb: &mut Vec<u32>, out: &mut Vec<Reverse<Candidate>>) {
+        self.neighbours_into(x, nb);
+        for &y in nb.iter() {
             let back = both.binary_search(&y).is_err();
             for (a, b) in [(x, y), (y, x)] {
                 if self.class[a as usize] != Class::Corner && (a == x || back) {
                     let c = self.place(a, b).1;
-                    let entry = (c.to_bits(), a, b, self.version[a as usize], self.version[b as usize]);
-                    self.heap.push(Reverse(entry));
+                    out.push(Reverse((
+                        c.to_bits(),
+                        a,
+                        b,
+                        self.version[a as usize],
+                        self.version[b as usize],
+                    )));
                 }
             }
         }
-        self.scratch.ring = nb;
+    }
+
+    /// A box that holds every triangle the collapse of `u` into `v` reads or changes,
+    /// before and after: the corners of both stars, and the ball of the edge's length
+    /// around its midpoint (where `v` may go), widened far above rounding.
+    fn reach(&self, u: u32, v: u32) -> (DVec3, DVec3) {
+        let (pu, pv) = (self.pos[u as usize], self.pos[v as usize]);
+        let r = DVec3::splat(0.5 * pu.distance(pv) * (2.0 + 1e-9) + 1e-300);
+        let m = 0.5 * (pu + pv);
+        let (mut lo, mut hi) = (m - r, m + r);
+        for x in [u, v] {
+            for &t in &self.vtris[x as usize] {
+                for w in self.tris[t as usize] {
+                    lo = lo.min(self.pos[w as usize]);
+                    hi = hi.max(self.pos[w as usize]);
+                }
+            }
+        }
+        (lo, hi)
     }
 
     fn is_current(&self, c: &Candidate) -> bool {
@@ -476,6 +510,12 @@ impl<'m> Engine<'m> {
             });
         self.stop()?;
         let mut limit = self.set_queue(entries);
+        let mut slots = std::mem::take(&mut self.slots);
+        slots.resize_with(BATCH, Slot::default);
+        let mut batch: Vec<(Candidate, (DVec3, DVec3))> = Vec::with_capacity(BATCH);
+        let mut deferred: Vec<(Candidate, (DVec3, DVec3))> = Vec::new();
+        let mut applied: Vec<u32> = Vec::with_capacity(BATCH);
+        let mut requests: Vec<(u32, Vec<u32>)> = Vec::new();
         while self.alive > goal {
             self.stop()?;
             if self.grid.is_some() && 2 * self.alive < self.grid_built_at {
@@ -487,16 +527,79 @@ impl<'m> Engine<'m> {
                 kept.retain(|c| self.is_current(&c.0));
                 limit = self.set_queue(kept);
             }
-            let Some(Reverse(c)) = self.heap.pop() else { break };
-            if !self.is_current(&c) {
-                continue;
+            // The next collapses in queue order whose reaches meet the reach of no collapse
+            // taken before them (in the batch or put back): they commute with each other
+            // and with those put back, so planning them together on the same state and
+            // applying them in order is applying them one by one.
+            batch.clear();
+            deferred.clear();
+            while batch.len() < BATCH && deferred.len() < 2 * BATCH {
+                let Some(Reverse(c)) = self.heap.pop() else { break };
+                if !self.is_current(&c) {
+                    continue;
+                }
+                let b = self.reach(c.1, c.2);
+                let meets = |x: &(Candidate, (DVec3, DVec3))| {
+                    let (lo, hi) = x.1;
+                    !(lo.cmpgt(b.1).any() || b.0.cmpgt(hi).any())
+                };
+                if batch.iter().any(meets) || deferred.iter().any(meets) {
+                    deferred.push((c, b));
+                } else {
+                    batch.push((c, b));
+                }
             }
-            if !self.plan(c.1, c.2) {
-                self.retry[c.1 as usize] = true;
-            } else {
-                self.apply();
+            if batch.is_empty() {
+                break;
+            }
+            for (c, _) in &deferred {
+                self.heap.push(Reverse(*c));
+            }
+            let this = &*self;
+            slots[..batch.len()].par_iter_mut().zip(&batch).for_each(|(slot, (c, _))| {
+                slot.ok = this.plan_with(c.1, c.2, &mut slot.plan, &mut slot.scratch);
+            });
+            applied.clear();
+            for slot in &slots[..batch.len()] {
+                if self.alive <= goal {
+                    break;
+                }
+                if slot.ok && self.within_tolerances(&slot.plan.deltas) {
+                    self.apply(&slot.plan);
+                    applied.push(slot.plan.v);
+                } else {
+                    self.retry[slot.plan.u as usize] = true;
+                }
+            }
+            // The kept vertices' collapses are queued anew; those of their neighbours keep
+            // their queued costs (only the order depends on them: every check is made again
+            // when one is tried), and a neighbour whose collapse was refused queues its own
+            // again, as the change may let it pass now. The costs are computed in parallel.
+            requests.clear();
+            for &v in &applied {
+                let ring = self.neighbours(v);
+                requests.push((v, Vec::new()));
+                for &x in &ring {
+                    if self.retry[x as usize] {
+                        self.retry[x as usize] = false;
+                        requests.push((x, ring.clone()));
+                    }
+                }
+            }
+            let this = &*self;
+            let pushed: Vec<Vec<Reverse<Candidate>>> = requests
+                .par_iter()
+                .map_init(Vec::new, |nb, (x, both)| {
+                    let mut out = Vec::new();
+                    this.entries_of(*x, both, nb, &mut out);
+                    out
+                })
+                .collect();
+            for e in pushed {
+                self.heap.extend(e);
             }
         }
+        self.slots = slots;
         Ok(())
     }
 
@@ -539,17 +642,23 @@ impl<'m> Engine<'m> {
         self.grid_built_at = self.alive;
     }
 
-    /// Plans the collapse of `u` into `v` in `self.plan`; whether every check passes.
-    fn plan(&mut self, u: u32, v: u32) -> bool {
-        let mut plan = std::mem::take(&mut self.plan);
-        let mut scratch = std::mem::take(&mut self.scratch);
-        let ok = self.plan_with(u, v, &mut plan, &mut scratch);
-        self.plan = plan;
-        self.scratch = scratch;
-        ok
+    /// Whether the changes of a planned collapse keep every region's volume and every
+    /// patch's area within their tolerances, counting every collapse before it.
+    fn within_tolerances(&self, deltas: &[(bool, u32, f64)]) -> bool {
+        deltas.iter().all(|&(kind, id, d)| {
+            let (total, so_far) =
+                if kind { self.region_volume[id as usize] } else { self.patch_area[id as usize] };
+            let tolerance = if kind { VOLUME_TOLERANCE } else { AREA_TOLERANCE };
+            (so_far + d).abs() <= tolerance * total.abs()
+        })
     }
 
-    fn plan_with(&mut self, u: u32, v: u32, plan: &mut Plan, sc: &mut Scratch) -> bool {
+    /// Plans the collapse of `u` into `v` in `plan`; whether every check but the
+    /// tolerances' passes (those depend on the collapses applied before it, and are
+    /// checked when it is applied). Reads only what lies in `reach(u, v)`.
+    fn plan_with(&self, u: u32, v: u32, plan: &mut Plan, sc: &mut Scratch) -> bool {
+        plan.u = u;
+        plan.v = v;
         if self.class[u as usize] == Class::Corner {
             return false;
         }
@@ -559,8 +668,6 @@ impl<'m> Engine<'m> {
         if star_u.iter().any(|&t| self.frozen[t as usize] != NONE) {
             return false;
         }
-        plan.u = u;
-        plan.v = v;
         plan.removed.clear();
         plan.modified.clear();
         plan.assigned.clear();
@@ -690,14 +797,6 @@ impl<'m> Engine<'m> {
                 add(*key, tri.map(at), 1.0);
             }
         }
-        for &(kind, id, d) in &plan.deltas {
-            let (total, so_far) =
-                if kind { self.region_volume[id as usize] } else { self.patch_area[id as usize] };
-            let tolerance = if kind { VOLUME_TOLERANCE } else { AREA_TOLERANCE };
-            if (so_far + d).abs() > tolerance * total.abs() {
-                return false;
-            }
-        }
         // The distance budget: every input vertex that u's triangles (and v's, if v
         // moves) answer for, u itself and v if it leaves its input position, goes to the
         // nearest triangle of v's new star.
@@ -762,7 +861,7 @@ impl<'m> Engine<'m> {
         // No new intersection: with a triangle that shares no vertex, none at all; with one
         // that shares vertices, none off the shared corners and edges (exactly, as
         // `voxreg check` tests).
-        if let Some(mut grid) = self.grid.take() {
+        if let Some(grid) = self.grid.as_ref() {
             sc.tested.clear();
             sc.tested.extend(sc.after[changed..].iter().map(|(tri, _, _)| (*tri, tri.map(at))));
             let star_v = &self.vtris[v as usize];
@@ -818,7 +917,6 @@ impl<'m> Engine<'m> {
                     }
                 }
             }
-            self.grid = Some(grid);
             if hit {
                 return false;
             }
@@ -826,9 +924,9 @@ impl<'m> Engine<'m> {
         true
     }
 
-    fn apply(&mut self) {
-        let plan = std::mem::take(&mut self.plan);
-        let Plan { u, v, p, ref removed, ref modified, ref assigned, ref deltas } = plan;
+    /// Applies a planned collapse (its queue entries are made by the caller).
+    fn apply(&mut self, plan: &Plan) {
+        let Plan { u, v, p, ref removed, ref modified, ref assigned, ref deltas } = *plan;
         for &t in removed {
             self.tri_alive[t as usize] = false;
             self.alive -= 1;
@@ -874,21 +972,6 @@ impl<'m> Engine<'m> {
         self.quadric[v as usize].add(&qu);
         self.version[u as usize] += 1;
         self.version[v as usize] += 1;
-        // v's collapses are queued anew; those of its neighbours keep their queued costs
-        // (only the order depends on them: every check is made again when one is tried),
-        // and a neighbour whose collapse was refused queues its own again, as the change
-        // may let it pass now.
-        self.push_vertex(v, &[]);
-        let mut ring = std::mem::take(&mut self.scratch.nv);
-        self.neighbours_into(v, &mut ring);
-        for &x in &ring {
-            if self.retry[x as usize] {
-                self.retry[x as usize] = false;
-                self.push_vertex(x, &ring);
-            }
-        }
-        self.scratch.nv = ring;
-        self.plan = plan;
     }
 
     /// The mesh as it is now: triangles paired into quads, vertices renumbered in input
