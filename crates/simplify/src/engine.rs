@@ -974,36 +974,82 @@ impl<'m> Engine<'m> {
         self.version[v as usize] += 1;
     }
 
+    /// What the mesh as it is now is made from (a copy, so that it can be paired while
+    /// the engine goes on to the next level).
+    pub(crate) fn capture(&self) -> Capture<'m> {
+        let alive: Vec<u32> = if self.alive == self.input_triangles {
+            Vec::new()
+        } else {
+            (0..self.tris.len() as u32).filter(|&t| self.tri_alive[t as usize]).collect()
+        };
+        Capture {
+            whole: self.alive == self.input_triangles,
+            pos: if alive.is_empty() { Vec::new() } else { self.pos.clone() },
+            tris: alive.iter().map(|&t| self.tris[t as usize]).collect(),
+            keys: alive.iter().map(|&t| self.tri_key[t as usize]).collect(),
+            frozen: alive.iter().map(|&t| self.frozen[t as usize]).collect(),
+            patch_keys: self.keys.clone(),
+            input: self.input,
+            input_triangles: self.input_triangles,
+            triangles_left: self.alive,
+            counts: self.counts(),
+            quads: self.options.quads.then_some(self.options.max_quad_dihedral_deg),
+            interrupt: self.interrupt.clone(),
+        }
+    }
+
+    /// The error bound and the vertex classes' counts.
+    fn counts(&self) -> Stats {
+        let count = |c: Class| {
+            (0..self.pos.len()).filter(|&v| self.class[v] == c && !self.vtris[v].is_empty()).count()
+        };
+        Stats {
+            error_bound: self.error_bound,
+            corners: count(Class::Corner),
+            line_vertices: count(Class::Line),
+            ..Stats::default()
+        }
+    }
+}
+
+/// A level's triangles, copied from the engine, to be paired into the level's mesh.
+pub(crate) struct Capture<'m> {
+    /// No collapse yet: the level is the input itself.
+    whole: bool,
+    pos: Vec<DVec3>,
+    tris: Vec<[u32; 3]>,
+    keys: Vec<u32>,
+    frozen: Vec<u32>,
+    patch_keys: Vec<Key>,
+    input: &'m QuadMesh,
+    input_triangles: usize,
+    triangles_left: usize,
+    counts: Stats,
+    quads: Option<f64>,
+    interrupt: Interrupt,
+}
+
+impl Capture<'_> {
     /// The mesh as it is now: triangles paired into quads, vertices renumbered in input
     /// order; `Interrupted` once the interrupt is raised (the pairing polls it).
-    pub(crate) fn snapshot(&self) -> Result<Simplified, SimplifyError> {
-        if self.alive == self.input_triangles {
+    pub(crate) fn finish(self) -> Result<Simplified, SimplifyError> {
+        if self.whole {
             let stats = Stats {
                 input_faces: self.input.quads.len(),
                 input_triangles: self.input_triangles,
-                triangles_left: self.alive,
+                triangles_left: self.triangles_left,
                 faces: self.input.quads.len(),
                 quads: self.input.quads.iter().filter(|q| q[3] != q[2] && q[3] != q[0]).count(),
-                ..self.counts()
+                ..self.counts
             };
             return Ok(Simplified { mesh: self.input.clone(), stats });
         }
-        let alive: Vec<u32> = (0..self.tris.len() as u32).filter(|&t| self.tri_alive[t as usize]).collect();
-        let tris: Vec<[u32; 3]> = alive.iter().map(|&t| self.tris[t as usize]).collect();
-        let keys: Vec<u32> = alive.iter().map(|&t| self.tri_key[t as usize]).collect();
-        let frozen: Vec<u32> = alive.iter().map(|&t| self.frozen[t as usize]).collect();
-        let faces = crate::pair::pair(
-            &self.pos,
-            &tris,
-            &keys,
-            &frozen,
-            &self.input.quads,
-            self.options.quads.then_some(self.options.max_quad_dihedral_deg),
-            &self.interrupt,
-        );
-        self.stop()?;
+        let (tris, keys, frozen) = (&self.tris, &self.keys, &self.frozen);
+        let faces =
+            crate::pair::pair(&self.pos, tris, keys, frozen, &self.input.quads, self.quads, &self.interrupt);
+        crate::types::check(&self.interrupt)?;
         let mut used = vec![u32::MAX; self.pos.len()];
-        for t in &tris {
+        for t in tris {
             for &x in t {
                 used[x as usize] = 0;
             }
@@ -1035,7 +1081,7 @@ impl<'m> Engine<'m> {
                     (q, keys[i as usize])
                 }
             };
-            let key = self.keys[k as usize];
+            let key = self.patch_keys[k as usize];
             if key.group != NONE {
                 groups[key.group as usize].push(mesh.quads.len() as u32);
             }
@@ -1055,24 +1101,11 @@ impl<'m> Engine<'m> {
         let stats = Stats {
             input_faces: self.input.quads.len(),
             input_triangles: self.input_triangles,
-            triangles_left: self.alive,
+            triangles_left: self.triangles_left,
             faces: mesh.quads.len(),
             quads,
-            ..self.counts()
+            ..self.counts
         };
         Ok(Simplified { mesh, stats })
-    }
-
-    /// The error bound and the vertex classes' counts.
-    fn counts(&self) -> Stats {
-        let count = |c: Class| {
-            (0..self.pos.len()).filter(|&v| self.class[v] == c && !self.vtris[v].is_empty()).count()
-        };
-        Stats {
-            error_bound: self.error_bound,
-            corners: count(Class::Corner),
-            line_vertices: count(Class::Line),
-            ..Stats::default()
-        }
     }
 }

@@ -113,13 +113,25 @@ pub fn simplify_levels_interruptible(
     types::check(interrupt)?;
     let mut engine = engine::Engine::new(mesh, options, interrupt)?;
     let mut out = Vec::with_capacity(targets.len());
+    // Each level is paired into quads while the engine makes the next one.
+    let mut pending: Option<engine::Capture<'_>> = None;
     for t in targets {
-        engine.run(t)?;
-        if options.quads {
-            engine.flip_for_quads()?;
+        let (done, next) = rayon::join(
+            || pending.take().map(engine::Capture::finish),
+            || -> Result<_, SimplifyError> {
+                engine.run(t)?;
+                if options.quads {
+                    engine.flip_for_quads()?;
+                }
+                Ok(engine.capture())
+            },
+        );
+        if let Some(level) = done {
+            out.push(level?);
         }
-        out.push(engine.snapshot()?);
+        pending = Some(next?);
     }
+    out.push(pending.take().expect("one level").finish()?);
     types::check(interrupt)?;
     Ok(out)
 }
