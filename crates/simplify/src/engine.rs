@@ -653,9 +653,10 @@ impl<'m> Engine<'m> {
         })
     }
 
-    /// Plans the collapse of `u` into `v` in `plan`; whether every check but the
-    /// tolerances' passes (those depend on the collapses applied before it, and are
-    /// checked when it is applied). Reads only what lies in `reach(u, v)`.
+    /// Plans the collapse of `u` into `v` in `plan`; whether every check passes, the
+    /// tolerances against the totals of the collapses applied before the batch (the
+    /// caller checks them again when it applies the plan). Reads only what lies in
+    /// `reach(u, v)`, and the totals.
     fn plan_with(&self, u: u32, v: u32, plan: &mut Plan, sc: &mut Scratch) -> bool {
         plan.u = u;
         plan.v = v;
@@ -796,6 +797,11 @@ impl<'m> Engine<'m> {
             for (tri, key, _) in &sc.after[changed..] {
                 add(*key, tri.map(at), 1.0);
             }
+        }
+        // Refused early against the totals before the batch (checked again, against the
+        // totals of the collapses applied before it, when it is applied).
+        if !self.within_tolerances(&plan.deltas) {
+            return false;
         }
         // The distance budget: every input vertex that u's triangles (and v's, if v
         // moves) answer for, u itself and v if it leaves its input position, goes to the
