@@ -132,6 +132,9 @@ pub(crate) struct Engine<'m> {
     /// (hidden by the faces sharing a vertex): the input face. Such triangles never
     /// change and come out as their input face.
     frozen: Vec<u32>,
+    /// Whether each vertex is a corner of a frozen triangle (frozen triangles never
+    /// change, so neither does this).
+    frozen_vertex: Vec<bool>,
     input: &'m QuadMesh,
     input_triangles: usize,
     error_bound: f64,
@@ -360,7 +363,7 @@ impl<'m> Engine<'m> {
         let tie = self.length_weight * pu.distance_squared(pv);
         let movable = self.class[u as usize] == Class::Interior
             && self.class[v as usize] == Class::Interior
-            && !self.vtris[v as usize].iter().any(|&t| self.frozen[t as usize] != NONE);
+            && !self.frozen_vertex[v as usize];
         if movable {
             // Six times the volume under the new star is g.(p - pv); under the old stars, old.
             let (mut g, mut old) = (DVec3::ZERO, 0.0);
@@ -666,7 +669,7 @@ impl<'m> Engine<'m> {
         sc.star_u.clear();
         sc.star_u.extend_from_slice(&self.vtris[u as usize]);
         let star_u = &sc.star_u;
-        if star_u.iter().any(|&t| self.frozen[t as usize] != NONE) {
+        if self.frozen_vertex[u as usize] {
             return false;
         }
         plan.removed.clear();
