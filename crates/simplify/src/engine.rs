@@ -33,6 +33,10 @@ const VOLUME_TOLERANCE: f64 = 0.005;
 /// counting every collapse before it.
 const AREA_TOLERANCE: f64 = 0.01;
 
+/// Collapses planned together, in parallel, before they are applied in queue order. A
+/// constant, so that the output does not depend on the thread count.
+const BATCH: usize = 32;
+
 /// No group or no material.
 pub(crate) const NONE: u32 = u32::MAX;
 
@@ -79,6 +83,14 @@ struct Plan {
     deltas: Vec<(bool, u32, f64)>,
 }
 
+/// One collapse of a batch: its plan, whether its checks passed, its buffers.
+#[derive(Default)]
+struct Slot {
+    plan: Plan,
+    ok: bool,
+    scratch: Scratch,
+}
+
 /// Reused buffers of the collapse checks, so that a collapse allocates nothing.
 #[derive(Default)]
 struct Scratch {
@@ -91,7 +103,6 @@ struct Scratch {
     sig_b: Signature,
     pool: Vec<u32>,
     tested: Vec<([u32; 3], [DVec3; 3])>,
-    ring: Vec<u32>,
     /// The boxes of the triangles in `tested`.
     boxes: Vec<(DVec3, DVec3)>,
     /// The new star's triangles' corners, centres and radii.
@@ -125,6 +136,9 @@ pub(crate) struct Engine<'m> {
     /// (hidden by the faces sharing a vertex): the input face. Such triangles never
     /// change and come out as their input face.
     frozen: Vec<u32>,
+    /// Whether each vertex is a corner of a frozen triangle (frozen triangles never
+    /// change, so neither does this).
+    frozen_vertex: Vec<bool>,
     input: &'m QuadMesh,
     input_triangles: usize,
     error_bound: f64,
@@ -134,8 +148,9 @@ pub(crate) struct Engine<'m> {
     mean_area: f64,
     max_error: f64,
     cos_normal: f64,
-    plan: Plan,
-    scratch: Scratch,
+    /// Per collapse of a batch, its plan and the buffers of its checks (kept between
+    /// batches, so that a collapse allocates nothing).
+    slots: Vec<Slot>,
     /// Triangles alive when the grid was last built.
     grid_built_at: usize,
     /// Vertices with a refused collapse since they last queued theirs.
@@ -352,7 +367,7 @@ impl<'m> Engine<'m> {
         let tie = self.length_weight * pu.distance_squared(pv);
         let movable = self.class[u as usize] == Class::Interior
             && self.class[v as usize] == Class::Interior
-            && !self.vtris[v as usize].iter().any(|&t| self.frozen[t as usize] != NONE);
+            && !self.frozen_vertex[v as usize];
         if movable {
             // Six times the volume under the new star is g.(p - pv); under the old stars, old.
             let (mut g, mut old) = (DVec3::ZERO, 0.0);
@@ -406,22 +421,44 @@ impl<'m> Engine<'m> {
         (pv, q.eval(pv) + tie + penalty)
     }
 
-    /// Queues the collapses along `x`'s edges: `x` into each neighbour, and each
-    /// neighbour not in `both` (sorted) into `x`.
-    fn push_vertex(&mut self, x: u32, both: &[u32]) {
-        let mut nb = std::mem::take(&mut self.scratch.ring);
-        self.neighbours_into(x, &mut nb);
-        for &y in &nb {
+    /// The queue entries of the collapses along `x`'s edges, into `out`: `x` into each
+    /// neighbour, and each neighbour not in `both` (sorted) into `x`.
+    fn entries_of(&self, x: u32, both: &[u32], nb: &mut Vec<u32>, out: &mut Vec<Reverse<Candidate>>) {
+        self.neighbours_into(x, nb);
+        for &y in nb.iter() {
             let back = both.binary_search(&y).is_err();
             for (a, b) in [(x, y), (y, x)] {
                 if self.class[a as usize] != Class::Corner && (a == x || back) {
                     let c = self.place(a, b).1;
-                    let entry = (c.to_bits(), a, b, self.version[a as usize], self.version[b as usize]);
-                    self.heap.push(Reverse(entry));
+                    out.push(Reverse((
+                        c.to_bits(),
+                        a,
+                        b,
+                        self.version[a as usize],
+                        self.version[b as usize],
+                    )));
                 }
             }
         }
-        self.scratch.ring = nb;
+    }
+
+    /// A box that holds every triangle the collapse of `u` into `v` reads or changes,
+    /// before and after: the corners of both stars, and the ball of the edge's length
+    /// around its midpoint (where `v` may go), widened far above rounding.
+    fn reach(&self, u: u32, v: u32) -> (DVec3, DVec3) {
+        let (pu, pv) = (self.pos[u as usize], self.pos[v as usize]);
+        let r = DVec3::splat(0.5 * pu.distance(pv) * (2.0 + 1e-9) + 1e-300);
+        let m = 0.5 * (pu + pv);
+        let (mut lo, mut hi) = (m - r, m + r);
+        for x in [u, v] {
+            for &t in &self.vtris[x as usize] {
+                for w in self.tris[t as usize] {
+                    lo = lo.min(self.pos[w as usize]);
+                    hi = hi.max(self.pos[w as usize]);
+                }
+            }
+        }
+        (lo, hi)
     }
 
     fn is_current(&self, c: &Candidate) -> bool {
@@ -488,6 +525,12 @@ impl<'m> Engine<'m> {
         let mut limit = self.set_queue(entries);
         let start = self.alive;
         let mut next_report = start.saturating_sub(PROGRESS_EVERY);
+        let mut slots = std::mem::take(&mut self.slots);
+        slots.resize_with(BATCH, Slot::default);
+        let mut batch: Vec<(Candidate, (DVec3, DVec3))> = Vec::with_capacity(BATCH);
+        let mut deferred: Vec<(Candidate, (DVec3, DVec3))> = Vec::new();
+        let mut applied: Vec<u32> = Vec::with_capacity(BATCH);
+        let mut requests: Vec<(u32, Vec<u32>)> = Vec::new();
         while self.alive > goal {
             if self.alive <= next_report {
                 next_report = self.alive.saturating_sub(PROGRESS_EVERY);
@@ -503,16 +546,79 @@ impl<'m> Engine<'m> {
                 kept.retain(|c| self.is_current(&c.0));
                 limit = self.set_queue(kept);
             }
-            let Some(Reverse(c)) = self.heap.pop() else { break };
-            if !self.is_current(&c) {
-                continue;
+            // The next collapses in queue order whose reaches meet the reach of no collapse
+            // taken before them (in the batch or put back): they commute with each other
+            // and with those put back, so planning them together on the same state and
+            // applying them in order is applying them one by one.
+            batch.clear();
+            deferred.clear();
+            while batch.len() < BATCH && deferred.len() < 2 * BATCH {
+                let Some(Reverse(c)) = self.heap.pop() else { break };
+                if !self.is_current(&c) {
+                    continue;
+                }
+                let b = self.reach(c.1, c.2);
+                let meets = |x: &(Candidate, (DVec3, DVec3))| {
+                    let (lo, hi) = x.1;
+                    !(lo.cmpgt(b.1).any() || b.0.cmpgt(hi).any())
+                };
+                if batch.iter().any(meets) || deferred.iter().any(meets) {
+                    deferred.push((c, b));
+                } else {
+                    batch.push((c, b));
+                }
             }
-            if !self.plan(c.1, c.2) {
-                self.retry[c.1 as usize] = true;
-            } else {
-                self.apply();
+            if batch.is_empty() {
+                break;
+            }
+            for (c, _) in &deferred {
+                self.heap.push(Reverse(*c));
+            }
+            let this = &*self;
+            slots[..batch.len()].par_iter_mut().zip(&batch).for_each(|(slot, (c, _))| {
+                slot.ok = this.plan_with(c.1, c.2, &mut slot.plan, &mut slot.scratch);
+            });
+            applied.clear();
+            for slot in &slots[..batch.len()] {
+                if self.alive <= goal {
+                    break;
+                }
+                if slot.ok && self.within_tolerances(&slot.plan.deltas) {
+                    self.apply(&slot.plan);
+                    applied.push(slot.plan.v);
+                } else {
+                    self.retry[slot.plan.u as usize] = true;
+                }
+            }
+            // The kept vertices' collapses are queued anew; those of their neighbours keep
+            // their queued costs (only the order depends on them: every check is made again
+            // when one is tried), and a neighbour whose collapse was refused queues its own
+            // again, as the change may let it pass now. The costs are computed in parallel.
+            requests.clear();
+            for &v in &applied {
+                let ring = self.neighbours(v);
+                requests.push((v, Vec::new()));
+                for &x in &ring {
+                    if self.retry[x as usize] {
+                        self.retry[x as usize] = false;
+                        requests.push((x, ring.clone()));
+                    }
+                }
+            }
+            let this = &*self;
+            let pushed: Vec<Vec<Reverse<Candidate>>> = requests
+                .par_iter()
+                .map_init(Vec::new, |nb, (x, both)| {
+                    let mut out = Vec::new();
+                    this.entries_of(*x, both, nb, &mut out);
+                    out
+                })
+                .collect();
+            for e in pushed {
+                self.heap.extend(e);
             }
         }
+        self.slots = slots;
         Ok(())
     }
 
@@ -555,28 +661,33 @@ impl<'m> Engine<'m> {
         self.grid_built_at = self.alive;
     }
 
-    /// Plans the collapse of `u` into `v` in `self.plan`; whether every check passes.
-    fn plan(&mut self, u: u32, v: u32) -> bool {
-        let mut plan = std::mem::take(&mut self.plan);
-        let mut scratch = std::mem::take(&mut self.scratch);
-        let ok = self.plan_with(u, v, &mut plan, &mut scratch);
-        self.plan = plan;
-        self.scratch = scratch;
-        ok
+    /// Whether the changes of a planned collapse keep every region's volume and every
+    /// patch's area within their tolerances, counting every collapse before it.
+    fn within_tolerances(&self, deltas: &[(bool, u32, f64)]) -> bool {
+        deltas.iter().all(|&(kind, id, d)| {
+            let (total, so_far) =
+                if kind { self.region_volume[id as usize] } else { self.patch_area[id as usize] };
+            let tolerance = if kind { VOLUME_TOLERANCE } else { AREA_TOLERANCE };
+            (so_far + d).abs() <= tolerance * total.abs()
+        })
     }
 
-    fn plan_with(&mut self, u: u32, v: u32, plan: &mut Plan, sc: &mut Scratch) -> bool {
+    /// Plans the collapse of `u` into `v` in `plan`; whether every check passes, the
+    /// tolerances against the totals of the collapses applied before the batch (the
+    /// caller checks them again when it applies the plan). Reads only what lies in
+    /// `reach(u, v)`, and the totals.
+    fn plan_with(&self, u: u32, v: u32, plan: &mut Plan, sc: &mut Scratch) -> bool {
+        plan.u = u;
+        plan.v = v;
         if self.class[u as usize] == Class::Corner {
             return false;
         }
         sc.star_u.clear();
         sc.star_u.extend_from_slice(&self.vtris[u as usize]);
         let star_u = &sc.star_u;
-        if star_u.iter().any(|&t| self.frozen[t as usize] != NONE) {
+        if self.frozen_vertex[u as usize] {
             return false;
         }
-        plan.u = u;
-        plan.v = v;
         plan.removed.clear();
         plan.modified.clear();
         plan.assigned.clear();
@@ -706,13 +817,10 @@ impl<'m> Engine<'m> {
                 add(*key, tri.map(at), 1.0);
             }
         }
-        for &(kind, id, d) in &plan.deltas {
-            let (total, so_far) =
-                if kind { self.region_volume[id as usize] } else { self.patch_area[id as usize] };
-            let tolerance = if kind { VOLUME_TOLERANCE } else { AREA_TOLERANCE };
-            if (so_far + d).abs() > tolerance * total.abs() {
-                return false;
-            }
+        // Refused early against the totals before the batch (checked again, against the
+        // totals of the collapses applied before it, when it is applied).
+        if !self.within_tolerances(&plan.deltas) {
+            return false;
         }
         // The distance budget: every input vertex that u's triangles (and v's, if v
         // moves) answer for, u itself and v if it leaves its input position, goes to the
@@ -778,7 +886,7 @@ impl<'m> Engine<'m> {
         // No new intersection: with a triangle that shares no vertex, none at all; with one
         // that shares vertices, none off the shared corners and edges (exactly, as
         // `voxreg check` tests).
-        if let Some(mut grid) = self.grid.take() {
+        if let Some(grid) = self.grid.as_ref() {
             sc.tested.clear();
             sc.tested.extend(sc.after[changed..].iter().map(|(tri, _, _)| (*tri, tri.map(at))));
             let star_v = &self.vtris[v as usize];
@@ -834,7 +942,6 @@ impl<'m> Engine<'m> {
                     }
                 }
             }
-            self.grid = Some(grid);
             if hit {
                 return false;
             }
@@ -842,9 +949,9 @@ impl<'m> Engine<'m> {
         true
     }
 
-    fn apply(&mut self) {
-        let plan = std::mem::take(&mut self.plan);
-        let Plan { u, v, p, ref removed, ref modified, ref assigned, ref deltas } = plan;
+    /// Applies a planned collapse (its queue entries are made by the caller).
+    fn apply(&mut self, plan: &Plan) {
+        let Plan { u, v, p, ref removed, ref modified, ref assigned, ref deltas } = *plan;
         for &t in removed {
             self.tri_alive[t as usize] = false;
             self.alive -= 1;
@@ -890,53 +997,84 @@ impl<'m> Engine<'m> {
         self.quadric[v as usize].add(&qu);
         self.version[u as usize] += 1;
         self.version[v as usize] += 1;
-        // v's collapses are queued anew; those of its neighbours keep their queued costs
-        // (only the order depends on them: every check is made again when one is tried),
-        // and a neighbour whose collapse was refused queues its own again, as the change
-        // may let it pass now.
-        self.push_vertex(v, &[]);
-        let mut ring = std::mem::take(&mut self.scratch.nv);
-        self.neighbours_into(v, &mut ring);
-        for &x in &ring {
-            if self.retry[x as usize] {
-                self.retry[x as usize] = false;
-                self.push_vertex(x, &ring);
-            }
-        }
-        self.scratch.nv = ring;
-        self.plan = plan;
     }
 
+    /// What the mesh as it is now is made from (a copy, so that it can be paired while
+    /// the engine goes on to the next level).
+    pub(crate) fn capture(&self) -> Capture<'m> {
+        let alive: Vec<u32> = if self.alive == self.input_triangles {
+            Vec::new()
+        } else {
+            (0..self.tris.len() as u32).filter(|&t| self.tri_alive[t as usize]).collect()
+        };
+        Capture {
+            whole: self.alive == self.input_triangles,
+            pos: if alive.is_empty() { Vec::new() } else { self.pos.clone() },
+            tris: alive.iter().map(|&t| self.tris[t as usize]).collect(),
+            keys: alive.iter().map(|&t| self.tri_key[t as usize]).collect(),
+            frozen: alive.iter().map(|&t| self.frozen[t as usize]).collect(),
+            patch_keys: self.keys.clone(),
+            input: self.input,
+            input_triangles: self.input_triangles,
+            triangles_left: self.alive,
+            counts: self.counts(),
+            quads: self.options.quads.then_some(self.options.max_quad_dihedral_deg),
+            interrupt: self.interrupt.clone(),
+        }
+    }
+
+    /// The error bound and the vertex classes' counts.
+    fn counts(&self) -> Stats {
+        let count = |c: Class| {
+            (0..self.pos.len()).filter(|&v| self.class[v] == c && !self.vtris[v].is_empty()).count()
+        };
+        Stats {
+            error_bound: self.error_bound,
+            corners: count(Class::Corner),
+            line_vertices: count(Class::Line),
+            ..Stats::default()
+        }
+    }
+}
+
+/// A level's triangles, copied from the engine, to be paired into the level's mesh.
+pub(crate) struct Capture<'m> {
+    /// No collapse yet: the level is the input itself.
+    whole: bool,
+    pos: Vec<DVec3>,
+    tris: Vec<[u32; 3]>,
+    keys: Vec<u32>,
+    frozen: Vec<u32>,
+    patch_keys: Vec<Key>,
+    input: &'m QuadMesh,
+    input_triangles: usize,
+    triangles_left: usize,
+    counts: Stats,
+    quads: Option<f64>,
+    interrupt: Interrupt,
+}
+
+impl Capture<'_> {
     /// The mesh as it is now: triangles paired into quads, vertices renumbered in input
     /// order; `Interrupted` once the interrupt is raised (the pairing polls it).
-    pub(crate) fn snapshot(&self) -> Result<Simplified, SimplifyError> {
-        if self.alive == self.input_triangles {
+    pub(crate) fn finish(self) -> Result<Simplified, SimplifyError> {
+        if self.whole {
             let stats = Stats {
                 input_faces: self.input.quads.len(),
                 input_triangles: self.input_triangles,
-                triangles_left: self.alive,
+                triangles_left: self.triangles_left,
                 faces: self.input.quads.len(),
                 quads: self.input.quads.iter().filter(|q| q[3] != q[2] && q[3] != q[0]).count(),
-                ..self.counts()
+                ..self.counts
             };
             return Ok(Simplified { mesh: self.input.clone(), stats });
         }
-        let alive: Vec<u32> = (0..self.tris.len() as u32).filter(|&t| self.tri_alive[t as usize]).collect();
-        let tris: Vec<[u32; 3]> = alive.iter().map(|&t| self.tris[t as usize]).collect();
-        let keys: Vec<u32> = alive.iter().map(|&t| self.tri_key[t as usize]).collect();
-        let frozen: Vec<u32> = alive.iter().map(|&t| self.frozen[t as usize]).collect();
-        let faces = crate::pair::pair(
-            &self.pos,
-            &tris,
-            &keys,
-            &frozen,
-            &self.input.quads,
-            self.options.quads.then_some(self.options.max_quad_dihedral_deg),
-            &self.interrupt,
-        );
-        self.stop()?;
+        let (tris, keys, frozen) = (&self.tris, &self.keys, &self.frozen);
+        let faces =
+            crate::pair::pair(&self.pos, tris, keys, frozen, &self.input.quads, self.quads, &self.interrupt);
+        crate::types::check(&self.interrupt)?;
         let mut used = vec![u32::MAX; self.pos.len()];
-        for t in &tris {
+        for t in tris {
             for &x in t {
                 used[x as usize] = 0;
             }
@@ -968,7 +1106,7 @@ impl<'m> Engine<'m> {
                     (q, keys[i as usize])
                 }
             };
-            let key = self.keys[k as usize];
+            let key = self.patch_keys[k as usize];
             if key.group != NONE {
                 groups[key.group as usize].push(mesh.quads.len() as u32);
             }
@@ -988,24 +1126,11 @@ impl<'m> Engine<'m> {
         let stats = Stats {
             input_faces: self.input.quads.len(),
             input_triangles: self.input_triangles,
-            triangles_left: self.alive,
+            triangles_left: self.triangles_left,
             faces: mesh.quads.len(),
             quads,
-            ..self.counts()
+            ..self.counts
         };
         Ok(Simplified { mesh, stats })
-    }
-
-    /// The error bound and the vertex classes' counts.
-    fn counts(&self) -> Stats {
-        let count = |c: Class| {
-            (0..self.pos.len()).filter(|&v| self.class[v] == c && !self.vtris[v].is_empty()).count()
-        };
-        Stats {
-            error_bound: self.error_bound,
-            corners: count(Class::Corner),
-            line_vertices: count(Class::Line),
-            ..Stats::default()
-        }
     }
 }

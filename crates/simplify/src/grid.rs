@@ -27,8 +27,6 @@ pub(crate) struct Grid {
     cells: Vec<Vec<u32>>,
     large: Vec<u32>,
     entries: Vec<Entry>,
-    seen: Vec<u32>,
-    stamp: u32,
 }
 
 impl Grid {
@@ -54,8 +52,6 @@ impl Grid {
             cells: vec![Vec::new(); (n.x * n.y * n.z) as usize],
             large: Vec::new(),
             entries: vec![Entry::None; triangles],
-            seen: vec![0; triangles],
-            stamp: 0,
         }
     }
 
@@ -142,31 +138,22 @@ impl Grid {
 
     /// Calls `f` once for each triangle entered in a cell that the box `[lo, hi]`
     /// overlaps (or in the large list), until `f` returns `true`; returns whether it did.
-    pub(crate) fn any(&mut self, lo: DVec3, hi: DVec3, mut f: impl FnMut(u32) -> bool) -> bool {
-        self.stamp = self.stamp.wrapping_add(1);
-        if self.stamp == 0 {
-            self.seen.fill(0);
-            self.stamp = 1;
-        }
-        let stamp = self.stamp;
-        let (a, b) = self.range(lo, hi);
-        let mut visit = |t: u32, seen: &mut Vec<u32>| {
-            if seen[t as usize] == stamp {
-                return false;
-            }
-            seen[t as usize] = stamp;
-            f(t)
-        };
+    /// A triangle in several of those cells is visited in the first of them (the corner
+    /// of its cells' range and the query's that is least on every axis), so the query
+    /// keeps no marks and leaves the grid as it is: for parallel use.
+    pub(crate) fn any(&self, lo: DVec3, hi: DVec3, mut f: impl FnMut(u32) -> bool) -> bool {
         for &t in &self.large {
-            if visit(t, &mut self.seen) {
+            if f(t) {
                 return true;
             }
         }
+        let (a, b) = self.range(lo, hi);
         for z in a[2]..=b[2] {
             for y in a[1]..=b[1] {
                 for x in a[0]..=b[0] {
                     for &t in &self.cells[self.index(x, y, z)] {
-                        if visit(t, &mut self.seen) {
+                        let Entry::Cells(c, _) = self.entries[t as usize] else { continue };
+                        if c[0].max(a[0]) == x && c[1].max(a[1]) == y && c[2].max(a[2]) == z && f(t) {
                             return true;
                         }
                     }

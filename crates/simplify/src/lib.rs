@@ -136,19 +136,33 @@ pub fn simplify_levels_reporting(
     let mut engine = engine::Engine::new(mesh, options, interrupt)?;
     report(0, Stage::Setup, 1.0);
     let mut out = Vec::with_capacity(levels);
+    // Each level is paired into quads on another thread while this one makes the next.
+    let mut pending: Option<engine::Capture<'_>> = None;
     for (level, t) in targets.iter().enumerate() {
-        report(level, Stage::Collapses, 0.0);
-        engine.run(t, &mut |f| report(level, Stage::Collapses, f))?;
-        report(level, Stage::Collapses, 1.0);
-        if options.quads {
-            report(level, Stage::Flips, 0.0);
-            engine.flip_for_quads()?;
-            report(level, Stage::Flips, 1.0);
+        let mut done = None;
+        let next = rayon::in_place_scope(|s| -> Result<_, SimplifyError> {
+            if let Some(capture) = pending.take() {
+                let done = &mut done;
+                s.spawn(move |_| *done = Some(capture.finish()));
+            }
+            report(level, Stage::Collapses, 0.0);
+            engine.run(t, &mut |f| report(level, Stage::Collapses, f))?;
+            report(level, Stage::Collapses, 1.0);
+            if options.quads {
+                report(level, Stage::Flips, 0.0);
+                engine.flip_for_quads()?;
+                report(level, Stage::Flips, 1.0);
+            }
+            report(level, Stage::Pairing, 0.0);
+            Ok(engine.capture())
+        });
+        if let Some(level) = done {
+            out.push(level?);
         }
-        report(level, Stage::Pairing, 0.0);
-        out.push(engine.snapshot()?);
-        report(level, Stage::Pairing, 1.0);
+        pending = Some(next?);
     }
+    out.push(pending.take().expect("one level").finish()?);
+    report(levels - 1, Stage::Pairing, 1.0);
     types::check(interrupt)?;
     Ok(out)
 }

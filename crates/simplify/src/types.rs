@@ -121,7 +121,9 @@ pub enum Stage {
     Collapses,
     /// The edge flips that let more triangles pair.
     Flips,
-    /// The pairing into quads and the output mesh.
+    /// The pairing into quads and the output mesh. A level's pairing runs on another
+    /// thread beside the next level's collapses: its report at 0 marks the hand-off, and
+    /// only the last level reports it done.
     Pairing,
 }
 

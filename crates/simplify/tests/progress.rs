@@ -47,7 +47,8 @@ fn progress_reports_every_stage_in_order_and_changes_nothing() {
     }
 
     // Setup once, then each level's collapses, flips and pairing, each opened at 0 and
-    // closed at 1, fractions in [0, 1] and non-decreasing within a stage.
+    // closed at 1 (a pairing other than the last level's overlaps the next level's
+    // collapses and is only opened), fractions in [0, 1] and non-decreasing within a stage.
     let order = |p: &Progress| {
         let s = match p.stage {
             Stage::Setup => 0,
@@ -72,7 +73,10 @@ fn progress_reports_every_stage_in_order_and_changes_nothing() {
     for stage in 0..(1 + 3 * 3) {
         let of: Vec<f64> = seen.iter().filter(|p| order(p) == stage).map(|p| p.fraction).collect();
         assert_eq!(of.first(), Some(&0.0), "stage {stage} not opened at 0");
-        assert_eq!(of.last(), Some(&1.0), "stage {stage} not closed at 1");
+        let handed_off = stage > 0 && stage % 3 == 0 && stage < 3 * 3;
+        if !handed_off {
+            assert_eq!(of.last(), Some(&1.0), "stage {stage} not closed at 1");
+        }
     }
     // The first level's collapses (to a quarter of about 13k triangles) report between
     // their ends, and reach most of the way there.

@@ -113,13 +113,13 @@ impl<'m> Engine<'m> {
             heap: BinaryHeap::new(),
             keys,
             frozen: vec![NONE; nt],
+            frozen_vertex: vec![false; n],
             input: mesh,
             input_triangles: nt,
             error_bound: 0.0,
             length_weight: 1e-3,
             mean_area,
-            plan: Plan::default(),
-            scratch: Scratch::default(),
+            slots: Vec::new(),
             retry: vec![false; n],
             grid_built_at: nt,
             key_regions: Vec::new(),
@@ -230,6 +230,13 @@ impl<'m> Engine<'m> {
                         if s < nt && tri_face[s] == tri_face[t] {
                             engine.frozen[s] = tri_face[t];
                         }
+                    }
+                }
+            }
+            for t in 0..nt {
+                if engine.frozen[t] != NONE {
+                    for x in engine.tris[t] {
+                        engine.frozen_vertex[x as usize] = true;
                     }
                 }
             }
