@@ -5,7 +5,7 @@ use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 use std::collections::HashMap;
 
-use voxreg_digisurf::{DigitalSurface, EdgeId, InterfaceId, Surfel, SurfelId};
+use voxreg_digisurf::{DigitalSurface, EdgeId, Surfel, SurfelId};
 
 use crate::error::NormalError;
 use crate::estimator::NormalEstimator;
@@ -91,7 +91,7 @@ impl QuadGraph {
                             continue;
                         }
                         let Some(flip) = continuation(me, other) else { continue };
-                        if continuations.dominant(surface, others, me.interface, other.interface) {
+                        if continuations.dominant(e, me, other) {
                             out[k] = t.0 | if flip { FLIP } else { 0 };
                             k += 1;
                             break;
@@ -142,30 +142,64 @@ fn continuation(a: &Surfel, b: &Surfel) -> Option<bool> {
     (sign * dot > 0.0).then_some(sign < 0.0)
 }
 
-/// Per pair of interfaces that meet at a junction edge, the share of their junction edges
-/// at which one continues the other ([`continuation`]: the region between them fills two of
-/// the edge's four voxels).
+/// Half the side of the window (lattice units, Chebyshev distance) over which
+/// [`Continuations`] counts a pair's junction edges: wide enough to hold a stretch of a
+/// junction curve with its steps, small next to a chunked run's halo, which it adds to.
+const CONTINUATION_WINDOW: u32 = 6;
+
+/// Two interfaces that meet at a junction edge, named by their label pairs so that the
+/// name is the same in any chunk of the volume: `(lower, higher)`.
+type PairKey = ([u32; 2], [u32; 2]);
+
+/// The label pair of a surfel's interface, lower label first.
+fn labels_of(s: &Surfel) -> [u32; 2] {
+    let [a, b] = s.labels;
+    [a.min(b), a.max(b)]
+}
+
+/// The key of the unordered pair of the interfaces of two surfels.
+fn pair_key(a: &Surfel, b: &Surfel) -> PairKey {
+    let (p, q) = (labels_of(a), labels_of(b));
+    (p.min(q), p.max(q))
+}
+
+/// Per junction edge, each pair of its interfaces with the share of the junction edges
+/// near it (within [`CONTINUATION_WINDOW`]) that hold the pair and at which one of the two
+/// continues the other ([`continuation`]: the region between them fills two of the edge's
+/// four voxels).
 ///
 /// Why: along a junction curve the staircase makes every pair of its interfaces coplanar
 /// here and there. The pair that continues each other in the geometry (the two caps of a
 /// split ball, whose region between them spans 180 degrees) does so at most of its edges;
 /// the others (a cap and the cut disc, at 90 degrees) only where the digital curve steps.
 /// Linking those would diffuse the disc's normal into the sphere and back, and sink the
-/// junction along the disc's normal.
-struct Continuations(HashMap<(u32, u32), f64>);
+/// junction along the disc's normal. Counted in a window, not over the whole surface, so
+/// that a chunk with a halo a window wider than the diffusion's reach decides as the whole
+/// volume does.
+struct Continuations {
+    /// The junction edges, ascending.
+    edges: Vec<u32>,
+    /// Per junction edge, the end of its pairs in `pairs`.
+    ends: Vec<u32>,
+    /// Each junction edge's pairs, with their share in the window.
+    pairs: Vec<(PairKey, f32)>,
+}
 
 impl Continuations {
     fn new(surface: &DigitalSurface) -> Self {
         let surfels = surface.surfels();
-        let votes: Vec<((u32, u32), bool)> = (0..surface.num_edges())
+        // Each junction edge: its id, its lower corner, and its pairs with whether they
+        // continue each other there.
+        type Votes = Vec<(PairKey, bool)>;
+        let junctions: Vec<(u32, [u32; 3], Votes)> = (0..surface.num_edges())
             .into_par_iter()
-            .flat_map_iter(|e| {
+            .filter_map(|e| {
                 let others = surface.edge_surfels(EdgeId(e as u32));
-                let mut out = Vec::new();
-                let i0 = others.first().map(|s| surfels[s.index()].interface);
-                if others.iter().all(|s| Some(surfels[s.index()].interface) == i0) {
-                    return out;
+                let i0 = surfels[others.first()?.index()].interface;
+                if others.iter().all(|s| surfels[s.index()].interface == i0) {
+                    return None;
                 }
+                let mut votes: Votes = Vec::new();
                 for (i, a) in others.iter().enumerate() {
                     let a = &surfels[a.index()];
                     for b in &others[..i] {
@@ -173,45 +207,71 @@ impl Continuations {
                         if a.interface == b.interface {
                             continue;
                         }
-                        let key = pair(a.interface, b.interface);
+                        let key = pair_key(a, b);
                         let continued = continuation(a, b).is_some();
-                        match out.iter_mut().find(|(k, _)| *k == key) {
+                        match votes.iter_mut().find(|(k, _)| *k == key) {
                             Some((_, c)) => *c |= continued,
-                            None => out.push((key, continued)),
+                            None => votes.push((key, continued)),
                         }
                     }
                 }
-                out
+                let corner = surface.vertex_corner(surface.edges()[e].vertices[0]);
+                Some((e as u32, corner, votes))
             })
             .collect();
-        let mut counts: HashMap<(u32, u32), (u32, u32)> = HashMap::new();
-        for (key, continued) in votes {
-            let c = counts.entry(key).or_default();
-            c.0 += u32::from(continued);
-            c.1 += 1;
+        // The junction edges by cell of the window's size.
+        let w = CONTINUATION_WINDOW;
+        let cell = |c: [u32; 3]| c.map(|x| x / w);
+        let mut grid: HashMap<[u32; 3], Vec<u32>> = HashMap::new();
+        for (i, (_, corner, _)) in junctions.iter().enumerate() {
+            grid.entry(cell(*corner)).or_default().push(i as u32);
         }
-        Continuations(counts.into_iter().map(|(k, (c, n))| (k, f64::from(c) / f64::from(n))).collect())
+        let shares: Vec<Vec<(PairKey, f32)>> = junctions
+            .par_iter()
+            .map(|(_, corner, votes)| {
+                let mut counts: Vec<(PairKey, u32, u32)> = votes.iter().map(|(k, _)| (*k, 0, 0)).collect();
+                let [cx, cy, cz] = cell(*corner);
+                for x in cx.saturating_sub(1)..=cx + 1 {
+                    for y in cy.saturating_sub(1)..=cy + 1 {
+                        for z in cz.saturating_sub(1)..=cz + 1 {
+                            for &j in grid.get(&[x, y, z]).map_or(&[][..], Vec::as_slice) {
+                                let (_, other, theirs) = &junctions[j as usize];
+                                if (0..3).any(|k| corner[k].abs_diff(other[k]) > w) {
+                                    continue;
+                                }
+                                for (key, continued) in theirs {
+                                    if let Some(c) = counts.iter_mut().find(|(k, ..)| k == key) {
+                                        c.1 += u32::from(*continued);
+                                        c.2 += 1;
+                                    }
+                                }
+                            }
+                        }
+                    }
+                }
+                counts.into_iter().map(|(k, c, n)| (k, c as f32 / n.max(1) as f32)).collect()
+            })
+            .collect();
+        let mut ends = Vec::with_capacity(junctions.len());
+        let mut pairs = Vec::new();
+        for s in shares {
+            pairs.extend(s);
+            ends.push(pairs.len() as u32);
+        }
+        Continuations { edges: junctions.iter().map(|j| j.0).collect(), ends, pairs }
     }
 
-    fn share(&self, a: InterfaceId, b: InterfaceId) -> f64 {
-        self.0.get(&pair(a, b)).copied().unwrap_or(0.0)
+    /// Whether the pair of `a` and `b` (surfels of two interfaces at the junction edge
+    /// `e`) continues each other at least as often near `e` as any other pair of the
+    /// edge's interfaces.
+    fn dominant(&self, e: EdgeId, a: &Surfel, b: &Surfel) -> bool {
+        let Ok(i) = self.edges.binary_search(&e.0) else { return false };
+        let start = if i == 0 { 0 } else { self.ends[i - 1] as usize };
+        let pairs = &self.pairs[start..self.ends[i] as usize];
+        let key = pair_key(a, b);
+        let Some(&(_, mine)) = pairs.iter().find(|(k, _)| *k == key) else { return false };
+        pairs.iter().all(|&(_, share)| share <= mine)
     }
-
-    /// Whether the pair `(a, b)` continues each other at least as often as any other pair
-    /// of the interfaces of the junction edge whose surfels are `at`.
-    fn dominant(&self, surface: &DigitalSurface, at: &[SurfelId], a: InterfaceId, b: InterfaceId) -> bool {
-        let mine = self.share(a, b);
-        let interfaces = at.iter().map(|s| surface.surfel(*s).interface);
-        interfaces
-            .clone()
-            .enumerate()
-            .all(|(i, p)| interfaces.clone().take(i).all(|q| p == q || self.share(p, q) <= mine))
-    }
-}
-
-/// The key of an unordered pair of interfaces.
-fn pair(a: InterfaceId, b: InterfaceId) -> (u32, u32) {
-    (a.0.min(b.0), a.0.max(b.0))
 }
 
 /// Normals re-estimated from given vertex positions, cheaply: each quad's vector area
