@@ -22,8 +22,14 @@ use crate::progress::Progress;
 use crate::request::{SolveRequest, SolveStart};
 use crate::stencil::MatrixFreeOperator;
 use crate::stencil::CHUNK;
-use crate::vecops::{dot, norm, tail_estimate};
+use crate::vecops::{dot, norm, tail_estimate_over};
 use voxreg_normals::Interrupt;
+
+/// The iterations over which the projected descent's stopping estimate measures its
+/// reduction rate, and the cap on that rate: its residual zigzags, and over 5 iterations
+/// the rate read low enough on a small open surface to stop it at twice the tolerance.
+const DESCENT_RATE_WINDOW: usize = 20;
+const DESCENT_RATE_CAP: f64 = 0.999;
 
 /// Parameters of [`BoundedSolver`].
 #[derive(Copy, Clone, Debug, PartialEq, serde::Serialize)]
@@ -424,7 +430,7 @@ impl BoundedSolver {
             let rp_norm = norm(&rp);
             residuals.push(rp_norm);
             if let Some(c) = correction {
-                s.estimate = 2.0 * tail_estimate(c, &residuals[residuals.len().saturating_sub(6)..]);
+                s.estimate = 2.0 * tail_estimate_over(c, &residuals, DESCENT_RATE_WINDOW, DESCENT_RATE_CAP);
                 progress(&Progress {
                     iteration: s.iterations,
                     energy: s.energy,

