@@ -3,7 +3,7 @@
 
 use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
-use std::collections::HashMap;
+use rustc_hash::FxHashMap as HashMap;
 
 use voxreg_digisurf::{DigitalSurface, EdgeId, Surfel, SurfelId};
 
@@ -219,43 +219,83 @@ impl Continuations {
                 Some((e as u32, corner, votes))
             })
             .collect();
-        // The junction edges by cell of the window's size.
+        // Each pair at each junction edge, the pairs named by dense ids, and those records
+        // by pair and cell of the window's size: an edge's window is scanned for its own
+        // pairs only.
+        let mut ids: HashMap<PairKey, u32> = HashMap::default();
+        let records: Vec<(u32, [u32; 3], bool)> = junctions
+            .iter()
+            .flat_map(|(_, corner, votes)| {
+                votes.iter().map(move |(key, continued)| (key, *corner, *continued))
+            })
+            .map(|(key, corner, continued)| {
+                let n = ids.len() as u32;
+                (*ids.entry(*key).or_insert(n), corner, continued)
+            })
+            .collect();
         let w = CONTINUATION_WINDOW;
         let cell = |c: [u32; 3]| c.map(|x| x / w);
-        let mut grid: HashMap<[u32; 3], Vec<u32>> = HashMap::new();
-        for (i, (_, corner, _)) in junctions.iter().enumerate() {
-            grid.entry(cell(*corner)).or_default().push(i as u32);
+        // The records sorted by pair and cell, in runs (groups) of one pair and cell: a
+        // group's records share the 27 groups their windows can reach.
+        let mut keyed: Vec<(u32, [u32; 3], u32)> =
+            records.iter().enumerate().map(|(r, &(id, corner, _))| (id, cell(corner), r as u32)).collect();
+        keyed.par_sort_unstable();
+        let order: Vec<u32> = keyed.iter().map(|k| k.2).collect();
+        let sorted: Vec<([u32; 3], bool)> =
+            order.iter().map(|&r| (records[r as usize].1, records[r as usize].2)).collect();
+        let mut groups: Vec<(u32, [u32; 3], u32)> = Vec::new(); // pair, cell, start in `order`
+        let mut index: HashMap<(u32, [u32; 3]), u32> = HashMap::default();
+        for (i, &(id, c, _)) in keyed.iter().enumerate() {
+            if groups.last().is_none_or(|g| (g.0, g.1) != (id, c)) {
+                index.insert((id, c), groups.len() as u32);
+                groups.push((id, c, i as u32));
+            }
         }
-        let shares: Vec<Vec<(PairKey, f32)>> = junctions
-            .par_iter()
-            .map(|(_, corner, votes)| {
-                let mut counts: Vec<(PairKey, u32, u32)> = votes.iter().map(|(k, _)| (*k, 0, 0)).collect();
-                let [cx, cy, cz] = cell(*corner);
+        drop(keyed);
+        let group_range = |g: usize| {
+            let end = groups.get(g + 1).map_or(order.len(), |n| n.2 as usize);
+            groups[g].2 as usize..end
+        };
+        let mut shares = vec![0f32; records.len()];
+        let per_group: Vec<Vec<(u32, f32)>> = (0..groups.len())
+            .into_par_iter()
+            .map(|g| {
+                let (id, [cx, cy, cz], _) = groups[g];
+                let mut near = Vec::with_capacity(27);
                 for x in cx.saturating_sub(1)..=cx + 1 {
                     for y in cy.saturating_sub(1)..=cy + 1 {
                         for z in cz.saturating_sub(1)..=cz + 1 {
-                            for &j in grid.get(&[x, y, z]).map_or(&[][..], Vec::as_slice) {
-                                let (_, other, theirs) = &junctions[j as usize];
-                                if (0..3).any(|k| corner[k].abs_diff(other[k]) > w) {
-                                    continue;
-                                }
-                                for (key, continued) in theirs {
-                                    if let Some(c) = counts.iter_mut().find(|(k, ..)| k == key) {
-                                        c.1 += u32::from(*continued);
-                                        c.2 += 1;
-                                    }
-                                }
+                            if let Some(&n) = index.get(&(id, [x, y, z])) {
+                                near.push(group_range(n as usize));
                             }
                         }
                     }
                 }
-                counts.into_iter().map(|(k, c, n)| (k, c as f32 / n.max(1) as f32)).collect()
+                group_range(g)
+                    .map(|i| {
+                        let (corner, _) = sorted[i];
+                        let (mut continued, mut all) = (0u32, 0u32);
+                        for range in &near {
+                            for &(other, c) in &sorted[range.clone()] {
+                                if (0..3).all(|k| corner[k].abs_diff(other[k]) <= w) {
+                                    continued += u32::from(c);
+                                    all += 1;
+                                }
+                            }
+                        }
+                        (order[i], continued as f32 / all.max(1) as f32)
+                    })
+                    .collect()
             })
             .collect();
+        for (r, share) in per_group.into_iter().flatten() {
+            shares[r as usize] = share;
+        }
         let mut ends = Vec::with_capacity(junctions.len());
-        let mut pairs = Vec::new();
-        for s in shares {
-            pairs.extend(s);
+        let mut pairs = Vec::with_capacity(records.len());
+        for (_, _, votes) in &junctions {
+            let at = pairs.len();
+            pairs.extend(votes.iter().zip(&shares[at..]).map(|((key, _), share)| (*key, *share)));
             ends.push(pairs.len() as u32);
         }
         Continuations { edges: junctions.iter().map(|j| j.0).collect(), ends, pairs }
