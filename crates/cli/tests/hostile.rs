@@ -168,6 +168,21 @@ fn check_survives_one_huge_triangle_among_tiny_ones() {
     assert!(start.elapsed().as_secs() < 20);
 }
 
+/// Found by the mesh fuzzer: faces with coincident and collinear corners (one at 1e308)
+/// made the exact intersection test fan two triangles around each other's shared
+/// corners without end (a stack overflow). Now the check finishes and reports.
+#[test]
+fn check_survives_degenerate_faces_sharing_corners() {
+    let dir = tempfile::tempdir().unwrap();
+    let obj = dir.path().join("degenerate.obj");
+    // The fuzz seed's first byte picks the format (even: OBJ); the rest is the file.
+    let seed = include_bytes!("../../../fuzz/seeds/mesh/degenerate_fan.obj.bin");
+    std::fs::write(&obj, &seed[1..]).unwrap();
+    let out = voxreg(&["check", s(&obj)]);
+    assert_eq!(out.status.code(), Some(1), "{}", stderr(&out));
+    assert!(stderr(&out).contains("self-intersections"), "{}", stderr(&out));
+}
+
 /// Regularizes `dims` labels of `f` with `--split regions --manifold` and runs
 /// `voxreg check` on each file: (self-intersecting pairs, check passed) per file.
 fn split_and_check(dims: [usize; 3], f: impl Fn(usize, usize, usize) -> u32) -> Vec<(String, bool)> {

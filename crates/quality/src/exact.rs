@@ -257,15 +257,24 @@ pub fn triangles_meet_off_shared(s: [(u32, DVec3); 3], t: [(u32, DVec3); 3]) -> 
 /// neighbour's corner inside a triangle that does not have it as a corner): the pieces
 /// are then tested with [`triangles_meet_off_shared`].
 pub(crate) fn pieces_meet(s: [(u32, DVec3); 3], t: [(u32, DVec3); 3], shared: &[u32]) -> bool {
+    pieces_meet_fanned(s, t, shared, &[])
+}
+
+/// [`pieces_meet`], never fanning again around a corner in `fanned`: on degenerate faces
+/// (corners collinear or coincident) a fan around one corner can leave another inside a
+/// piece and the fan around that one the first, without end. Each fan adds a distinct
+/// shared corner, so the depth is at most the number of shared corners.
+fn pieces_meet_fanned(s: [(u32, DVec3); 3], t: [(u32, DVec3); 3], shared: &[u32], fanned: &[u32]) -> bool {
     for (x, y) in [(s, t), (t, s)] {
         let inside = x.iter().find(|v| {
-            shared.contains(&v.0) && !y.iter().any(|w| w.0 == v.0) && {
+            shared.contains(&v.0) && !fanned.contains(&v.0) && !y.iter().any(|w| w.0 == v.0) && {
                 let hull = reduce(&y.map(|w| w.1));
                 simplices_meet(&hull, &[v.1])
             }
         });
         if let Some(&p) = inside {
-            return (0..3).any(|i| pieces_meet(x, [p, y[i], y[(i + 1) % 3]], shared));
+            let fanned: Vec<u32> = fanned.iter().copied().chain([p.0]).collect();
+            return (0..3).any(|i| pieces_meet_fanned(x, [p, y[i], y[(i + 1) % 3]], shared, &fanned));
         }
     }
     triangles_meet_off_shared(s, t)
