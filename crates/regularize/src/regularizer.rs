@@ -393,6 +393,11 @@ impl Regularizer {
         }
 
         interrupt.check()?;
+        // The sweeps' work arrays are not read again in this run: let go before the finish,
+        // which makes the lattice positions (otherwise the fast pipeline's peak).
+        if let Solver::Sweeps(s) = &mut *solver {
+            s.release_work();
+        }
         let energy = stages::finish(&surface, params, &mut positions, &field, &targets, solve.weights())?;
         let report = Report {
             params: params.clone(),

@@ -142,6 +142,17 @@ impl SweepsSolver {
         self.interrupt = interrupt;
     }
 
+    /// Lets go of the work arrays (a solve makes them again): after a run's last solve,
+    /// so that its finish does not hold them beside the positions it makes.
+    pub(crate) fn release_work(&mut self) {
+        for v in [&mut self.face_normals, &mut self.rhs, &mut self.disp, &mut self.next, &mut self.resid] {
+            *v = Vec::new();
+        }
+        self.dinv = Vec::new();
+        self.fair = Vec::new();
+        self.partials = Vec::new();
+    }
+
     /// The surfel graph of the re-estimates ([`voxreg_normals::Diffused`]), built on first
     /// use and kept.
     pub(crate) fn graph(&mut self, surface: &DigitalSurface) -> &QuadGraph {
