@@ -5,7 +5,7 @@ use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 use rustc_hash::FxHashMap as HashMap;
 
-use voxreg_digisurf::{DigitalSurface, EdgeId, Surfel, SurfelId};
+use voxreg_digisurf::{DigitalSurface, EdgeId, EdgeKind, Surfel, SurfelId};
 
 use crate::error::NormalError;
 use crate::estimator::NormalEstimator;
@@ -194,6 +194,10 @@ impl Continuations {
         let junctions: Vec<(u32, [u32; 3], Votes)> = (0..surface.num_edges())
             .into_par_iter()
             .filter_map(|e| {
+                // A regular edge (two surfels, closed side) has one interface.
+                if surface.edges()[e].kind == EdgeKind::Regular {
+                    return None;
+                }
                 let others = surface.edge_surfels(EdgeId(e as u32));
                 let i0 = surfels[others.first()?.index()].interface;
                 if others.iter().all(|s| surfels[s.index()].interface == i0) {
@@ -219,53 +223,43 @@ impl Continuations {
                 Some((e as u32, corner, votes))
             })
             .collect();
-        // Each pair at each junction edge, the pairs named by dense ids, and those records
-        // by pair and cell of the window's size: an edge's window is scanned for its own
-        // pairs only.
-        let mut ids: HashMap<PairKey, u32> = HashMap::default();
-        let records: Vec<(u32, [u32; 3], bool)> = junctions
-            .iter()
-            .flat_map(|(_, corner, votes)| {
-                votes.iter().map(move |(key, continued)| (key, *corner, *continued))
-            })
-            .map(|(key, corner, continued)| {
-                let n = ids.len() as u32;
-                (*ids.entry(*key).or_insert(n), corner, continued)
-            })
-            .collect();
+        // Each pair at each junction edge (its records, in the order of `junctions`),
+        // sorted by pair and cell of the window's size, in runs (groups) of one pair and
+        // cell: an edge's window is scanned for its own pair only, and a group's records
+        // share the 27 groups their windows can reach.
         let w = CONTINUATION_WINDOW;
         let cell = |c: [u32; 3]| c.map(|x| x / w);
-        // The records sorted by pair and cell, in runs (groups) of one pair and cell: a
-        // group's records share the 27 groups their windows can reach.
-        let mut keyed: Vec<(u32, [u32; 3], u32)> =
-            records.iter().enumerate().map(|(r, &(id, corner, _))| (id, cell(corner), r as u32)).collect();
-        keyed.par_sort_unstable();
-        let order: Vec<u32> = keyed.iter().map(|k| k.2).collect();
-        let sorted: Vec<([u32; 3], bool)> =
-            order.iter().map(|&r| (records[r as usize].1, records[r as usize].2)).collect();
-        let mut groups: Vec<(u32, [u32; 3], u32)> = Vec::new(); // pair, cell, start in `order`
-        let mut index: HashMap<(u32, [u32; 3]), u32> = HashMap::default();
-        for (i, &(id, c, _)) in keyed.iter().enumerate() {
-            if groups.last().is_none_or(|g| (g.0, g.1) != (id, c)) {
-                index.insert((id, c), groups.len() as u32);
-                groups.push((id, c, i as u32));
+        let mut sorted: Vec<(PairKey, [u32; 3], [u32; 3], bool, u32)> = junctions
+            .iter()
+            .flat_map(|(_, corner, votes)| {
+                votes.iter().map(move |&(key, continued)| (key, *corner, continued))
+            })
+            .enumerate()
+            .map(|(r, (key, corner, continued))| (key, cell(corner), corner, continued, r as u32))
+            .collect();
+        sorted.par_sort_unstable_by_key(|x| (x.0, x.1, x.4));
+        let mut groups: Vec<(PairKey, [u32; 3], u32)> = Vec::new(); // pair, cell, start in `sorted`
+        let mut index: HashMap<(PairKey, [u32; 3]), u32> = HashMap::default();
+        for (i, &(key, c, ..)) in sorted.iter().enumerate() {
+            if groups.last().is_none_or(|g| (g.0, g.1) != (key, c)) {
+                index.insert((key, c), groups.len() as u32);
+                groups.push((key, c, i as u32));
             }
         }
-        drop(keyed);
         let group_range = |g: usize| {
-            let end = groups.get(g + 1).map_or(order.len(), |n| n.2 as usize);
+            let end = groups.get(g + 1).map_or(sorted.len(), |n| n.2 as usize);
             groups[g].2 as usize..end
         };
-        let mut shares = vec![0f32; records.len()];
+        let mut shares = vec![0f32; sorted.len()];
         let per_group: Vec<Vec<(u32, f32)>> = (0..groups.len())
             .into_par_iter()
             .map(|g| {
-                let (id, [cx, cy, cz], _) = groups[g];
+                let (key, [cx, cy, cz], _) = groups[g];
                 let mut near = Vec::with_capacity(27);
                 for x in cx.saturating_sub(1)..=cx + 1 {
                     for y in cy.saturating_sub(1)..=cy + 1 {
                         for z in cz.saturating_sub(1)..=cz + 1 {
-                            if let Some(&n) = index.get(&(id, [x, y, z])) {
+                            if let Some(&n) = index.get(&(key, [x, y, z])) {
                                 near.push(group_range(n as usize));
                             }
                         }
@@ -273,17 +267,17 @@ impl Continuations {
                 }
                 group_range(g)
                     .map(|i| {
-                        let (corner, _) = sorted[i];
+                        let (_, _, corner, _, r) = sorted[i];
                         let (mut continued, mut all) = (0u32, 0u32);
                         for range in &near {
-                            for &(other, c) in &sorted[range.clone()] {
+                            for &(_, _, other, c, _) in &sorted[range.clone()] {
                                 if (0..3).all(|k| corner[k].abs_diff(other[k]) <= w) {
                                     continued += u32::from(c);
                                     all += 1;
                                 }
                             }
                         }
-                        (order[i], continued as f32 / all.max(1) as f32)
+                        (r, continued as f32 / all.max(1) as f32)
                     })
                     .collect()
             })
@@ -292,7 +286,7 @@ impl Continuations {
             shares[r as usize] = share;
         }
         let mut ends = Vec::with_capacity(junctions.len());
-        let mut pairs = Vec::with_capacity(records.len());
+        let mut pairs = Vec::with_capacity(shares.len());
         for (_, _, votes) in &junctions {
             let at = pairs.len();
             pairs.extend(votes.iter().zip(&shares[at..]).map(|((key, _), share)| (*key, *share)));
