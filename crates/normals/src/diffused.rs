@@ -151,6 +151,11 @@ const CONTINUATION_WINDOW: u32 = 6;
 /// name is the same in any chunk of the volume: `(lower, higher)`.
 type PairKey = ([u32; 2], [u32; 2]);
 
+/// A pair of interfaces at a junction edge, for [`Continuations`]: the pair, the window
+/// cell of the edge, the edge's lower corner, whether one continues the other there, and
+/// the record's number (its place among all edges' pairs).
+type Record = (PairKey, [u32; 3], [u32; 3], bool, u32);
+
 /// The label pair of a surfel's interface, lower label first.
 fn labels_of(s: &Surfel) -> [u32; 2] {
     let [a, b] = s.labels;
@@ -229,7 +234,7 @@ impl Continuations {
         // share the 27 groups their windows can reach.
         let w = CONTINUATION_WINDOW;
         let cell = |c: [u32; 3]| c.map(|x| x / w);
-        let mut sorted: Vec<(PairKey, [u32; 3], [u32; 3], bool, u32)> = junctions
+        let mut sorted: Vec<Record> = junctions
             .iter()
             .flat_map(|(_, corner, votes)| {
                 votes.iter().map(move |&(key, continued)| (key, *corner, continued))
