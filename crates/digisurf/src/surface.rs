@@ -943,6 +943,13 @@ impl DigitalSurface {
         self.vertex_surfels.get(v.index())
     }
 
+    /// Every vertex's incident surfels ([`DigitalSurface::vertex_surfels`]) as one flat
+    /// list with offsets: for arrays laid out slot by slot beside it, which then need
+    /// neither offsets nor surfel ids of their own.
+    pub fn vertex_surfel_lists(&self) -> &Lists<SurfelId> {
+        &self.vertex_surfels
+    }
+
     /// Whether `v` lies on the rim of an open surface.
     pub fn is_boundary_vertex(&self, v: VertexId) -> bool {
         self.boundary_vertex[v.index()]

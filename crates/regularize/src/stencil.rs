@@ -31,10 +31,63 @@ pub(crate) struct FaceSlot {
 pub(crate) struct Stencil {
     face_offsets: Vec<u32>,
     face_slots: Vec<FaceSlot>,
-    /// Barycenter neighbours (all vertices, rim ones included: the mask, not the rim,
-    /// decides who is in whose barycenter).
-    fair_offsets: Vec<u32>,
-    fair_nbrs: Vec<u32>,
+    fair: FairNeighbours,
+}
+
+/// Every vertex's barycenter neighbours (all vertices, rim ones included: the mask, not
+/// the rim, decides who is in whose barycenter).
+#[derive(Clone, Debug)]
+pub(crate) struct FairNeighbours {
+    offsets: Vec<u32>,
+    nbrs: Vec<u32>,
+}
+
+impl FairNeighbours {
+    /// The neighbours of every vertex of `surface` that the fairness `mask` (if any) keeps.
+    pub(crate) fn new(
+        surface: &DigitalSurface,
+        mask: Option<&FairnessMask>,
+    ) -> Result<Self, RegularizeError> {
+        let n = surface.num_vertices();
+        let vid = |v: usize| VertexId(v as u32);
+        let (offsets, nbrs) = match mask {
+            None => {
+                let offs = offsets(n, |v| surface.vertex_neighbours(vid(v)).len())?;
+                let nbrs = fill(&offs, |v, out: &mut [u32]| {
+                    for (o, w) in out.iter_mut().zip(surface.vertex_neighbours(vid(v))) {
+                        *o = w.0;
+                    }
+                });
+                (offs, nbrs)
+            }
+            Some(m) => {
+                let offs = offsets(n, |v| m.kept_neighbours(surface, vid(v)).count())?;
+                let nbrs = fill(&offs, |v, out: &mut [u32]| {
+                    for (o, w) in out.iter_mut().zip(m.kept_neighbours(surface, vid(v))) {
+                        *o = w.0;
+                    }
+                });
+                (offs, nbrs)
+            }
+        };
+        Ok(FairNeighbours { offsets, nbrs })
+    }
+
+    /// Number of vertices.
+    pub(crate) fn len(&self) -> usize {
+        self.offsets.len() - 1
+    }
+
+    /// The barycenter neighbours of `v`.
+    #[inline(always)]
+    pub(crate) fn of(&self, v: usize) -> &[u32] {
+        &self.nbrs[self.offsets[v] as usize..self.offsets[v + 1] as usize]
+    }
+
+    /// Bytes held.
+    pub(crate) fn bytes(&self) -> usize {
+        4 * (self.offsets.len() + self.nbrs.len())
+    }
 }
 
 /// The energy's operator `H` as the iterative solvers apply it, matrix-free: the
@@ -129,7 +182,7 @@ fn offsets(n: usize, len: impl Fn(usize) -> usize + Sync) -> Result<Vec<u32>, Re
 }
 
 /// A flat array with `offsets`, each vertex's slice filled by `f(v, slice)`, in parallel.
-fn fill<T: Copy + Default + Send>(offsets: &[u32], f: impl Fn(usize, &mut [T]) + Sync) -> Vec<T> {
+pub(crate) fn fill<T: Copy + Default + Send>(offsets: &[u32], f: impl Fn(usize, &mut [T]) + Sync) -> Vec<T> {
     let n = offsets.len() - 1;
     let mut out = vec![T::default(); offsets[n] as usize];
     let mut chunks = Vec::with_capacity(n.div_ceil(CHUNK));
@@ -169,27 +222,7 @@ impl Stencil {
                 };
             }
         });
-        let (fair_offsets, fair_nbrs) = match mask {
-            None => {
-                let offs = offsets(n, |v| surface.vertex_neighbours(vid(v)).len())?;
-                let nbrs = fill(&offs, |v, out: &mut [u32]| {
-                    for (o, w) in out.iter_mut().zip(surface.vertex_neighbours(vid(v))) {
-                        *o = w.0;
-                    }
-                });
-                (offs, nbrs)
-            }
-            Some(m) => {
-                let offs = offsets(n, |v| m.kept_neighbours(surface, vid(v)).count())?;
-                let nbrs = fill(&offs, |v, out: &mut [u32]| {
-                    for (o, w) in out.iter_mut().zip(m.kept_neighbours(surface, vid(v))) {
-                        *o = w.0;
-                    }
-                });
-                (offs, nbrs)
-            }
-        };
-        Ok(Stencil { face_offsets, face_slots, fair_offsets, fair_nbrs })
+        Ok(Stencil { face_offsets, face_slots, fair: FairNeighbours::new(surface, mask)? })
     }
 
     /// Number of vertices.
@@ -215,12 +248,13 @@ impl Stencil {
 
     #[inline(always)]
     pub(crate) fn fair_neighbours(&self, v: usize) -> &[u32] {
-        &self.fair_nbrs[self.fair_offsets[v] as usize..self.fair_offsets[v + 1] as usize]
+        self.fair.of(v)
     }
 
     /// Bytes of connectivity read by one product (for the bandwidth model).
     pub(crate) fn bytes(&self) -> usize {
-        4 * (self.face_offsets.len() + self.fair_offsets.len() + self.fair_nbrs.len())
+        4 * self.face_offsets.len()
+            + self.fair.bytes()
             + std::mem::size_of::<FaceSlot>() * self.face_slots.len()
     }
 

@@ -5,14 +5,14 @@ use std::time::Instant;
 use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
 use serde::Serialize;
-use voxreg_digisurf::{DigitalSurface, VertexId};
+use voxreg_digisurf::{DigitalSurface, Lists, SurfelId, VertexId};
 use voxreg_normals::{Interrupt, QuadGraph};
 
 use crate::energy::Energy;
 use crate::error::RegularizeError;
 use crate::info::{SolveTimings, SweepsInfo};
 use crate::progress::Progress;
-use crate::stencil::{Stencil, CHUNK};
+use crate::stencil::{fill, FairNeighbours, CHUNK};
 use crate::vecops::sym_inverse;
 use crate::weights::FairnessMask;
 
@@ -82,7 +82,7 @@ impl SweepsParams {
 pub struct SweepsSolver {
     params: SweepsParams,
     /// The connectivity, built at the first solve (for its energy's fairness mask).
-    stencil: Option<Stencil>,
+    stencil: Option<Corners>,
     mask: Option<FairnessMask>,
     spacing: DVec3,
     graph: Option<QuadGraph>,
@@ -99,6 +99,53 @@ pub struct SweepsSolver {
     next: Vec<Vec3A>,
     resid: Vec<Vec3A>,
     partials: Vec<(f64, f64)>,
+}
+
+/// The sweeps' connectivity: per slot of the surface's vertex-surfel lists
+/// ([`DigitalSurface::vertex_surfel_lists`], which give the faces), the slot's corner's
+/// two neighbours in its quad (previous, next); and the barycenter neighbours. 8 bytes a
+/// slot beside the surface's 4, where the operator's own stencil holds 12 and offsets.
+#[derive(Clone, Debug)]
+struct Corners {
+    pairs: Vec<[u32; 2]>,
+    fair: FairNeighbours,
+}
+
+impl Corners {
+    fn new(surface: &DigitalSurface, mask: Option<&FairnessMask>) -> Result<Self, RegularizeError> {
+        let lists = surface.vertex_surfel_lists();
+        let pairs = fill(lists.offsets(), |v, out: &mut [[u32; 2]]| {
+            for (pair, f) in out.iter_mut().zip(lists.get(v)) {
+                let quad = surface.surfel(*f).vertices;
+                let i = quad.iter().position(|w| w.index() == v).unwrap_or(0);
+                *pair = [quad[(i + 3) % 4].0, quad[(i + 1) % 4].0];
+            }
+        });
+        Ok(Corners { pairs, fair: FairNeighbours::new(surface, mask)? })
+    }
+
+    fn len(&self) -> usize {
+        self.fair.len()
+    }
+
+    fn bytes(&self) -> usize {
+        8 * self.pairs.len() + self.fair.bytes()
+    }
+}
+
+/// The faces around vertex `i`: each as (face, previous corner, next corner).
+#[inline(always)]
+fn faces<'a>(
+    lists: &'a Lists<SurfelId>,
+    pairs: &'a [[u32; 2]],
+    i: usize,
+) -> impl Iterator<Item = (usize, usize, usize)> + 'a {
+    let offsets = lists.offsets();
+    let range = offsets[i] as usize..offsets[i + 1] as usize;
+    lists.items()[range.clone()]
+        .iter()
+        .zip(&pairs[range])
+        .map(|(f, [p, q])| (f.index(), *p as usize, *q as usize))
 }
 
 /// `m x` for a symmetric `m` stored as `[xx, yy, zz, xy, xz, yz]`, in `f32`, as three
@@ -165,6 +212,7 @@ impl SweepsSolver {
     fn prepare(&mut self, energy: &Energy<'_>) {
         let stencil = self.stencil.as_ref().expect("built before");
         let surface = energy.surface();
+        let (lists, pairs) = (surface.vertex_surfel_lists(), &stencil.pairs[..]);
         let (input, normals) = (energy.input(), energy.normals());
         let n = stencil.len();
         self.face_normals.resize(normals.len(), Vec3A::ZERO);
@@ -173,7 +221,7 @@ impl SweepsSolver {
         });
         self.fair.resize(n, 0.0);
         self.fair.par_iter_mut().enumerate().for_each(|(v, c)| {
-            let deg = stencil.fair_neighbours(v).len();
+            let deg = stencil.fair.of(v).len();
             *c = if deg == 0 || surface.is_boundary_vertex(VertexId(v as u32)) {
                 0.0
             } else {
@@ -185,17 +233,17 @@ impl SweepsSolver {
         self.dinv.resize(n, [0.0; 6]);
         self.dinv.par_iter_mut().enumerate().for_each(|(i, out)| {
             let a = energy.alpha_at(i);
-            let nb = stencil.fair_neighbours(i);
+            let nb = stencil.fair.of(i);
             let mut f = f64::from(fair[i]) * nb.len() as f64;
             for &j in nb {
-                let dj = stencil.fair_neighbours(j as usize).len();
+                let dj = stencil.fair.of(j as usize).len();
                 if dj > 0 {
                     f += f64::from(fair[j as usize]) / dj as f64;
                 }
             }
             let mut d = [a + f, a + f, a + f, 0.0, 0.0, 0.0];
-            for s in stencil.faces(i) {
-                let m = 2.0 * m[s.face as usize].as_dvec3();
+            for (f, _, _) in faces(lists, pairs, i) {
+                let m = 2.0 * m[f].as_dvec3();
                 let m2 = m / 2.0;
                 d[0] += m.x * m2.x;
                 d[1] += m.y * m2.y;
@@ -210,7 +258,7 @@ impl SweepsSolver {
         // differences of positions taken in f64.
         self.resid.resize(n, Vec3A::ZERO);
         self.resid.par_iter_mut().enumerate().for_each(|(i, t)| {
-            let nb = stencil.fair_neighbours(i);
+            let nb = stencil.fair.of(i);
             *t = if fair[i] == 0.0 {
                 Vec3A::ZERO
             } else {
@@ -223,12 +271,12 @@ impl SweepsSolver {
         self.rhs.par_iter_mut().enumerate().for_each(|(i, g)| {
             let p = input[i];
             let mut acc = Vec3A::ZERO;
-            for s in stencil.faces(i) {
-                let m = m[s.face as usize];
-                let e = (2.0 * p - input[s.prev as usize] - input[s.next as usize]).as_vec3a();
+            for (f, prev, next) in faces(lists, pairs, i) {
+                let m = m[f];
+                let e = (2.0 * p - input[prev] - input[next]).as_vec3a();
                 acc += e.dot(m) * m;
             }
-            let nb = stencil.fair_neighbours(i);
+            let nb = stencil.fair.of(i);
             let sum: Vec3A = nb.iter().map(|&j| t[j as usize]).sum();
             *g = -(acc + nb.len() as f32 * t[i] - sum);
         });
@@ -256,13 +304,14 @@ impl SweepsSolver {
         let mask = energy.weights().and_then(|w| w.fairness.as_ref());
         if self.stencil.is_none() || mask != self.mask.as_ref() {
             let t = Instant::now();
-            self.stencil = Some(Stencil::new(surface, mask)?);
+            self.stencil = Some(Corners::new(surface, mask)?);
             self.mask = mask.cloned();
             self.structure_seconds += t.elapsed().as_secs_f64();
         }
         seconds.structure = std::mem::take(&mut self.structure_seconds);
         let t = Instant::now();
-        self.prepare(energy);
+        // The start becomes the displacement first: its f64 positions go before the
+        // solve's other arrays are made.
         self.disp.resize(n, Vec3A::ZERO);
         match start {
             Some(x) => {
@@ -270,12 +319,14 @@ impl SweepsSolver {
             }
             None => self.disp.fill(Vec3A::ZERO),
         }
+        self.prepare(energy);
         self.next.resize(n, Vec3A::ZERO);
         self.partials.resize(n.div_ceil(CHUNK), (0.0, 0.0));
         seconds.assemble = t.elapsed().as_secs_f64();
 
         let t = Instant::now();
         let stencil = self.stencil.as_ref().expect("built above");
+        let (lists, pairs) = (surface.vertex_surfel_lists(), &stencil.pairs[..]);
         let h = self.spacing.min_element();
         let (mut first, mut last, mut last_move) = (f64::NAN, f64::NAN, 0.0);
         let (m, fair, dinv, rhs) = (&self.face_normals[..], &self.fair[..], &self.dinv[..], &self.rhs[..]);
@@ -298,7 +349,7 @@ impl SweepsSolver {
                     *ti = if ci == 0.0 {
                         Vec3A::ZERO
                     } else {
-                        let nb = stencil.fair_neighbours(i);
+                        let nb = stencil.fair.of(i);
                         let sum: Vec3A = nb.iter().map(|&j| d[j as usize]).sum();
                         ci * (d[i] - sum / nb.len() as f32)
                     };
@@ -315,11 +366,11 @@ impl SweepsSolver {
                         let di = d[i];
                         let di2 = 2.0 * di;
                         let mut hx = alpha_at(i) * di;
-                        for s in stencil.faces(i) {
-                            let m = m[s.face as usize];
-                            hx += (di2 - d[s.prev as usize] - d[s.next as usize]).dot(m) * m;
+                        for (f, prev, next) in faces(lists, pairs, i) {
+                            let m = m[f];
+                            hx += (di2 - d[prev] - d[next]).dot(m) * m;
                         }
-                        let nb = stencil.fair_neighbours(i);
+                        let nb = stencil.fair.of(i);
                         let sum: Vec3A = nb.iter().map(|&j| t[j as usize]).sum();
                         hx += nb.len() as f32 * t[i] - sum;
                         let r = rhs[i] - hx;
@@ -341,6 +392,12 @@ impl SweepsSolver {
                 first = last;
             }
         }
+        let memory_bytes = stencil.bytes()
+            + 24 * self.dinv.len()
+            + 16 * self.face_normals.len()
+            + 4 * self.fair.len()
+            + 16 * (self.rhs.len() + 3 * self.disp.len())
+            + self.graph.as_ref().map_or(0, QuadGraph::memory_bytes);
         // The next value and the residuals are rebuilt by the next solve: freed before
         // the f64 outputs, so that the peak holds them or these, not both.
         self.next = Vec::new();
@@ -361,12 +418,6 @@ impl SweepsSolver {
         }
         x.par_iter_mut().zip(input).for_each(|(x, p)| *x = *p + *x);
         seconds.solve = t.elapsed().as_secs_f64();
-        let memory_bytes = stencil.bytes()
-            + 24 * self.dinv.len()
-            + 16 * self.face_normals.len()
-            + 4 * self.fair.len()
-            + 16 * (self.rhs.len() + 3 * self.disp.len())
-            + self.graph.as_ref().map_or(0, QuadGraph::memory_bytes);
         let relative_gradient = if first > 0.0 { last / first } else { 0.0 };
         Ok((
             x,
