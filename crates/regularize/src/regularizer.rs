@@ -11,7 +11,7 @@ use crate::error::RegularizeError;
 use crate::params::Params;
 use crate::progress::Progress;
 use crate::report::{NormalsReport, Report, StageTimes};
-use crate::solver::{Solver, SolverParams};
+use crate::solver::{Solver, SolverChoice, SolverParams};
 use crate::stages::{self, Event, RecentringInputs, Refine, Solve, Stage};
 
 /// The regularized positions and what produced them.
@@ -60,16 +60,28 @@ pub const BYTES_PER_SURFEL: u64 = 1_400;
 /// (`tests/memory.rs`), 1,310 on a 3-million-quad voxel scene.
 pub const BYTES_PER_SURFEL_CLAMPED: u64 = 2_100;
 
+/// [`BYTES_PER_SURFEL`] for a run of the sweeps solver (the fast preset), which builds
+/// no hierarchy and keeps its work arrays in `f32`: the resident memory a run adds
+/// measured at about 400 bytes a surfel (the digital surface included) on tissues of 1.5
+/// million surfels, 500 to 610 on surfaces of 80k to 130k (`tests/memory.rs`).
+pub const BYTES_PER_SURFEL_SWEEPS: u64 = 700;
+
 /// The part of a run's memory that does not grow with the surface, with a margin (the
 /// direct solver's factor budget on small surfaces, the threads' buffers).
 pub const BYTES_FIXED: u64 = 32 << 20;
 
 /// An upper estimate of the memory a run of `params` takes on a surface of `surfels`
 /// surfels, in bytes: [`BYTES_FIXED`] and [`BYTES_PER_SURFEL`] (or
-/// [`BYTES_PER_SURFEL_CLAMPED`]) per surfel for the solver's operator, hierarchy and
+/// [`BYTES_PER_SURFEL_CLAMPED`], [`BYTES_PER_SURFEL_SWEEPS`]) per surfel for the solver's operator, hierarchy and
 /// vectors, the normals and the refinement's work arrays.
 pub fn estimated_bytes(surfels: u64, params: &Params) -> u64 {
-    let per = if params.clamps() { BYTES_PER_SURFEL_CLAMPED } else { BYTES_PER_SURFEL };
+    let per = if params.clamps() {
+        BYTES_PER_SURFEL_CLAMPED
+    } else if params.solver.choice == SolverChoice::Sweeps {
+        BYTES_PER_SURFEL_SWEEPS
+    } else {
+        BYTES_PER_SURFEL
+    };
     surfels.saturating_mul(per).saturating_add(BYTES_FIXED)
 }
 

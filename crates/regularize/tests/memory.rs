@@ -32,6 +32,7 @@ fn params(name: &str) -> Params {
         "default" => Params::default(),
         "papers" => Params::papers(),
         "voxel art" => Params::voxel_art(),
+        "fast" => Params::fast(),
         "at" => {
             let mut p = Params::default();
             p.normals.estimator = Estimator::At;
@@ -106,6 +107,9 @@ fn runs_stay_within_the_memory_estimate() {
         ("split ball", "voxel art, at"),
         ("quartered ball", "default"),
         ("quartered ball", "at"),
+        ("sphere", "fast"),
+        ("split ball", "fast"),
+        ("quartered ball", "fast"),
     ];
     for (shape, preset) in cases {
         let Some((peak, estimate)) = measured(shape, preset) else {
