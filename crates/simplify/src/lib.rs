@@ -138,28 +138,51 @@ pub fn simplify_levels_reporting(
     let mut out = Vec::with_capacity(levels);
     // Each level is paired into quads on another thread while this one makes the next.
     let mut pending: Option<engine::Capture<'_>> = None;
+    // Outside the pool, a level is made on one of its threads and its progress reaches
+    // this one through a channel: the collapses' many small parallel batches are then
+    // forked from a worker, not each handed over to the pool and waited for. Inside it
+    // (a caller on a worker thread), that worker makes it.
+    let on_worker = rayon::current_thread_index().is_some();
     for (level, t) in targets.iter().enumerate() {
         let mut done = None;
-        let next = rayon::in_place_scope(|s| -> Result<_, SimplifyError> {
+        let mut next = None;
+        rayon::in_place_scope(|s| {
             if let Some(capture) = pending.take() {
                 let done = &mut done;
                 s.spawn(move |_| *done = Some(capture.finish()));
             }
-            report(level, Stage::Collapses, 0.0);
-            engine.run(t, &mut |f| report(level, Stage::Collapses, f))?;
-            report(level, Stage::Collapses, 1.0);
-            if options.quads {
-                report(level, Stage::Flips, 0.0);
-                engine.flip_for_quads()?;
-                report(level, Stage::Flips, 1.0);
+            let (engine, next) = (&mut engine, &mut next);
+            let mut make = move |send: &mut dyn FnMut(Stage, f64)| -> Result<_, SimplifyError> {
+                send(Stage::Collapses, 0.0);
+                engine.run(t, &mut |f| send(Stage::Collapses, f))?;
+                send(Stage::Collapses, 1.0);
+                if options.quads {
+                    send(Stage::Flips, 0.0);
+                    engine.flip_for_quads()?;
+                    send(Stage::Flips, 1.0);
+                }
+                send(Stage::Pairing, 0.0);
+                Ok(engine.capture())
+            };
+            if on_worker {
+                *next = Some(make(&mut |stage, f| report(level, stage, f)));
+            } else {
+                let (tx, rx) = std::sync::mpsc::channel();
+                s.spawn(move |_| {
+                    let mut make = make;
+                    *next = Some(make(&mut |stage, f| {
+                        let _ = tx.send((stage, f));
+                    }));
+                });
+                for (stage, f) in rx {
+                    report(level, stage, f);
+                }
             }
-            report(level, Stage::Pairing, 0.0);
-            Ok(engine.capture())
         });
         if let Some(level) = done {
             out.push(level?);
         }
-        pending = Some(next?);
+        pending = Some(next.expect("made in the scope")?);
     }
     out.push(pending.take().expect("one level").finish()?);
     report(levels - 1, Stage::Pairing, 1.0);
