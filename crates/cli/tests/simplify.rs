@@ -170,3 +170,24 @@ fn sigint_during_the_levels_leaves_nothing() {
     let left: Vec<_> = std::fs::read_dir(&out_dir).unwrap().map(|e| e.unwrap().file_name()).collect();
     assert!(left.is_empty(), "SIGINT left {left:?}");
 }
+
+/// The four-level pyramid's run peaks within twice the plain run's (the simplifier's
+/// queue, quadrics and grid, and the level being paired, beside the mesh the writers
+/// read; the regularizer's state is let go before).
+#[cfg(target_os = "linux")]
+#[test]
+fn the_levels_stay_within_twice_the_plain_runs_peak() {
+    let dir = tempfile::tempdir().unwrap();
+    let input = data("bunny-128.vol");
+    let peak = |extra: &[&str]| {
+        let report = dir.path().join("report.json");
+        let mut args = vec!["--report", report.to_str().unwrap()];
+        args.extend_from_slice(extra);
+        let o = regularize(input.to_str().unwrap(), &dir.path().join("out.glb"), &args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        common::report_of(&report)["peak_memory"].as_u64().expect("a peak on Linux")
+    };
+    let plain = peak(&[]);
+    let levels = peak(&["--lod", "4"]);
+    assert!(levels <= 2 * plain, "peak {levels} bytes with four levels against {plain} without");
+}
