@@ -191,6 +191,24 @@ pub struct DigitalSurface {
     component_closed: Vec<bool>,
 }
 
+/// Touches every page of `v`'s spare capacity from the pool's threads (one zeroed slot a
+/// page), so that a sequential loop filling it then finds its pages resident.
+fn prefault<T: Send>(v: &mut Vec<T>) {
+    let step = (4096 / std::mem::size_of::<T>().max(1)).max(1);
+    v.spare_capacity_mut().par_chunks_mut(64 * step).for_each(|chunk| {
+        for slot in chunk.iter_mut().step_by(step) {
+            *slot = std::mem::MaybeUninit::zeroed();
+        }
+    });
+}
+
+/// `n` copies of `value`, written in parallel: a fresh array's pages are first touched by
+/// the threads that fill them, where `vec![value; n]` (for values other than zeroed
+/// primitives, which come from zeroed pages) has one thread write them all.
+fn par_filled<T: Copy + Send + Sync>(value: T, n: usize) -> Vec<T> {
+    (0..n).into_par_iter().map(|_| value).collect()
+}
+
 impl DigitalSurface {
     /// The digital surface of `volume` with every label its own region.
     pub fn from_volume<S: LabelStorage>(volume: &LabelVolume<S>) -> Result<Self, SurfaceError> {
@@ -228,8 +246,14 @@ impl DigitalSurface {
         // Faces are found in parallel (voxel-proportional work), then numbered sequentially
         // in slab order (surfel-proportional work).
         let found = all_faces(volume, &regions, &outside, rayon::current_num_threads().max(1))?;
-        // The surfels' array sized once (a grown one holds up to twice its surfels).
-        scan.surfels.reserve_exact(found.iter().flatten().map(Vec::len).sum());
+        // The surfels' array sized once (a grown one holds up to twice its surfels), and
+        // the vertices' for as many (a closed surface has about one a surfel); their pages
+        // faulted in by the pool rather than one at a time by the numbering below.
+        let total = found.iter().flatten().map(Vec::len).sum();
+        scan.surfels.reserve_exact(total);
+        scan.vertex_corners.reserve_exact(total);
+        prefault(&mut scan.surfels);
+        prefault(&mut scan.vertex_corners);
         for (k, pieces) in found.into_iter().enumerate() {
             for f in pieces.into_iter().flatten() {
                 scan.face(f.cell, f.axis as usize, f.regions[0], f.regions[1], f.labels[0], f.labels[1], k)?;
@@ -445,11 +469,11 @@ impl DigitalSurface {
         let num_items: usize = pieces.iter().map(|p| p.items.len()).sum();
         let num_nbrs: usize = pieces.iter().map(|p| p.neighbours.len()).sum();
         let blank = Edge { vertices: [VertexId(0); 2], axis: 0, kind: EdgeKind::Regular };
-        let mut edges = vec![blank; num_edges];
+        let mut edges = par_filled(blank, num_edges);
         let mut offsets = vec![0u32; num_edges + 1];
-        let mut items = vec![SurfelId(0); num_items];
+        let mut items = par_filled(SurfelId(0), num_items);
         let mut nbr_offsets = vec![0u32; nv + 1];
-        let mut nbrs = vec![VertexId(0); num_nbrs];
+        let mut nbrs = par_filled(VertexId(0), num_nbrs);
         let mut flags = vec![(false, false); nv];
         let mut edge_bases = Vec::with_capacity(pieces.len());
         // Each piece's slices of the outputs, and where its edges, items and neighbours start.
@@ -651,10 +675,11 @@ impl DigitalSurface {
         let num_sides: usize = counts.iter().map(|c| c.1).sum();
         debug_assert_eq!(num_sides, 4 * self.surfels.len());
         let blank = Edge { vertices: [VertexId(0); 2], axis: 0, kind: EdgeKind::Regular };
-        let mut edges = vec![blank; num_edges];
+        let mut edges = par_filled(blank, num_edges);
         let mut offsets = vec![0u32; num_edges + 1];
-        let mut items = vec![SurfelId(0); num_sides];
-        let surfel_edges: Vec<AtomicU32> = (0..num_sides).map(|_| AtomicU32::new(0)).collect();
+        let mut items = par_filled(SurfelId(0), num_sides);
+        let surfel_edges: Vec<AtomicU32> =
+            (0..num_sides).into_par_iter().map(|_| AtomicU32::new(0)).collect();
         // Each piece's slices of the outputs, and where they start.
         let bases: Vec<(usize, usize)> = counts
             .iter()
@@ -930,7 +955,12 @@ impl DigitalSurface {
 
     /// Physical positions of all vertices, indexed by [`VertexId`].
     pub fn positions(&self) -> VertexData<DVec3> {
-        VertexData::from_fn(self.num_vertices(), |v| self.vertex_position(v))
+        VertexData::new(
+            (0..self.num_vertices())
+                .into_par_iter()
+                .map(|v| self.vertex_position(VertexId(v as u32)))
+                .collect(),
+        )
     }
 
     /// The edge-neighbours of vertex `v`, sorted by id. Across interfaces too.

@@ -419,7 +419,9 @@ fn diffuse(
         .chain(rayon::iter::once(Vec3A::ZERO))
         .collect();
     // The empty slots' zero vector at `n`, in both arrays.
-    let mut next = vec![Vec3A::ZERO; n + 1];
+    // Zeroed in parallel: a fresh array's pages are first touched by the threads that
+    // fill them (`vec!` would have one thread zero them all).
+    let mut next: Vec<Vec3A> = (0..=n).into_par_iter().map(|_| Vec3A::ZERO).collect();
     let scale: [f32; 5] = std::array::from_fn(|c| 1.0 / (1 + c) as f32);
     for _ in 0..Diffused::steps(radius) {
         interrupt.check()?;

@@ -1,6 +1,7 @@
 //! Per-surfel normal fields.
 
 use glam::DVec3;
+use rayon::prelude::*;
 use voxreg_digisurf::{SurfelData, SurfelId};
 
 /// One unit normal per surfel, indexed by [`SurfelId`].
@@ -13,9 +14,7 @@ impl NormalField {
     /// Wraps `normals`, normalizing each; zero or non-finite vectors are kept as zero
     /// (such a surfel then exerts no alignment force).
     pub fn new(mut normals: Vec<DVec3>) -> Self {
-        for n in &mut normals {
-            *n = n.try_normalize().unwrap_or(DVec3::ZERO);
-        }
+        normals.par_iter_mut().for_each(|n| *n = n.try_normalize().unwrap_or(DVec3::ZERO));
         NormalField { normals: normals.into() }
     }
 

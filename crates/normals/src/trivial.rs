@@ -1,5 +1,6 @@
 //! The trivial estimator.
 
+use rayon::prelude::*;
 use voxreg_digisurf::DigitalSurface;
 
 use crate::error::NormalError;
@@ -23,6 +24,6 @@ impl NormalEstimator for Trivial {
         interrupt: &Interrupt,
     ) -> Result<NormalField, NormalError> {
         interrupt.check()?;
-        Ok(NormalField::new(surface.surfels().iter().map(|s| s.normal()).collect()))
+        Ok(NormalField::new(surface.surfels().par_iter().map(|s| s.normal()).collect()))
     }
 }

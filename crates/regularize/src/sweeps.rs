@@ -148,6 +148,14 @@ fn faces<'a>(
         .map(|(f, [p, q])| (f.index(), *p as usize, *q as usize))
 }
 
+/// `v` made `n` items long, item `i` being `f(i)`, written in parallel: a fresh vector's
+/// pages are first touched by the threads that fill them, where a `resize` would have one
+/// thread zero them all first.
+fn par_fill<T: Send>(v: &mut Vec<T>, n: usize, f: impl Fn(usize) -> T + Sync + Send) {
+    v.clear();
+    v.par_extend((0..n).into_par_iter().map(f));
+}
+
 /// `m x` for a symmetric `m` stored as `[xx, yy, zz, xy, xz, yz]`, in `f32`, as three
 /// column products in SIMD lanes.
 #[inline(always)]
@@ -215,23 +223,20 @@ impl SweepsSolver {
         let (lists, pairs) = (surface.vertex_surfel_lists(), &stencil.pairs[..]);
         let (input, normals) = (energy.input(), energy.normals());
         let n = stencil.len();
-        self.face_normals.resize(normals.len(), Vec3A::ZERO);
-        self.face_normals.par_iter_mut().zip(normals).enumerate().for_each(|(f, (m, n))| {
-            *m = (energy.beta_at(f).sqrt() * *n).as_vec3a();
+        par_fill(&mut self.face_normals, normals.len(), |f| {
+            (energy.beta_at(f).sqrt() * normals[f]).as_vec3a()
         });
-        self.fair.resize(n, 0.0);
-        self.fair.par_iter_mut().enumerate().for_each(|(v, c)| {
+        par_fill(&mut self.fair, n, |v| {
             let deg = stencil.fair.of(v).len();
-            *c = if deg == 0 || surface.is_boundary_vertex(VertexId(v as u32)) {
+            if deg == 0 || surface.is_boundary_vertex(VertexId(v as u32)) {
                 0.0
             } else {
                 (energy.gamma_at(v) / deg as f64) as f32
-            };
+            }
         });
         let (m, fair) = (&self.face_normals[..], &self.fair[..]);
         let omega = self.params.omega;
-        self.dinv.resize(n, [0.0; 6]);
-        self.dinv.par_iter_mut().enumerate().for_each(|(i, out)| {
+        par_fill(&mut self.dinv, n, |i| {
             let a = energy.alpha_at(i);
             let nb = stencil.fair.of(i);
             let mut f = f64::from(fair[i]) * nb.len() as f64;
@@ -252,23 +257,21 @@ impl SweepsSolver {
                 d[4] += m.x * m2.z;
                 d[5] += m.y * m2.z;
             }
-            *out = sym_inverse(&d).map(|v| (omega * v) as f32);
+            sym_inverse(&d).map(|v| (omega * v) as f32)
         });
         // g: the fairness residuals of p, then the alignment and fairness rows, with the
         // differences of positions taken in f64.
-        self.resid.resize(n, Vec3A::ZERO);
-        self.resid.par_iter_mut().enumerate().for_each(|(i, t)| {
+        par_fill(&mut self.resid, n, |i| {
             let nb = stencil.fair.of(i);
-            *t = if fair[i] == 0.0 {
+            if fair[i] == 0.0 {
                 Vec3A::ZERO
             } else {
                 let sum: DVec3 = nb.iter().map(|&j| input[j as usize]).sum();
                 f64::from(fair[i]) as f32 * (input[i] - sum / nb.len() as f64).as_vec3a()
-            };
+            }
         });
         let t = &self.resid[..];
-        self.rhs.resize(n, Vec3A::ZERO);
-        self.rhs.par_iter_mut().enumerate().for_each(|(i, g)| {
+        par_fill(&mut self.rhs, n, |i| {
             let p = input[i];
             let mut acc = Vec3A::ZERO;
             for (f, prev, next) in faces(lists, pairs, i) {
@@ -278,7 +281,7 @@ impl SweepsSolver {
             }
             let nb = stencil.fair.of(i);
             let sum: Vec3A = nb.iter().map(|&j| t[j as usize]).sum();
-            *g = -(acc + nb.len() as f32 * t[i] - sum);
+            -(acc + nb.len() as f32 * t[i] - sum)
         });
     }
 
@@ -312,15 +315,12 @@ impl SweepsSolver {
         let t = Instant::now();
         // The start becomes the displacement first: its f64 positions go before the
         // solve's other arrays are made.
-        self.disp.resize(n, Vec3A::ZERO);
         match start {
-            Some(x) => {
-                self.disp.par_iter_mut().zip(&x).zip(input).for_each(|((d, x), p)| *d = (*x - *p).as_vec3a())
-            }
-            None => self.disp.fill(Vec3A::ZERO),
+            Some(x) => par_fill(&mut self.disp, n, |i| (x[i] - input[i]).as_vec3a()),
+            None => par_fill(&mut self.disp, n, |_| Vec3A::ZERO),
         }
         self.prepare(energy);
-        self.next.resize(n, Vec3A::ZERO);
+        par_fill(&mut self.next, n, |_| Vec3A::ZERO);
         self.partials.resize(n.div_ceil(CHUNK), (0.0, 0.0));
         seconds.assemble = t.elapsed().as_secs_f64();
 
