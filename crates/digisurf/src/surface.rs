@@ -440,7 +440,7 @@ impl DigitalSurface {
             .collect();
         // Each side's edge, numbered within the piece of the side's lower end first.
         let surfel_edges: Vec<[AtomicU32; 4]> =
-            (0..self.surfels.len()).map(|_| [0; 4].map(AtomicU32::new)).collect();
+            (0..self.surfels.len()).into_par_iter().map(|_| [0; 4].map(AtomicU32::new)).collect();
         let pieces: Vec<VertexPass> = (0..nv.div_ceil(PIECE))
             .into_par_iter()
             .map(|p| {
