@@ -193,39 +193,47 @@ struct Continuations {
 impl Continuations {
     fn new(surface: &DigitalSurface) -> Self {
         let surfels = surface.surfels();
-        // Each junction edge: its id, its lower corner, and its pairs with whether they
-        // continue each other there.
-        type Votes = Vec<(PairKey, bool)>;
-        let junctions: Vec<(u32, [u32; 3], Votes)> = (0..surface.num_edges())
+        // Each pair of interfaces at each junction edge, edge after edge: the edge's id,
+        // its lower corner, the pair, and whether they continue each other there (a
+        // junction edge has at most four surfels, so at most six pairs, kept inline).
+        let found: Vec<(u32, [u32; 3], PairKey, bool)> = (0..surface.num_edges())
             .into_par_iter()
-            .filter_map(|e| {
+            .flat_map_iter(|e| {
+                let mut votes = [(([0u32; 2], [0u32; 2]), false); 6];
+                let mut n = 0;
+                let mut corner = [0u32; 3];
                 // A regular edge (two surfels, closed side) has one interface.
-                if surface.edges()[e].kind == EdgeKind::Regular {
-                    return None;
-                }
-                let others = surface.edge_surfels(EdgeId(e as u32));
-                let i0 = surfels[others.first()?.index()].interface;
-                if others.iter().all(|s| surfels[s.index()].interface == i0) {
-                    return None;
-                }
-                let mut votes: Votes = Vec::new();
-                for (i, a) in others.iter().enumerate() {
-                    let a = &surfels[a.index()];
-                    for b in &others[..i] {
-                        let b = &surfels[b.index()];
-                        if a.interface == b.interface {
-                            continue;
-                        }
-                        let key = pair_key(a, b);
-                        let continued = continuation(a, b).is_some();
-                        match votes.iter_mut().find(|(k, _)| *k == key) {
-                            Some((_, c)) => *c |= continued,
-                            None => votes.push((key, continued)),
+                let others = if surface.edges()[e].kind == EdgeKind::Regular {
+                    &[][..]
+                } else {
+                    surface.edge_surfels(EdgeId(e as u32))
+                };
+                let mixed = others.first().is_some_and(|s0| {
+                    others.iter().any(|s| surfels[s.index()].interface != surfels[s0.index()].interface)
+                });
+                if mixed {
+                    corner = surface.vertex_corner(surface.edges()[e].vertices[0]);
+                    for (i, a) in others.iter().enumerate() {
+                        let a = &surfels[a.index()];
+                        for b in &others[..i] {
+                            let b = &surfels[b.index()];
+                            if a.interface == b.interface {
+                                continue;
+                            }
+                            let key = pair_key(a, b);
+                            let continued = continuation(a, b).is_some();
+                            match votes[..n].iter_mut().find(|(k, _)| *k == key) {
+                                Some((_, c)) => *c |= continued,
+                                None if n < 6 => {
+                                    votes[n] = (key, continued);
+                                    n += 1;
+                                }
+                                None => {}
+                            }
                         }
                     }
                 }
-                let corner = surface.vertex_corner(surface.edges()[e].vertices[0]);
-                Some((e as u32, corner, votes))
+                votes.into_iter().take(n).map(move |(key, continued)| (e as u32, corner, key, continued))
             })
             .collect();
         // Each pair at each junction edge (its records, in the order of `junctions`),
@@ -234,13 +242,10 @@ impl Continuations {
         // share the 27 groups their windows can reach.
         let w = CONTINUATION_WINDOW;
         let cell = |c: [u32; 3]| c.map(|x| x / w);
-        let mut sorted: Vec<Record> = junctions
-            .iter()
-            .flat_map(|(_, corner, votes)| {
-                votes.iter().map(move |&(key, continued)| (key, *corner, continued))
-            })
+        let mut sorted: Vec<Record> = found
+            .par_iter()
             .enumerate()
-            .map(|(r, (key, corner, continued))| (key, cell(corner), corner, continued, r as u32))
+            .map(|(r, &(_, corner, key, continued))| (key, cell(corner), corner, continued, r as u32))
             .collect();
         sorted.par_sort_unstable_by_key(|x| (x.0, x.1, x.4));
         let mut groups: Vec<(PairKey, [u32; 3], u32)> = Vec::new(); // pair, cell, start in `sorted`
@@ -255,49 +260,59 @@ impl Continuations {
             let end = groups.get(g + 1).map_or(sorted.len(), |n| n.2 as usize);
             groups[g].2 as usize..end
         };
-        let mut shares = vec![0f32; sorted.len()];
-        let per_group: Vec<Vec<(u32, f32)>> = (0..groups.len())
-            .into_par_iter()
-            .map(|g| {
-                let (key, [cx, cy, cz], _) = groups[g];
-                let mut near = Vec::with_capacity(27);
-                for x in cx.saturating_sub(1)..=cx + 1 {
-                    for y in cy.saturating_sub(1)..=cy + 1 {
-                        for z in cz.saturating_sub(1)..=cz + 1 {
-                            if let Some(&n) = index.get(&(key, [x, y, z])) {
-                                near.push(group_range(n as usize));
-                            }
+        // Each group's shares in `sorted`'s order, its candidates (the records of the 27
+        // groups its windows can reach: corner and flag) gathered once into a buffer of the
+        // thread's; then in record order.
+        let mut by_sorted = vec![0f32; sorted.len()];
+        let mut slices: Vec<&mut [f32]> = Vec::with_capacity(groups.len());
+        let mut rest = &mut by_sorted[..];
+        for g in 0..groups.len() {
+            let (head, tail) = std::mem::take(&mut rest).split_at_mut(group_range(g).len());
+            slices.push(head);
+            rest = tail;
+        }
+        slices.into_par_iter().enumerate().for_each_init(Vec::new, |candidates, (g, out)| {
+            let (key, [cx, cy, cz], _) = groups[g];
+            candidates.clear();
+            for x in cx.saturating_sub(1)..=cx + 1 {
+                for y in cy.saturating_sub(1)..=cy + 1 {
+                    for z in cz.saturating_sub(1)..=cz + 1 {
+                        if let Some(&n) = index.get(&(key, [x, y, z])) {
+                            candidates.extend(sorted[group_range(n as usize)].iter().map(|x| (x.2, x.3)));
                         }
                     }
                 }
-                group_range(g)
-                    .map(|i| {
-                        let (_, _, corner, _, r) = sorted[i];
-                        let (mut continued, mut all) = (0u32, 0u32);
-                        for range in &near {
-                            for &(_, _, other, c, _) in &sorted[range.clone()] {
-                                if (0..3).all(|k| corner[k].abs_diff(other[k]) <= w) {
-                                    continued += u32::from(c);
-                                    all += 1;
-                                }
-                            }
-                        }
-                        (r, continued as f32 / all.max(1) as f32)
-                    })
-                    .collect()
-            })
-            .collect();
-        for (r, share) in per_group.into_iter().flatten() {
-            shares[r as usize] = share;
+            }
+            for (share, i) in out.iter_mut().zip(group_range(g)) {
+                let corner = sorted[i].2;
+                let (mut continued, mut all) = (0u32, 0u32);
+                for &(other, c) in candidates.iter() {
+                    if (0..3).all(|k| corner[k].abs_diff(other[k]) <= w) {
+                        continued += u32::from(c);
+                        all += 1;
+                    }
+                }
+                *share = continued as f32 / all.max(1) as f32;
+            }
+        });
+        let mut shares = vec![0f32; sorted.len()];
+        for (record, &share) in sorted.iter().zip(&by_sorted) {
+            shares[record.4 as usize] = share;
         }
-        let mut ends = Vec::with_capacity(junctions.len());
-        let mut pairs = Vec::with_capacity(shares.len());
-        for (_, _, votes) in &junctions {
-            let at = pairs.len();
-            pairs.extend(votes.iter().zip(&shares[at..]).map(|((key, _), share)| (*key, *share)));
-            ends.push(pairs.len() as u32);
+        let (mut edges, mut ends) = (Vec::new(), Vec::new());
+        for (i, &(e, ..)) in found.iter().enumerate() {
+            if edges.last() != Some(&e) {
+                if i > 0 {
+                    ends.push(i as u32);
+                }
+                edges.push(e);
+            }
         }
-        Continuations { edges: junctions.iter().map(|j| j.0).collect(), ends, pairs }
+        if !found.is_empty() {
+            ends.push(found.len() as u32);
+        }
+        let pairs = found.iter().zip(&shares).map(|(&(_, _, key, _), &share)| (key, share)).collect();
+        Continuations { edges, ends, pairs }
     }
 
     /// Whether the pair of `a` and `b` (surfels of two interfaces at the junction edge
