@@ -49,6 +49,11 @@ const READ_TIMEOUT: Duration = Duration::from_secs(30);
 /// How long a response (or an event) may wait for a stalled reader.
 const WRITE_TIMEOUT: Duration = Duration::from_secs(60);
 
+/// How long, and how many bytes, a connection's end waits for and drops of what the peer
+/// still sends after the answer (see `connection`).
+const LINGER: Duration = Duration::from_millis(500);
+const LINGER_BYTES: usize = 256 << 10;
+
 /// How often an idle event stream sends a keep-alive comment (and notices a closed page).
 const KEEP_ALIVE: Duration = Duration::from_secs(10);
 
@@ -232,6 +237,20 @@ impl Viewer {
         let mut output = stream;
         self.handle(&mut input, &mut output, peer, false);
         let _ = output.flush();
+        // A lingering close: the answer's end is sent, then what the peer still sends (a
+        // body refused unread) is read and dropped for a moment. Closing with unread bytes
+        // would reset the connection, and a reset can reach the peer before it has read the
+        // answer (the refusal is then lost). Bounded in bytes and time.
+        let _ = output.shutdown(std::net::Shutdown::Write);
+        let _ = input.set_read_timeout(Some(LINGER));
+        let started = std::time::Instant::now();
+        let (mut buf, mut drained) = ([0u8; 4096], 0usize);
+        while drained < LINGER_BYTES && started.elapsed() < LINGER {
+            match input.read(&mut buf) {
+                Ok(0) | Err(_) => break,
+                Ok(n) => drained += n,
+            }
+        }
     }
 
     /// Answers one raw HTTP/1.1 request as the server answers a connection from a

@@ -845,3 +845,17 @@ fn a_level_of_detail_is_served_closed_per_region_and_a_new_run_replaces_it() {
     let full_again = wait_for(&r, |s| s["level_shown"] == 0);
     assert_eq!(full_again["frame"], again["frame"]);
 }
+
+#[test]
+fn a_refusal_reaches_the_peer_whose_body_went_unread() {
+    // A request refused before its body is read (here: no token) still gets its answer:
+    // the server reads and drops the rest before it closes, where closing with the body
+    // unread would reset the connection, at times before the answer was read.
+    let r = start();
+    wait_for(&r, |s| s["final"] == true);
+    let host = r.host();
+    let body = vec![b'x'; 60_000];
+    for _ in 0..20 {
+        assert_eq!(request(r.addr, "POST", "/api/level", Some(&host), &body).0, 403);
+    }
+}
