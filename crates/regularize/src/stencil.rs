@@ -9,7 +9,7 @@ use std::sync::Arc;
 
 use glam::DVec3;
 use rayon::prelude::*;
-use voxreg_digisurf::{DigitalSurface, VertexId};
+use voxreg_digisurf::{DigitalSurface, SurfelId, VertexId};
 
 use crate::energy::Energy;
 use crate::error::RegularizeError;
@@ -50,26 +50,16 @@ impl FairNeighbours {
     ) -> Result<Self, RegularizeError> {
         let n = surface.num_vertices();
         let vid = |v: usize| VertexId(v as u32);
-        let (offsets, nbrs) = match mask {
-            None => {
-                let offs = offsets(n, |v| surface.vertex_neighbours(vid(v)).len())?;
-                let nbrs = fill(&offs, |v, out: &mut [u32]| {
-                    for (o, w) in out.iter_mut().zip(surface.vertex_neighbours(vid(v))) {
-                        *o = w.0;
-                    }
-                });
-                (offs, nbrs)
-            }
-            Some(m) => {
-                let offs = offsets(n, |v| m.kept_neighbours(surface, vid(v)).count())?;
-                let nbrs = fill(&offs, |v, out: &mut [u32]| {
-                    for (o, w) in out.iter_mut().zip(m.kept_neighbours(surface, vid(v))) {
-                        *o = w.0;
-                    }
-                });
-                (offs, nbrs)
-            }
+        let kept = |v: usize| {
+            let all = surface.vertex_neighbours(vid(v)).iter().enumerate();
+            all.filter(move |&(k, _)| mask.is_none_or(|m| m.keeps(vid(v), k))).map(|(_, w)| w.0)
         };
+        let offsets = offsets(n, |v| kept(v).count())?;
+        let nbrs = fill(&offsets, |v, out: &mut [u32]| {
+            for (o, w) in out.iter_mut().zip(kept(v)) {
+                *o = w;
+            }
+        });
         Ok(FairNeighbours { offsets, nbrs })
     }
 
@@ -181,6 +171,14 @@ fn offsets(n: usize, len: impl Fn(usize) -> usize + Sync) -> Result<Vec<u32>, Re
     Ok(out)
 }
 
+/// The two vertices next to vertex `v` in the quad of surfel `f` (previous, next in the
+/// quad's order).
+pub(crate) fn corner_neighbours(surface: &DigitalSurface, f: SurfelId, v: usize) -> [u32; 2] {
+    let quad = surface.surfel(f).vertices;
+    let i = quad.iter().position(|w| w.index() == v).unwrap_or(0);
+    [quad[(i + 3) % 4].0, quad[(i + 1) % 4].0]
+}
+
 /// A flat array with `offsets`, each vertex's slice filled by `f(v, slice)`, in parallel.
 pub(crate) fn fill<T: Copy + Default + Send>(offsets: &[u32], f: impl Fn(usize, &mut [T]) + Sync) -> Vec<T> {
     let n = offsets.len() - 1;
@@ -208,18 +206,13 @@ impl Stencil {
         surface: &DigitalSurface,
         mask: Option<&FairnessMask>,
     ) -> Result<Self, RegularizeError> {
-        let n = surface.num_vertices();
-        let vid = |v: usize| VertexId(v as u32);
-        let face_offsets = offsets(n, |v| surface.vertex_surfels(vid(v)).len())?;
+        // A vertex's slots follow the surface's own vertex-surfel lists.
+        let lists = surface.vertex_surfel_lists();
+        let face_offsets = lists.offsets().to_vec();
         let face_slots = fill(&face_offsets, |v, out: &mut [FaceSlot]| {
-            for (slot, f) in out.iter_mut().zip(surface.vertex_surfels(vid(v))) {
-                let sf = surface.surfel(*f);
-                let i = sf.vertices.iter().position(|&w| w == vid(v)).unwrap_or(0);
-                *slot = FaceSlot {
-                    face: f.0,
-                    prev: sf.vertices[(i + 3) % 4].0,
-                    next: sf.vertices[(i + 1) % 4].0,
-                };
+            for (slot, f) in out.iter_mut().zip(lists.get(v)) {
+                let [prev, next] = corner_neighbours(surface, *f, v);
+                *slot = FaceSlot { face: f.0, prev, next };
             }
         });
         Ok(Stencil { face_offsets, face_slots, fair: FairNeighbours::new(surface, mask)? })

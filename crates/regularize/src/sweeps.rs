@@ -12,7 +12,7 @@ use crate::energy::Energy;
 use crate::error::RegularizeError;
 use crate::info::{SolveTimings, SweepsInfo};
 use crate::progress::Progress;
-use crate::stencil::{fill, FairNeighbours, CHUNK};
+use crate::stencil::{corner_neighbours, fill, FairNeighbours, CHUNK};
 use crate::vecops::sym_inverse;
 use crate::weights::FairnessMask;
 
@@ -116,9 +116,7 @@ impl Corners {
         let lists = surface.vertex_surfel_lists();
         let pairs = fill(lists.offsets(), |v, out: &mut [[u32; 2]]| {
             for (pair, f) in out.iter_mut().zip(lists.get(v)) {
-                let quad = surface.surfel(*f).vertices;
-                let i = quad.iter().position(|w| w.index() == v).unwrap_or(0);
-                *pair = [quad[(i + 3) % 4].0, quad[(i + 1) % 4].0];
+                *pair = corner_neighbours(surface, *f, v);
             }
         });
         Ok(Corners { pairs, fair: FairNeighbours::new(surface, mask)? })
