@@ -2,9 +2,9 @@
 
 use anyhow::{Context, Result};
 use glam::DVec3;
-use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelVolume, RegionMap};
+use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelVolume, RegionMap, SurfaceError};
 use voxreg_io::{is_voxel_art, Background, InputError, InputOptions, Palette};
-use voxreg_regularize::{Params, Regularizer};
+use voxreg_regularize::{max_surfels_within, Params, RegularizeError, Regularizer};
 
 use crate::args::InputArgs;
 
@@ -159,6 +159,42 @@ impl Source {
                 .map_err(Into::into),
         };
         counted.with_context(|| format!("{}: no surface to regularize", args.input.display()))
+    }
+
+    /// A regularizer of `params.regions`' surface, refused before the surface is built
+    /// when a run of `params` on it, and `extra(surfels)` more bytes, would exceed the
+    /// memory budget (`voxreg_io::max_memory`); `what(count)` names what needs the memory
+    /// ("the regularization of its {count} surfels"). A dense volume's extraction counts
+    /// its surfels as it finds them and stops past the most that fit (one pass over the
+    /// voxels; a refused one is then counted to the end for the message); blocks are
+    /// counted first.
+    pub(crate) fn regularizer_within(
+        &self,
+        args: &InputArgs,
+        params: &Params,
+        extra: impl Fn(u64) -> u64,
+        what: impl Fn(&str) -> String,
+    ) -> Result<Regularizer> {
+        let path = &args.input;
+        let need = |s: u64| voxreg_regularize::estimated_bytes(s, params).saturating_add(extra(s));
+        let Source::Dense(v) = self else {
+            let (surfels, bytes) = self.estimated_bytes(args, params)?;
+            voxreg_io::check_memory(path, &what(&surfels.to_string()), u128::from(bytes) + u128::from(extra(surfels)))?;
+            return self.regularizer(args, &params.regions);
+        };
+        let cap = max_surfels_within(voxreg_io::max_memory(), need);
+        match Regularizer::from_volume_within(v, &params.regions, cap) {
+            Err(RegularizeError::Surface(SurfaceError::TooManySurfels(m))) => {
+                // Refused: counted to the end (a pass that stores nothing), so that the
+                // message names the surface's size and need, as `voxreg info` does.
+                let surfels = DigitalSurface::count_surfels(v, &params.regions)
+                    .with_context(|| format!("{}: no surface to regularize", path.display()))?;
+                let bytes = u128::from(need(surfels.max(m + 1)));
+                voxreg_io::check_memory(path, &what(&surfels.max(m + 1).to_string()), bytes)?;
+                Err(anyhow::anyhow!("{}: more than {m} surfels", path.display()))
+            }
+            r => r.with_context(|| format!("{}: no surface to regularize", path.display())),
+        }
     }
 
     /// A regularizer on the digital surface, with labels grouped into regions by `map`.

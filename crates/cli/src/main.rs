@@ -162,18 +162,19 @@ fn regularize(args: &RegularizeArgs, product: Product<'_>) -> Result<()> {
     output::check_volume(args, product, &source)?;
     output::check_library(args, product, palette.is_some())?;
     let (mut regularizer, _) = stages.run("digital surface", || {
-        // Refused before the surface is built: the count is one pass over the voxels.
-        let (surfels, bytes) = source.estimated_bytes(&args.input, &params)?;
-        let (what, bytes) = match product {
+        // Refused before the surface is built, by the extraction's own count.
+        match product {
             // Exact geodesics' windows outgrow the surface: refused here too, not hours later.
-            Product::Geodesic(opts) if opts.method == args::GeodesicMethod::Exact => (
-                format!("the regularization of its {surfels} surfels and their exact geodesics (--method heat needs less)"),
-                bytes.saturating_add(voxreg_geodesic::exact_estimated_bytes(2 * surfels as usize)),
+            Product::Geodesic(opts) if opts.method == args::GeodesicMethod::Exact => source.regularizer_within(
+                &args.input,
+                &params,
+                |surfels| voxreg_geodesic::exact_estimated_bytes(2 * surfels as usize),
+                |n| format!("the regularization of its {n} surfels and their exact geodesics (--method heat needs less)"),
             ),
-            _ => (format!("the regularization of its {surfels} surfels"), bytes),
-        };
-        voxreg_io::check_memory(path, &what, u128::from(bytes))?;
-        source.regularizer(&args.input, &params.regions)
+            _ => source.regularizer_within(&args.input, &params, |_| 0, |n| {
+                format!("the regularization of its {n} surfels")
+            }),
+        }
     })?;
     // What the run needs of the volume is in the surface now: unless the output is a
     // volume, its memory goes back before the solves (the run's peak).

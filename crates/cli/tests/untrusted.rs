@@ -242,6 +242,13 @@ fn info_is_refused_over_the_budget_as_regularize_is() {
             &["checker.npy: the regularization of its ", " surfels needs", "memory limit of 4.0 MiB"],
         );
     }
+    // Under a budget that its fixed part fits, the extraction stops partway through the
+    // volume; the message still names the whole surface, as `info` does.
+    refused(
+        &["regularize", s(&path), "-o", s(&out), "--max-memory", "40M", "-q"],
+        &["checker.npy: the regularization of its 12288 surfels needs 48 MiB, over the memory limit of 40 MiB"],
+    );
+    assert!(!out.exists());
     let ok = limited(&["info", s(&path)]);
     assert_eq!(ok.status.code(), Some(0), "{}", stderr(&ok));
 }

@@ -15,4 +15,8 @@ pub enum SurfaceError {
     /// The surface does not fit the 32-bit ids of the complex.
     #[error("volume too large: {0}")]
     TooLarge(String),
+    /// The surface has more surfels than the cap of [`crate::DigitalSurface::new_within`]
+    /// (the cap, which the count passed).
+    #[error("more than {0} surfels")]
+    TooManySurfels(u64),
 }

@@ -18,7 +18,7 @@ use crate::volume::{LabelStorage, LabelView, LabelVolume, Voxel};
 mod blocks;
 mod scan;
 
-use scan::{all_faces, outside_of, range_faces, Scan};
+use scan::{all_faces, outside_of, range_faces, Cap, Scan};
 
 const NONE: u32 = u32::MAX;
 
@@ -222,11 +222,25 @@ impl DigitalSurface {
     /// [`SurfaceError::Empty`] when no surfel separates two regions. The volume may own
     /// or borrow its labels (a [`LabelView`](crate::volume::LabelView)); either is read in place.
     pub fn new<S: LabelStorage>(volume: &LabelVolume<S>, map: &RegionMap) -> Result<Self, SurfaceError> {
-        Self::of_view(&volume.view(), map)
+        Self::of_view(&volume.view(), map, &Cap::none())
+    }
+
+    /// [`DigitalSurface::new`] with at most `max_surfels` surfels: fails with
+    /// [`SurfaceError::TooManySurfels`] as soon as its pass over the voxels has found more,
+    /// before the complex's arrays are made, so that a caller can refuse a surface too
+    /// large for its memory without a separate count ([`DigitalSurface::count_surfels`])
+    /// of a surface that fits. The faces found before the refusal hold at most about
+    /// 32 bytes a surfel of the cap.
+    pub fn new_within<S: LabelStorage>(
+        volume: &LabelVolume<S>,
+        map: &RegionMap,
+        max_surfels: u64,
+    ) -> Result<Self, SurfaceError> {
+        Self::of_view(&volume.view(), map, &Cap::new(max_surfels))
     }
 
     /// [`DigitalSurface::new`], compiled once for every storage.
-    fn of_view(volume: &LabelView<'_>, map: &RegionMap) -> Result<Self, SurfaceError> {
+    fn of_view(volume: &LabelView<'_>, map: &RegionMap, cap: &Cap) -> Result<Self, SurfaceError> {
         let regions = map.resolve(volume)?;
         let [nx, ny, nz] = volume.dims();
         if nx.max(ny).max(nz) >= (u32::MAX as usize) - 1 {
@@ -245,7 +259,7 @@ impl DigitalSurface {
         };
         // Faces are found in parallel (voxel-proportional work), then numbered sequentially
         // in slab order (surfel-proportional work).
-        let found = all_faces(volume, &regions, &outside, rayon::current_num_threads().max(1))?;
+        let found = all_faces(volume, &regions, &outside, rayon::current_num_threads().max(1), cap)?;
         // The surfels' array sized once (a grown one holds up to twice its surfels), and
         // the vertices' for as many (a closed surface has about one a surfel); their pages
         // faulted in by the pool rather than one at a time by the numbering below.
@@ -355,6 +369,7 @@ impl DigitalSurface {
                     &regions,
                     &outside,
                     (t * per_task).min(nz + 1)..((t + 1) * per_task).min(nz + 1),
+                    &Cap::none(),
                 )
             })
             .try_reduce(|| 0, |a, b| Ok(a + b))

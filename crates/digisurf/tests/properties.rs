@@ -538,6 +538,20 @@ proptest! {
                     prop_assert_eq!(a.vertex_corner(VertexId(v as u32)), b.vertex_corner(VertexId(v as u32)));
                 }
                 prop_assert_eq!(a.counts(), b.counts());
+                // A cap at the surface's size builds it; one below refuses it, in both
+                // orders (the column scan counts per row, the layer scan per slab).
+                let n = a.num_surfels() as u64;
+                for vol in [&fortran, &c] {
+                    prop_assert_eq!(&DigitalSurface::new_within(vol, &map, n).unwrap(), &a);
+                    prop_assert_eq!(
+                        DigitalSurface::new_within(vol, &map, n - 1),
+                        Err(SurfaceError::TooManySurfels(n - 1))
+                    );
+                    prop_assert_eq!(
+                        DigitalSurface::new_within(vol, &map, 0),
+                        Err(SurfaceError::TooManySurfels(0))
+                    );
+                }
             }
             (a, b) => prop_assert_eq!(a.err().map(|e| e.to_string()), b.err().map(|e| e.to_string())),
         }

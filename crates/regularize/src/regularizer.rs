@@ -85,6 +85,27 @@ pub fn estimated_bytes(surfels: u64, params: &Params) -> u64 {
     surfels.saturating_mul(per).saturating_add(BYTES_FIXED)
 }
 
+/// The most surfels whose run fits in `limit` bytes, `need(surfels)` being the bytes a
+/// run on that many takes (nondecreasing, for example [`estimated_bytes`] of the run's
+/// parameters): the cap to give [`Regularizer::from_volume_within`].
+pub fn max_surfels_within(limit: u64, need: impl Fn(u64) -> u64) -> u64 {
+    // No surface has 2^32 surfels (its ids are 32-bit).
+    let (mut lo, mut hi) = (0u64, 1u64 << 32);
+    if need(0) > limit {
+        return 0;
+    }
+    // need(lo) fits; the largest that fits is in lo..hi.
+    while hi - lo > 1 {
+        let mid = lo + (hi - lo) / 2;
+        if need(mid) <= limit {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
+}
+
 /// One run of a [`Regularizer`] ([`Regularizer::run`]): the parameters, and how the run
 /// starts and reports. `&Params` converts into a plain run.
 #[non_exhaustive]
@@ -212,6 +233,23 @@ impl Regularizer {
     ) -> Result<Self, RegularizeError> {
         let t = Instant::now();
         let surface = DigitalSurface::new(volume, regions)?;
+        let mut r = Regularizer::new(surface);
+        r.surface_seconds = t.elapsed().as_secs_f64();
+        Ok(r)
+    }
+
+    /// [`Regularizer::from_volume`] for a surface of at most `max_surfels` surfels
+    /// ([`max_surfels_within`] a memory budget): refused with
+    /// [`SurfaceError::TooManySurfels`](voxreg_digisurf::SurfaceError::TooManySurfels)
+    /// as soon as the pass over the voxels finds more, before the surface is built. One
+    /// pass where counting first ([`Regularizer::estimated_bytes_of`]) takes two.
+    pub fn from_volume_within<S: LabelStorage>(
+        volume: &LabelVolume<S>,
+        regions: &RegionMap,
+        max_surfels: u64,
+    ) -> Result<Self, RegularizeError> {
+        let t = Instant::now();
+        let surface = DigitalSurface::new_within(volume, regions, max_surfels)?;
         let mut r = Regularizer::new(surface);
         r.surface_seconds = t.elapsed().as_secs_f64();
         Ok(r)
@@ -424,5 +462,41 @@ impl Regularizer {
             solves,
         };
         Ok(Output { surface, positions, normals: field, targets, features: normals.features, report })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use voxreg_digisurf::SurfaceError;
+
+    use super::*;
+
+    #[test]
+    fn the_cap_is_the_most_surfels_whose_run_fits() {
+        let params = Params::default();
+        let need = |s| estimated_bytes(s, &params);
+        for limit in [BYTES_FIXED, BYTES_FIXED + 1, 1 << 30, 20 << 30] {
+            let cap = max_surfels_within(limit, need);
+            assert!(need(cap) <= limit && need(cap + 1) > limit, "{limit}: {cap}");
+        }
+        assert_eq!(max_surfels_within(BYTES_FIXED - 1, need), 0);
+        assert_eq!(max_surfels_within(u64::MAX, |_| 0), u64::from(u32::MAX));
+    }
+
+    #[test]
+    fn a_capped_extraction_builds_what_fits_and_refuses_the_rest() {
+        let v = LabelVolume::from_fn([12, 11, 10], |[x, y, z]| {
+            let d = |a: usize, c: usize| (a as i64 - c as i64).pow(2);
+            u32::from(d(x, 6) + d(y, 5) + d(z, 5) <= 16) + u32::from(x > 8)
+        });
+        let map = RegionMap::per_label();
+        let whole = Regularizer::from_volume(&v, &map).unwrap();
+        let n = whole.surface().num_surfels() as u64;
+        let capped = Regularizer::from_volume_within(&v, &map, n).unwrap();
+        assert_eq!(capped.surface().as_ref(), whole.surface().as_ref());
+        assert_eq!(
+            Regularizer::from_volume_within(&v, &map, n - 1).err(),
+            Some(RegularizeError::Surface(SurfaceError::TooManySurfels(n - 1)))
+        );
     }
 }

@@ -481,31 +481,47 @@ const BYTES_PER_LINE: u64 = 32;
 /// would not fit the memory limit; the error is the page's one-line message. Blocks are
 /// built as blocks ([`Regularizer::from_blocks`]): the memory of the models' boxes.
 fn build(volume: &Volume, regions: &RegionMap, name: &str) -> Result<Regularizer, String> {
-    let (surfels, lines) = match volume {
-        Volume::Dense(v) => (voxreg_digisurf::DigitalSurface::count_surfels(v, regions), 0),
+    let need = |surfels: u64, lines: u64| {
+        let lines =
+            if u128::from(surfels) * 16 < u128::from(lines) { 0 } else { lines.saturating_mul(BYTES_PER_LINE) };
+        surfels
+            .saturating_mul(SESSION_BYTES_PER_SURFEL)
+            .saturating_add(voxreg_regularize::BYTES_FIXED)
+            .saturating_add(lines)
+    };
+    let check = |surfels: u64, bytes: u64| {
+        voxreg_io::check_memory(
+            std::path::Path::new(name),
+            &format!("the regularization of its {surfels} surfels"),
+            u128::from(bytes),
+        )
+        .map_err(|e| e.to_string())
+    };
+    let no_surface = |e: &dyn std::fmt::Display| format!("{name}: {e}");
+    match volume {
+        // The extraction stops past the most surfels that fit; a refused surface is then
+        // counted to the end for the message.
+        Volume::Dense(v) => {
+            let cap = voxreg_regularize::max_surfels_within(voxreg_io::max_memory(), |s| need(s, 0));
+            match Regularizer::from_volume_within(v, regions, cap) {
+                Err(RegularizeError::Surface(SurfaceError::TooManySurfels(m))) => {
+                    let surfels = voxreg_digisurf::DigitalSurface::count_surfels(v, regions)
+                        .map_err(|e| no_surface(&e))?
+                        .max(m + 1);
+                    check(surfels, need(surfels, 0))?;
+                    Err(no_surface(&SurfaceError::TooManySurfels(m)))
+                }
+                r => r.map_err(|e| no_surface(&e)),
+            }
+        }
         Volume::Blocks(v) => {
             let [_, ny, nz] = v.dims().map(|d| d as u64);
-            (voxreg_digisurf::DigitalSurface::count_surfels_of_blocks(v, regions), ny.saturating_mul(nz))
+            let surfels = voxreg_digisurf::DigitalSurface::count_surfels_of_blocks(v, regions)
+                .map_err(|e| no_surface(&e))?;
+            check(surfels, need(surfels, ny.saturating_mul(nz)))?;
+            Regularizer::from_blocks(v, regions).map_err(|e| no_surface(&e))
         }
-    };
-    let surfels = surfels.map_err(|e| format!("{name}: {e}"))?;
-    let lines =
-        if u128::from(surfels) * 16 < u128::from(lines) { 0 } else { lines.saturating_mul(BYTES_PER_LINE) };
-    let bytes = surfels
-        .saturating_mul(SESSION_BYTES_PER_SURFEL)
-        .saturating_add(voxreg_regularize::BYTES_FIXED)
-        .saturating_add(lines);
-    voxreg_io::check_memory(
-        std::path::Path::new(name),
-        &format!("the regularization of its {surfels} surfels"),
-        u128::from(bytes),
-    )
-    .map_err(|e| e.to_string())?;
-    match volume {
-        Volume::Dense(v) => Regularizer::from_volume(v, regions),
-        Volume::Blocks(v) => Regularizer::from_blocks(v, regions),
     }
-    .map_err(|e| format!("{name}: {e}"))
 }
 
 /// `volume` with voxel `at` set to `label`: inside a block, that block's voxel; outside

@@ -5,7 +5,7 @@ use std::collections::HashMap;
 
 use rayon::prelude::*;
 
-use super::scan::{oriented_surfel, outside_of, range_faces, RawFace, MAX_SURFELS};
+use super::scan::{oriented_surfel, outside_of, range_faces, Cap, RawFace, MAX_SURFELS};
 use super::NONE;
 use crate::blocks::BlockVolume;
 use crate::error::SurfaceError;
@@ -36,7 +36,7 @@ impl DigitalSurface {
                 let outside = outside_of(&view, &regions);
                 let nz = view.dims()[2];
                 let at = b.offset.map(|o| o as u32);
-                let slabs: Vec<Vec<RawFace>> = range_faces(&view, &regions, &outside, 0..nz + 1)?;
+                let slabs: Vec<Vec<RawFace>> = range_faces(&view, &regions, &outside, 0..nz + 1, &Cap::none())?;
                 let mut faces: Vec<RawFace> = slabs.into_iter().flatten().collect();
                 for f in &mut faces {
                     f.cell = [0, 1, 2].map(|k| f.cell[k] + at[k]);
@@ -98,7 +98,7 @@ impl DigitalSurface {
             .map(|b| {
                 let view = block_view(volume, &b.labels);
                 let outside = outside_of(&view, &regions);
-                range_faces::<u64>(&view, &regions, &outside, 0..view.dims()[2] + 1)
+                range_faces::<u64>(&view, &regions, &outside, 0..view.dims()[2] + 1, &Cap::none())
             })
             .try_reduce(|| 0, |a, b| Ok(a + b))
     }

@@ -5,6 +5,7 @@
 //! vertices through two rolling corner layers (`Scan`).
 
 use std::collections::HashMap;
+use std::sync::atomic::{AtomicU64, Ordering};
 
 use rayon::prelude::*;
 
@@ -27,6 +28,38 @@ impl RawFace {
     /// Whether the face becomes a surfel: not on an open border (no region outside).
     fn is_inner(&self) -> bool {
         self.regions[0] != NONE && self.regions[1] != NONE
+    }
+}
+
+/// A cap on the surfels one extraction finds, shared by its parallel tasks: each adds its
+/// count as it goes (a row or a slab at a time), and the first to take the total past the
+/// cap stops them all with [`SurfaceError::TooManySurfels`], so that the faces found
+/// before a refusal stay within the cap.
+pub(super) struct Cap {
+    max: u64,
+    found: AtomicU64,
+}
+
+impl Cap {
+    /// At most `max` surfels.
+    pub(super) fn new(max: u64) -> Self {
+        Cap { max, found: AtomicU64::new(0) }
+    }
+
+    /// No cap.
+    pub(super) fn none() -> Self {
+        Cap::new(u64::MAX)
+    }
+
+    /// Counts `n` more surfels.
+    fn take(&self, n: u64) -> Result<(), SurfaceError> {
+        if n == 0 || self.max == u64::MAX {
+            return Ok(());
+        }
+        if self.found.fetch_add(n, Ordering::Relaxed).saturating_add(n) > self.max {
+            return Err(SurfaceError::TooManySurfels(self.max));
+        }
+        Ok(())
     }
 }
 
@@ -109,27 +142,32 @@ impl SlabSink for u64 {
 }
 
 /// The inner faces of slabs `range` (see [`slab_faces`]), with rolling layers: one list
-/// per slab as a `Vec<Vec<RawFace>>`, or their number as a `u64`.
+/// per slab as a `Vec<Vec<RawFace>>`, or their number as a `u64`; each slab's counted
+/// against `cap`.
 pub(super) fn range_faces<S: SlabSink>(
     volume: &LabelView<'_>,
     regions: &Regions,
     outside: &Outside,
     range: std::ops::Range<usize>,
+    cap: &Cap,
 ) -> Result<S, SurfaceError> {
     let mut out = S::default();
     scan_slabs(volume, regions, outside, range, |prev, cur, k| {
         out.slab();
+        let mut n = 0;
         slab_faces(volume.dims(), outside, k, prev, cur, |f| {
             if f.is_inner() {
+                n += 1;
                 out.face(f);
             }
         });
+        cap.take(n)
     })?;
     Ok(out)
 }
 
 /// Calls `visit(previous layer, current layer, k)` for each slab `k` of `range`, with
-/// rolling region/label layers.
+/// rolling region/label layers; stops at its first error.
 ///
 /// A volume stored `z` fastest (a C-order array indexed `[x, y, z]`, as numpy writes it)
 /// is read [`LAYER_BATCH`] layers at a time, one short contiguous run per `(x, y)`: one
@@ -140,7 +178,7 @@ pub(super) fn scan_slabs(
     regions: &Regions,
     outside: &Outside,
     range: std::ops::Range<usize>,
-    mut visit: impl FnMut(&(Vec<u32>, Vec<u32>), &(Vec<u32>, Vec<u32>), usize),
+    mut visit: impl FnMut(&(Vec<u32>, Vec<u32>), &(Vec<u32>, Vec<u32>), usize) -> Result<(), SurfaceError>,
 ) -> Result<(), SurfaceError> {
     let [nx, ny, _] = volume.dims();
     // At most a quarter of the range's layers at once: the batches of all ranges hold at
@@ -155,7 +193,7 @@ pub(super) fn scan_slabs(
         let m = (layers.len() - 1).min(range.end - k);
         fill_layers(volume, regions, outside, k as isize, &mut layers[1..=m])?;
         for j in 0..m {
-            visit(&layers[j], &layers[j + 1], k + j);
+            visit(&layers[j], &layers[j + 1], k + j)?;
         }
         layers.swap(0, m);
         k += m;
@@ -377,13 +415,14 @@ pub(super) fn all_faces(
     regions: &Regions,
     outside: &Outside,
     tasks: usize,
+    cap: &Cap,
 ) -> Result<SlabFaces, SurfaceError> {
     let [_, ny, nz] = volume.dims();
     if let Some(all) = z_fastest(volume) {
         let per_task = ny.div_ceil(tasks).max(1);
         let mut found: Vec<[Vec<Vec<RawFace>>; 3]> = (0..ny.div_ceil(per_task))
             .into_par_iter()
-            .map(|t| rows_faces(volume, all, regions, outside, t * per_task..((t + 1) * per_task).min(ny)))
+            .map(|t| rows_faces(volume, all, regions, outside, t * per_task..((t + 1) * per_task).min(ny), cap))
             .collect::<Result<_, _>>()?;
         // Slab `k`: its z faces row range after row range, then its x faces, then its y faces.
         let mut slabs: SlabFaces = (0..=nz).map(|_| Vec::with_capacity(3 * found.len())).collect();
@@ -405,6 +444,7 @@ pub(super) fn all_faces(
                 regions,
                 outside,
                 (t * per_task).min(nz + 1)..((t + 1) * per_task).min(nz + 1),
+                cap,
             )
         })
         .collect::<Result<_, _>>()?;
@@ -415,13 +455,15 @@ pub(super) fn all_faces(
 /// `(x * ny + y) * nz + z`), `[x, y, z]` faces by axis and slab: the faces perpendicular to
 /// `z` between `(x, y)` columns' voxels, and those perpendicular to `x` and `y` between
 /// neighbouring columns, with cell `y` in `ys` (and `y = ny` for the last rows). Each
-/// slab's list is in the order of [`slab_faces`] restricted to these rows.
+/// slab's list is in the order of [`slab_faces`] restricted to these rows. Each row's faces
+/// are counted against `cap`.
 pub(super) fn rows_faces(
     volume: &LabelView<'_>,
     all: &[u32],
     regions: &Regions,
     outside: &Outside,
     ys: std::ops::Range<usize>,
+    cap: &Cap,
 ) -> Result<[Vec<Vec<RawFace>>; 3], SurfaceError> {
     let [nx, ny, nz] = volume.dims();
     let mut out: [Vec<Vec<RawFace>>; 3] = [0, 1, 2].map(|_| (0..=nz).map(|_| Vec::new()).collect());
@@ -449,6 +491,8 @@ pub(super) fn rows_faces(
     // A column of the outside beyond each side, `[axis][low, high]`.
     let beyond: [[Vec<u32>; 2]; 3] = outside.map(|sides| sides.map(|(r, _)| vec![r; nz]));
     let last = if ys.end == ny { ny + 1 } else { ys.end };
+    // The row's faces, counted against the cap.
+    let mut n = 0u64;
     for y in ys.start..last {
         let yy = y as u32;
         if y < ny {
@@ -460,6 +504,7 @@ pub(super) fn rows_faces(
                 let label_at = |z: usize| label(x, y, z);
                 let (lo, hi) = (outside[2][0], outside[2][1]);
                 if col[0] != lo.0 && lo.0 != NONE {
+                    n += 1;
                     out[2][0].push(RawFace {
                         cell: cell(0),
                         axis: 2,
@@ -469,6 +514,7 @@ pub(super) fn rows_faces(
                 }
                 for_differences(&col[..nz - 1], &col[1..], |j, a, b| {
                     let z = j + 1;
+                    n += 1;
                     out[2][z].push(RawFace {
                         cell: cell(z),
                         axis: 2,
@@ -483,6 +529,7 @@ pub(super) fn rows_faces(
                         regions: [col[nz - 1], hi.0],
                         labels: [label_at(nz - 1), hi.1],
                     };
+                    n += 1;
                     out[2][nz].push(face);
                 }
             }
@@ -493,6 +540,7 @@ pub(super) fn rows_faces(
                 for_differences(a, b, |z, ra, rb| {
                     let la = if x > 0 { label(x - 1, y, z) } else { outside[0][0].1 };
                     let lb = if x < nx { label(x, y, z) } else { outside[0][1].1 };
+                    n += 1;
                     out[0][z].push(RawFace {
                         cell: [x as u32, yy, z as u32],
                         axis: 0,
@@ -509,6 +557,7 @@ pub(super) fn rows_faces(
             for_differences(a, b, |z, ra, rb| {
                 let la = if y > 0 { label(x, y - 1, z) } else { outside[1][0].1 };
                 let lb = if y < ny { label(x, y, z) } else { outside[1][1].1 };
+                n += 1;
                 out[1][z].push(RawFace {
                     cell: [x as u32, yy, z as u32],
                     axis: 1,
@@ -518,6 +567,7 @@ pub(super) fn rows_faces(
             });
         }
         std::mem::swap(&mut prev, &mut cur);
+        cap.take(std::mem::take(&mut n))?;
     }
     Ok(out)
 }

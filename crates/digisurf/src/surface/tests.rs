@@ -96,7 +96,7 @@ fn column_scan_does_not_depend_on_the_row_ranges() {
     let outside = scan::outside_of(&vol.view(), &regions);
     type Face = ([u32; 3], u8, [u32; 2], [u32; 2]);
     let flat = |tasks| -> Vec<Face> {
-        let found = scan::all_faces(&vol.view(), &regions, &outside, tasks).unwrap();
+        let found = scan::all_faces(&vol.view(), &regions, &outside, tasks, &scan::Cap::none()).unwrap();
         found.into_iter().flatten().flatten().map(|f| (f.cell, f.axis, f.regions, f.labels)).collect()
     };
     let one = flat(1);
