@@ -179,7 +179,11 @@ impl Source {
         let need = |s: u64| voxreg_regularize::estimated_bytes(s, params).saturating_add(extra(s));
         let Source::Dense(v) = self else {
             let (surfels, bytes) = self.estimated_bytes(args, params)?;
-            voxreg_io::check_memory(path, &what(&surfels.to_string()), u128::from(bytes) + u128::from(extra(surfels)))?;
+            voxreg_io::check_memory(
+                path,
+                &what(&surfels.to_string()),
+                u128::from(bytes) + u128::from(extra(surfels)),
+            )?;
             return self.regularizer(args, &params.regions);
         };
         let cap = max_surfels_within(voxreg_io::max_memory(), need);

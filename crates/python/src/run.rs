@@ -9,8 +9,8 @@ use std::time::{Duration, Instant};
 use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
-use voxreg_io::{Material, Palette};
 use voxreg_digisurf::{DigitalSurface, SurfaceError};
+use voxreg_io::{Material, Palette};
 use voxreg_regularize::{Event, Output, RegularizeError, Regularizer, Report, Run, Stage};
 
 use crate::error::{panic_error, Error, Result};
@@ -162,8 +162,10 @@ pub(crate) fn regularize<'py>(
                     // surface is counted to the end for the message.
                     let need = |s: u64| voxreg_regularize::estimated_bytes(s, params);
                     let cap = voxreg_regularize::max_surfels_within(limit, need);
-                    let no_surface = |e: &RegularizeError| Error::regularize("labels: no surface to regularize: ", e);
-                    let mut regularizer = match Regularizer::from_volume_within(volume, &params.regions, cap) {
+                    let no_surface =
+                        |e: &RegularizeError| Error::regularize("labels: no surface to regularize: ", e);
+                    let mut regularizer = match Regularizer::from_volume_within(volume, &params.regions, cap)
+                    {
                         Err(RegularizeError::Surface(SurfaceError::TooManySurfels(m))) => {
                             let surfels = DigitalSurface::count_surfels(volume, &params.regions)
                                 .map_err(|e| no_surface(&e.into()))?

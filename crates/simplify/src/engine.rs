@@ -2,7 +2,7 @@
 //! half-edge collapses with their checks.
 
 use std::cmp::Reverse;
-use std::collections::BinaryHeap;
+use std::collections::{BinaryHeap, VecDeque};
 
 use glam::DVec3;
 use rayon::prelude::*;
@@ -36,6 +36,10 @@ const AREA_TOLERANCE: f64 = 0.01;
 /// Collapses planned together, in parallel, before they are applied in queue order. A
 /// constant, so that the output does not depend on the thread count.
 const BATCH: usize = 32;
+
+/// The fewest plans (or queue updates) of a batch made on the pool's threads; fewer are
+/// made on the calling one. Only where they run depends on it, not what they give.
+const PARALLEL_PLANS: usize = 8;
 
 /// No group or no material.
 pub(crate) const NONE: u32 = u32::MAX;
@@ -529,6 +533,9 @@ impl<'m> Engine<'m> {
         slots.resize_with(BATCH, Slot::default);
         let mut batch: Vec<(Candidate, (DVec3, DVec3))> = Vec::with_capacity(BATCH);
         let mut deferred: Vec<(Candidate, (DVec3, DVec3))> = Vec::new();
+        // The entries put back, in queue order, beside the queue: the next batch takes
+        // the least of both, as if they had been pushed back, without the heap's work.
+        let mut held: VecDeque<Candidate> = VecDeque::new();
         let mut applied: Vec<u32> = Vec::with_capacity(BATCH);
         let mut requests: Vec<(u32, Vec<u32>)> = Vec::new();
         while self.alive > goal {
@@ -553,8 +560,24 @@ impl<'m> Engine<'m> {
             batch.clear();
             deferred.clear();
             while batch.len() < BATCH && deferred.len() < 2 * BATCH {
-                let Some(Reverse(c)) = self.heap.pop() else { break };
+                let from_held = match (self.heap.peek(), held.front()) {
+                    (_, None) => false,
+                    (None, Some(_)) => true,
+                    (Some(Reverse(h)), Some(d)) => d <= h,
+                };
+                let c = if from_held {
+                    held.pop_front().expect("peeked")
+                } else {
+                    match self.heap.pop() {
+                        Some(Reverse(c)) => c,
+                        None => break,
+                    }
+                };
                 if !self.is_current(&c) {
+                    continue;
+                }
+                if self.frozen_vertex[c.1 as usize] {
+                    self.retry[c.1 as usize] = true;
                     continue;
                 }
                 let b = self.reach(c.1, c.2);
@@ -571,13 +594,20 @@ impl<'m> Engine<'m> {
             if batch.is_empty() {
                 break;
             }
-            for (c, _) in &deferred {
-                self.heap.push(Reverse(*c));
+            // Taken in queue order, the entries put back all come before those still held.
+            for (c, _) in deferred.iter().rev() {
+                held.push_front(*c);
             }
             let this = &*self;
-            slots[..batch.len()].par_iter_mut().zip(&batch).for_each(|(slot, (c, _))| {
+            let plan = |(slot, (c, _)): (&mut Slot, &(Candidate, (DVec3, DVec3)))| {
                 slot.ok = this.plan_with(c.1, c.2, &mut slot.plan, &mut slot.scratch);
-            });
+            };
+            // A few plans are made here: waking the pool's threads for them costs more.
+            if batch.len() < PARALLEL_PLANS {
+                slots[..batch.len()].iter_mut().zip(&batch).for_each(plan);
+            } else {
+                slots[..batch.len()].par_iter_mut().zip(&batch).for_each(plan);
+            }
             applied.clear();
             for slot in &slots[..batch.len()] {
                 if self.alive <= goal {
@@ -605,17 +635,26 @@ impl<'m> Engine<'m> {
                     }
                 }
             }
-            let this = &*self;
-            let pushed: Vec<Vec<Reverse<Candidate>>> = requests
-                .par_iter()
-                .map_init(Vec::new, |nb, (x, both)| {
-                    let mut out = Vec::new();
-                    this.entries_of(*x, both, nb, &mut out);
-                    out
-                })
-                .collect();
-            for e in pushed {
-                self.heap.extend(e);
+            if requests.len() < PARALLEL_PLANS {
+                let mut nb = Vec::new();
+                let mut out = Vec::new();
+                for (x, both) in &requests {
+                    self.entries_of(*x, both, &mut nb, &mut out);
+                }
+                self.heap.extend(out);
+            } else {
+                let this = &*self;
+                let pushed: Vec<Vec<Reverse<Candidate>>> = requests
+                    .par_iter()
+                    .map_init(Vec::new, |nb, (x, both)| {
+                        let mut out = Vec::new();
+                        this.entries_of(*x, both, nb, &mut out);
+                        out
+                    })
+                    .collect();
+                for e in pushed {
+                    self.heap.extend(e);
+                }
             }
         }
         self.slots = slots;

@@ -482,8 +482,11 @@ const BYTES_PER_LINE: u64 = 32;
 /// built as blocks ([`Regularizer::from_blocks`]): the memory of the models' boxes.
 fn build(volume: &Volume, regions: &RegionMap, name: &str) -> Result<Regularizer, String> {
     let need = |surfels: u64, lines: u64| {
-        let lines =
-            if u128::from(surfels) * 16 < u128::from(lines) { 0 } else { lines.saturating_mul(BYTES_PER_LINE) };
+        let lines = if u128::from(surfels) * 16 < u128::from(lines) {
+            0
+        } else {
+            lines.saturating_mul(BYTES_PER_LINE)
+        };
         surfels
             .saturating_mul(SESSION_BYTES_PER_SURFEL)
             .saturating_add(voxreg_regularize::BYTES_FIXED)

@@ -36,7 +36,8 @@ impl DigitalSurface {
                 let outside = outside_of(&view, &regions);
                 let nz = view.dims()[2];
                 let at = b.offset.map(|o| o as u32);
-                let slabs: Vec<Vec<RawFace>> = range_faces(&view, &regions, &outside, 0..nz + 1, &Cap::none())?;
+                let slabs: Vec<Vec<RawFace>> =
+                    range_faces(&view, &regions, &outside, 0..nz + 1, &Cap::none())?;
                 let mut faces: Vec<RawFace> = slabs.into_iter().flatten().collect();
                 for f in &mut faces {
                     f.cell = [0, 1, 2].map(|k| f.cell[k] + at[k]);

@@ -422,7 +422,9 @@ pub(super) fn all_faces(
         let per_task = ny.div_ceil(tasks).max(1);
         let mut found: Vec<[Vec<Vec<RawFace>>; 3]> = (0..ny.div_ceil(per_task))
             .into_par_iter()
-            .map(|t| rows_faces(volume, all, regions, outside, t * per_task..((t + 1) * per_task).min(ny), cap))
+            .map(|t| {
+                rows_faces(volume, all, regions, outside, t * per_task..((t + 1) * per_task).min(ny), cap)
+            })
             .collect::<Result<_, _>>()?;
         // Slab `k`: its z faces row range after row range, then its x faces, then its y faces.
         let mut slabs: SlabFaces = (0..=nz).map(|_| Vec::with_capacity(3 * found.len())).collect();
