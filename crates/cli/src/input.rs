@@ -2,9 +2,9 @@
 
 use anyhow::{Context, Result};
 use glam::DVec3;
-use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelVolume, RegionMap, SurfaceError};
+use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelVolume, RegionMap};
 use voxreg_io::{is_voxel_art, Background, InputError, InputOptions, Palette};
-use voxreg_regularize::{max_surfels_within, Params, RegularizeError, Regularizer};
+use voxreg_regularize::{Budgeted, Params, Regularizer};
 
 use crate::args::InputArgs;
 
@@ -166,8 +166,7 @@ impl Source {
     /// memory budget (`voxreg_io::max_memory`); `what(count)` names what needs the memory
     /// ("the regularization of its {count} surfels"). A dense volume's extraction counts
     /// its surfels as it finds them and stops past the most that fit (one pass over the
-    /// voxels; a refused one is then counted to the end for the message); blocks are
-    /// counted first.
+    /// voxels; `Regularizer::from_volume_within_budget`); blocks are counted first.
     pub(crate) fn regularizer_within(
         &self,
         args: &InputArgs,
@@ -186,18 +185,15 @@ impl Source {
             )?;
             return self.regularizer(args, &params.regions);
         };
-        let cap = max_surfels_within(voxreg_io::max_memory(), need);
-        match Regularizer::from_volume_within(v, &params.regions, cap) {
-            Err(RegularizeError::Surface(SurfaceError::TooManySurfels(m))) => {
-                // Refused: counted to the end (a pass that stores nothing), so that the
-                // message names the surface's size and need, as `voxreg info` does.
-                let surfels = DigitalSurface::count_surfels(v, &params.regions)
-                    .with_context(|| format!("{}: no surface to regularize", path.display()))?;
-                let bytes = u128::from(need(surfels.max(m + 1)));
-                voxreg_io::check_memory(path, &what(&surfels.max(m + 1).to_string()), bytes)?;
-                Err(anyhow::anyhow!("{}: more than {m} surfels", path.display()))
+        let limit = voxreg_io::max_memory();
+        let budgeted = Regularizer::from_volume_within_budget(v, &params.regions, limit, need)
+            .with_context(|| format!("{}: no surface to regularize", path.display()))?;
+        match budgeted {
+            Budgeted::Fits(r) => Ok(*r),
+            Budgeted::TooLarge { surfels, bytes } => {
+                let what = what(&surfels.to_string());
+                Err(voxreg_io::IoError::OverBudget { path: path.clone(), what, bytes, limit }.into())
             }
-            r => r.with_context(|| format!("{}: no surface to regularize", path.display())),
         }
     }
 

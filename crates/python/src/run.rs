@@ -9,9 +9,8 @@ use std::time::{Duration, Instant};
 use numpy::PyReadonlyArray2;
 use pyo3::prelude::*;
 use pyo3::types::{PyDict, PyString};
-use voxreg_digisurf::{DigitalSurface, SurfaceError};
 use voxreg_io::{Material, Palette};
-use voxreg_regularize::{Event, Output, RegularizeError, Regularizer, Report, Run, Stage};
+use voxreg_regularize::{Budgeted, Event, Output, Regularizer, Report, Run, Stage};
 
 use crate::error::{panic_error, Error, Result};
 use crate::mesh::{Part, Surface};
@@ -157,28 +156,18 @@ pub(crate) fn regularize<'py>(
         crate::signals::interruptible(py, move |interrupt| {
             on_pool(threads, move || {
                 catch_unwind(AssertUnwindSafe(|| -> Result<Output> {
-                    // Refused before the surface is built, as the CLI refuses it: the
-                    // extraction stops past the most surfels that fit, and a refused
-                    // surface is counted to the end for the message.
+                    // Refused before the surface is built, as the CLI refuses it.
                     let need = |s: u64| voxreg_regularize::estimated_bytes(s, params);
-                    let cap = voxreg_regularize::max_surfels_within(limit, need);
-                    let no_surface =
-                        |e: &RegularizeError| Error::regularize("labels: no surface to regularize: ", e);
-                    let mut regularizer = match Regularizer::from_volume_within(volume, &params.regions, cap)
-                    {
-                        Err(RegularizeError::Surface(SurfaceError::TooManySurfels(m))) => {
-                            let surfels = DigitalSurface::count_surfels(volume, &params.regions)
-                                .map_err(|e| no_surface(&e.into()))?
-                                .max(m + 1);
-                            volume::check_budget(
-                                &format!("the regularization of its {surfels} surfels"),
-                                u128::from(need(surfels)),
-                                limit,
-                            )?;
-                            return Err(no_surface(&SurfaceError::TooManySurfels(m).into()));
-                        }
-                        r => r.map_err(|e| no_surface(&e))?,
-                    };
+                    let mut regularizer =
+                        match Regularizer::from_volume_within_budget(volume, &params.regions, limit, need)
+                            .map_err(|e| Error::regularize("labels: no surface to regularize: ", &e))?
+                        {
+                            Budgeted::Fits(r) => *r,
+                            Budgeted::TooLarge { surfels, bytes } => {
+                                let what = format!("the regularization of its {surfels} surfels");
+                                return Err(volume::over_budget(&what, bytes, limit));
+                            }
+                        };
                     regularizer.set_keep_normals(false);
                     regularizer.set_interrupt(interrupt.clone());
                     regularizer

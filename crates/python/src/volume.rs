@@ -36,17 +36,21 @@ impl Labels<'_> {
 /// Refuses an allocation of `bytes` for `what` over `limit`, before it is made.
 pub(crate) fn check_budget(what: &str, bytes: u128, limit: u64) -> Result<()> {
     if bytes > u128::from(limit) {
-        let bytes = u64::try_from(bytes).unwrap_or(u64::MAX);
-        return Err(Error::new(
-            Kind::Voxreg,
-            format!(
-                "labels: {what} needs {}, over the memory limit of {} (raise it with max_memory=)",
-                voxreg_io::format_size(bytes),
-                voxreg_io::format_size(limit)
-            ),
-        ));
+        return Err(over_budget(what, u64::try_from(bytes).unwrap_or(u64::MAX), limit));
     }
     Ok(())
+}
+
+/// The error of [`check_budget`]: `what` needs `bytes`, over `limit`.
+pub(crate) fn over_budget(what: &str, bytes: u64, limit: u64) -> Error {
+    Error::new(
+        Kind::Voxreg,
+        format!(
+            "labels: {what} needs {}, over the memory limit of {} (raise it with max_memory=)",
+            voxreg_io::format_size(bytes),
+            voxreg_io::format_size(limit)
+        ),
+    )
 }
 
 /// An integer type a label can come from.

@@ -112,8 +112,8 @@ pub use options::{Clamp, InputFacts, Overrides, Preset, Regions};
 pub use params::{EstimatedNormals, Estimator, NormalsParams, Params};
 pub use progress::Progress;
 pub use regularizer::{
-    estimated_bytes, max_surfels_within, regularize, Output, Regularizer, Run, BYTES_FIXED, BYTES_PER_SURFEL,
-    BYTES_PER_SURFEL_CLAMPED, BYTES_PER_SURFEL_SWEEPS,
+    estimated_bytes, max_surfels_within, regularize, Budgeted, Output, Regularizer, Run, BYTES_FIXED,
+    BYTES_PER_SURFEL, BYTES_PER_SURFEL_CLAMPED, BYTES_PER_SURFEL_SWEEPS,
 };
 pub use report::{EnergyReport, NormalsReport, Report, StageTimes};
 pub use request::{SolveRequest, SolveStart};

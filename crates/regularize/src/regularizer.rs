@@ -4,7 +4,9 @@ use std::sync::Arc;
 use std::time::Instant;
 
 use glam::DVec3;
-use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelStorage, LabelVolume, RegionMap, VertexData};
+use voxreg_digisurf::{
+    BlockVolume, DigitalSurface, LabelStorage, LabelVolume, RegionMap, SurfaceError, VertexData,
+};
 use voxreg_normals::{FeatureField, Interrupt, NormalField};
 
 use crate::error::RegularizeError;
@@ -104,6 +106,20 @@ pub fn max_surfels_within(limit: u64, need: impl Fn(u64) -> u64) -> u64 {
         }
     }
     lo
+}
+
+/// What [`Regularizer::from_volume_within_budget`] gives.
+#[derive(Debug)]
+pub enum Budgeted {
+    /// A run on the surface fits the budget: the regularizer.
+    Fits(Box<Regularizer>),
+    /// A run on the surface of `surfels` surfels would need `bytes`, more than the budget.
+    TooLarge {
+        /// The surface's surfels.
+        surfels: u64,
+        /// What a run on it needs.
+        bytes: u64,
+    },
 }
 
 /// One run of a [`Regularizer`] ([`Regularizer::run`]): the parameters, and how the run
@@ -253,6 +269,30 @@ impl Regularizer {
         let mut r = Regularizer::new(surface);
         r.surface_seconds = t.elapsed().as_secs_f64();
         Ok(r)
+    }
+
+    /// [`Regularizer::from_volume`] when a run on the surface fits `limit` bytes,
+    /// `need(surfels)` being what a run on that many takes (nondecreasing, such as
+    /// [`estimated_bytes`] of its parameters): the extraction is capped at the most
+    /// surfels that fit ([`Regularizer::from_volume_within`]), so that a surface that fits
+    /// is built in one pass over the voxels; a refused one is counted to the end (a pass
+    /// that stores nothing, [`DigitalSurface::count_surfels`]) so that the caller can name
+    /// its size and need.
+    pub fn from_volume_within_budget<S: LabelStorage>(
+        volume: &LabelVolume<S>,
+        regions: &RegionMap,
+        limit: u64,
+        need: impl Fn(u64) -> u64,
+    ) -> Result<Budgeted, RegularizeError> {
+        let cap = max_surfels_within(limit, &need);
+        match Regularizer::from_volume_within(volume, regions, cap) {
+            Ok(r) => Ok(Budgeted::Fits(Box::new(r))),
+            Err(RegularizeError::Surface(SurfaceError::TooManySurfels(m))) => {
+                let surfels = DigitalSurface::count_surfels(volume, regions)?.max(m + 1);
+                Ok(Budgeted::TooLarge { surfels, bytes: need(surfels) })
+            }
+            Err(e) => Err(e),
+        }
     }
 
     /// A regularizer on the digital surface of the blocks of `volume`
@@ -498,5 +538,17 @@ mod tests {
             Regularizer::from_volume_within(&v, &map, n - 1).err(),
             Some(RegularizeError::Surface(SurfaceError::TooManySurfels(n - 1)))
         );
+        // Within a budget: built where the run fits, else the whole surface's size and need.
+        let need = |s: u64| 1000 + 10 * s;
+        match Regularizer::from_volume_within_budget(&v, &map, need(n), need).unwrap() {
+            Budgeted::Fits(r) => assert_eq!(r.surface().as_ref(), whole.surface().as_ref()),
+            b => panic!("{b:?}"),
+        }
+        for limit in [need(n) - 1, need(n / 2), 999] {
+            match Regularizer::from_volume_within_budget(&v, &map, limit, need).unwrap() {
+                Budgeted::TooLarge { surfels, bytes } => assert_eq!((surfels, bytes), (n, need(n))),
+                b => panic!("{limit}: {b:?}"),
+            }
+        }
     }
 }

@@ -12,7 +12,7 @@ use voxreg_simplify::Simplified;
 use glam::DVec3;
 use voxreg_digisurf::{Block, BlockVolume, RegionMap, SurfaceError};
 use voxreg_io::{Palette, QuadMesh};
-use voxreg_regularize::{Interrupt, Output, Params, RegularizeError, Regularizer, Run, Stage};
+use voxreg_regularize::{Budgeted, Interrupt, Output, Params, RegularizeError, Regularizer, Run, Stage};
 
 use crate::model::{f32_bytes, Model};
 use crate::model::{Loaded, Volume};
@@ -502,19 +502,18 @@ fn build(volume: &Volume, regions: &RegionMap, name: &str) -> Result<Regularizer
     };
     let no_surface = |e: &dyn std::fmt::Display| format!("{name}: {e}");
     match volume {
-        // The extraction stops past the most surfels that fit; a refused surface is then
-        // counted to the end for the message.
+        // One pass over the voxels, the extraction's (a refused volume is counted).
         Volume::Dense(v) => {
-            let cap = voxreg_regularize::max_surfels_within(voxreg_io::max_memory(), |s| need(s, 0));
-            match Regularizer::from_volume_within(v, regions, cap) {
-                Err(RegularizeError::Surface(SurfaceError::TooManySurfels(m))) => {
-                    let surfels = voxreg_digisurf::DigitalSurface::count_surfels(v, regions)
-                        .map_err(|e| no_surface(&e))?
-                        .max(m + 1);
-                    check(surfels, need(surfels, 0))?;
-                    Err(no_surface(&SurfaceError::TooManySurfels(m)))
+            let limit = voxreg_io::max_memory();
+            match Regularizer::from_volume_within_budget(v, regions, limit, |s| need(s, 0))
+                .map_err(|e| no_surface(&e))?
+            {
+                Budgeted::Fits(r) => Ok(*r),
+                Budgeted::TooLarge { surfels, bytes } => {
+                    let path = std::path::PathBuf::from(name);
+                    let what = format!("the regularization of its {surfels} surfels");
+                    Err(voxreg_io::IoError::OverBudget { path, what, bytes, limit }.to_string())
                 }
-                r => r.map_err(|e| no_surface(&e)),
             }
         }
         Volume::Blocks(v) => {
