@@ -32,15 +32,19 @@ impl RawFace {
 }
 
 /// A cap on the surfels one extraction finds, shared by its parallel tasks: each adds its
-/// count as it goes (a row or a slab at a time), and the first to take the total past the
-/// cap stops them all with [`SurfaceError::TooManySurfels`], so that the faces found
-/// before a refusal stay within the cap.
+/// count as it goes (every [`Cap::EVERY`] faces or so: a slab's faces, or a column's
+/// beyond), and the first to take the total past the cap stops them all with
+/// [`SurfaceError::TooManySurfels`], so that the faces held at a refusal stay within the
+/// cap and about [`Cap::EVERY`] a task.
 pub(super) struct Cap {
     max: u64,
     found: AtomicU64,
 }
 
 impl Cap {
+    /// The most faces a task finds between two counts.
+    pub(super) const EVERY: u64 = 1 << 16;
+
     /// At most `max` surfels.
     pub(super) fn new(max: u64) -> Self {
         Cap { max, found: AtomicU64::new(0) }
@@ -154,14 +158,17 @@ pub(super) fn range_faces<S: SlabSink>(
     let mut out = S::default();
     scan_slabs(volume, regions, outside, range, |prev, cur, k| {
         out.slab();
-        let mut n = 0;
+        let (mut n, mut refused) = (0, Ok(()));
         slab_faces(volume.dims(), outside, k, prev, cur, |f| {
-            if f.is_inner() {
+            if f.is_inner() && refused.is_ok() {
                 n += 1;
                 out.face(f);
+                if n == Cap::EVERY {
+                    refused = cap.take(std::mem::take(&mut n));
+                }
             }
         });
-        cap.take(n)
+        refused.and_then(|()| cap.take(n))
     })?;
     Ok(out)
 }
@@ -534,6 +541,9 @@ pub(super) fn rows_faces(
                     n += 1;
                     out[2][nz].push(face);
                 }
+                if n >= Cap::EVERY {
+                    cap.take(std::mem::take(&mut n))?;
+                }
             }
             // Faces perpendicular to x.
             for x in 0..=nx {
@@ -550,6 +560,9 @@ pub(super) fn rows_faces(
                         labels: [la, lb],
                     });
                 });
+                if n >= Cap::EVERY {
+                    cap.take(std::mem::take(&mut n))?;
+                }
             }
         }
         // Faces perpendicular to y, between rows `y - 1` and `y`.
@@ -567,6 +580,9 @@ pub(super) fn rows_faces(
                     labels: [la, lb],
                 });
             });
+            if n >= Cap::EVERY {
+                cap.take(std::mem::take(&mut n))?;
+            }
         }
         std::mem::swap(&mut prev, &mut cur);
         cap.take(std::mem::take(&mut n))?;

@@ -106,6 +106,29 @@ fn column_scan_does_not_depend_on_the_row_ranges() {
     }
 }
 
+/// A volume of several times [`scan::Cap::EVERY`] faces (counted within slabs and rows,
+/// not only at their ends), stored either way, builds at its size and is refused below it.
+#[test]
+fn a_cap_counted_many_times_builds_at_the_size_and_refuses_below() {
+    let mut x = 99u64;
+    let layers = LabelVolume::from_fn([96, 90, 40], |_| {
+        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((x >> 33) % 2) as u32
+    });
+    let columns = LabelVolume::new(layers.labels().as_standard_layout().into_owned());
+    assert!(scan::z_fastest(&columns.view()).is_some() && scan::z_fastest(&layers.view()).is_none());
+    let map = RegionMap::per_label();
+    let whole = DigitalSurface::new(&layers, &map).unwrap();
+    let n = whole.num_surfels() as u64;
+    assert!(n > 4 * scan::Cap::EVERY, "{n}");
+    for vol in [&layers, &columns] {
+        assert_eq!(DigitalSurface::new_within(vol, &map, n).unwrap(), whole);
+        for cap in [n - 1, scan::Cap::EVERY / 2, 1] {
+            assert_eq!(DigitalSurface::new_within(vol, &map, cap), Err(SurfaceError::TooManySurfels(cap)));
+        }
+    }
+}
+
 proptest! {
     /// A volume stored `z` fastest (read column by column) and the same labels stored
     /// `x` fastest (read layer by layer) give the same surface.
