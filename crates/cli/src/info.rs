@@ -47,14 +47,17 @@ pub(crate) fn info(args: &InputArgs) -> Result<()> {
             None => writeln!(out, "  {label}: {count} voxels").ok(),
         };
     }
-    // Under the estimate `regularize` checks before it builds the surface: `info` on an
-    // input that `regularize` refuses fails the same way, before the same work.
+    // Under the budget `regularize` checks as it builds the surface: `info` on an input
+    // that `regularize` refuses fails the same way, at the same point.
     let mut params = preset.params();
     params.regions = map.clone();
-    let (surfels, bytes) = volume.estimated_bytes(args, &params)?;
-    let what = format!("the regularization of its {surfels} surfels");
-    voxreg_io::check_memory(&args.input, &what, u128::from(bytes))?;
-    let surface = volume.surface(args, &map)?;
+    let regularizer = volume.regularizer_within(
+        args,
+        &params,
+        |_| 0,
+        |n| format!("the regularization of its {n} surfels"),
+    )?;
+    let surface = regularizer.surface();
     let c = surface.counts();
     writeln!(out, "regions: {}", surface.regions().len()).ok();
     writeln!(out, "surfels: {}", c.surfels).ok();

@@ -205,15 +205,6 @@ impl Source {
         }
         .with_context(|| format!("{}: no surface to regularize", args.input.display()))
     }
-
-    /// The digital surface, or an error naming the file.
-    pub(crate) fn surface(&self, args: &InputArgs, map: &RegionMap) -> Result<DigitalSurface> {
-        match self {
-            Source::Dense(v) => DigitalSurface::new(v, map),
-            Source::Blocks(v) => DigitalSurface::from_blocks(v, map),
-        }
-        .with_context(|| format!("{}: no surface to regularize", args.input.display()))
-    }
 }
 
 /// Whether INPUT is voxel art (the voxel-art preset's input).
