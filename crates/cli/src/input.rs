@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result};
 use glam::DVec3;
-use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelVolume, RegionMap};
+use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelVolume};
 use voxreg_io::{is_voxel_art, Background, InputError, InputOptions, Palette};
 use voxreg_regularize::{Budgeted, Params, Regularizer};
 
@@ -146,21 +146,6 @@ impl Source {
         }
     }
 
-    /// The surfels of the surface with `params.regions`, and the memory a run of
-    /// `params` on it takes (`Regularizer::estimated_bytes_of`), before it is built.
-    pub(crate) fn estimated_bytes(&self, args: &InputArgs, params: &Params) -> Result<(u64, u64)> {
-        let counted = match self {
-            Source::Dense(v) => Regularizer::estimated_bytes_of(v, params),
-            Source::Blocks(v) => DigitalSurface::count_surfels_of_blocks(v, &params.regions)
-                .map(|s| {
-                    let [_, ny, nz] = v.dims().map(|d| d as u64);
-                    (s, voxreg_regularize::estimated_bytes(s, params).saturating_add(line_bytes(s, ny, nz)))
-                })
-                .map_err(Into::into),
-        };
-        counted.with_context(|| format!("{}: no surface to regularize", args.input.display()))
-    }
-
     /// A regularizer of `params.regions`' surface, refused before the surface is built
     /// when a run of `params` on it, and `extra(surfels)` more bytes, would exceed the
     /// memory budget (`voxreg_io::max_memory`); `what(count)` names what needs the memory
@@ -175,35 +160,36 @@ impl Source {
         what: impl Fn(&str) -> String,
     ) -> Result<Regularizer> {
         let path = &args.input;
+        let no_surface = || format!("{}: no surface to regularize", path.display());
         let need = |s: u64| voxreg_regularize::estimated_bytes(s, params).saturating_add(extra(s));
-        let Source::Dense(v) = self else {
-            let (surfels, bytes) = self.estimated_bytes(args, params)?;
-            voxreg_io::check_memory(
-                path,
-                &what(&surfels.to_string()),
-                u128::from(bytes) + u128::from(extra(surfels)),
-            )?;
-            return self.regularizer(args, &params.regions);
-        };
         let limit = voxreg_io::max_memory();
-        let budgeted = Regularizer::from_volume_within_budget(v, &params.regions, limit, need)
-            .with_context(|| format!("{}: no surface to regularize", path.display()))?;
-        match budgeted {
-            Budgeted::Fits(r) => Ok(*r),
-            Budgeted::TooLarge { surfels, bytes } => {
-                let what = what(&surfels.to_string());
-                Err(voxreg_io::IoError::OverBudget { path: path.clone(), what, bytes, limit }.into())
+        let (surfels, bytes) = match self {
+            Source::Dense(v) => {
+                match Regularizer::from_volume_within_budget(v, &params.regions, limit, need)
+                    .with_context(no_surface)?
+                {
+                    Budgeted::Fits(r) => return Ok(*r),
+                    Budgeted::TooLarge { surfels, bytes } => (surfels, bytes),
+                }
             }
+            Source::Blocks(v) => {
+                let s =
+                    DigitalSurface::count_surfels_of_blocks(v, &params.regions).with_context(no_surface)?;
+                let [_, ny, nz] = v.dims().map(|d| d as u64);
+                let bytes = need(s).saturating_add(line_bytes(s, ny, nz));
+                if bytes <= limit {
+                    return Regularizer::from_blocks(v, &params.regions).with_context(no_surface);
+                }
+                (s, bytes)
+            }
+        };
+        Err(voxreg_io::IoError::OverBudget {
+            path: path.clone(),
+            what: what(&surfels.to_string()),
+            bytes,
+            limit,
         }
-    }
-
-    /// A regularizer on the digital surface, with labels grouped into regions by `map`.
-    pub(crate) fn regularizer(&self, args: &InputArgs, map: &RegionMap) -> Result<Regularizer> {
-        match self {
-            Source::Dense(v) => Regularizer::from_volume(v, map),
-            Source::Blocks(v) => Regularizer::from_blocks(v, map),
-        }
-        .with_context(|| format!("{}: no surface to regularize", args.input.display()))
+        .into())
     }
 }
 

@@ -247,18 +247,15 @@ impl Regularizer {
         volume: &LabelVolume<S>,
         regions: &RegionMap,
     ) -> Result<Self, RegularizeError> {
-        let t = Instant::now();
-        let surface = DigitalSurface::new(volume, regions)?;
-        let mut r = Regularizer::new(surface);
-        r.surface_seconds = t.elapsed().as_secs_f64();
-        Ok(r)
+        Self::from_volume_within(volume, regions, u64::MAX)
     }
 
     /// [`Regularizer::from_volume`] for a surface of at most `max_surfels` surfels
     /// ([`max_surfels_within`] a memory budget): refused with
     /// [`SurfaceError::TooManySurfels`](voxreg_digisurf::SurfaceError::TooManySurfels)
-    /// as soon as the pass over the voxels finds more, before the surface is built. One
-    /// pass where counting first ([`Regularizer::estimated_bytes_of`]) takes two.
+    /// as soon as the pass over the voxels finds more, before the surface is built (no cap:
+    /// `u64::MAX`). One pass where counting first ([`Regularizer::estimated_bytes_of`])
+    /// takes two.
     pub fn from_volume_within<S: LabelStorage>(
         volume: &LabelVolume<S>,
         regions: &RegionMap,
@@ -507,8 +504,6 @@ impl Regularizer {
 
 #[cfg(test)]
 mod tests {
-    use voxreg_digisurf::SurfaceError;
-
     use super::*;
 
     #[test]

@@ -82,15 +82,21 @@ fn edges_built_per_vertex_are_those_of_a_sort_of_all_sides() {
     agrees_with_sorting(&vol.with_background(None));
 }
 
+/// A volume of `dims` with labels `0..labels` drawn by a linear congruential generator
+/// from `seed`.
+fn random_volume(dims: [usize; 3], seed: u64, labels: u64) -> LabelVolume {
+    let mut x = seed;
+    LabelVolume::from_fn(dims, |_| {
+        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
+        ((x >> 33) % labels) as u32
+    })
+}
+
 /// The column scan cut into many ranges of rows finds the faces a single range finds, in
 /// the same order.
 #[test]
 fn column_scan_does_not_depend_on_the_row_ranges() {
-    let mut x = 777u64;
-    let vol = LabelVolume::from_fn([13, 17, 11], |_| {
-        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        ((x >> 33) % 3) as u32
-    });
+    let vol = random_volume([13, 17, 11], 777, 3);
     let vol = LabelVolume::new(vol.labels().as_standard_layout().into_owned());
     let regions = RegionMap::per_label().resolve(&vol).unwrap();
     let outside = scan::outside_of(&vol.view(), &regions);
@@ -110,11 +116,7 @@ fn column_scan_does_not_depend_on_the_row_ranges() {
 /// not only at their ends), stored either way, builds at its size and is refused below it.
 #[test]
 fn a_cap_counted_many_times_builds_at_the_size_and_refuses_below() {
-    let mut x = 99u64;
-    let layers = LabelVolume::from_fn([96, 90, 40], |_| {
-        x = x.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-        ((x >> 33) % 2) as u32
-    });
+    let layers = random_volume([96, 90, 40], 99, 2);
     let columns = LabelVolume::new(layers.labels().as_standard_layout().into_owned());
     assert!(scan::z_fastest(&columns.view()).is_some() && scan::z_fastest(&layers.view()).is_none());
     let map = RegionMap::per_label();
