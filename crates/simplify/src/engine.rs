@@ -41,6 +41,16 @@ const BATCH: usize = 32;
 /// made on the calling one. Only where they run depends on it, not what they give.
 const PARALLEL_PLANS: usize = 8;
 
+/// The queue's stale entries are dropped once it has grown by this share of its length
+/// after the last drop (one in `STALE_SHARE`): most entries go stale within a few
+/// collapses (every collapse changes the costs of both ends' edges), and popping them
+/// one by one from a larger queue costs more than a pass over it. When they are dropped
+/// does not change the queue's order.
+const STALE_SHARE: usize = 16;
+
+/// Room in the queue beyond its drop length, for the pushes of the batch that crosses it.
+const QUEUE_SLACK: usize = 8192;
+
 /// No group or no material.
 pub(crate) const NONE: u32 = u32::MAX;
 
@@ -661,13 +671,13 @@ impl<'m> Engine<'m> {
         Ok(())
     }
 
-    /// Makes `entries` the queue, with room for half as many again and the pushes of a
-    /// collapse, so that it never grows by doubling; returns the length past which its
+    /// Makes `entries` the queue, with room for [`STALE_SHARE`] more and the pushes of a
+    /// batch, so that it seldom grows by doubling; returns the length past which its
     /// stale entries are dropped (the queue's order is the same whenever they are).
     fn set_queue(&mut self, mut entries: Vec<Reverse<Candidate>>) -> usize {
-        let limit = entries.len() + entries.len() / 2 + 1024;
-        entries.shrink_to(limit + 1024);
-        entries.reserve_exact(limit + 1024 - entries.len());
+        let limit = entries.len() + entries.len() / STALE_SHARE + 1024;
+        entries.shrink_to(limit + QUEUE_SLACK);
+        entries.reserve_exact(limit + QUEUE_SLACK - entries.len());
         self.heap = BinaryHeap::from(entries);
         limit
     }
