@@ -314,9 +314,10 @@ pub(crate) struct OverrideArgs {
     /// Normal estimator driving the alignment term [default: ii].
     #[arg(long, value_enum)]
     pub(crate) normals: Option<NormalsKind>,
-    /// Radius of the ii, convolved and at estimators, in physical units [default: the
-    /// multigrid rule 3 h^(1/3), h the largest voxel spacing, kept within 3 to 12 voxels:
-    /// 3 at unit spacing; 2 voxels for the voxel-art preset].
+    /// Radius of the ii, convolved, at and diffused estimators, in physical units [default:
+    /// the multigrid rule 3 h^(1/3), h the largest voxel spacing, kept within 3 to 12
+    /// voxels: 3 at unit spacing; 2 voxels for the voxel-art preset; 6 voxels of the finest
+    /// axis for diffused].
     #[arg(long, value_name = "R")]
     pub(crate) radius: Option<f64>,
     /// With --normals at: most alternations of the sharpening stage after the last epsilon
@@ -483,6 +484,9 @@ pub(crate) enum NormalsKind {
     Ii,
     /// Ambrosio-Tortorelli regularization of the ii normals: smooth, but keeps sharp features.
     At,
+    /// The faces' own axes diffused over the surface within the radius: cheap and smooth
+    /// (the fast preset's).
+    Diffused,
 }
 
 impl NormalsKind {
@@ -492,6 +496,7 @@ impl NormalsKind {
             NormalsKind::Convolved => Estimator::Convolved,
             NormalsKind::Ii => Estimator::Ii,
             NormalsKind::At => Estimator::At,
+            NormalsKind::Diffused => Estimator::Diffused,
         }
     }
 }

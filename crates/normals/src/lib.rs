@@ -61,7 +61,7 @@ mod trivial;
 
 pub use at::{AmbrosioTortorelli, AtInfo, AtLinearSolver, AtParams, AtSolver, FeatureField};
 pub use convolved::ConvolvedTrivial;
-pub use diffused::{Diffused, QuadGraph};
+pub use diffused::{Diffused, DiffusedStaircase, QuadGraph};
 pub use error::NormalError;
 pub use estimator::NormalEstimator;
 pub use field::NormalField;

@@ -55,7 +55,7 @@ impl Preset {
                 "One solve clamped to the voxels' boxes (never self-intersecting), all colours one solid"
             }
             Preset::Fast => {
-                "Speed of surface nets: trivial normals, 4 x 8 block-Jacobi sweeps, 3 cheap re-estimates"
+                "Speed of surface nets: diffused normals, 3 x 8 block-Jacobi sweeps, 2 cheap re-estimates"
             }
         }
     }
@@ -540,7 +540,10 @@ mod tests {
             assert!(serde_json::from_str::<Overrides>(bad).is_err(), "{bad}");
         }
         let e = serde_json::from_str::<Overrides>(r#"{"normals": "pca"}"#).unwrap_err().to_string();
-        assert!(e.starts_with("must be one of 'trivial', 'convolved', 'ii', 'at', got 'pca'"), "{e}");
+        assert!(
+            e.starts_with("must be one of 'trivial', 'convolved', 'ii', 'at', 'diffused', got 'pca'"),
+            "{e}"
+        );
         // Every field has its name in the list.
         let names: Vec<String> = serde_json::to_value(Overrides::default())
             .unwrap()

@@ -3,8 +3,8 @@
 use serde::Serialize;
 use voxreg_digisurf::{DigitalSurface, RegionMap};
 use voxreg_normals::{
-    default_radius, AmbrosioTortorelli, AtInfo, AtParams, ConvolvedTrivial, FeatureField, IntegralInvariant,
-    Interrupt, NormalEstimator, NormalField, Trivial,
+    default_radius, AmbrosioTortorelli, AtInfo, AtParams, ConvolvedTrivial, DiffusedStaircase, FeatureField,
+    IntegralInvariant, Interrupt, NormalEstimator, NormalField, QuadGraph, Trivial,
 };
 
 use crate::energy::EnergyParams;
@@ -27,19 +27,24 @@ pub enum Estimator {
     /// Ambrosio-Tortorelli regularization of the integral invariants: smooth, but keeps
     /// sharp features ([`AmbrosioTortorelli`]).
     At,
+    /// The staircase's normals diffused over the surface: cheap and smooth, no feature
+    /// rule ([`DiffusedStaircase`]; the fast preset's first field).
+    Diffused,
 }
 
 impl Estimator {
     /// Every estimator.
-    pub const ALL: [Estimator; 4] = [Estimator::Trivial, Estimator::Convolved, Estimator::Ii, Estimator::At];
+    pub const ALL: [Estimator; 5] =
+        [Estimator::Trivial, Estimator::Convolved, Estimator::Ii, Estimator::At, Estimator::Diffused];
 
-    /// `"trivial"`, `"convolved"`, `"ii"` or `"at"`.
+    /// `"trivial"`, `"convolved"`, `"ii"`, `"at"` or `"diffused"`.
     pub fn name(self) -> &'static str {
         match self {
             Estimator::Trivial => "trivial",
             Estimator::Convolved => "convolved",
             Estimator::Ii => "ii",
             Estimator::At => "at",
+            Estimator::Diffused => "diffused",
         }
     }
 }
@@ -68,7 +73,8 @@ pub struct NormalsParams {
     /// The estimator. Default: [`Estimator::Ii`].
     pub estimator: Estimator,
     /// Radius of the ball and disc estimators in physical units; `None` is the multigrid
-    /// rule `3 h^(1/3)` kept within 3 to 12 voxels ([`default_radius`]; 3 at unit spacing).
+    /// rule `3 h^(1/3)` kept within 3 to 12 voxels ([`default_radius`]; 3 at unit spacing),
+    /// and for [`Estimator::Diffused`] 6 voxels of the finest axis.
     /// Default: `None`.
     pub radius: Option<f64>,
     /// Where `radius` is `None`: the radius in voxels along the coarsest axis (so
@@ -118,6 +124,10 @@ impl NormalsParams {
     pub fn radius_on(&self, surface: &DigitalSurface) -> Option<f64> {
         match self.estimator {
             Estimator::Trivial => None,
+            Estimator::Diffused => Some(
+                self.explicit_radius(surface)
+                    .unwrap_or_else(|| DiffusedStaircase::DEFAULT_RADIUS * surface.spacing().min_element()),
+            ),
             _ => Some(self.explicit_radius(surface).unwrap_or_else(|| default_radius(surface))),
         }
     }
@@ -137,6 +147,7 @@ impl NormalsParams {
             Estimator::Convolved => Box::new(ConvolvedTrivial { radius }),
             Estimator::Ii => Box::new(IntegralInvariant { radius }),
             Estimator::At => Box::new(self.at_estimator()),
+            Estimator::Diffused => Box::new(DiffusedStaircase { radius }),
         }
     }
 
@@ -171,6 +182,23 @@ impl NormalsParams {
                 at_info: None,
             },
         })
+    }
+}
+
+impl NormalsParams {
+    /// [`NormalsParams::estimate_interruptible`] of [`Estimator::Diffused`] on the
+    /// surface's surfel `graph` ([`QuadGraph::new`]), which the fast pipeline's
+    /// re-estimates use too.
+    pub(crate) fn diffused_on(
+        &self,
+        surface: &DigitalSurface,
+        graph: &QuadGraph,
+        interrupt: &Interrupt,
+    ) -> Result<EstimatedNormals, RegularizeError> {
+        self.validate()?;
+        let field = DiffusedStaircase { radius: self.explicit_radius(surface) }
+            .estimate_on(surface, graph, interrupt)?;
+        Ok(EstimatedNormals { field, features: None, at_info: None })
     }
 }
 
@@ -272,22 +300,23 @@ impl Params {
         }
     }
 
-    /// The fast pipeline, for speed on a par with surface nets: trivial normals, then four
-    /// batches of [`crate::SweepsParams::default`]'s 8 damped block-Jacobi sweeps from the
-    /// staircase ([`SolverChoice::Sweeps`]), the normals re-estimated between batches by
-    /// diffusing the quads' vector areas over [`Params::FAST_RADIUS`] voxels
+    /// The fast pipeline, for speed on a par with surface nets: the staircase's normals
+    /// diffused ([`Estimator::Diffused`]), then three batches of
+    /// [`crate::SweepsParams::default`]'s 8 damped block-Jacobi sweeps from the staircase
+    /// ([`SolverChoice::Sweeps`]), the normals re-estimated between batches by diffusing
+    /// the quads' vector areas over [`Params::FAST_RADIUS`] voxels
     /// ([`voxreg_normals::Diffused`]); no integral invariants, no conjugate gradient, no
     /// re-centring, crease weights or thin-sheet rule (`docs/design/fast-preset.md`).
     pub fn fast() -> Self {
         let refinement = Refinement {
-            rounds: 3,
+            rounds: 2,
             radius: Self::FAST_RADIUS,
             sheet_thickness: 0.0,
             creases: Creases { alignment: 1.0, ..Creases::default() },
             ..Refinement::default()
         };
         Params {
-            normals: NormalsParams { estimator: Estimator::Trivial, ..Default::default() },
+            normals: NormalsParams { estimator: Estimator::Diffused, ..Default::default() },
             solver: SolverParams { choice: SolverChoice::Sweeps, ..Default::default() },
             mode: Mode::Fidelity(Fidelity { refinement, recentring: None, ..Fidelity::default() }),
             ..Default::default()
@@ -395,7 +424,7 @@ mod tests {
             p.validate().unwrap();
         }
         assert_eq!(Params::fast().solver.choice, SolverChoice::Sweeps);
-        assert!(!Params::fast().clamps() && Params::fast().normals.estimator == Estimator::Trivial);
+        assert!(!Params::fast().clamps() && Params::fast().normals.estimator == Estimator::Diffused);
         assert_eq!(Params::papers().energy.alpha, 1e-3);
         assert!(Params::voxel_art().clamps() && !Params::default().clamps());
         assert_eq!(Params::voxel_art().regions, RegionMap::single_solid());

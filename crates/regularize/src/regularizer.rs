@@ -380,12 +380,14 @@ impl Regularizer {
 
         let t = Instant::now();
         progress(&Event { stage: Stage::Normals, fraction: 0.0, iteration: None, input: None });
+        let mut graph = None;
         let normals = stages::initial_normals(
             &surface,
             &params.normals,
             initial,
             &mut self.normals,
             self.keep_normals,
+            &mut graph,
             &interrupt,
         )?;
         times.normals = t.elapsed().as_secs_f64();
@@ -407,6 +409,10 @@ impl Regularizer {
         }
         let solver = &mut self.solver.as_mut().expect("built above").1;
         solver.set_interrupt(interrupt.clone());
+        // The diffused normals' surfel graph is the sweeps' re-estimates' own.
+        if let (Some(g), Solver::Sweeps(s)) = (graph, &mut *solver) {
+            s.adopt_graph(g);
+        }
         // Re-centring is the fidelity mode's, between refinement rounds.
         let sigma = params.mode.fidelity().and_then(|f| f.recentring).map(|r| r.sigma).filter(|_| rounds > 0);
         if sigma.is_some() && self.recentring.is_none() {

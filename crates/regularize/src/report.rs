@@ -33,8 +33,8 @@ impl StageTimes {
 /// The initial normal field's estimator.
 #[derive(Clone, Debug, PartialEq, Serialize)]
 pub struct NormalsReport {
-    /// `"trivial"`, `"convolved"`, `"ii"`, `"at"`, or `"given"` when the caller supplied
-    /// the field.
+    /// `"trivial"`, `"convolved"`, `"ii"`, `"at"`, `"diffused"`, or `"given"` when the
+    /// caller supplied the field.
     pub estimator: &'static str,
     /// The radius used, in physical units (`None` without one).
     pub radius: Option<f64>,

@@ -206,6 +206,14 @@ impl SweepsSolver {
         self.partials = Vec::new();
     }
 
+    /// Takes `graph` (the [`QuadGraph`] of this solver's surface) as the re-estimates'
+    /// graph, unless it has one.
+    pub(crate) fn adopt_graph(&mut self, graph: QuadGraph) {
+        if self.graph.is_none() {
+            self.graph = Some(graph);
+        }
+    }
+
     /// The surfel graph of the re-estimates ([`voxreg_normals::Diffused`]), built on first
     /// use and kept.
     pub(crate) fn graph(&mut self, surface: &DigitalSurface) -> &QuadGraph {

@@ -81,8 +81,8 @@ impl Former {
 
     fn fast() -> Self {
         Former {
-            normals: NormalsParams { estimator: Estimator::Trivial, ..Default::default() },
-            refine: 3,
+            normals: NormalsParams { estimator: Estimator::Diffused, ..Default::default() },
+            refine: 2,
             refine_radius: Params::FAST_RADIUS,
             preserve_size: false,
             crease_alignment: 1.0,

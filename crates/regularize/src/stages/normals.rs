@@ -2,10 +2,10 @@
 //! run.
 
 use voxreg_digisurf::DigitalSurface;
-use voxreg_normals::{AtInfo, FeatureField, Interrupt, NormalField};
+use voxreg_normals::{AtInfo, FeatureField, Interrupt, NormalField, QuadGraph};
 
 use crate::error::RegularizeError;
-use crate::params::{EstimatedNormals, NormalsParams};
+use crate::params::{EstimatedNormals, Estimator, NormalsParams};
 
 /// The normals stage's result.
 pub(crate) struct Initial {
@@ -21,13 +21,15 @@ pub(crate) struct Initial {
 
 /// The initial field: `given` (one direction per surfel), else `params`' estimate,
 /// reused from `cache` where it was made with the same parameters, and left there for the
-/// next runs when `keep`.
+/// next runs when `keep`. The diffused estimate's surfel graph is left in `graph`, for
+/// the sweeps solver's re-estimates.
 pub(crate) fn initial_normals(
     surface: &DigitalSurface,
     params: &NormalsParams,
     given: Option<&NormalField>,
     cache: &mut Option<(NormalsParams, EstimatedNormals)>,
     keep: bool,
+    graph: &mut Option<QuadGraph>,
     interrupt: &Interrupt,
 ) -> Result<Initial, RegularizeError> {
     if let Some(field) = given {
@@ -41,7 +43,12 @@ pub(crate) fn initial_normals(
         return Ok(Initial { field: field.clone(), features: None, at_info: None, estimator: "given" });
     }
     if cache.as_ref().is_none_or(|(p, _)| p != params) {
-        let estimated = params.estimate_interruptible(surface, interrupt)?;
+        let estimated = if params.estimator == Estimator::Diffused {
+            let g = graph.insert(QuadGraph::new(surface));
+            params.diffused_on(surface, g, interrupt)?
+        } else {
+            params.estimate_interruptible(surface, interrupt)?
+        };
         *cache = Some((params.clone(), estimated));
     }
     let estimator = params.estimator.name();
