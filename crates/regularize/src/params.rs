@@ -183,9 +183,7 @@ impl NormalsParams {
             },
         })
     }
-}
 
-impl NormalsParams {
     /// [`NormalsParams::estimate_interruptible`] of [`Estimator::Diffused`] on the
     /// surface's surfel `graph` ([`QuadGraph::new`]), which the fast pipeline's
     /// re-estimates use too.
