@@ -2,7 +2,7 @@
 
 use anyhow::{Context, Result};
 use glam::DVec3;
-use voxreg_digisurf::{BlockVolume, DigitalSurface, LabelVolume};
+use voxreg_digisurf::{BlockVolume, LabelVolume};
 use voxreg_io::{is_voxel_art, Background, InputError, InputOptions, Palette};
 use voxreg_regularize::{Budgeted, Params, Regularizer};
 
@@ -56,24 +56,6 @@ pub(crate) fn input_error(args: &InputArgs, e: InputError) -> anyhow::Error {
             path.display()
         ),
         InputError::Io(e) => e.into(),
-    }
-}
-
-/// What a regularization keeps per `(y, z)` line of the lattice beyond the surface: the
-/// integral-invariant normals' runs along x (an offset, a run, a region, a flag and a
-/// queue entry per line), unless the lattice holds 16 times more lines than surfels (then
-/// they keep the lines the surfels touch only). Counted for blocks, whose lattice may
-/// hold far more lines than surfels; a dense volume holds more voxels than lines.
-const BYTES_PER_LINE: u64 = 32;
-
-/// The bytes of the lines of a lattice of `ny * nz` lines around `surfels` surfels
-/// ([`BYTES_PER_LINE`]).
-fn line_bytes(surfels: u64, ny: u64, nz: u64) -> u64 {
-    let lines = ny.saturating_mul(nz);
-    if u128::from(surfels) * 16 < u128::from(lines) {
-        0
-    } else {
-        lines.saturating_mul(BYTES_PER_LINE)
     }
 }
 
@@ -151,7 +133,8 @@ impl Source {
     /// memory budget (`voxreg_io::max_memory`); `what(count)` names what needs the memory
     /// ("the regularization of its {count} surfels"). A dense volume's extraction counts
     /// its surfels as it finds them and stops past the most that fit (one pass over the
-    /// voxels; `Regularizer::from_volume_within_budget`); blocks are counted first.
+    /// voxels; `Regularizer::from_volume_within_budget`); blocks are counted first
+    /// (`Regularizer::from_blocks_within_budget`).
     pub(crate) fn regularizer_within(
         &self,
         args: &InputArgs,
@@ -163,33 +146,21 @@ impl Source {
         let no_surface = || format!("{}: no surface to regularize", path.display());
         let need = |s: u64| voxreg_regularize::estimated_bytes(s, params).saturating_add(extra(s));
         let limit = voxreg_io::max_memory();
-        let (surfels, bytes) = match self {
-            Source::Dense(v) => {
-                match Regularizer::from_volume_within_budget(v, &params.regions, limit, need)
-                    .with_context(no_surface)?
-                {
-                    Budgeted::Fits(r) => return Ok(*r),
-                    Budgeted::TooLarge { surfels, bytes } => (surfels, bytes),
-                }
-            }
-            Source::Blocks(v) => {
-                let s =
-                    DigitalSurface::count_surfels_of_blocks(v, &params.regions).with_context(no_surface)?;
-                let [_, ny, nz] = v.dims().map(|d| d as u64);
-                let bytes = need(s).saturating_add(line_bytes(s, ny, nz));
-                if bytes <= limit {
-                    return Regularizer::from_blocks(v, &params.regions).with_context(no_surface);
-                }
-                (s, bytes)
-            }
-        };
-        Err(voxreg_io::IoError::OverBudget {
-            path: path.clone(),
-            what: what(&surfels.to_string()),
-            bytes,
-            limit,
+        let budgeted = match self {
+            Source::Dense(v) => Regularizer::from_volume_within_budget(v, &params.regions, limit, need),
+            Source::Blocks(v) => Regularizer::from_blocks_within_budget(v, &params.regions, limit, need),
         }
-        .into())
+        .with_context(no_surface)?;
+        match budgeted {
+            Budgeted::Fits(r) => Ok(*r),
+            Budgeted::TooLarge { surfels, bytes } => Err(voxreg_io::IoError::OverBudget {
+                path: path.clone(),
+                what: what(&surfels.to_string()),
+                bytes,
+                limit,
+            }
+            .into()),
+        }
     }
 }
 

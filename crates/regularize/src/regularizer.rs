@@ -108,7 +108,26 @@ pub fn max_surfels_within(limit: u64, need: impl Fn(u64) -> u64) -> u64 {
     lo
 }
 
-/// What [`Regularizer::from_volume_within_budget`] gives.
+/// What a run keeps per `(y, z)` line of a blocks volume's lattice beyond its surface: the
+/// integral-invariant normals' runs along x (an offset, a run, a region, a flag and a
+/// queue entry per line), unless the lattice holds 16 times more lines than surfels (then
+/// only the lines the surfels touch). A dense volume holds more voxels than lines, so its
+/// budget leaves them out.
+const BYTES_PER_LINE: u64 = 32;
+
+/// The bytes of the lines of a blocks volume's lattice of `ny * nz` lines around `surfels`
+/// surfels ([`BYTES_PER_LINE`]).
+fn line_bytes(surfels: u64, ny: u64, nz: u64) -> u64 {
+    let lines = ny.saturating_mul(nz);
+    if u128::from(surfels) * 16 < u128::from(lines) {
+        0
+    } else {
+        lines.saturating_mul(BYTES_PER_LINE)
+    }
+}
+
+/// What [`Regularizer::from_volume_within_budget`] and
+/// [`Regularizer::from_blocks_within_budget`] give.
 #[derive(Debug)]
 pub enum Budgeted {
     /// A run on the surface fits the budget: the regularizer.
@@ -303,6 +322,25 @@ impl Regularizer {
         Ok(r)
     }
 
+    /// [`Regularizer::from_blocks`] when a run on the surface fits `limit` bytes: `need`
+    /// as for [`Regularizer::from_volume_within_budget`], plus what the run keeps per line
+    /// of the blocks' lattice. The surfels are counted first (a pass over the blocks that
+    /// stores nothing).
+    pub fn from_blocks_within_budget(
+        volume: &BlockVolume,
+        regions: &RegionMap,
+        limit: u64,
+        need: impl Fn(u64) -> u64,
+    ) -> Result<Budgeted, RegularizeError> {
+        let surfels = DigitalSurface::count_surfels_of_blocks(volume, regions)?;
+        let [_, ny, nz] = volume.dims().map(|d| d as u64);
+        let bytes = need(surfels).saturating_add(line_bytes(surfels, ny, nz));
+        if bytes > limit {
+            return Ok(Budgeted::TooLarge { surfels, bytes });
+        }
+        Ok(Budgeted::Fits(Box::new(Regularizer::from_blocks(volume, regions)?)))
+    }
+
     /// An upper estimate of the memory a run of `params` takes on this surface, in bytes
     /// ([`estimated_bytes`]), so that a caller can refuse a run that cannot fit before it
     /// starts.
@@ -380,7 +418,12 @@ impl Regularizer {
 
         let t = Instant::now();
         progress(&Event { stage: Stage::Normals, fraction: 0.0, iteration: None, input: None });
-        let mut graph = None;
+        // The surfel graph depends on the surface alone: a kept sweeps solver lends its
+        // own to the diffused estimate, which otherwise builds it for the solver.
+        let mut graph = match &mut self.solver {
+            Some((_, Solver::Sweeps(s))) => s.take_graph(),
+            _ => None,
+        };
         let normals = stages::initial_normals(
             &surface,
             &params.normals,
@@ -409,9 +452,9 @@ impl Regularizer {
         }
         let solver = &mut self.solver.as_mut().expect("built above").1;
         solver.set_interrupt(interrupt.clone());
-        // The diffused normals' surfel graph is the sweeps' re-estimates' own.
+        // The surfel graph goes (back) to the sweeps' re-estimates.
         if let (Some(g), Solver::Sweeps(s)) = (graph, &mut *solver) {
-            s.adopt_graph(g);
+            s.set_graph(g);
         }
         // Re-centring is the fidelity mode's, between refinement rounds.
         let sigma = params.mode.fidelity().and_then(|f| f.recentring).map(|r| r.sigma).filter(|_| rounds > 0);
@@ -549,6 +592,30 @@ mod tests {
             match Regularizer::from_volume_within_budget(&v, &map, limit, need).unwrap() {
                 Budgeted::TooLarge { surfels, bytes } => assert_eq!((surfels, bytes), (n, need(n))),
                 b => panic!("{limit}: {b:?}"),
+            }
+        }
+    }
+
+    /// Blocks are counted first, and their budget holds the lattice's lines where the
+    /// lattice has fewer than 16 lines a surfel.
+    #[test]
+    fn blocks_within_a_budget_count_the_lattice_lines() {
+        use voxreg_digisurf::{Block, BlockVolume};
+        let cube = |offset| Block { offset, labels: ndarray::Array3::from_elem((3, 3, 3), 1) };
+        let map = RegionMap::per_label();
+        let need = |s: u64| 1000 + 10 * s;
+        for (dims, lines) in [([10, 4, 4], 16 * 32), ([10, 40, 40], 1600 * 32), ([10, 50, 50], 0)] {
+            let v = BlockVolume::new(dims, vec![cube([0, 0, 0]), cube([6, 0, 0])], 0).unwrap();
+            let n = DigitalSurface::from_blocks(&v, &map).unwrap().num_surfels() as u64;
+            assert_eq!(n, 108);
+            let whole = need(n) + lines;
+            match Regularizer::from_blocks_within_budget(&v, &map, whole, need).unwrap() {
+                Budgeted::Fits(r) => assert_eq!(r.surface().num_surfels() as u64, n),
+                b => panic!("{b:?}"),
+            }
+            match Regularizer::from_blocks_within_budget(&v, &map, whole - 1, need).unwrap() {
+                Budgeted::TooLarge { surfels, bytes } => assert_eq!((surfels, bytes), (n, whole)),
+                b => panic!("{b:?}"),
             }
         }
     }

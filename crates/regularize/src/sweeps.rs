@@ -206,12 +206,15 @@ impl SweepsSolver {
         self.partials = Vec::new();
     }
 
-    /// Takes `graph` (the [`QuadGraph`] of this solver's surface) as the re-estimates'
-    /// graph, unless it has one.
-    pub(crate) fn adopt_graph(&mut self, graph: QuadGraph) {
-        if self.graph.is_none() {
-            self.graph = Some(graph);
-        }
+    /// Lends the re-estimates' graph, if it was built ([`SweepsSolver::set_graph`] gives
+    /// it back).
+    pub(crate) fn take_graph(&mut self) -> Option<QuadGraph> {
+        self.graph.take()
+    }
+
+    /// Makes `graph` (the [`QuadGraph`] of this solver's surface) the re-estimates' graph.
+    pub(crate) fn set_graph(&mut self, graph: QuadGraph) {
+        self.graph = Some(graph);
     }
 
     /// The surfel graph of the re-estimates ([`voxreg_normals::Diffused`]), built on first

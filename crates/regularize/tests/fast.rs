@@ -221,3 +221,19 @@ fn explore() {
         }
     }
 }
+
+/// A regularizer run again with other diffused normals lends its sweeps solver's surfel
+/// graph to the new estimate: the same positions as a fresh regularizer's.
+#[test]
+fn a_kept_regularizer_reruns_as_a_fresh_one() {
+    let surface =
+        DigitalSurface::from_volume(&digitize_labels(&Solid(&Sphere { radius: 8.0 }), DVec3::ONE)).unwrap();
+    let mut kept = Regularizer::new(surface.clone());
+    kept.run(&Params::fast()).unwrap();
+    let mut params = Params::fast();
+    params.normals.radius = Some(4.0);
+    let again = kept.run(&params).unwrap();
+    let fresh = Regularizer::new(surface).run(&params).unwrap();
+    assert_eq!(again.positions, fresh.positions);
+    assert_eq!(again.report.normals.estimator, "diffused");
+}

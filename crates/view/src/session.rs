@@ -470,58 +470,26 @@ fn apply_edit(shared: &Shared, c: &mut Current, edit: &Edit) -> Result<(), Strin
 /// lower, above [`voxreg_regularize::BYTES_PER_SURFEL_CLAMPED`].
 const SESSION_BYTES_PER_SURFEL: u64 = 2_700;
 
-/// What a session keeps per `(y, z)` line of a blocks volume's lattice beyond its surface:
-/// the integral-invariant normals' runs along x (an offset, a run, a region, a flag and a
-/// queue entry per line), unless the lattice holds 16 times more lines than surfels (then
-/// only the lines the surfels touch; the command line counts the same). A dense volume
-/// holds more voxels than lines.
-const BYTES_PER_LINE: u64 = 32;
-
 /// The regularizer of `volume`, refused up front (as the CLI does) when a session on it
 /// would not fit the memory limit; the error is the page's one-line message. Blocks are
 /// built as blocks ([`Regularizer::from_blocks`]): the memory of the models' boxes.
 fn build(volume: &Volume, regions: &RegionMap, name: &str) -> Result<Regularizer, String> {
-    let need = |surfels: u64, lines: u64| {
-        let lines = if u128::from(surfels) * 16 < u128::from(lines) {
-            0
-        } else {
-            lines.saturating_mul(BYTES_PER_LINE)
-        };
-        surfels
-            .saturating_mul(SESSION_BYTES_PER_SURFEL)
-            .saturating_add(voxreg_regularize::BYTES_FIXED)
-            .saturating_add(lines)
+    let need = |surfels: u64| {
+        surfels.saturating_mul(SESSION_BYTES_PER_SURFEL).saturating_add(voxreg_regularize::BYTES_FIXED)
     };
-    let check = |surfels: u64, bytes: u64| {
-        voxreg_io::check_memory(
-            std::path::Path::new(name),
-            &format!("the regularization of its {surfels} surfels"),
-            u128::from(bytes),
-        )
-        .map_err(|e| e.to_string())
-    };
-    let no_surface = |e: &dyn std::fmt::Display| format!("{name}: {e}");
-    match volume {
-        // One pass over the voxels, the extraction's (a refused volume is counted).
-        Volume::Dense(v) => {
-            let limit = voxreg_io::max_memory();
-            match Regularizer::from_volume_within_budget(v, regions, limit, |s| need(s, 0))
-                .map_err(|e| no_surface(&e))?
-            {
-                Budgeted::Fits(r) => Ok(*r),
-                Budgeted::TooLarge { surfels, bytes } => {
-                    let path = std::path::PathBuf::from(name);
-                    let what = format!("the regularization of its {surfels} surfels");
-                    Err(voxreg_io::IoError::OverBudget { path, what, bytes, limit }.to_string())
-                }
-            }
-        }
-        Volume::Blocks(v) => {
-            let [_, ny, nz] = v.dims().map(|d| d as u64);
-            let surfels = voxreg_digisurf::DigitalSurface::count_surfels_of_blocks(v, regions)
-                .map_err(|e| no_surface(&e))?;
-            check(surfels, need(surfels, ny.saturating_mul(nz)))?;
-            Regularizer::from_blocks(v, regions).map_err(|e| no_surface(&e))
+    let limit = voxreg_io::max_memory();
+    // A dense volume: one pass over the voxels, the extraction's (a refused one is counted).
+    let budgeted = match volume {
+        Volume::Dense(v) => Regularizer::from_volume_within_budget(v, regions, limit, need),
+        Volume::Blocks(v) => Regularizer::from_blocks_within_budget(v, regions, limit, need),
+    }
+    .map_err(|e| format!("{name}: {e}"))?;
+    match budgeted {
+        Budgeted::Fits(r) => Ok(*r),
+        Budgeted::TooLarge { surfels, bytes } => {
+            let path = std::path::PathBuf::from(name);
+            let what = format!("the regularization of its {surfels} surfels");
+            Err(voxreg_io::IoError::OverBudget { path, what, bytes, limit }.to_string())
         }
     }
 }

@@ -21,8 +21,8 @@ pub(crate) struct Initial {
 
 /// The initial field: `given` (one direction per surfel), else `params`' estimate,
 /// reused from `cache` where it was made with the same parameters, and left there for the
-/// next runs when `keep`. The diffused estimate's surfel graph is left in `graph`, for
-/// the sweeps solver's re-estimates.
+/// next runs when `keep`. The diffused estimate uses the surfel graph in `graph`, built
+/// there if it is not, for the sweeps solver's re-estimates.
 pub(crate) fn initial_normals(
     surface: &DigitalSurface,
     params: &NormalsParams,
@@ -44,7 +44,7 @@ pub(crate) fn initial_normals(
     }
     if cache.as_ref().is_none_or(|(p, _)| p != params) {
         let estimated = if params.estimator == Estimator::Diffused {
-            let g = graph.insert(QuadGraph::new(surface));
+            let g = graph.get_or_insert_with(|| QuadGraph::new(surface));
             params.diffused_on(surface, g, interrupt)?
         } else {
             params.estimate_interruptible(surface, interrupt)?
