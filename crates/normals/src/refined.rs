@@ -311,8 +311,9 @@ fn junction_surfels(surface: &DigitalSurface) -> Vec<bool> {
 /// `estimator`'s estimate; once `interrupt` is raised, the surfels not yet done keep the
 /// previous field's normal (the caller reports the interruption). With `probe`, a wide disc is searched
 /// only where a plain search first finds another interface's interior within its reach,
-/// and that search only where such an interior quad near enough is within the feature
-/// angle by a per-cell bound on the normals ([`InteriorNormals`]). Where none is, its
+/// and that search only where such an interior quad exists within the disc and the
+/// feature angle at all ([`InteriorNormals`]: a per-cell bound on the normals, then the
+/// probe's own test quad by quad). Where none is, its
 /// share is 0 and the disc is not used: the same estimate, bit for bit, for a fraction of
 /// the search where junction curves are creases. With `hints` (one per surfel), the
 /// surfels marked search their wide disc without the probe (the same estimate: the probe
@@ -579,9 +580,15 @@ fn refined_interruptible(
                     .then(|| {
                         // No interior quad of another interface near enough and within the
                         // feature angle: nothing for the probe to find.
-                        let none = interiors
-                            .as_ref()
-                            .is_some_and(|b| !b.may_continue(cf, iface_f, regions_f, nf, ramp.cos_zero));
+                        let none = interiors.as_ref().is_some_and(|b| {
+                            // The probe's own test of the quad it stops at.
+                            let wide = JUNCTION_DISC_FACTOR * r;
+                            let r2 = wide * wide;
+                            let within = |g: usize| {
+                                nodes[g].centre.distance_squared(cf) < r2 && feature_weight(g) > 0.0
+                            };
+                            !b.may_continue(cf, iface_f, regions_f, (nf, ramp.cos_zero), within)
+                        });
                         if none {
                             None
                         } else {
@@ -614,14 +621,20 @@ fn refined_interruptible(
     NormalField::new(field)
 }
 
-/// Per cell of a grid of side `side` and per interface, the largest absolute components of
-/// the unit normals of its interior quads (not next to a junction, of positive area): a
-/// bound on their cosine to any direction, so that a wide disc's probe can be skipped where
-/// no such quad within `side` of the quad being refined is within the feature angle.
+/// The interior quads (not next to a junction, of positive area) by cell of a grid of
+/// side `side` and by interface, with each group's largest absolute components of its unit
+/// normals (a bound on their cosine to any direction), so that a wide disc's probe can be
+/// skipped where no such quad of another interface, within the disc and within the feature
+/// angle, exists: the bound rules out a group at once, and the quads of the groups it
+/// leaves are tested one by one with the search's own expressions, so the test never
+/// rules out a quad the probe would find.
 struct InteriorNormals {
     side: f64,
-    /// Sorted by cell key: `(key, interface, regions, largest |n_x|, |n_y|, |n_z|)`.
-    entries: Vec<(u64, u32, [u32; 2], DVec3)>,
+    /// Sorted by cell key: `(key, interface, regions, largest |n_x|, |n_y|, |n_z|, end of
+    /// the group's quads in `quads`)`.
+    entries: Vec<(u64, u32, [u32; 2], DVec3, u32)>,
+    /// The interior quads, group after group.
+    quads: Vec<u32>,
 }
 
 impl InteriorNormals {
@@ -637,32 +650,36 @@ impl InteriorNormals {
     }
 
     fn new(nodes: &[Node], samples: &[Sample], near_junction: &[bool], side: f64) -> InteriorNormals {
-        let mut this = InteriorNormals { side, entries: Vec::new() };
+        let mut this = InteriorNormals { side, entries: Vec::new(), quads: Vec::new() };
         // Sorted as (cell key, interface, quad): 16 bytes a quad while sorting, the
         // normals read from the quads (an interface's quads share its regions).
         let mut all: Vec<(u64, u32, u32)> = (0..nodes.len())
             .filter(|&g| !near_junction[g] && samples[g].len > 0.0)
             .map(|g| (Self::pack(this.key(nodes[g].centre)), nodes[g].interface, g as u32))
             .collect();
-        all.sort_unstable();
+        all.par_sort_unstable();
+        this.quads = all.iter().map(|e| e.2).collect();
         let unit = |g: u32| (samples[g as usize].area / samples[g as usize].len).abs();
+        let mut end = 0;
         for group in all.chunk_by(|a, b| a.0 == b.0 && a.1 == b.1) {
             let m = group.iter().fold(DVec3::ZERO, |m, e| m.max(unit(e.2)));
-            this.entries.push((group[0].0, group[0].1, nodes[group[0].2 as usize].regions, m));
+            end += group.len() as u32;
+            this.entries.push((group[0].0, group[0].1, nodes[group[0].2 as usize].regions, m, end));
         }
         this
     }
 
-    /// Whether an interior quad of an interface other than `interface`, sharing one of
-    /// `regions`, with a centre within `side` of `centre`, may have a cosine to `normal`
-    /// (a unit vector) above `cos_zero` in absolute value.
+    /// Whether an interior quad `g` of an interface other than `interface`, sharing one of
+    /// `regions`, with a centre within `side` of `centre`, has `within(g)`: groups whose
+    /// normals' bound keeps their cosine to `normal` (a unit vector) at or below
+    /// `cos_zero` in absolute value are passed over without testing their quads.
     fn may_continue(
         &self,
         centre: DVec3,
         interface: u32,
         regions: [u32; 2],
-        normal: DVec3,
-        cos_zero: f64,
+        (normal, cos_zero): (DVec3, f64),
+        within: impl Fn(usize) -> bool,
     ) -> bool {
         let [x, y, z] = self.key(centre);
         let a = normal.abs();
@@ -670,15 +687,19 @@ impl InteriorNormals {
             for dy in -1..=1 {
                 for dx in -1..=1 {
                     let key = Self::pack([x + dx, y + dy, z + dz]);
-                    let start = self.entries.partition_point(|e| e.0 < key);
-                    for e in self.entries[start..].iter().take_while(|e| e.0 == key) {
+                    let mut at = self.entries.partition_point(|e| e.0 < key);
+                    let mut start = if at == 0 { 0 } else { self.entries[at - 1].4 as usize };
+                    while let Some(e) = self.entries.get(at).filter(|e| e.0 == key) {
                         // A margin over the rounding of the search's own cosines.
                         if e.1 != interface
                             && e.2.iter().any(|r| regions.contains(r))
                             && e.3.dot(a) > cos_zero - 1e-9
+                            && self.quads[start..e.4 as usize].iter().any(|&g| within(g as usize))
                         {
                             return true;
                         }
+                        start = e.4 as usize;
+                        at += 1;
                     }
                 }
             }

@@ -190,6 +190,16 @@ fn the_wide_disc_probe_changes_no_normal() {
             1 + u32::from(x > 5) + u32::from(y > 4) + 2 * u32::from(z > 6 && x > 2)
         })
         .with_background(Some(0)),
+        // Junctions nearly everywhere (as in a porous medium of several phases): blocks
+        // of two voxels of four labels at random, where most quads are near a junction
+        // and most wide discs are ruled out by the interior quads' test alone.
+        {
+            let mut blocks = Lcg::new(5);
+            let labels: Vec<u32> = (0..8 * 8 * 8).map(|_| blocks.next_u32() % 4).collect();
+            voxreg_digisurf::LabelVolume::from_fn([16, 16, 16], |[x, y, z]| {
+                labels[x / 2 + 8 * (y / 2 + 8 * (z / 2))]
+            })
+        },
     ];
     for volume in &volumes {
         let surface = DigitalSurface::from_volume(volume).unwrap();
