@@ -253,10 +253,18 @@ const RIM_FRACTION: f64 = 0.25;
 
 /// A disc search's scratch, kept per worker: the seen marks, the reached quads in
 /// visiting order `(quad, parent, distance, reach)`, and the quads of partial reach
-/// waiting, highest reach first (`(reach, quad, parent, squared distance)`, the floats as
-/// their bits: non-negative, they order as their values), and per quad the highest reach
-/// it waits with (0 where it does not).
-type Scratch = (Vec<bool>, Vec<(u32, u32, f64, f64)>, BinaryHeap<(u64, u32, u32, u64)>, Vec<f64>);
+/// waiting, highest reach first (`(reach, quad, parent)` packed in one `u128` by
+/// [`waiting_entry`], which orders as the triple), and per quad the highest reach it
+/// waits with (0 where it does not).
+type Scratch = (Vec<bool>, Vec<(u32, u32, f64, f64)>, BinaryHeap<u128>, Vec<f64>);
+
+/// A waiting quad `k` reached from `parent` with `reach`: the reach's bits (non-negative,
+/// they order as its values), then the quad, then the parent, so that one comparison of
+/// integers orders the entries (a quad is pushed at most once from each parent, so no two
+/// entries are equal).
+fn waiting_entry(reach: f64, k: u32, parent: u32) -> u128 {
+    (u128::from(reach.to_bits()) << 64) | (u128::from(k) << 32) | u128::from(parent)
+}
 
 /// `t` of the direction of `a` and `1 - t` of the direction of `b` (`a` itself from
 /// `t = 1`, `b` itself at `t = 0`).
@@ -453,13 +461,17 @@ fn refined_interruptible(
                     let mut head = 0;
                     loop {
                         if head == queue.len() {
-                            let Some((reach, k, parent, d2)) =
-                                std::iter::from_fn(|| waiting.pop()).find(|e| !seen[e.1 as usize])
+                            let Some(e) = std::iter::from_fn(|| waiting.pop())
+                                .find(|e| !seen[(*e >> 32) as u32 as usize])
                             else {
                                 break;
                             };
+                            let (reach, k, parent) =
+                                (f64::from_bits((e >> 64) as u64), (e >> 32) as u32, e as u32);
                             seen[k as usize] = true;
-                            queue.push((k, parent, f64::from_bits(d2), f64::from_bits(reach)));
+                            // Its squared distance as when it was pushed.
+                            let d2 = nodes[k as usize].centre.distance_squared(cf);
+                            queue.push((k, parent, d2, reach));
                         }
                         // Queued with its squared distance (the test below needs no root):
                         // the distance is taken here, and kept for the second pass.
@@ -512,7 +524,7 @@ fn refined_interruptible(
                                         // depends on the rest of the entry).
                                         if pass >= best[ku] {
                                             best[ku] = pass;
-                                            waiting.push((pass.to_bits(), k, g as u32, dk.to_bits()));
+                                            waiting.push(waiting_entry(pass, k, g as u32));
                                         }
                                     }
                                 }

@@ -280,3 +280,26 @@ fn quads_near_a_junction_take_the_interior_of_their_surface() {
     eprintln!("near the junction: plain {plain:?} deg, interior {interior:?} deg");
     assert!(interior.0 < 0.5 * plain.0 && interior.1 < plain.1, "plain {plain:?}, interior {interior:?}");
 }
+
+#[test]
+fn waiting_entries_order_as_their_triples() {
+    // The packed entries of the widest-first search compare as (reach, quad, parent).
+    let mut rng = Lcg::new(3);
+    let reaches = [0.0, 1e-300, 0.25, 0.5, 0.5000000000000001, 0.75, 1.0];
+    let triples: Vec<(f64, u32, u32)> = (0..400)
+        .map(|_| {
+            let r = reaches[(rng.next_u32() % reaches.len() as u32) as usize];
+            (r, rng.next_u32() % 5 + u32::MAX * (rng.next_u32() % 2), rng.next_u32() % 4)
+        })
+        .collect();
+    for a in &triples {
+        for b in &triples {
+            let by_tuple = a.0.partial_cmp(&b.0).unwrap().then(a.1.cmp(&b.1)).then(a.2.cmp(&b.2));
+            assert_eq!(
+                waiting_entry(a.0, a.1, a.2).cmp(&waiting_entry(b.0, b.1, b.2)),
+                by_tuple,
+                "{a:?} {b:?}"
+            );
+        }
+    }
+}
