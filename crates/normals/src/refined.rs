@@ -171,29 +171,40 @@ fn interface_adjacency(surface: &DigitalSurface, order: &[u32]) -> (Vec<u32>, Ve
     for (i, &s) in order.iter().enumerate() {
         rank[s as usize] = i as u32;
     }
-    let lists: Vec<Vec<u32>> = order
-        .par_iter()
-        .map(|&g| {
-            let g = g as usize;
-            let regions = surface.surfels()[g].regions;
-            let mut list = Vec::with_capacity(4);
-            for e in surface.surfel_edges(SurfelId(g as u32)) {
-                for &k in surface.edge_surfels(e) {
-                    let other = surface.surfels()[k.index()].regions;
-                    if k.index() != g && regions.iter().any(|r| other.contains(r)) {
-                        list.push(rank[k.index()]);
+    // One list a piece of quads (not one a quad), then joined.
+    const PIECE: usize = 4096;
+    let pieces: Vec<(Vec<u32>, Vec<u8>)> = order
+        .par_chunks(PIECE)
+        .map(|chunk| {
+            let (mut items, mut lens) =
+                (Vec::with_capacity(4 * chunk.len()), Vec::with_capacity(chunk.len()));
+            for &g in chunk {
+                let g = g as usize;
+                let regions = surface.surfels()[g].regions;
+                let before = items.len();
+                for e in surface.surfel_edges(SurfelId(g as u32)) {
+                    for &k in surface.edge_surfels(e) {
+                        let other = surface.surfels()[k.index()].regions;
+                        if k.index() != g && regions.iter().any(|r| other.contains(r)) {
+                            items.push(rank[k.index()]);
+                        }
                     }
                 }
+                lens.push((items.len() - before) as u8);
             }
-            list
+            (items, lens)
         })
         .collect();
-    let mut starts = Vec::with_capacity(lists.len() + 1);
+    let mut starts = Vec::with_capacity(order.len() + 1);
     starts.push(0u32);
-    let mut adjacent = Vec::with_capacity(lists.iter().map(Vec::len).sum());
-    for l in &lists {
-        adjacent.extend_from_slice(l);
-        starts.push(adjacent.len() as u32);
+    let mut adjacent = Vec::with_capacity(pieces.iter().map(|p| p.0.len()).sum());
+    for (items, lens) in &pieces {
+        let mut at = adjacent.len() as u32;
+        starts.extend(lens.iter().map(|&l| {
+            at += u32::from(l);
+            at
+        }));
+        adjacent.extend_from_slice(items);
     }
     (starts, adjacent)
 }
