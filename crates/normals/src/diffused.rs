@@ -208,19 +208,18 @@ fn junction_pairs(surface: &DigitalSurface) -> Vec<(u32, [u32; 3], PairKey, bool
         .into_par_iter()
         .filter(|&e| edges[e as usize].kind != EdgeKind::Regular)
         .collect();
-    let found: Vec<(u32, [u32; 3], PairKey, bool)> = candidates
+    candidates
         .par_iter()
         .flat_map_iter(|&e| {
-            let e = e as usize;
             let mut votes = [(([0u32; 2], [0u32; 2]), false); 6];
             let mut n = 0;
             let mut corner = [0u32; 3];
-            let others = surface.edge_surfels(EdgeId(e as u32));
+            let others = surface.edge_surfels(EdgeId(e));
             let mixed = others.first().is_some_and(|s0| {
                 others.iter().any(|s| surfels[s.index()].interface != surfels[s0.index()].interface)
             });
             if mixed {
-                corner = surface.vertex_corner(edges[e].vertices[0]);
+                corner = surface.vertex_corner(edges[e as usize].vertices[0]);
                 for (i, a) in others.iter().enumerate() {
                     let a = &surfels[a.index()];
                     for b in &others[..i] {
@@ -241,10 +240,9 @@ fn junction_pairs(surface: &DigitalSurface) -> Vec<(u32, [u32; 3], PairKey, bool
                     }
                 }
             }
-            votes.into_iter().take(n).map(move |(key, continued)| (e as u32, corner, key, continued))
+            votes.into_iter().take(n).map(move |(key, continued)| (e, corner, key, continued))
         })
-        .collect();
-    found
+        .collect()
 }
 
 /// Per record of [`junction_pairs`], the share of the records of its pair within
@@ -680,12 +678,8 @@ mod tests {
     /// of four labels at random) and on a ball cut in two.
     #[test]
     fn window_shares_are_the_brute_force_counts() {
-        let mut state = 5u64;
-        let mut next = || {
-            state = state.wrapping_mul(6364136223846793005).wrapping_add(1442695040888963407);
-            (state >> 33) as u32
-        };
-        let labels: Vec<u32> = (0..10 * 10 * 10).map(|_| next() % 4).collect();
+        let mut rng = voxreg_testkit::Lcg::new(5);
+        let labels: Vec<u32> = (0..10 * 10 * 10).map(|_| rng.next_u32() % 4).collect();
         let blocks =
             LabelVolume::from_fn([20, 20, 20], |[x, y, z]| labels[x / 2 + 10 * (y / 2 + 10 * (z / 2))]);
         let split = LabelVolume::from_fn([27, 27, 27], |[x, y, z]| {

@@ -289,7 +289,10 @@ fn waiting_entries_order_as_their_triples() {
     let triples: Vec<(f64, u32, u32)> = (0..400)
         .map(|_| {
             let r = reaches[(rng.next_u32() % reaches.len() as u32) as usize];
-            (r, rng.next_u32() % 5 + u32::MAX * (rng.next_u32() % 2), rng.next_u32() % 4)
+            // Quads at both ends of their range: small ids and ids near `u32::MAX`.
+            let k = rng.next_u32() % 5;
+            let k = if rng.next_u32() % 2 == 0 { k } else { u32::MAX - k };
+            (r, k, rng.next_u32() % 4)
         })
         .collect();
     for a in &triples {
