@@ -232,7 +232,7 @@ def inputs(args):
 def main():
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--voxreg", default=os.path.join(ROOT, "target", "release", "voxreg"))
-    ap.add_argument("--before", help="another voxreg binary (an earlier build) run interleaved too")
+    ap.add_argument("--before", help="another voxreg binary (an earlier build) run interleaved too, with the same --voxreg-args")
     ap.add_argument("--runs", type=int, default=3)
     ap.add_argument("--quick", action="store_true", help="bunny-128 and a small tissue, 1 run")
     ap.add_argument("--set-aside", action="store_true", help="the inputs kept out of tuning")
@@ -263,7 +263,9 @@ def main():
             for _ in range(args.runs):  # interleaved: A B C A B C ...
                 rows["voxreg"].append(voxreg_run(exe, path, nobg, tmp, args.voxreg_args.split()))
                 if args.before:
-                    rows["voxreg before"].append(voxreg_run(os.path.abspath(args.before), path, nobg, tmp))
+                    rows["voxreg before"].append(
+                        voxreg_run(os.path.abspath(args.before), path, nobg, tmp, args.voxreg_args.split())
+                    )
                 rows["SurfaceNets3D + smoothing"].append(vtk_run(path, True, nobg))
                 rows["SurfaceNets3D, no smoothing"].append(vtk_run(path, False, nobg))
             med = {

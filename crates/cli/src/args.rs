@@ -316,7 +316,7 @@ pub(crate) struct OverrideArgs {
     pub(crate) normals: Option<NormalsKind>,
     /// Radius of the ii, convolved, at and diffused estimators, in physical units [default:
     /// the multigrid rule 3 h^(1/3), h the largest voxel spacing, kept within 3 to 12
-    /// voxels: 3 at unit spacing; 2 voxels for the voxel-art preset; 6 voxels of the finest
+    /// voxels: 3 at unit spacing; 2 voxels for the voxel-art preset; 8 voxels of the finest
     /// axis for diffused].
     #[arg(long, value_name = "R")]
     pub(crate) radius: Option<f64>,

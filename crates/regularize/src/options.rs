@@ -54,9 +54,7 @@ impl Preset {
             Preset::VoxelArt => {
                 "One solve clamped to the voxels' boxes (never self-intersecting), all colours one solid"
             }
-            Preset::Fast => {
-                "Speed of surface nets: diffused normals, 3 x 8 block-Jacobi sweeps, 2 cheap re-estimates"
-            }
+            Preset::Fast => "Speed of surface nets: diffused normals, 24 block-Jacobi sweeps",
         }
     }
 

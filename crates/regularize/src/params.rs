@@ -11,6 +11,7 @@ use crate::energy::EnergyParams;
 use crate::error::RegularizeError;
 use crate::mode::{Clamped, Creases, Fidelity, Mode, Refinement};
 use crate::solver::{SolverChoice, SolverParams};
+use crate::sweeps::SweepsParams;
 
 /// The normal estimators of the alignment term's field.
 #[derive(Copy, Clone, Debug, PartialEq, Eq, Default, Serialize)]
@@ -74,7 +75,7 @@ pub struct NormalsParams {
     pub estimator: Estimator,
     /// Radius of the ball and disc estimators in physical units; `None` is the multigrid
     /// rule `3 h^(1/3)` kept within 3 to 12 voxels ([`default_radius`]; 3 at unit spacing),
-    /// and for [`Estimator::Diffused`] 6 voxels of the finest axis.
+    /// and for [`Estimator::Diffused`] 8 voxels of the finest axis.
     /// Default: `None`.
     pub radius: Option<f64>,
     /// Where `radius` is `None`: the radius in voxels along the coarsest axis (so
@@ -299,15 +300,16 @@ impl Params {
     }
 
     /// The fast pipeline, for speed on a par with surface nets: the staircase's normals
-    /// diffused ([`Estimator::Diffused`]), then three batches of
-    /// [`crate::SweepsParams::default`]'s 8 damped block-Jacobi sweeps from the staircase
-    /// ([`SolverChoice::Sweeps`]), the normals re-estimated between batches by diffusing
-    /// the quads' vector areas over [`Params::FAST_RADIUS`] voxels
-    /// ([`voxreg_normals::Diffused`]); no integral invariants, no conjugate gradient, no
-    /// re-centring, crease weights or thin-sheet rule (`docs/design/fast-preset.md`).
+    /// diffused over [`voxreg_normals::DiffusedStaircase::DEFAULT_RADIUS`] voxels
+    /// ([`Estimator::Diffused`]), then one batch of [`Params::FAST_SWEEPS`] damped
+    /// block-Jacobi sweeps from the staircase ([`SolverChoice::Sweeps`]); no integral
+    /// invariants, no conjugate gradient, no re-centring, crease weights or thin-sheet rule
+    /// (`docs/design/fast-preset.md`). Refinement rounds, where asked for, re-estimate the
+    /// normals between batches by diffusing the quads' vector areas over
+    /// [`Params::FAST_RADIUS`] voxels ([`voxreg_normals::Diffused`]).
     pub fn fast() -> Self {
         let refinement = Refinement {
-            rounds: 2,
+            rounds: 0,
             radius: Self::FAST_RADIUS,
             sheet_thickness: 0.0,
             creases: Creases { alignment: 1.0, ..Creases::default() },
@@ -315,13 +317,22 @@ impl Params {
         };
         Params {
             normals: NormalsParams { estimator: Estimator::Diffused, ..Default::default() },
-            solver: SolverParams { choice: SolverChoice::Sweeps, ..Default::default() },
+            solver: SolverParams {
+                choice: SolverChoice::Sweeps,
+                sweeps: SweepsParams { sweeps: Self::FAST_SWEEPS, ..SweepsParams::default() },
+                ..Default::default()
+            },
             mode: Mode::Fidelity(Fidelity { refinement, recentring: None, ..Fidelity::default() }),
             ..Default::default()
         }
     }
 
-    /// The re-estimates' radius of [`Params::fast`], in lattice steps
+    /// The sweeps of [`Params::fast`]'s one batch: from a field diffused over 8 voxels, as
+    /// accurate on the frontier's shapes as three batches of 8 with two re-estimates
+    /// between them, for one setup and no re-estimate (`docs/design/fast-preset.md`).
+    pub const FAST_SWEEPS: usize = 24;
+
+    /// The re-estimates' radius of [`Params::fast`] with refinement rounds, in lattice steps
     /// ([`voxreg_normals::Diffused`]): wider than the fidelity pipeline's 3-voxel discs,
     /// since the field comes from quads only 8 sweeps from the staircase (on the sphere
     /// R = 20, 1.89 degrees at 3, 1.26 at 6).

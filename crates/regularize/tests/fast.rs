@@ -24,9 +24,13 @@ fn fast(shape: &dyn Shape, spacing: DVec3) -> (f64, f64) {
     let surface = DigitalSurface::from_volume(&digitize_labels(&Solid(shape), spacing)).unwrap();
     let params = Preset::Fast.params();
     let out = Regularizer::new(surface.clone()).run(&params).unwrap();
-    // Four batches of sweeps, three re-estimates between them.
-    assert_eq!(out.report.solves.len(), 3);
-    assert!(out.report.solves.iter().all(|s| matches!(s, SolveInfo::Sweeps(i) if i.iterations == 8)));
+    // One batch of sweeps, no re-estimate.
+    assert_eq!(out.report.solves.len(), 1);
+    assert!(out
+        .report
+        .solves
+        .iter()
+        .all(|s| matches!(s, SolveInfo::Sweeps(i) if i.iterations == Params::FAST_SWEEPS)));
     let mesh = Mesh::from_surface(&surface, &out.positions);
     let acc = accuracy(&mesh, &shape);
     (acc.distance_mean / spacing.min_element(), acc.normal_mean_deg)
@@ -164,9 +168,9 @@ fn explore() {
     ];
     let env = |k: &str, d: &str| std::env::var(k).unwrap_or(d.into());
     let radii: Vec<f64> = env("RADII", "6").split(',').map(|s| s.parse().unwrap()).collect();
-    let sweeps: usize = env("SWEEPS", "8").parse().unwrap();
-    let refine: usize = env("REFINE", "3").parse().unwrap();
-    let params = |r: f64| {
+    let sweeps: usize = env("SWEEPS", "24").parse().unwrap();
+    let refine: usize = env("REFINE", "0").parse().unwrap();
+    let params = |r: f64, h: f64| {
         let mut params = Params::fast();
         params.refinement_mut().radius = r;
         params.refinement_mut().rounds = refine;
@@ -174,6 +178,9 @@ fn explore() {
         params.junction_fairness = env("JF", "1") == "1";
         params.solver.sweeps.omega = env("OMEGA", "0.6").parse().unwrap();
         params.energy.gamma = env("GAMMA", "0.1").parse().unwrap();
+        if let Ok(r) = std::env::var("NRADIUS") {
+            params.normals.radius = Some(r.parse::<f64>().unwrap() * h);
+        }
         params
     };
     for (name, shape, h) in &shapes {
@@ -182,7 +189,7 @@ fn explore() {
         }
         let surface = DigitalSurface::from_volume(&digitize_labels(&Solid(shape.as_ref()), *h)).unwrap();
         for &r in &radii {
-            let out = Regularizer::new(surface.clone()).run(&params(r)).unwrap();
+            let out = Regularizer::new(surface.clone()).run(&params(r, h.min_element())).unwrap();
             let mesh = Mesh::from_surface(&surface, &out.positions);
             let acc = accuracy(&mesh, &shape.as_ref());
             eprintln!("{name} r {r}: {:.4} {:.3}", acc.distance_mean / h.min_element(), acc.normal_mean_deg);
@@ -193,7 +200,7 @@ fn explore() {
         let ball = SplitBall { radius: radius.parse().unwrap(), cut: cut.parse().unwrap() };
         let surface = DigitalSurface::from_volume(&digitize_labels(&ball, DVec3::ONE)).unwrap();
         for &r in &radii {
-            let out = Regularizer::new(surface.clone()).run(&params(r)).unwrap();
+            let out = Regularizer::new(surface.clone()).run(&params(r, 1.0)).unwrap();
             let f = label_fidelity(&surface, &out.positions, &ball);
             let labels = voxreg_testkit::vertex_labels(&surface);
             let rc = (ball.radius * ball.radius - ball.cut * ball.cut).sqrt();

@@ -6,7 +6,7 @@
 use voxreg_digisurf::RegionMap;
 use voxreg_regularize::{
     Clamp, ClampOverride, Clamped, EnergyParams, Estimator, Fidelity, InputFacts, Mode, NormalsParams,
-    Overrides, Params, Preset, Recentring, Regions, SolverChoice, SolverParams,
+    Overrides, Params, Preset, Recentring, Regions, SolverChoice, SolverParams, SweepsParams,
 };
 
 /// The former flat parameters: 17 fields, some read only when others are set.
@@ -82,12 +82,16 @@ impl Former {
     fn fast() -> Self {
         Former {
             normals: NormalsParams { estimator: Estimator::Diffused, ..Default::default() },
-            refine: 2,
+            refine: 0,
             refine_radius: Params::FAST_RADIUS,
             preserve_size: false,
             crease_alignment: 1.0,
             sheet_thickness: 0.0,
-            solver: SolverParams { choice: SolverChoice::Sweeps, ..Default::default() },
+            solver: SolverParams {
+                choice: SolverChoice::Sweeps,
+                sweeps: SweepsParams { sweeps: Params::FAST_SWEEPS, ..Default::default() },
+                ..Default::default()
+            },
             ..Former::default()
         }
     }

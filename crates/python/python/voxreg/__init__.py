@@ -173,15 +173,14 @@ def regularize(
         re-centring); "papers": the papers' single solve (alpha 1e-3, no refinement);
         "voxel_art": one solve clamped to the voxels' boxes (never self-intersecting),
         all colours one solid (what the CLI uses for .vox files); "fast": about the
-        cost of surface nets (diffused normals, 3 batches of 8 block-Jacobi sweeps with
-        2 cheap re-estimates of the normals in between).
+        cost of surface nets (diffused normals, one batch of 24 block-Jacobi sweeps).
     normals : {"trivial", "convolved", "ii", "at", "diffused"}, default None (preset: "ii"; fast "diffused")
         Normal estimator driving the alignment term: each face's axis, axes averaged
         within the radius, integral invariants, Ambrosio-Tortorelli (keeps sharp
         features), or axes diffused over the surface within the radius (cheap).
     radius : float, default None (preset: 3 h^(1/3), h the largest spacing, 3 at unit spacing; voxel_art 2 voxels)
         Radius of the ii, convolved, at and diffused estimators, in physical units
-        (diffused: 6 voxels of the finest axis by default).
+        (diffused: 8 voxels of the finest axis by default).
     alpha : float > 0, default None (preset: 1e-2; papers 1e-3)
         Attachment weight.
     beta : float >= 0, default None (preset: 1)
