@@ -214,7 +214,7 @@ VOXREG = {
     "papers": ["--preset", "papers"],
     "fast": ["--preset", "fast"],
     "fast, 1 round": ["--preset", "fast", "--refine", "1"],
-    "fast, 0 rounds": ["--preset", "fast", "--refine", "0"],
+    "diffused, 8 sweeps": ["--solver", "sweeps", "--normals", "diffused", "--refine", "0"],
 }
 SNETS = [0, 16, 32, 64]
 VOLUME_SETTINGS = ["default (3 rounds)", "1 round, tol 1e-2", "0 rounds", "0 rounds, tol 5e-2", "0 rounds, trivial", "fast", "fast, 1 round"]

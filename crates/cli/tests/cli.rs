@@ -353,7 +353,7 @@ fn the_fast_preset_runs_its_sweeps() {
     let r = report_of(&report);
     let solves = r["solves"].as_array().unwrap();
     assert_eq!(solves.len(), 1);
-    assert!(solves.iter().all(|s| s["solver"] == "sweeps" && s["iterations"] == 24), "{solves:?}");
+    assert!(solves.iter().all(|s| s["solver"] == "sweeps" && s["iterations"] == 20), "{solves:?}");
     assert_eq!(r["normals"]["estimator"], "diffused");
     assert_eq!(r["normals"]["radius"], 8.0);
     assert_eq!(r["params"]["solver"]["choice"], "sweeps");

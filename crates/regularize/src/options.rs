@@ -54,7 +54,7 @@ impl Preset {
             Preset::VoxelArt => {
                 "One solve clamped to the voxels' boxes (never self-intersecting), all colours one solid"
             }
-            Preset::Fast => "Speed of surface nets: diffused normals, 24 block-Jacobi sweeps",
+            Preset::Fast => "Speed of surface nets: diffused normals, 20 block-Jacobi sweeps",
         }
     }
 

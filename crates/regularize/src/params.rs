@@ -330,7 +330,7 @@ impl Params {
     /// The sweeps of [`Params::fast`]'s one batch: from a field diffused over 8 voxels, as
     /// accurate on the frontier's shapes as three batches of 8 with two re-estimates
     /// between them, for one setup and no re-estimate (`docs/design/fast-preset.md`).
-    pub const FAST_SWEEPS: usize = 24;
+    pub const FAST_SWEEPS: usize = 20;
 
     /// The re-estimates' radius of [`Params::fast`] with refinement rounds, in lattice steps
     /// ([`voxreg_normals::Diffused`]): wider than the fidelity pipeline's 3-voxel discs,

@@ -251,7 +251,9 @@ impl Regularizer {
 
     /// Whether a run keeps the initial normal field it estimated for the next runs
     /// (default: `true`). A single run (the command line's) does not need it: not kept,
-    /// its 24 bytes per surfel are free for the solves.
+    /// its 24 bytes per surfel are free for the solves (and the diffused estimate's surfel
+    /// graph, 17 bytes a surfel, is let go after the first field where no refinement
+    /// round re-estimates).
     pub fn set_keep_normals(&mut self, keep: bool) {
         self.keep_normals = keep;
         if !keep {
@@ -452,9 +454,13 @@ impl Regularizer {
         }
         let solver = &mut self.solver.as_mut().expect("built above").1;
         solver.set_interrupt(interrupt.clone());
-        // The surfel graph goes (back) to the sweeps' re-estimates.
+        // The surfel graph goes (back) to the sweeps' re-estimates, where a round of this
+        // run or a later run may use it; a single run without rounds lets it go before the
+        // sweeps (the fast preset's peak).
         if let (Some(g), Solver::Sweeps(s)) = (graph, &mut *solver) {
-            s.set_graph(g);
+            if rounds > 0 || self.keep_normals {
+                s.set_graph(g);
+            }
         }
         // Re-centring is the fidelity mode's, between refinement rounds.
         let sigma = params.mode.fidelity().and_then(|f| f.recentring).map(|r| r.sigma).filter(|_| rounds > 0);

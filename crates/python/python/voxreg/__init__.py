@@ -173,7 +173,7 @@ def regularize(
         re-centring); "papers": the papers' single solve (alpha 1e-3, no refinement);
         "voxel_art": one solve clamped to the voxels' boxes (never self-intersecting),
         all colours one solid (what the CLI uses for .vox files); "fast": about the
-        cost of surface nets (diffused normals, one batch of 24 block-Jacobi sweeps).
+        cost of surface nets (diffused normals, one batch of 20 block-Jacobi sweeps).
     normals : {"trivial", "convolved", "ii", "at", "diffused"}, default None (preset: "ii"; fast "diffused")
         Normal estimator driving the alignment term: each face's axis, axes averaged
         within the radius, integral invariants, Ambrosio-Tortorelli (keeps sharp
