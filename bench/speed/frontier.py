@@ -525,7 +525,9 @@ def markdown(results, args, meta):
         "",
         "voxreg's settings: `N rounds` is `--refine N` (the default preset has 3), `tol` `--tolerance` (default"
         " 1e-3 voxel), `ii r=5` `--radius` of 5 voxels (the default rule gives 3 voxels at unit spacing, 7.6 at"
-        " h = 0.25), `convolved` and `trivial` `--normals` (default `ii`), `papers` `--preset papers`; the rest is"
+        " h = 0.25), `convolved` and `trivial` `--normals` (default `ii`), `papers` `--preset papers`, `fast`"
+        " `--preset fast` (`fast, 1 round` with `--refine 1`), `diffused, 8 sweeps` `--solver sweeps --normals"
+        " diffused --refine 0` (the fast preset's first field and 8 sweeps instead of 20); the rest is"
         " the default preset. SurfaceNets3D: `SmoothingOff()` for 0, else `SetNumberOfIterations`, every other"
         f" option VTK {meta['vtk']}'s default (relaxation factor 0.5, its default constraint; triangles when smoothed,"
         " quads not).",

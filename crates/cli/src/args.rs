@@ -356,8 +356,9 @@ pub(crate) struct OverrideArgs {
     #[arg(long, value_name = "VOXELS")]
     pub(crate) tolerance: Option<f64>,
     /// Normal refinement rounds: re-estimate the normals from the regularized quads
-    /// (keeping sharp edges) and solve again, K times [default: the preset's: 3, or 0 for
-    /// voxel art, whose blocky art is not a sampled smooth shape].
+    /// (keeping sharp edges) and solve again, K times [default: the preset's: 3; 0 for
+    /// papers, for voxel art, whose blocky art is not a sampled smooth shape, and for fast,
+    /// whose one batch of sweeps from its diffused field is as accurate as more rounds].
     #[arg(long, value_name = "K")]
     pub(crate) refine: Option<usize>,
     /// The solves before the last refinement round stop at F times --tolerance (their

@@ -187,7 +187,7 @@ def regularize(
         Alignment weight.
     gamma : float >= 0, default None (preset: 0.1; voxel_art 1)
         Fairness weight.
-    refine : int >= 0, default None (preset: 3; papers and voxel_art 0)
+    refine : int >= 0, default None (preset: 3; papers, voxel_art and fast 0)
         Normal refinement rounds: re-estimate the normals from the result and solve again.
     preserve_size : bool, default None (preset: True; papers False)
         Re-centre the attachment targets between refinement rounds (cancels the shrinking
