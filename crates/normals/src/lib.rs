@@ -16,7 +16,9 @@
 //! - [`Refined`]: normals re-estimated from given vertex positions (the front door's
 //!   refinement rounds).
 //! - [`Diffused`]: the same from the quads' vector areas diffused over each interface's
-//!   surfel graph ([`QuadGraph`]), the fast pipeline's cheap re-estimate.
+//!   surfel graph ([`QuadGraph`]), the fast pipeline's cheap re-estimate;
+//!   [`DiffusedStaircase`], the same from the staircase's own faces (the `fast` preset's
+//!   field).
 //!
 //! [`NormalEstimator::estimate_interruptible`] stops an estimate early when the caller
 //! raises an [`Interrupt`] (an interactive front end replacing a run).
