@@ -629,21 +629,22 @@ mod tests {
     }
 
     /// The staircase estimator is the re-estimate from the lattice positions, with the
-    /// trivial field kept where it degenerates; its radius is in physical units, 6 voxels
-    /// of the finest axis by default.
+    /// trivial field kept where it degenerates; its radius is in physical units,
+    /// [`DiffusedStaircase::DEFAULT_RADIUS`] voxels of the finest axis by default.
     #[test]
     fn the_staircase_estimate_is_the_re_estimate_of_the_lattice() {
         let s = ball(8.0);
         let trivial = Trivial.estimate(&s).unwrap();
         let positions = s.positions();
         let graph = QuadGraph::new(&s);
-        let direct = Diffused { positions: &positions, previous: &trivial, radius: 6.0 }
+        let r = DiffusedStaircase::DEFAULT_RADIUS;
+        let direct = Diffused { positions: &positions, previous: &trivial, radius: r }
             .estimate_on(&s, &graph, &Interrupt::never())
             .unwrap();
         let staircase = DiffusedStaircase::default();
         assert_eq!(staircase.steps_radius(&s), DiffusedStaircase::DEFAULT_RADIUS);
         assert_eq!(staircase.estimate(&s).unwrap(), direct);
-        assert_eq!(DiffusedStaircase { radius: Some(6.0) }.estimate(&s).unwrap(), direct);
+        assert_eq!(DiffusedStaircase { radius: Some(r) }.estimate(&s).unwrap(), direct);
         assert_ne!(DiffusedStaircase { radius: Some(3.0) }.estimate(&s).unwrap(), direct);
         for bad in [0.0, -1.0, f64::NAN, f64::INFINITY] {
             assert!(DiffusedStaircase { radius: Some(bad) }.estimate(&s).is_err(), "{bad}");
