@@ -334,8 +334,8 @@ impl Params {
 
     /// The re-estimates' radius of [`Params::fast`] with refinement rounds, in lattice steps
     /// ([`voxreg_normals::Diffused`]): wider than the fidelity pipeline's 3-voxel discs,
-    /// since the field comes from quads only 8 sweeps from the staircase (on the sphere
-    /// R = 20, 1.89 degrees at 3, 1.26 at 6).
+    /// since the field comes from quads only a batch of sweeps from the staircase
+    /// (measured with batches of 8: on the sphere R = 20, 1.89 degrees at 3, 1.26 at 6).
     pub const FAST_RADIUS: f64 = 6.0;
 
     /// The ii normals' ball radius of [`Params::voxel_art`], in voxels

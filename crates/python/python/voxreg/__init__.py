@@ -198,7 +198,7 @@ def regularize(
         "auto": exact factorization for small surfaces, else cg; "direct": sparse
         Cholesky; "cg": multigrid conjugate gradient; "bounded": conjugate gradient in
         per-vertex boxes (the only one that clamps; "gd" is its former name); "sweeps":
-        the fast preset's fixed batches of block-Jacobi sweeps.
+        a fixed count of damped block-Jacobi sweeps, no tolerance (the fast preset's).
     clamp : bool or float, default None (preset: off; voxel_art 0.01)
         Keep every vertex within (1 - eps) voxel of its input, which rules out
         self-intersections. A float is eps in voxels, in (0, 1); True is the preset's
