@@ -3,7 +3,7 @@
 
 use glam::{DVec3, Vec3A};
 use rayon::prelude::*;
-use rustc_hash::FxHashMap as HashMap;
+use rustc_hash::{FxHashMap as HashMap, FxHashSet as HashSet};
 
 use voxreg_digisurf::{DigitalSurface, EdgeId, EdgeKind, Surfel, SurfelId};
 
@@ -157,11 +157,6 @@ const CONTINUATION_WINDOW: u32 = 6;
 /// name is the same in any chunk of the volume: `(lower, higher)`.
 type PairKey = ([u32; 2], [u32; 2]);
 
-/// A pair of interfaces at a junction edge, for [`Continuations`]: the pair, the window
-/// cell of the edge, the edge's lower corner, whether one continues the other there, and
-/// the record's number (its place among all edges' pairs).
-type Record = (PairKey, [u32; 3], [u32; 3], bool, u32);
-
 /// The label pair of a surfel's interface, lower label first.
 fn labels_of(s: &Surfel) -> [u32; 2] {
     let [a, b] = s.labels;
@@ -252,26 +247,39 @@ fn window_shares(found: &[(u32, [u32; 3], PairKey, bool)]) -> Vec<f32> {
     // Each pair at each junction edge (its records, in the order of `found`),
     // sorted by pair and cell of the window's size, in runs (groups) of one pair and
     // cell: an edge's window is scanned for its own pair only, and a group's records
-    // share the 27 groups their windows can reach.
+    // share the 27 groups their windows can reach. A group is named by one `u128`, the
+    // pair's rank among the pairs met and the cell's three coordinates, which orders
+    // as (pair, cell) and hashes in two words.
     let w = CONTINUATION_WINDOW;
-    let cell = |c: [u32; 3]| c.map(|x| x / w);
-    let mut sorted: Vec<Record> = found
+    let mut pairs: Vec<PairKey> = found.iter().map(|r| r.2).collect::<HashSet<_>>().into_iter().collect();
+    pairs.sort_unstable();
+    let group_key = |pair: u32, [x, y, z]: [u32; 3]| {
+        (u128::from(pair) << 96) | (u128::from(x) << 64) | (u128::from(y) << 32) | u128::from(z)
+    };
+    let cell_of = |key: u128| [(key >> 64) as u32, (key >> 32) as u32, key as u32];
+    let mut sorted: Vec<(u128, u32)> = found
         .par_iter()
         .enumerate()
-        .map(|(r, &(_, corner, key, continued))| (key, cell(corner), corner, continued, r as u32))
+        .map(|(r, &(_, corner, key, _))| {
+            let pair = pairs.binary_search(&key).expect("every pair was collected") as u32;
+            (group_key(pair, corner.map(|c| c / w)), r as u32)
+        })
         .collect();
-    sorted.par_sort_unstable_by_key(|x| (x.0, x.1, x.4));
-    let mut groups: Vec<(PairKey, [u32; 3], u32)> = Vec::new(); // pair, cell, start in `sorted`
-    let mut index: HashMap<(PairKey, [u32; 3]), u32> = HashMap::default();
-    for (i, &(key, c, ..)) in sorted.iter().enumerate() {
-        if groups.last().is_none_or(|g| (g.0, g.1) != (key, c)) {
-            index.insert((key, c), groups.len() as u32);
-            groups.push((key, c, i as u32));
+    sorted.par_sort_unstable();
+    // Each record's corner and flag (0 or 1), in `sorted`'s order.
+    let records: Vec<([u32; 3], u32)> =
+        sorted.par_iter().map(|&(_, r)| (found[r as usize].1, u32::from(found[r as usize].3))).collect();
+    let mut groups: Vec<(u128, u32)> = Vec::new(); // key, start in `sorted`
+    let mut index: HashMap<u128, u32> = HashMap::default();
+    for (i, &(key, _)) in sorted.iter().enumerate() {
+        if groups.last().is_none_or(|g| g.0 != key) {
+            index.insert(key, groups.len() as u32);
+            groups.push((key, i as u32));
         }
     }
     let group_range = |g: usize| {
-        let end = groups.get(g + 1).map_or(sorted.len(), |n| n.2 as usize);
-        groups[g].2 as usize..end
+        let end = groups.get(g + 1).map_or(sorted.len(), |n| n.1 as usize);
+        groups[g].1 as usize..end
     };
     // Each group's shares in `sorted`'s order, its candidates (the records of the 27
     // groups its windows can reach: corner and flag) gathered once into a buffer of the
@@ -288,19 +296,20 @@ fn window_shares(found: &[(u32, [u32; 3], PairKey, bool)]) -> Vec<f32> {
     // count below is branch-free over them, in SIMD lanes.
     let buffers = || (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     slices.into_par_iter().enumerate().for_each_init(buffers, |(xs, ys, zs, cs), (g, out)| {
-        let (key, [cx, cy, cz], _) = groups[g];
+        let key = groups[g].0;
+        let (pair, [cx, cy, cz]) = ((key >> 96) as u32, cell_of(key));
         for v in [&mut *xs, &mut *ys, &mut *zs, &mut *cs] {
             v.clear();
         }
         for x in cx.saturating_sub(1)..=cx + 1 {
             for y in cy.saturating_sub(1)..=cy + 1 {
                 for z in cz.saturating_sub(1)..=cz + 1 {
-                    if let Some(&n) = index.get(&(key, [x, y, z])) {
-                        for r in &sorted[group_range(n as usize)] {
-                            xs.push(r.2[0]);
-                            ys.push(r.2[1]);
-                            zs.push(r.2[2]);
-                            cs.push(u32::from(r.3));
+                    if let Some(&n) = index.get(&group_key(pair, [x, y, z])) {
+                        for &(corner, flag) in &records[group_range(n as usize)] {
+                            xs.push(corner[0]);
+                            ys.push(corner[1]);
+                            zs.push(corner[2]);
+                            cs.push(flag);
                         }
                     }
                 }
@@ -309,7 +318,7 @@ fn window_shares(found: &[(u32, [u32; 3], PairKey, bool)]) -> Vec<f32> {
         for (share, i) in out.iter_mut().zip(group_range(g)) {
             // Within `w` of the corner on an axis: `a - (corner - w)` at most `2 w`,
             // in wrapping arithmetic (below the corner's `- w`, it wraps past it).
-            let lo = sorted[i].2.map(|c| c.wrapping_sub(w));
+            let lo = records[i].0.map(|c| c.wrapping_sub(w));
             let (mut continued, mut all) = (0u32, 0u32);
             for (((x, y), z), c) in xs.iter().zip(&*ys).zip(&*zs).zip(&*cs) {
                 let inside = u32::from(x.wrapping_sub(lo[0]) <= 2 * w)
@@ -322,8 +331,8 @@ fn window_shares(found: &[(u32, [u32; 3], PairKey, bool)]) -> Vec<f32> {
         }
     });
     let mut shares = vec![0f32; sorted.len()];
-    for (record, &share) in sorted.iter().zip(&by_sorted) {
-        shares[record.4 as usize] = share;
+    for (&(_, r), &share) in sorted.iter().zip(&by_sorted) {
+        shares[r as usize] = share;
     }
     shares
 }
