@@ -540,7 +540,7 @@ pub struct DiffusedStaircase {
 impl DiffusedStaircase {
     /// The default radius, in voxels of the finest axis (lattice steps): the fast
     /// pipeline's first field, whose one batch of sweeps needs it wider than the
-    /// re-estimates' 6 (on the sphere R = 20, 1.30 degrees at 6, 1.12 at 8).
+    /// re-estimates' 6 (on the sphere R = 20 with 24 sweeps, 1.30 degrees at 6, 1.12 at 8).
     pub const DEFAULT_RADIUS: f64 = 8.0;
 
     /// The radius in lattice steps on `surface` (the finest axis's voxels).
