@@ -260,12 +260,11 @@ def main():
             rows = {"voxreg": [], "SurfaceNets3D + smoothing": [], "SurfaceNets3D, no smoothing": []}
             if args.before:
                 rows["voxreg before"] = []
+            extra = args.voxreg_args.split()
             for _ in range(args.runs):  # interleaved: A B C A B C ...
-                rows["voxreg"].append(voxreg_run(exe, path, nobg, tmp, args.voxreg_args.split()))
+                rows["voxreg"].append(voxreg_run(exe, path, nobg, tmp, extra))
                 if args.before:
-                    rows["voxreg before"].append(
-                        voxreg_run(os.path.abspath(args.before), path, nobg, tmp, args.voxreg_args.split())
-                    )
+                    rows["voxreg before"].append(voxreg_run(os.path.abspath(args.before), path, nobg, tmp, extra))
                 rows["SurfaceNets3D + smoothing"].append(vtk_run(path, True, nobg))
                 rows["SurfaceNets3D, no smoothing"].append(vtk_run(path, False, nobg))
             med = {

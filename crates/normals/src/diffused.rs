@@ -256,7 +256,7 @@ fn window_shares(found: &[(u32, [u32; 3], PairKey, bool)]) -> Vec<f32> {
     let group_key = |pair: u32, [x, y, z]: [u32; 3]| {
         (u128::from(pair) << 96) | (u128::from(x) << 64) | (u128::from(y) << 32) | u128::from(z)
     };
-    let cell_of = |key: u128| [(key >> 64) as u32, (key >> 32) as u32, key as u32];
+    let parts = |key: u128| ((key >> 96) as u32, [(key >> 64) as u32, (key >> 32) as u32, key as u32]);
     let mut sorted: Vec<(u128, u32)> = found
         .par_iter()
         .enumerate()
@@ -296,8 +296,7 @@ fn window_shares(found: &[(u32, [u32; 3], PairKey, bool)]) -> Vec<f32> {
     // count below is branch-free over them, in SIMD lanes.
     let buffers = || (Vec::new(), Vec::new(), Vec::new(), Vec::new());
     slices.into_par_iter().enumerate().for_each_init(buffers, |(xs, ys, zs, cs), (g, out)| {
-        let key = groups[g].0;
-        let (pair, [cx, cy, cz]) = ((key >> 96) as u32, cell_of(key));
+        let (pair, [cx, cy, cz]) = parts(groups[g].0);
         for v in [&mut *xs, &mut *ys, &mut *zs, &mut *cs] {
             v.clear();
         }

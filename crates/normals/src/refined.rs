@@ -277,6 +277,11 @@ fn waiting_entry(reach: f64, k: u32, parent: u32) -> u128 {
     (u128::from(reach.to_bits()) << 64) | (u128::from(k) << 32) | u128::from(parent)
 }
 
+/// The `(reach, quad, parent)` of a [`waiting_entry`].
+fn waiting_parts(e: u128) -> (f64, u32, u32) {
+    (f64::from_bits((e >> 64) as u64), (e >> 32) as u32, e as u32)
+}
+
 /// `t` of the direction of `a` and `1 - t` of the direction of `b` (`a` itself from
 /// `t = 1`, `b` itself at `t = 0`).
 fn mix(t: f64, a: DVec3, b: DVec3) -> DVec3 {
@@ -472,13 +477,12 @@ fn refined_interruptible(
                     let mut head = 0;
                     loop {
                         if head == queue.len() {
-                            let Some(e) = std::iter::from_fn(|| waiting.pop())
-                                .find(|e| !seen[(*e >> 32) as u32 as usize])
+                            let Some((reach, k, parent)) = std::iter::from_fn(|| waiting.pop())
+                                .map(waiting_parts)
+                                .find(|e| !seen[e.1 as usize])
                             else {
                                 break;
                             };
-                            let (reach, k, parent) =
-                                (f64::from_bits((e >> 64) as u64), (e >> 32) as u32, e as u32);
                             seen[k as usize] = true;
                             // Its squared distance as when it was pushed.
                             let d2 = nodes[k as usize].centre.distance_squared(cf);
@@ -601,14 +605,14 @@ fn refined_interruptible(
                 // (A search without the probe always returns its disc.)
                 let wide = near_junction[f]
                     .then(|| {
+                        let wide_r = JUNCTION_DISC_FACTOR * r;
                         // No interior quad of another interface near enough and within the
                         // feature angle: nothing for the probe to find.
                         let none = interiors.as_ref().is_some_and(|b| {
                             // The probe's own test of the quad it stops at.
-                            let wide = JUNCTION_DISC_FACTOR * r;
-                            let r2 = wide * wide;
                             let within = |g: usize| {
-                                nodes[g].centre.distance_squared(cf) < r2 && feature_weight(g) > 0.0
+                                nodes[g].centre.distance_squared(cf) < wide_r * wide_r
+                                    && feature_weight(g) > 0.0
                             };
                             !b.may_continue(cf, iface_f, regions_f, (nf, ramp.cos_zero), within)
                         });
@@ -617,7 +621,7 @@ fn refined_interruptible(
                         } else {
                             // Searched at once where the last estimate found a share.
                             let known = hinted.as_ref().is_some_and(|h| h[f]);
-                            disc(JUNCTION_DISC_FACTOR * r, probe && !known)
+                            disc(wide_r, probe && !known)
                         }
                     })
                     .flatten();
